@@ -1,0 +1,88 @@
+"""Reading and writing image files with OpenImageIO.
+
+Pixels come back as numpy arrays of shape (H, W, C) in the file's own integer depth
+(uint8 or uint16) or float32 for float formats.
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .errors import SceneError
+
+IMAGE_EXTENSIONS = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".bmp", ".ppm", ".pgm", ".hdr", ".webp"}
+
+
+def _oiio():
+    import OpenImageIO as oiio  # imported lazily: it is slow to import
+
+    return oiio
+
+
+def read_image(path: str | os.PathLike) -> np.ndarray:
+    """Read one image file.
+
+    Args:
+        path: image file (PNG, JPEG, TIFF, EXR, ...).
+
+    Returns:
+        (H, W, C) array: uint8 or uint16 for integer files, float32 for float files.
+
+    Raises:
+        SceneError: the file is missing or not a readable image.
+    """
+    oiio = _oiio()
+    path = str(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"{path}: no such image file")
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise SceneError(f"{path}: not a readable image ({oiio.geterror().strip() or 'unknown format'})")
+    try:
+        spec = inp.spec()
+        fmt = spec.format.basetype
+        if fmt in (oiio.UINT8, oiio.INT8):
+            want = oiio.UINT8
+        elif fmt in (oiio.UINT16, oiio.INT16):
+            want = oiio.UINT16
+        else:
+            want = oiio.FLOAT
+        pixels = inp.read_image(0, 0, 0, spec.nchannels, want)
+        if pixels is None or not hasattr(pixels, "shape"):
+            raise SceneError(f"{path}: could not decode pixels ({inp.geterror().strip()})")
+    finally:
+        inp.close()
+    arr = np.asarray(pixels)
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    return np.ascontiguousarray(arr)
+
+
+def write_image(path: str | os.PathLike, pixels: np.ndarray) -> None:
+    """Write an image atomically (temp file in the same folder, then rename).
+
+    Args:
+        path: destination; the extension picks the format (e.g. .png, .tif, .exr).
+        pixels: (H, W) or (H, W, C) uint8, uint16 or float32.
+    """
+    oiio = _oiio()
+    path = Path(path)
+    arr = np.ascontiguousarray(pixels)
+    if arr.ndim == 2:
+        arr = arr[:, :, None]
+    typ = {np.dtype(np.uint8): oiio.UINT8, np.dtype(np.uint16): oiio.UINT16}.get(arr.dtype, oiio.FLOAT)
+    if typ == oiio.FLOAT:
+        arr = arr.astype(np.float32)
+    tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
+    spec = oiio.ImageSpec(arr.shape[1], arr.shape[0], arr.shape[2], typ)
+    out = oiio.ImageOutput.create(str(tmp))
+    if out is None:
+        raise SceneError(f"{path}: cannot write this image format ({oiio.geterror().strip()})")
+    try:
+        if not out.open(str(tmp), spec) or not out.write_image(arr):
+            raise SceneError(f"{path}: write failed ({out.geterror().strip()})")
+    finally:
+        out.close()
+    os.replace(tmp, path)

@@ -1,0 +1,90 @@
+"""Scene readers (one per capture format) and the writer for decoded views.
+
+``read_scene(path)`` detects the layout:
+
+- ``scene.json`` → grid scene (:func:`read_grid`)
+- ``poses_bounds.npy`` + ``images/`` → LLFF (:func:`read_llff`)
+- ``transforms.json`` / ``transforms_<split>.json`` (or the JSON file itself) → :func:`read_transforms`
+- ``input_CamNNN.*`` → HCI benchmark (:func:`read_hci`)
+- ``out_RR_CC_*.*`` → Stanford archive (:func:`read_stanford`)
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from ..imageio import write_image
+from ..lightfield import LightField
+from .common import is_image
+from .grid import read_grid
+from .named import HCI_RE, STANFORD_RE, read_hci, read_stanford
+from .posed import plucker_rays, read_llff, read_transforms
+
+__all__ = ["read_scene", "write_views", "read_grid", "read_hci", "read_stanford", "read_llff",
+           "read_transforms", "plucker_rays", "view_filename"]
+
+
+def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float | None = None,
+               focal: float | None = None) -> LightField:
+    """Read a light field from a folder (or a transforms JSON file), detecting its layout.
+
+    Args:
+        path: scene folder or ``transforms*.json`` file.
+        split: for NeRF-synthetic folders with ``transforms_<split>.json``.
+        baseline, focal: override unknown grid geometry (scene units, pixels).
+
+    Raises:
+        SceneError: not a folder, empty, no recognizable layout, or unreadable/mismatched views.
+    """
+    p = Path(path)
+    if p.is_file() and p.suffix.lower() == ".json":
+        return read_transforms(p)
+    if not p.exists():
+        raise SceneError(f"{p}: no such scene folder")
+    if not p.is_dir():
+        raise SceneError(f"{p}: a scene is a folder of views (or a transforms.json), not a single file")
+    if (p / "scene.json").is_file():
+        return read_grid(p, baseline=baseline, focal=focal)
+    if (p / "poses_bounds.npy").is_file():
+        return read_llff(p)
+    for name in ("transforms.json", f"transforms_{split}.json"):
+        if (p / name).is_file():
+            return read_transforms(p / name)
+    entries = [e for e in p.iterdir() if not e.name.startswith(".")]
+    if not entries:
+        raise SceneError(f"{p}: empty folder")
+    if any(HCI_RE.match(e.name) for e in entries):
+        return read_hci(p, baseline=baseline, focal=focal)
+    if any(STANFORD_RE.match(e.name) for e in entries):
+        return read_stanford(p, baseline=baseline, focal=focal)
+    images = [e for e in entries if is_image(e)]
+    raise SceneError(f"{p}: no recognizable light-field layout (expected scene.json, poses_bounds.npy, "
+                     f"transforms.json, input_CamNNN.png or out_RR_CC_*.png; found {len(images)} image files "
+                     f"among {len(entries)} entries)")
+
+
+def view_filename(row: int, col: int, ext: str = ".png") -> str:
+    """File name of a decoded view: ``rRR_cCC.png``."""
+    return f"r{row:02d}_c{col:02d}{ext}"
+
+
+def write_views(folder: str | os.PathLike, views: np.ndarray, *, rows: list[int] | None = None,
+                cols: list[int] | None = None, ext: str = ".png") -> list[Path]:
+    """Write (R, C, H, W, Ch) views as ``rRR_cCC.png`` (16-bit PNG for uint16), atomically each.
+
+    ``rows``/``cols`` give the grid indices of the given views when they are a subset.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    rows = rows if rows is not None else list(range(views.shape[0]))
+    cols = cols if cols is not None else list(range(views.shape[1]))
+    out = []
+    for i, r in enumerate(rows):
+        for j, c in enumerate(cols):
+            path = folder / view_filename(r, c, ext)
+            write_image(path, views[i, j])
+            out.append(path)
+    return out

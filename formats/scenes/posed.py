@@ -1,0 +1,112 @@
+"""Posed, unordered captures: LLFF (``images/`` + ``poses_bounds.npy``) and
+nerfstudio / instant-ngp / NeRF-synthetic ``transforms.json``. Both become a 1 × N light
+field with per-view OpenGL camera-to-world matrices."""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from ..imageio import IMAGE_EXTENSIONS
+from ..lightfield import LightField
+from .common import is_image, load_views
+
+
+def read_llff(folder: Path) -> LightField:
+    """Read an LLFF capture.
+
+    ``poses_bounds.npy`` is (N, 17): a row-major 3×5 ``[R | t | hwf]`` per view (LLFF axes:
+    down, right, backwards) then near/far. hwf is for the original capture; the focal length is
+    rescaled to the stored images' width.
+    """
+    pb_path = folder / "poses_bounds.npy"
+    try:
+        pb = np.load(pb_path, allow_pickle=False)
+    except (OSError, ValueError) as e:
+        raise SceneError(f"{pb_path}: not a readable .npy array ({e})") from None
+    if pb.ndim != 2 or pb.shape[1] != 17:
+        raise SceneError(f"{pb_path}: expected an N x 17 array, got shape {pb.shape}")
+    img_dir = folder / "images"
+    files = sorted(p for p in img_dir.iterdir() if is_image(p)) if img_dir.is_dir() else []
+    if len(files) != pb.shape[0]:
+        raise SceneError(f"{folder}: poses_bounds.npy has {pb.shape[0]} poses but images/ has {len(files)} images")
+    views = load_views(files, str(folder))
+    n, h, w = views.shape[:3]
+    m = pb[:, :15].reshape(n, 3, 5)
+    rot_llff, t, hwf = m[:, :, :4 - 1], m[:, :, 3], m[:, :, 4]
+    rot = np.stack([rot_llff[:, :, 1], -rot_llff[:, :, 0], rot_llff[:, :, 2]], axis=-1)
+    c2w = np.tile(np.eye(4), (n, 1, 1))
+    c2w[:, :3, :3] = rot
+    c2w[:, :3, 3] = t
+    f = float(hwf[0, 2]) * w / float(hwf[0, 1])
+    return LightField(views=views[None], positions=t[None], c2w=c2w[None], focal=(f, f), layout="posed",
+                      meta={"reader": "llff", "files": [p.name for p in files],
+                            "bounds": np.round(pb[:, 15:], 6).tolist()})
+
+
+def _frame_file(base: Path, file_path: str) -> Path:
+    p = base / file_path
+    if p.suffix.lower() in IMAGE_EXTENSIONS:
+        return p
+    for ext in (".png", ".jpg", ".jpeg", ".exr", ".tif"):
+        if p.with_name(p.name + ext).is_file():
+            return p.with_name(p.name + ext)
+    return p.with_name(p.name + ".png")
+
+
+def read_transforms(path: Path) -> LightField:
+    """Read a ``transforms.json`` (nerfstudio, instant-ngp, NeRF synthetic).
+
+    Intrinsics from ``fl_x``/``fl_y`` or ``camera_angle_x``/``camera_angle_y``, ``cx``/``cy``
+    (default: image centre); ``frames[].transform_matrix`` is an OpenGL camera-to-world.
+    """
+    try:
+        cfg = json.loads(path.read_text())
+        frames = cfg["frames"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise SceneError(f"{path}: not a transforms.json with frames ({e})") from None
+    if not frames:
+        raise SceneError(f"{path}: no frames")
+    files = [_frame_file(path.parent, str(fr["file_path"])) for fr in frames]
+    views = load_views(files, str(path))
+    n, h, w = views.shape[:3]
+    try:
+        c2w = np.asarray([fr["transform_matrix"] for fr in frames], dtype=np.float64)
+    except (KeyError, ValueError) as e:
+        raise SceneError(f"{path}: bad transform_matrix ({e})") from None
+    if c2w.shape != (n, 4, 4):
+        raise SceneError(f"{path}: transform_matrix must be 4x4 per frame, got {c2w.shape[1:]}")
+    if "fl_x" in cfg:
+        fx = float(cfg["fl_x"])
+        fy = float(cfg.get("fl_y", fx))
+    elif "camera_angle_x" in cfg:
+        fx = 0.5 * w / math.tan(0.5 * float(cfg["camera_angle_x"]))
+        fy = 0.5 * h / math.tan(0.5 * float(cfg["camera_angle_y"])) if "camera_angle_y" in cfg else fx
+    else:
+        raise SceneError(f"{path}: needs fl_x or camera_angle_x")
+    cx, cy = float(cfg.get("cx", w / 2.0)), float(cfg.get("cy", h / 2.0))
+    return LightField(views=views[None], positions=c2w[None, :, :3, 3], c2w=c2w[None], focal=(fx, fy),
+                      principal=(cx, cy), layout="posed",
+                      meta={"reader": "transforms", "files": [str(f.relative_to(path.parent)) for f in files]})
+
+
+def plucker_rays(lf: LightField, row: int, col: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per-pixel rays of one view: origins and unit directions, both (H, W, 3) float64.
+
+    Pixel centres at +0.5; OpenGL camera (x right, y up, -z forward). Grid scenes without
+    matrices use an identity rotation at the view's position.
+    """
+    h, w = lf.height, lf.width
+    c2w = lf.c2w[row, col] if lf.c2w is not None else np.eye(4)
+    if lf.c2w is None:
+        c2w = c2w.copy()
+        c2w[:3, 3] = lf.positions[row, col]
+    ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    d = np.stack([(xs - lf.principal[0]) / lf.focal[0], -(ys - lf.principal[1]) / lf.focal[1], -np.ones_like(xs)], -1)
+    d = d @ c2w[:3, :3].T
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    o = np.broadcast_to(c2w[:3, 3], d.shape).copy()
+    return o, d

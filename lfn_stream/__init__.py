@@ -1,0 +1,1 @@
+"""lfn_stream: light field networks with continuous levels of detail (not yet landed)."""

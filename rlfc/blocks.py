@@ -1,0 +1,257 @@
+"""Residual block layout: per-block modes, runs gathered per spatial location behind a
+block-offset table, and the vectorized decode of many (node, location) blocks at once.
+
+Blocks section ("rlfc.blocks"): one run per block location (by·nbx + bx), at
+``index[loc]..index[loc+1]`` (empty when equal). A run is::
+
+    bitmap   ceil(n_nodes/8) bytes, bit g (LSB-first) set if residual node g has a block here;
+             nodes are numbered in BFS order (level H-1 first, then down to the views)
+    headers  one per present block, in node order, hs = off_bytes + P + P·min_bytes bytes:
+             payload offset from the run start (unsigned LE), P mode bytes, P minimums (signed LE)
+    payloads each block's planes back to back, each byte-aligned
+
+Plane modes (on-wire values; do not reorder):
+    0..20   BISE range RANGE_VALUES[mode] of (q - min), B·B values
+    21      constant plane (q == min everywhere): no payload
+    32+k    plain k-bit values (q - min), k = 9..31, for spans wider than 256
+    255     (in plane 0 only) raw block: the level's key view pixels at the input bit depth,
+            all channels, interleaved, B·B·C samples (uint8 or little-endian uint16)
+The section ends with 8 zero bytes so that decoders may read 64-bit words past the last block.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.errors import ChecksumError
+
+from . import bise
+from .bise_tables import RANGE_VALUES
+
+MODE_CONST = 21
+MODE_PLAIN = 32
+MODE_RAW = 255
+PAD = 8
+_RANGES = np.asarray(RANGE_VALUES, dtype=np.int64)
+_POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.int64)
+
+
+def plane_modes(mn: np.ndarray, mx: np.ndarray) -> np.ndarray:
+    """Smallest mode for planes with value span mx - mn (int arrays) → uint8 modes."""
+    span = (mx.astype(np.int64) - mn.astype(np.int64))
+    idx = np.searchsorted(_RANGES, np.minimum(span, 255) + 1)
+    k = np.maximum(np.ceil(np.log2(np.maximum(span, 1) + 1)).astype(np.int64), 9)
+    mode = np.where(span == 0, MODE_CONST, np.where(span <= 255, idx, MODE_PLAIN + k))
+    return mode.astype(np.uint8)
+
+
+def mode_bytes_table(count: int) -> np.ndarray:
+    """(256,) payload bytes of one plane of ``count`` values per mode (raw handled apart)."""
+    t = np.zeros(256, dtype=np.int64)
+    for i, n in enumerate(RANGE_VALUES):
+        t[i] = bise.byte_length(count, n)
+    for k in range(1, 32):
+        t[MODE_PLAIN + k] = -(-count * k // 8)
+    return t
+
+
+def pack_plain(values: np.ndarray, k: int) -> np.ndarray:
+    """(nb, count) unsigned ints < 2^k → (nb, ceil(count·k/8)) LSB-first plain k-bit fields."""
+    nb, count = values.shape
+    bits = ((values.astype(np.uint64)[:, :, None] >> np.arange(k, dtype=np.uint64)) & np.uint64(1)).astype(np.uint8)
+    nbytes = -(-count * k // 8)
+    out = np.zeros((nb, nbytes * 8), dtype=np.uint8)
+    out[:, :count * k] = bits.reshape(nb, count * k)
+    return np.packbits(out, axis=1, bitorder="little")
+
+
+def unpack_plain_at(buf: np.ndarray, starts: np.ndarray, k: int, count: int) -> np.ndarray:
+    """Inverse of :func:`pack_plain` for blocks at byte offsets of ``buf`` (>= 8 bytes slack)."""
+    pos = np.arange(count, dtype=np.int64) * k
+    w = np.ndarray((buf.size - 7,), dtype="<u8", buffer=buf, strides=(1,))
+    word = w[starts[:, None] + (pos >> 3)[None, :]]
+    return ((word >> (pos & 7).astype(np.uint64)[None, :]) & np.uint64((1 << k) - 1)).astype(np.int64)
+
+
+def _le_bytes(x: np.ndarray, nbytes: int) -> np.ndarray:
+    """(n,) ints → (n, nbytes) little-endian two's-complement bytes."""
+    return np.ascontiguousarray(x.astype("<i8")).view(np.uint8).reshape(-1, 8)[:, :nbytes]
+
+
+def _from_le(b: np.ndarray, signed: bool) -> np.ndarray:
+    """(n, k) little-endian bytes → (n,) int64."""
+    n, k = b.shape
+    v = (b.astype(np.int64) << (8 * np.arange(k, dtype=np.int64))).sum(axis=1)
+    if signed:
+        v = np.where(v >= 1 << (8 * k - 1), v - (1 << (8 * k)), v)
+    return v
+
+
+def pack_runs(g: np.ndarray, loc: np.ndarray, q: np.ndarray, raw: np.ndarray, raw_px: np.ndarray,
+              n_nodes: int, n_loc: int, bps: int) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Pack kept blocks into per-location runs.
+
+    Args:
+        g: (K,) BFS node ids; loc: (K,) location ids; no (g, loc) pair twice.
+        q: (K, P, n) int32 quantization indices per plane (n = B·B).
+        raw: (K,) bool, block stored raw; raw_px: (K, n·C) raw samples (rows used where raw).
+        n_nodes: residual nodes in the tree; n_loc: block locations; bps: bytes per raw sample.
+
+    Returns:
+        (index (n_loc+1,) uint32 byte offsets, blocks uint8 (ends with PAD zero bytes),
+        layout dict: off_bytes, min_bytes, bitmap_bytes).
+    """
+    K, P, n = q.shape
+    nbm = -(-n_nodes // 8)
+    mn = q.min(axis=2) if n else np.zeros((K, P), np.int32)
+    mx = q.max(axis=2) if n else np.zeros((K, P), np.int32)
+    modes = plane_modes(mn, mx)
+    modes[raw, 0] = MODE_RAW
+    modes[raw, 1:] = 0
+    mn[raw] = 0
+    table = mode_bytes_table(n)
+    psize = table[modes]
+    psize[raw, 0] = raw_px.shape[1] * bps
+    psize[raw, 1:] = 0
+    mabs = int(np.abs(mn).max()) if K else 0
+    min_bytes = 2 if mabs < 2 ** 15 else 4
+    order = np.lexsort((g, loc))
+    g, loc, q, raw, modes, mn, psize = g[order], loc[order], q[order], raw[order], modes[order], mn[order], psize[order]
+    raw_px = raw_px[order]
+    per_loc = np.bincount(loc, minlength=n_loc)
+    first = np.concatenate([[0], np.cumsum(per_loc)])[:-1]
+    rank = np.arange(K) - first[loc]
+    bsize = psize.sum(axis=1)
+    loc_pay = np.bincount(loc, weights=bsize, minlength=n_loc).astype(np.int64)
+    off_bytes = 2
+    for _ in range(2):
+        hs = off_bytes + P + P * min_bytes
+        run_size = np.where(per_loc > 0, nbm + per_loc * hs + loc_pay, 0)
+        if run_size.max(initial=0) < 65536:
+            break
+        off_bytes = 4
+    hs = off_bytes + P + P * min_bytes
+    index = np.concatenate([[0], np.cumsum(run_size)]).astype(np.int64)
+    if index[-1] >= 2 ** 32:
+        raise ValueError("blocks section over 4 GiB")
+    blocks = np.zeros(int(index[-1]) + PAD, dtype=np.uint8)
+    run0 = index[loc]
+    # bitmaps
+    nonempty = np.flatnonzero(per_loc)
+    bm = np.zeros((n_loc, nbm * 8), dtype=np.uint8)
+    bm[loc, g] = 1
+    bmb = np.packbits(bm[nonempty], axis=1, bitorder="little")
+    blocks[index[nonempty][:, None] + np.arange(nbm)] = bmb
+    # payload offsets (relative to the run start)
+    cum = np.cumsum(bsize) - bsize
+    pay_rel = nbm + per_loc[loc] * hs + (cum - cum[first[loc]])
+    hdr = np.concatenate([_le_bytes(pay_rel, off_bytes), modes,
+                          _le_bytes(mn.reshape(-1), min_bytes).reshape(K, P * min_bytes)], axis=1)
+    blocks[(run0 + nbm + rank * hs)[:, None] + np.arange(hs)] = hdr
+    # plane payloads, grouped by mode
+    pstart = run0[:, None] + pay_rel[:, None] + (np.cumsum(psize, axis=1) - psize)
+    vals = q - mn[:, :, None]
+    for m in np.unique(modes).tolist():
+        if m == MODE_CONST:
+            continue
+        if m == MODE_RAW:
+            sel = np.flatnonzero(raw)
+            data = raw_px[sel].astype("<u2").view(np.uint8).reshape(len(sel), -1) if bps == 2 else raw_px[sel].astype(np.uint8)
+            blocks[pstart[sel, 0][:, None] + np.arange(data.shape[1])] = data
+            continue
+        kk, cc = np.nonzero(modes == m)
+        if m < MODE_CONST:
+            enc = bise.encode_batch(vals[kk, cc], RANGE_VALUES[m])
+        else:
+            enc = pack_plain(vals[kk, cc].astype(np.int64), m - MODE_PLAIN)
+        if enc.shape[1]:
+            blocks[pstart[kk, cc][:, None] + np.arange(enc.shape[1])] = enc
+    return index.astype(np.uint32), blocks, {"off_bytes": off_bytes, "min_bytes": min_bytes, "bitmap_bytes": nbm}
+
+
+class BlockStore:
+    """Random access to residual blocks.
+
+    Args:
+        index: (n_loc+1,) int64 run offsets.
+        buf: uint8 blocks section (with PAD slack), or None with ``fetch`` given.
+        planes: P; block: B; channels: C of raw blocks; bps: bytes per raw sample;
+        layout: off_bytes, min_bytes, bitmap_bytes (from the file's config).
+        verify: ``verify(starts, stops)`` checks the checksum chunks of byte ranges before use.
+    """
+
+    def __init__(self, index: np.ndarray, buf: np.ndarray, planes: int, block: int, channels: int, bps: int,
+                 layout: dict, verify=None):
+        self.index = index.astype(np.int64)
+        self.buf = buf
+        self.P, self.B, self.C, self.bps = planes, block, channels, bps
+        self.off_bytes, self.min_bytes, self.nbm = layout["off_bytes"], layout["min_bytes"], layout["bitmap_bytes"]
+        self.hs = self.off_bytes + planes + planes * self.min_bytes
+        self.table = mode_bytes_table(block * block)
+        self.verify = verify
+        if len(self.index) < 2 or (np.diff(self.index) < 0).any() or self.index[-1] + PAD > buf.size:
+            raise ChecksumError("rlfc block-offset table is inconsistent with the blocks section")
+
+    def fetch(self, g: np.ndarray, loc: np.ndarray):
+        """Decode the blocks of many (node, location) pairs at once.
+
+        Args:
+            g: (M,) BFS node ids; loc: (M,) location ids.
+
+        Returns:
+            present (M,) bool; raw (M,) bool; q (M, B·B, P) int32 quantization indices
+            (zeros where absent); px (M, B·B, C) int64 raw samples (where raw).
+        """
+        n = self.B * self.B
+        M = len(g)
+        buf = self.buf
+        o0, o1 = self.index[loc], self.index[loc + 1]
+        if self.verify is not None:
+            u = np.unique(loc)
+            self.verify(self.index[u], self.index[u + 1])
+        nonempty = o1 > o0
+        gb = g >> 3
+        byte = buf[np.where(nonempty, o0 + gb, 0)]
+        present = nonempty & (((byte >> (g & 7).astype(np.uint8)) & 1) == 1)
+        q = np.zeros((M, n, self.P), dtype=np.int32)
+        raw = np.zeros(M, dtype=bool)
+        px = np.zeros((M, n, self.C), dtype=np.int64)
+        sel = np.flatnonzero(present)
+        if sel.size == 0:
+            return present, raw, q, px
+        s0, sg = o0[sel], g[sel]
+        bm = buf[s0[:, None] + np.arange(self.nbm)]                     # (S, nbm)
+        pc = _POPCOUNT[bm]
+        pc[np.arange(self.nbm)[None, :] >= (sg >> 3)[:, None]] = 0
+        part = _POPCOUNT[bm[np.arange(sel.size), sg >> 3] & ((1 << (sg & 7)) - 1).astype(np.uint8)]
+        rank = pc.sum(axis=1) + part
+        hdr = buf[(s0 + self.nbm + rank * self.hs)[:, None] + np.arange(self.hs)]   # (S, hs)
+        pay = s0 + _from_le(hdr[:, :self.off_bytes], False)
+        modes = hdr[:, self.off_bytes:self.off_bytes + self.P]
+        mins = _from_le(hdr[:, self.off_bytes + self.P:].reshape(-1, self.min_bytes), True).reshape(-1, self.P)
+        is_raw = modes[:, 0] == MODE_RAW
+        psize = self.table[modes]
+        psize[is_raw] = 0
+        pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)
+        if (pstart + psize).max(initial=0) > self.index[-1]:
+            raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+        vals = np.zeros((sel.size, self.P, n), dtype=np.int64)
+        for m in np.unique(modes[~is_raw]).tolist():
+            kk, cc = np.nonzero((modes == m) & ~is_raw[:, None])
+            if m == MODE_CONST:
+                continue
+            if m < MODE_CONST:
+                vals[kk, cc] = bise.decode_at(buf, pstart[kk, cc], RANGE_VALUES[m], n)
+            elif MODE_PLAIN < m < MODE_PLAIN + 32:
+                vals[kk, cc] = unpack_plain_at(buf, pstart[kk, cc], m - MODE_PLAIN, n)
+            else:
+                raise ChecksumError(f"rlfc block has invalid plane mode {m} (corrupt file)")
+        q[sel] = (vals + mins[:, :, None]).transpose(0, 2, 1)
+        rsel = np.flatnonzero(is_raw)
+        if rsel.size:
+            nbytes = n * self.C * self.bps
+            data = buf[pay[rsel][:, None] + np.arange(nbytes)]
+            smp = data.view("<u2").astype(np.int64) if self.bps == 2 else data.astype(np.int64)
+            px[sel[rsel]] = smp.reshape(-1, n, self.C)
+            raw[sel[rsel]] = True
+            q[sel[rsel]] = 0
+        return present, raw, q, px

@@ -1,0 +1,44 @@
+"""Lossless YCoCg-R (Malvar & Sullivan) on integer planes, with grey and alpha layouts.
+
+Channel layouts (last axis): 1 = Y (grey), 2 = Y + A, 3 = RGB → Y Co Cg, 4 = RGBA → Y Co Cg A.
+Y keeps the input's bit depth; Co and Cg need one extra bit (signed). All planes are int32.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+def to_planes(x: np.ndarray) -> np.ndarray:
+    """(…, C) uint8/uint16 → (…, C) int32 planes (YCoCg-R for RGB; grey and alpha pass through)."""
+    x = x.astype(np.int32)
+    c = x.shape[-1]
+    if c < 3:
+        return x
+    r, g, b = x[..., 0], x[..., 1], x[..., 2]
+    co = r - b
+    t = b + (co >> 1)
+    cg = g - t
+    y = t + (cg >> 1)
+    out = [y, co, cg] + ([x[..., 3]] if c == 4 else [])
+    return np.stack(out, axis=-1)
+
+
+def from_planes(p: np.ndarray, dtype=np.uint8) -> np.ndarray:
+    """Inverse of :func:`to_planes`, clipped to the range of ``dtype`` (uint8 or uint16)."""
+    p = np.asarray(p, dtype=np.int32)
+    peak = np.iinfo(dtype).max
+    c = p.shape[-1]
+    if c >= 3:
+        y, co, cg = p[..., 0], p[..., 1], p[..., 2]
+        t = y - (cg >> 1)
+        g = cg + t
+        b = t - (co >> 1)
+        r = b + co
+        p = np.stack([r, g, b] + ([p[..., 3]] if c == 4 else []), axis=-1)
+    return np.clip(p, 0, peak).astype(dtype)
+
+
+def plane_weights(channels: int) -> np.ndarray:
+    """Weights of the planes in PSNR_YCoCg / block energy: (6·Y + Co + Cg)/8; alpha like Y."""
+    return {1: np.array([1.0]), 2: np.array([1.0, 1.0]), 3: np.array([6, 1, 1]) / 8.0,
+            4: np.array([6, 1, 1, 8]) / 8.0}[channels]

@@ -1,0 +1,237 @@
+"""RLFC decoders: full light field, one view, one block (random access), many blocks
+(batched), each at any progressive level. All share one integer reconstruction, so they agree
+bit for bit: decoded node = where(raw, raw pixels, decoded parent + dequantized residual).
+
+The file stays compressed (memory-mapped or behind a byte-range source); opening decodes only
+the top-level key views (a few images) and reads the block-offset table.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.container import ByteRangeSource
+from formats.errors import ChecksumError, FormatError, ParameterError
+from formats.lfcfile import LfcFile, check_codec_version
+
+from .blocks import PAD, BlockStore
+from .color import from_planes, to_planes
+from .encoder import CODEC_ID, CODEC_VERSION
+from .residual import dequantize, from_blocks
+from .topcodec import decode_image
+from .tree import Tree
+
+
+class RlfcDecoder:
+    """Decoder over an opened .lfc file.
+
+    Attributes:
+        rows, cols, height, width, channels, dtype: the light field's geometry.
+        block_size: B. levels: tree height H (valid ``level`` arguments are 0..H).
+    """
+
+    def __init__(self, f: LfcFile):
+        check_codec_version(f, CODEC_ID, CODEC_VERSION)
+        self.file = f
+        c = f.container
+        try:
+            cfg = f.meta["config"]
+            scene = f.meta["scene"]
+            self.rows, self.cols = int(scene["rows"]), int(scene["cols"])
+            self.height, self.width = int(cfg["height"]), int(cfg["width"])
+            self.channels, self.P = int(cfg["channels"]), int(cfg["planes"])
+            self.dtype = np.dtype(cfg["dtype"])
+            self.block_size = B = int(cfg["block_size"])
+            self.Hp, self.Wp = map(int, cfg["padded"])
+            self.nby, self.nbx = map(int, cfg["blocks"])
+            self.q16 = np.asarray(cfg["q16"], dtype=np.int64)
+            self.tree = Tree.from_config(cfg["tree"])
+            self.level_offset = [int(x) for x in cfg["level_offset"]]
+            layout = cfg["layout"]
+            top_cfg = cfg["top"]
+        except (KeyError, TypeError, ValueError) as e:
+            raise FormatError(f"{c.name}: rlfc metadata is incomplete ({e})") from None
+        if self.dtype not in (np.uint8, np.uint16) or self.Hp != self.nby * B or self.Wp != self.nbx * B:
+            raise FormatError(f"{c.name}: rlfc metadata is inconsistent (dtype/padded size/blocks)")
+        if self.tree.sizes[0] != self.rows * self.cols or len(top_cfg) != self.tree.sizes[-1]:
+            raise FormatError(f"{c.name}: rlfc tree does not match the {self.rows}x{self.cols} grid")
+        self.levels = self.tree.height
+        self.anc = self.tree.ancestors()                    # (H+1, N0)
+        # top level: decoded once, kept
+        top = c.read("rlfc.top")
+        imgs = []
+        for i, t in enumerate(top_cfg):
+            a, n = int(t["offset"]), int(t["length"])
+            if a < 0 or a + n > len(top):
+                raise FormatError(f"{c.name}: top-level image {i} lies outside section 'rlfc.top'")
+            imgs.append(decode_image(t["codec"], bytes(top[a:a + n]), (self.Hp, self.Wp, self.channels), self.dtype))
+        self.top = to_planes(np.stack(imgs))                  # (N_H, Hp, Wp, P) int32
+        idx = c.read("rlfc.index")
+        if len(idx) != 4 * (self.nby * self.nbx + 1):
+            raise FormatError(f"{c.name}: section 'rlfc.index' has {len(idx)} bytes, expected {4 * (self.nby * self.nbx + 1)}")
+        index = np.frombuffer(idx, dtype="<u4").astype(np.int64)
+        self._remote = isinstance(c._src, ByteRangeSource)
+        info = c.info("rlfc.blocks")
+        if self._remote:
+            buf = np.zeros(0, np.uint8)
+            verify = None
+        else:
+            buf = c.array("rlfc.blocks", verify=False)
+            verify = lambda a, b: c.verify_ranges("rlfc.blocks", a, b)  # noqa: E731
+        if info.length != index[-1] + PAD:
+            raise FormatError(f"{c.name}: section 'rlfc.blocks' has {info.length} bytes, index says {index[-1] + PAD}")
+        self._layout = layout
+        self._index = index
+        self.store = None if self._remote else BlockStore(index, buf, self.P, B, self.channels, self.dtype.itemsize,
+                                                           layout, verify)
+
+    # -- helpers ----------------------------------------------------------------------------
+    def _store_for(self, locs: np.ndarray) -> tuple[BlockStore, np.ndarray]:
+        """A block store covering ``locs``; for byte-range sources only their runs are fetched."""
+        if not self._remote:
+            return self.store, locs
+        u, inv = np.unique(locs, return_inverse=True)
+        c = self.file.container
+        parts, idx = [], [0]
+        for a, b in zip(self._index[u].tolist(), self._index[u + 1].tolist()):   # one range read per run
+            parts.append(np.frombuffer(c.read("rlfc.blocks", a, b), dtype=np.uint8))
+            idx.append(idx[-1] + (b - a))
+        buf = np.concatenate(parts + [np.zeros(PAD, np.uint8)])
+        local_index = np.zeros(len(u) * 2, dtype=np.int64)
+        # runs are stored back to back: run i is local_index[2i]..[2i+1]
+        st = BlockStore(np.asarray(idx, dtype=np.int64), buf, self.P, self.block_size, self.channels,
+                        self.dtype.itemsize, self._layout)
+        del local_index
+        return st, inv.reshape(-1)
+
+    def _check_level(self, level: int) -> int:
+        if not 0 <= int(level) <= self.levels:
+            raise ParameterError(f"level must be within 0..{self.levels} (0 = full quality, {self.levels} = top key views), got {level}")
+        return int(level)
+
+    def _view_index(self, row: int, col: int) -> int:
+        if not (0 <= row < self.rows and 0 <= col < self.cols):
+            raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+        return row * self.cols + col
+
+    def _residual(self, store: BlockStore, g: np.ndarray, loc: np.ndarray):
+        present, raw, q, px = store.fetch(g, loc)
+        deq = dequantize(q, self.q16)
+        if raw.any():
+            rawp = to_planes(px.astype(self.dtype))
+        else:
+            rawp = None
+        return raw, deq, rawp
+
+    # -- decoders ---------------------------------------------------------------------------
+    def decode_blocks(self, views: np.ndarray, by: np.ndarray, bx: np.ndarray, level: int = 0,
+                      planes: bool = False) -> np.ndarray:
+        """Batched random access: many (view, block) requests in one vectorized pass.
+
+        Args:
+            views: (M,) flat view indices (row·cols + col); by, bx: (M,) block indices.
+            level: progressive level (0 = full quality .. H = top key views).
+            planes: return int32 planes instead of pixels.
+
+        Returns:
+            (M, B, B, C) pixels (uint8/uint16; blocks past the image edge hold padding).
+        """
+        level = self._check_level(level)
+        views = np.asarray(views, dtype=np.int64).reshape(-1)
+        by = np.asarray(by, dtype=np.int64).reshape(-1)
+        bx = np.asarray(bx, dtype=np.int64).reshape(-1)
+        M, B = views.size, self.block_size
+        if views.size and (views.min() < 0 or views.max() >= self.rows * self.cols):
+            raise ParameterError("view index out of range")
+        if by.size and (by.min() < 0 or by.max() >= self.nby or bx.min() < 0 or bx.max() >= self.nbx):
+            raise ParameterError(f"block index out of range (blocks are {self.nby} rows x {self.nbx} cols of {B} px)")
+        H = self.levels
+        top = self.anc[H][views]
+        ys = by[:, None] * B + np.arange(B)
+        xs = bx[:, None] * B + np.arange(B)
+        acc = self.top[top[:, None, None], ys[:, :, None], xs[:, None, :]].reshape(M, B * B, self.P)
+        loc = by * self.nbx + bx
+        if H > level:
+            levs = list(range(H - 1, level - 1, -1))
+            g = np.concatenate([self.level_offset[lv] + self.anc[lv][views] for lv in levs])
+            store, lloc = self._store_for(loc)
+            raw, deq, rawp = self._residual(store, g, np.tile(lloc, len(levs)))
+            for i in range(len(levs)):       # top-down over the tree height
+                s = slice(i * M, (i + 1) * M)
+                acc = acc + deq[s]
+                if raw[s].any():
+                    r = raw[s]
+                    acc[r] = rawp[s][r]
+        acc = acc.reshape(M, B, B, self.P)
+        return acc if planes else from_planes(acc, self.dtype)
+
+    def decode_block(self, row: int, col: int, by: int, bx: int, level: int = 0) -> np.ndarray:
+        """One block of one view: (b_h, b_w, C) pixels, cropped at the image edges.
+
+        Block (by, bx) covers pixels [by·B, (by+1)·B) × [bx·B, (bx+1)·B).
+        """
+        v = self._view_index(row, col)
+        if not (0 <= by < self.nby and 0 <= bx < self.nbx):
+            raise ParameterError(f"block ({by},{bx}) is outside the {self.nby}x{self.nbx} block grid "
+                                 f"({self.height}x{self.width} px, B={self.block_size})")
+        out = self.decode_blocks(np.array([v]), np.array([by]), np.array([bx]), level)[0]
+        B = self.block_size
+        return out[:min(B, self.height - by * B), :min(B, self.width - bx * B)]
+
+    def _decode_nodes(self, level: int, nodes: np.ndarray | None = None) -> np.ndarray:
+        """Decoded planes (N, Hp, Wp, P) of level-``level`` nodes, top-down, each node once."""
+        dec = self.top
+        nloc = self.nby * self.nbx
+        B = self.block_size
+        need = None
+        if nodes is not None:    # only the ancestors of the wanted nodes at each level
+            need = {level: np.unique(nodes)}
+            for lv in range(level, self.levels):
+                need[lv + 1] = np.unique(self.tree.parents[lv][need[lv]])
+        ids_above = np.arange(self.tree.sizes[-1]) if need is None else need[self.levels]
+        for lv in range(self.levels - 1, level - 1, -1):
+            ids = np.arange(self.tree.sizes[lv]) if need is None else need[lv]
+            par = self.tree.parents[lv][ids]
+            ppos = np.searchsorted(ids_above, par)
+            out = np.empty((len(ids), self.Hp, self.Wp, self.P), dtype=np.int32)
+            for a in range(0, len(ids), 8):
+                chunk = ids[a:a + 8]
+                g = np.repeat(self.level_offset[lv] + chunk, nloc)
+                loc = np.tile(np.arange(nloc), len(chunk))
+                raw, deq, rawp = self._residual(self.store if not self._remote else self._store_for(loc)[0], g,
+                                                loc if not self._remote else self._store_for(loc)[1])
+                res = deq.reshape(len(chunk), self.nby, self.nbx, B, B, self.P)
+                rec = dec[ppos[a:a + 8]] + from_blocks(res)
+                if raw.any():
+                    rb = rec.reshape(len(chunk), self.nby, B, self.nbx, B, self.P).transpose(0, 1, 3, 2, 4, 5).copy()
+                    flat = rb.reshape(-1, B * B, self.P)
+                    flat[raw] = rawp[raw]
+                    rec = from_blocks(flat.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
+                out[a:a + 8] = rec
+            dec, ids_above = out, ids
+        return dec
+
+    def decode_views(self, views: list[int] | np.ndarray | None = None, level: int = 0, planes: bool = False) -> np.ndarray:
+        """Decode whole views (flat indices; None = all) at a progressive level.
+
+        Returns:
+            (n, H, W, C) pixels (or int32 planes with ``planes=True``), cropped to the image.
+        """
+        level = self._check_level(level)
+        views = np.arange(self.rows * self.cols) if views is None else np.asarray(views, dtype=np.int64).reshape(-1)
+        if self.store is not None and views.size == self.rows * self.cols:
+            self.file.container.verify_ranges("rlfc.blocks", np.array([0]), np.array([int(self._index[-1])]))
+        nodes = self.anc[level][views]
+        un = np.unique(nodes)
+        dec = self._decode_nodes(level, None if un.size == self.tree.sizes[level] else un)
+        pos = np.searchsorted(un, nodes) if un.size != self.tree.sizes[level] else nodes
+        out = dec[pos][:, :self.height, :self.width]
+        return out if planes else from_planes(out, self.dtype)
+
+    def decode_view(self, row: int, col: int, level: int = 0) -> np.ndarray:
+        """One view: (H, W, C) pixels."""
+        return self.decode_views([self._view_index(row, col)], level)[0]
+
+    def decode_all(self, level: int = 0) -> np.ndarray:
+        """The whole light field: (rows, cols, H, W, C) pixels."""
+        out = self.decode_views(None, level)
+        return out.reshape(self.rows, self.cols, *out.shape[1:])

@@ -1,0 +1,66 @@
+"""RLFC parameters: one frozen dataclass, stored in the file's header."""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from formats.errors import ParameterError
+
+PROFILES = ("bise",)
+
+
+@dataclass(frozen=True)
+class RlfcParams:
+    """Encoder parameters of the RLFC codec.
+
+    Attributes:
+        tree_height: levels of Representative Key Views above the views (capped where a level
+            would have a single node).
+        block_size: B, residual block edge in pixels (blocks are B×B×planes).
+        threshold: pixel threshold T: residual values with |r| <= T (pixel units) become 0.
+        quant: quantization step Q (pixel units, >= 1, resolution 1/16); 1 = lossless.
+        energy: block-energy threshold E: a block whose weighted mean squared dequantized
+            residual is below E (pixel units²) is not stored.
+        sigma: Gaussian filter width, in units of a level's view spacing.
+        top_codec: "auto" (smaller of lossless JPEG 2000 and JPEG XL), "j2k" or "jxl".
+        top_psnr: None = lossless top level; a number = lossy JPEG 2000 at that PSNR (dB),
+            whose decoded pixels feed the closed loop.
+        profile: "bise" (the paper's: every significant block BISE-packed).
+    """
+
+    tree_height: int = 3
+    block_size: int = 8
+    threshold: float = 0.0
+    quant: float = 1.0
+    energy: float = 0.0
+    sigma: float = 1.0
+    top_codec: str = "auto"
+    top_psnr: float | None = None
+    profile: str = "bise"
+
+    def __post_init__(self) -> None:
+        if not 0 <= int(self.tree_height) <= 16 or int(self.tree_height) != self.tree_height:
+            raise ParameterError(f"tree height must be an integer 0..16, got {self.tree_height}")
+        if self.block_size not in (2, 4, 8, 16, 32):
+            raise ParameterError(f"block size must be 2, 4, 8, 16 or 32, got {self.block_size}")
+        if not self.threshold >= 0:
+            raise ParameterError(f"threshold must be >= 0, got {self.threshold}")
+        if not 1 <= self.quant <= 4096:
+            raise ParameterError(f"quant step must be within 1..4096, got {self.quant}")
+        if not self.energy >= 0:
+            raise ParameterError(f"energy threshold must be >= 0, got {self.energy}")
+        if not self.sigma > 0:
+            raise ParameterError(f"sigma must be > 0, got {self.sigma}")
+        if self.top_codec not in ("auto", "j2k", "jxl"):
+            raise ParameterError(f"top codec must be auto, j2k or jxl, got {self.top_codec!r}")
+        if self.top_psnr is not None and not 10 <= self.top_psnr <= 120:
+            raise ParameterError(f"top-level PSNR must be within 10..120 dB, got {self.top_psnr}")
+        if self.profile not in PROFILES:
+            raise ParameterError(f"unknown profile {self.profile!r} (available: {', '.join(PROFILES)})")
+
+    @property
+    def q16(self) -> int:
+        """Quantization step in 1/16 pixel units (16 = lossless)."""
+        return max(16, int(round(self.quant * 16)))
+
+    def to_dict(self) -> dict:
+        return asdict(self)

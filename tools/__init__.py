@@ -1,0 +1,1 @@
+"""Benchmarks and developer tools for lfcodec."""
