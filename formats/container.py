@@ -234,9 +234,9 @@ class Container:
             expect = off + ln
             self.sections[nm] = info
         if expect > self.size:
-            last = list(self.sections.values())[-1]
-            raise TruncatedError(f"{self.name}: truncated: section {last.name!r} ends at byte {expect}, "
-                                 f"file has {self.size} bytes")
+            cut = next(s for s in self.sections.values() if s.offset + s.length > self.size)
+            raise TruncatedError(f"{self.name}: truncated: section {cut.name!r} ends at byte "
+                                 f"{cut.offset + cut.length}, file has {self.size} bytes")
         if expect != self.size:
             raise FormatError(f"{self.name}: {self.size - expect} unexpected bytes after the last section")
         if "meta" not in self.sections:

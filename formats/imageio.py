@@ -37,7 +37,9 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     path = str(path)
     if not os.path.isfile(path):
         raise SceneError(f"{path}: no such image file")
-    inp = oiio.ImageInput.open(path)
+    cfg = oiio.ImageSpec()
+    cfg.attribute("oiio:UnassociatedAlpha", 1)   # keep straight alpha as stored (no premultiply)
+    inp = oiio.ImageInput.open(path, cfg)
     if inp is None:
         raise SceneError(f"{path}: not a readable image ({oiio.geterror().strip() or 'unknown format'})")
     try:
@@ -77,6 +79,7 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray) -> None:
         arr = arr.astype(np.float32)
     tmp = path.with_name(f".{path.stem}.tmp{os.getpid()}{path.suffix}")
     spec = oiio.ImageSpec(arr.shape[1], arr.shape[0], arr.shape[2], typ)
+    spec.attribute("oiio:UnassociatedAlpha", 1)      # pixels are straight alpha
     out = oiio.ImageOutput.create(str(tmp))
     if out is None:
         raise SceneError(f"{path}: cannot write this image format ({oiio.geterror().strip()})")

@@ -106,7 +106,7 @@ def pack_runs(g: np.ndarray, loc: np.ndarray, q: np.ndarray, raw: np.ndarray, ra
     mx = q.max(axis=2) if n else np.zeros((K, P), np.int32)
     modes = plane_modes(mn, mx)
     modes[raw, 0] = MODE_RAW
-    modes[raw, 1:] = 0
+    modes[raw, 1:] = MODE_CONST      # unused for raw blocks; written as "no payload"
     mn[raw] = 0
     table = mode_bytes_table(n)
     psize = table[modes]
@@ -158,7 +158,7 @@ def pack_runs(g: np.ndarray, loc: np.ndarray, q: np.ndarray, raw: np.ndarray, ra
             data = raw_px[sel].astype("<u2").view(np.uint8).reshape(len(sel), -1) if bps == 2 else raw_px[sel].astype(np.uint8)
             blocks[pstart[sel, 0][:, None] + np.arange(data.shape[1])] = data
             continue
-        kk, cc = np.nonzero(modes == m)
+        kk, cc = np.nonzero((modes == m) & ~raw[:, None])
         if m < MODE_CONST:
             enc = bise.encode_batch(vals[kk, cc], RANGE_VALUES[m])
         else:

@@ -188,6 +188,7 @@ class RlfcDecoder:
             for lv in range(level, self.levels):
                 need[lv + 1] = np.unique(self.tree.parents[lv][need[lv]])
         ids_above = np.arange(self.tree.sizes[-1]) if need is None else need[self.levels]
+        dec = self.top[ids_above]
         for lv in range(self.levels - 1, level - 1, -1):
             ids = np.arange(self.tree.sizes[lv]) if need is None else need[lv]
             par = self.tree.parents[lv][ids]

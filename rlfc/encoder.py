@@ -18,7 +18,7 @@ from formats.lightfield import LightField
 from . import blocks as blk
 from .color import plane_weights, to_planes
 from .params import RlfcParams
-from .residual import block_energy, dequantize, from_blocks, quantize, to_blocks
+from .residual import block_energy, from_blocks, quantize_dequantize, to_blocks
 from .topcodec import decode_image, encode_image
 from .tree import Tree, build_tree, filter_level
 
@@ -99,19 +99,19 @@ class Encoder:
                 s = slice(a, min(a + 16, n_l))
                 pred = dec[par[s]]
                 target = to_planes(self.rkv[lev][s])
-                q = quantize(target - pred, q16, thr)
-                deq = dequantize(q, q16)
+                q, deq = quantize_dequantize(target - pred, q16, thr)
                 qb = to_blocks(q, B)                                      # (n, nby, nbx, B, B, P)
                 db = to_blocks(deq, B)
                 keep = np.any(qb != 0, axis=(3, 4, 5))
                 if params.energy > 0:
                     keep &= block_energy(db, w) >= params.energy
-                # raw escape: a block whose coded size exceeds its raw pixels is stored raw
+                # raw escape: a block whose coded size is not clearly below its raw pixels is stored
+                # raw (exact, and it frees its ancestors' blocks for pruning)
                 kn, ky, kx = np.nonzero(keep)
                 qk = qb[kn, ky, kx].reshape(len(kn), B * B, P).transpose(0, 2, 1)  # (K, P, n)
                 modes = blk.plane_modes(qk.min(axis=2), qk.max(axis=2)) if len(kn) else np.zeros((0, P), np.uint8)
                 coded = blk.mode_bytes_table(B * B)[modes].sum(axis=1)
-                raw = coded >= B * B * self.lf.channels * self.bps
+                raw = coded * 8 >= 7 * B * B * self.lf.channels * self.bps
                 tb = to_blocks(target, B)
                 db_out = np.where(keep[..., None, None, None], db, 0)
                 rec = pred + from_blocks(db_out)
@@ -131,9 +131,51 @@ class Encoder:
         del nloc
         return LoopResult(self.tree, dec, levels, self.top, self.top_dec)
 
+    def prune(self, res: LoopResult) -> list:
+        """Drop key-view blocks that no descendant uses.
+
+        A node's block at a location is useless when every child there is independent of it:
+        stored raw, or itself pruned (recursively). Pruning leaves every view's reconstruction
+        unchanged; it matters on noise-like content, where children are stored raw.
+        """
+        if not res.levels:
+            return res.levels
+        nloc = self.nby * self.nbx
+        g = np.concatenate([x[0] for x in res.levels])
+        loc = np.concatenate([x[1] for x in res.levels])
+        raw = np.concatenate([x[3] for x in res.levels])
+        keep = np.ones(len(g), dtype=bool)
+        indep_below = None
+        for lev in range(0, self.tree.height):           # bottom-up
+            lo = self.level_offset[lev]
+            n_l = self.tree.sizes[lev]
+            sel = (g >= lo) & (g < lo + n_l)
+            indep = np.zeros((n_l, nloc), dtype=bool)
+            indep[g[sel] - lo, loc[sel]] = raw[sel]
+            if indep_below is not None:
+                par = self.tree.parents[lev - 1]
+                cnt = np.zeros((n_l, nloc), dtype=np.int32)
+                order = np.argsort(par, kind="stable")
+                starts = np.flatnonzero(np.r_[True, par[order][1:] != par[order][:-1]])
+                cnt[np.unique(par)] = np.add.reduceat(indep_below[order].astype(np.int32), starts, axis=0)
+                pruned = cnt == np.bincount(par, minlength=n_l)[:, None]
+                keep[sel] = ~pruned[g[sel] - lo, loc[sel]]
+                indep |= pruned
+            indep_below = indep
+        if keep.all():
+            return res.levels
+        out, a = [], 0
+        for x in res.levels:
+            k = keep[a:a + len(x[0])]
+            out.append(tuple(y[k] for y in x))
+            a += len(x[0])
+        return out
+
     def pack(self, params: RlfcParams, res: LoopResult) -> tuple[dict, list]:
         """Pack a closed-loop result into (config, sections)."""
         P, B = self.P, self.B
+        levels = self.prune(res)
+        res = LoopResult(res.tree, res.dec0, levels, res.top, res.top_dec)
         if res.levels:
             g = np.concatenate([x[0] for x in res.levels])
             loc = np.concatenate([x[1] for x in res.levels])

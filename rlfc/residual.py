@@ -5,26 +5,52 @@ from __future__ import annotations
 import numpy as np
 
 
-def quantize(r: np.ndarray, q16: np.ndarray, threshold: np.ndarray) -> np.ndarray:
-    """Residual → quantization indices.
+def _q_scalar(a: np.ndarray, q16: int, threshold: float) -> np.ndarray:
+    """The quantizer on non-negative magnitudes (int64), the definition the LUTs tabulate."""
+    a = np.where(a <= threshold, 0, a)
+    return (a * 16 + q16 // 2) // q16
+
+
+def _dq_scalar(a: np.ndarray, q16: int) -> np.ndarray:
+    return (a * q16 + 8) >> 4
+
+
+def quantize_dequantize(r: np.ndarray, q16, threshold) -> tuple[np.ndarray, np.ndarray]:
+    """Residual → (quantization indices, dequantized residual), both int32, via per-plane LUTs.
+
+    q = sign(r)·floor((16|r| + q16/2) / q16) with |r| <= T → 0; deq = sign(q)·((|q|·q16 + 8) >> 4).
 
     Args:
         r: (..., P) int32 residual planes.
-        q16: (P,) int steps in 1/16 pixel units (16 = identity).
-        threshold: (P,) pixel thresholds: |r| <= T becomes 0.
-
-    Returns:
-        (..., P) int32 indices q = sign(r)·floor((16|r| + q16/2) / q16).
+        q16: (P,) steps in 1/16 pixel units (16 = identity); threshold: (P,) pixel thresholds.
     """
-    a = np.abs(r).astype(np.int64)
-    a = np.where(a <= np.asarray(threshold), 0, a)
-    q = (a * 16 + np.asarray(q16) // 2) // np.asarray(q16)
-    return (np.sign(r) * q).astype(np.int32)
+    q16 = np.broadcast_to(np.asarray(q16, dtype=np.int64), (r.shape[-1],))
+    thr = np.broadcast_to(np.asarray(threshold, dtype=np.float64), (r.shape[-1],))
+    q = np.empty(r.shape, dtype=np.int32)
+    dq = np.empty(r.shape, dtype=np.int32)
+    for p in range(r.shape[-1]):          # one lookup table per plane (<= 4)
+        rp = r[..., p]
+        lo, hi = int(rp.min()), int(rp.max())
+        m = max(-lo, hi, 0)
+        mag = np.arange(m + 1, dtype=np.int64)
+        qm = _q_scalar(mag, int(q16[p]), float(thr[p]))
+        lut_q = np.concatenate([-qm[:0:-1], qm]).astype(np.int32)           # index r + m
+        lut_d = np.concatenate([-_dq_scalar(qm, int(q16[p]))[:0:-1], _dq_scalar(qm, int(q16[p]))]).astype(np.int32)
+        idx = rp + np.int32(m)
+        q[..., p] = lut_q[idx]
+        dq[..., p] = lut_d[idx]
+    return q, dq
 
 
-def dequantize(q: np.ndarray, q16: np.ndarray) -> np.ndarray:
+def quantize(r: np.ndarray, q16, threshold) -> np.ndarray:
+    """Residual → quantization indices (see :func:`quantize_dequantize`)."""
+    return quantize_dequantize(r, q16, threshold)[0]
+
+
+def dequantize(q: np.ndarray, q16) -> np.ndarray:
     """Indices → residual: sign(q)·((|q|·q16 + 8) >> 4), int32."""
-    a = (np.abs(q).astype(np.int64) * np.asarray(q16) + 8) >> 4
+    q16 = np.asarray(q16, dtype=np.int64)
+    a = (np.abs(q).astype(np.int64) * q16 + 8) >> 4
     return (np.sign(q) * a).astype(np.int32)
 
 
@@ -42,5 +68,6 @@ def from_blocks(x: np.ndarray) -> np.ndarray:
 
 def block_energy(deq_blocks: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """(N, nby, nbx, b, b, P) → (N, nby, nbx) weighted mean of squared values (pixel units²)."""
-    e = (deq_blocks.astype(np.float64) ** 2).mean(axis=(3, 4))
+    d = deq_blocks.astype(np.float32)
+    e = (d * d).mean(axis=(3, 4), dtype=np.float64)
     return e @ np.asarray(weights, dtype=np.float64)

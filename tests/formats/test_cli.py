@@ -1,0 +1,145 @@
+"""The lfcodec CLI as a user runs it: encode → info → decode, and bad input."""
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from formats.cli import main
+from formats.imageio import read_image
+from formats.scenes import read_scene
+from tests.conftest import ROOT
+
+SAMPLE = ROOT / "samples" / "dino_crop"
+
+
+@pytest.fixture(scope="module")
+def encoded(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "dino.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--quiet"]) == 0
+    return out
+
+
+def test_encode_json_report(tmp_path, capsys):
+    out = tmp_path / "x.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--quant", "6", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    for k in ("bytes", "bpp", "psnr_rgb", "psnr_ycocg", "ssim", "encode_s"):
+        assert k in rep
+    assert rep["bytes"] == out.stat().st_size
+    assert rep["bpp"] == pytest.approx(8 * rep["bytes"] / (81 * 128 * 160))
+    assert 35 < rep["psnr_rgb"] < 60 and 0.8 < rep["ssim"] <= 1
+
+
+def test_target_psnr(tmp_path, capsys):
+    out = tmp_path / "t.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--target-psnr", "40", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert 40 <= rep["psnr_rgb"] < 40.6, rep["psnr_rgb"]
+    assert len(rep["search"]) >= 5
+    # the decoded file reaches the reported quality
+    assert main(["decode", str(out), str(tmp_path / "v"), "--quiet"]) == 0
+    lf = read_scene(SAMPLE)
+    dec = np.stack([read_image(tmp_path / "v" / f"r{r:02d}_c{c:02d}.png") for r in range(9) for c in range(9)])
+    from formats.metrics import psnr_rgb
+    assert psnr_rgb(lf.views.reshape(dec.shape), dec) == pytest.approx(rep["psnr_rgb"], abs=1e-9)
+
+
+def test_target_bpp(tmp_path, capsys):
+    out = tmp_path / "b.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--target-bpp", "1.0", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert 0.5 < rep["bpp"] <= 1.0
+    # it is the best-quality point the search saw under the target
+    feasible = [t for t in rep["search"] if t["bpp"] <= 1.0]
+    assert rep["psnr_rgb"] == pytest.approx(max(t["psnr_rgb"] for t in feasible))
+
+
+def test_lossless_json_has_no_infinity(tmp_path, capsys):
+    assert main(["encode", str(SAMPLE), str(tmp_path / "l.lfc"), "--lossless", "--json", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    rep = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-JSON constant {c}"))
+    assert rep["exact"] is True and rep["psnr_rgb"] is None
+
+
+def test_info(encoded, capsys):
+    assert main(["info", str(encoded), "--json", "--verify"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["codec"] == "rlfc" and rep["scene"]["rows"] == 9 and rep["verified"]
+    assert [s["name"] for s in rep["sections"]] == ["meta", "rlfc.top", "rlfc.index", "rlfc.blocks"]
+    assert main(["info", str(encoded)]) == 0
+    assert "rlfc.blocks" in capsys.readouterr().out
+
+
+def test_decode_views_view_and_block(encoded, tmp_path):
+    assert main(["decode", str(encoded), str(tmp_path / "all"), "--quiet"]) == 0
+    files = sorted(p.name for p in (tmp_path / "all").iterdir())
+    assert len(files) == 81 and files[0] == "r00_c00.png" and files[-1] == "r08_c08.png"
+    assert main(["decode", str(encoded), str(tmp_path / "one"), "--view", "3,5", "--quiet"]) == 0
+    one = read_image(tmp_path / "one" / "r03_c05.png")
+    assert (one == read_image(tmp_path / "all" / "r03_c05.png")).all()
+    # --block ROW,COL,BY,BX: view (3,5), block row 2, block column 4 → pixels [16,24) x [32,40)
+    assert main(["decode", str(encoded), "--block", "3,5,2,4", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
+    blk = np.load(tmp_path / "b.npy")
+    assert blk.shape == (8, 8, 3) and blk.dtype == np.uint8
+    assert (blk == one[16:24, 32:40]).all()
+    # edge block is cropped: 160 px wide = 20 blocks, 128 high = 16 blocks (exact), so use level too
+    assert main(["decode", str(encoded), "--block", "3,5,15,19", "--out", str(tmp_path / "e.npy"), "--level", "1",
+                 "--quiet"]) == 0
+    assert np.load(tmp_path / "e.npy").shape == (8, 8, 3)
+
+
+def test_progressive_decode_levels(encoded, tmp_path):
+    for L in (0, 3):
+        assert main(["decode", str(encoded), str(tmp_path / f"L{L}"), "--view", "0,0", "--level", str(L), "--quiet"]) == 0
+    a, b = read_image(tmp_path / "L0" / "r00_c00.png"), read_image(tmp_path / "L3" / "r00_c00.png")
+    assert a.shape == b.shape and not (a == b).all()
+
+
+def _run(*args):
+    r = subprocess.run([sys.executable, "-m", "formats.cli", *args], capture_output=True, text=True, cwd=ROOT)
+    return r.returncode, r.stdout, r.stderr
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["info", "nope.lfc"], "cannot open"),
+    (["info", "README.md"], "magic"),
+    (["encode", "nope_dir", "x.lfc"], "no such scene"),
+    (["encode", "rlfc", "x.lfc"], "no recognizable"),
+    (["decode", "nope.lfc", "out"], "cannot open"),
+    (["encode", str(SAMPLE), "x.lfc", "--block-size", "5"], "block size"),
+    (["encode", str(SAMPLE), str(SAMPLE / "scene.json")], "refusing"),
+])
+def test_bad_input_one_line_exit_2(args, needle):
+    code, out, err = _run(*args)
+    assert code == 2, (code, err)
+    assert err.strip().count("\n") == 0 and needle in err and "Traceback" not in err
+
+
+def test_bad_block_and_level_requests(encoded):
+    for args, needle in ((["--block", "9,0,0,0"], "outside"), (["--block", "0,0,99,0"], "outside"),
+                         (["--block", "1,2,3"], "4 non-negative"), (["--block", "0,0,0,0", "--level", "9"], "level")):
+        code, out, err = _run("decode", str(encoded), *args, "--out", "/tmp/never.npy")
+        assert code == 2 and needle in err and err.strip().count("\n") == 0, err
+
+
+def test_corrupt_and_truncated_files(encoded, tmp_path):
+    blob = bytearray(encoded.read_bytes())
+    (tmp_path / "trunc.lfc").write_bytes(bytes(blob[:-1000]))
+    code, _, err = _run("info", str(tmp_path / "trunc.lfc"))
+    assert code == 2 and "truncated" in err and "rlfc.blocks" in err
+    from formats.container import Container
+    info = Container(bytes(blob)).info("rlfc.blocks")
+    blob[info.offset + 100] ^= 0xFF
+    (tmp_path / "flip.lfc").write_bytes(bytes(blob))
+    code, _, err = _run("info", str(tmp_path / "flip.lfc"), "--verify")
+    assert code == 2 and "rlfc.blocks" in err and "checksum" in err
+    code, _, err = _run("decode", str(tmp_path / "flip.lfc"), str(tmp_path / "o"), "--quiet")
+    assert code == 2 and "rlfc.blocks" in err
+
+
+def test_help_for_each_command():
+    for cmd in ("info", "encode", "decode"):
+        code, out, _ = _run(cmd, "--help")
+        assert code == 0 and "usage" in out

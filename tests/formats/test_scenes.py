@@ -1,0 +1,179 @@
+"""Scene readers: every layout on synthesized folders, the shared real scenes, and bad input."""
+import json
+
+import numpy as np
+import pytest
+
+from formats.errors import LfcError, SceneError
+from formats.imageio import read_image, write_image
+from formats.scenes import read_scene, write_views
+from tests.conftest import shared_scene
+
+
+def _img(h=6, w=8, c=3, dtype=np.uint8, seed=0):
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, np.iinfo(dtype).max, (h, w, c), endpoint=True).astype(dtype)
+
+
+def _grid(tmp_path, rows=2, cols=3, **kw):
+    (tmp_path / "v").mkdir()
+    imgs = {}
+    for r in range(rows):
+        for c in range(cols):
+            imgs[r, c] = _img(seed=r * 10 + c, **kw)
+            write_image(tmp_path / "v" / f"{r}_{c}.png", imgs[r, c])
+    (tmp_path / "scene.json").write_text(json.dumps(
+        {"layout": "grid", "rows": rows, "cols": cols, "views": "v/{row}_{col}.png", "baseline": None, "focal_px": None}))
+    return imgs
+
+
+def test_grid_scene(tmp_path):
+    imgs = _grid(tmp_path)
+    lf = read_scene(tmp_path)
+    assert lf.views.shape == (2, 3, 6, 8, 3) and lf.layout == "grid"
+    assert (lf.views[1, 2] == imgs[1, 2]).all()
+    assert lf.focal == (8.0, 8.0) and "baseline=1" in lf.meta["assumed"]
+    assert np.allclose(lf.positions[1, 2], [2, -1, 0])
+    lf2 = read_scene(tmp_path, baseline=0.5, focal=100)
+    assert lf2.focal == (100, 100) and np.allclose(lf2.positions[1, 2], [1, -0.5, 0])
+
+
+@pytest.mark.parametrize("dtype,c", [(np.uint16, 3), (np.uint8, 1), (np.uint8, 4), (np.uint16, 1)])
+def test_depths_and_channels(tmp_path, dtype, c):
+    imgs = _grid(tmp_path, dtype=dtype, c=c)
+    lf = read_scene(tmp_path)
+    assert lf.views.dtype == dtype and lf.channels == c
+    assert (lf.views[0, 1] == imgs[0, 1]).all()
+
+
+def test_hci_layout(tmp_path):
+    for i in range(9):
+        write_image(tmp_path / f"input_Cam{i:03d}.png", _img(seed=i))
+    (tmp_path / "license.txt").write_text("x")
+    lf = read_scene(tmp_path)
+    assert lf.views.shape[:2] == (3, 3)
+    assert (lf.views[1, 2] == _img(seed=5)).all()
+
+
+def test_hci_missing_view(tmp_path):
+    for i in [0, 1, 2, 3, 5, 6, 7, 8]:
+        write_image(tmp_path / f"input_Cam{i:03d}.png", _img(seed=i))
+    with pytest.raises(SceneError, match="input_Cam"):
+        read_scene(tmp_path)
+
+
+def test_stanford_layout(tmp_path):
+    for r in range(2):
+        for c in range(2):
+            write_image(tmp_path / f"out_{r:02d}_{c:02d}_-100.5_200.25.png", _img(seed=r * 2 + c))
+    lf = read_scene(tmp_path)
+    assert lf.views.shape[:2] == (2, 2) and (lf.views[1, 0] == _img(seed=2)).all()
+    (tmp_path / "out_01_01_-100.5_200.25.png").unlink()
+    with pytest.raises(SceneError, match="missing"):
+        read_scene(tmp_path)
+
+
+def test_llff_layout(tmp_path):
+    (tmp_path / "images").mkdir()
+    n = 3
+    for i in range(n):
+        write_image(tmp_path / "images" / f"img{i:03d}.png", _img(seed=i))
+    pb = np.zeros((n, 17))
+    for i in range(n):
+        m = np.zeros((3, 5))
+        m[:, :3] = np.eye(3)
+        m[:, 3] = [i, 0, 0]
+        m[:, 4] = [12, 16, 20]          # original capture 16 px wide, focal 20
+        pb[i, :15] = m.reshape(-1)
+    np.save(tmp_path / "poses_bounds.npy", pb)
+    lf = read_scene(tmp_path)
+    assert lf.views.shape[:2] == (1, 3) and lf.layout == "posed"
+    assert lf.focal[0] == pytest.approx(20 * 8 / 16)
+    # LLFF (down, right, back) -> OpenGL (right, up, back)
+    assert np.allclose(lf.c2w[0, 0, :3, :3], [[0, -1, 0], [1, 0, 0], [0, 0, 1]])
+    np.save(tmp_path / "poses_bounds.npy", pb[:2])
+    with pytest.raises(SceneError, match="2 poses"):
+        read_scene(tmp_path)
+
+
+def test_transforms_layout(tmp_path):
+    (tmp_path / "train").mkdir()
+    frames = []
+    for i in range(2):
+        write_image(tmp_path / "train" / f"r_{i}.png", _img(c=4, seed=i))
+        frames.append({"file_path": f"./train/r_{i}", "transform_matrix": np.eye(4).tolist()})
+    (tmp_path / "transforms_train.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames}))
+    lf = read_scene(tmp_path)
+    assert lf.views.shape == (1, 2, 6, 8, 4) and lf.has_alpha
+    assert lf.focal[0] == pytest.approx(4 / np.tan(0.25))
+    lf2 = read_scene(tmp_path / "transforms_train.json")
+    assert (lf2.views == lf.views).all()
+
+
+def test_mixed_sizes_and_channels(tmp_path):
+    _grid(tmp_path)
+    write_image(tmp_path / "v" / "1_1.png", _img(h=7))
+    with pytest.raises(SceneError, match="1_1.png"):
+        read_scene(tmp_path)
+    write_image(tmp_path / "v" / "1_1.png", _img(c=4))
+    with pytest.raises(SceneError, match="channels"):
+        read_scene(tmp_path)
+
+
+def test_missing_view(tmp_path):
+    _grid(tmp_path)
+    (tmp_path / "v" / "0_2.png").unlink()
+    with pytest.raises(SceneError, match="missing view"):
+        read_scene(tmp_path)
+
+
+def test_unreadable_image(tmp_path):
+    _grid(tmp_path)
+    (tmp_path / "v" / "0_1.png").write_bytes(b"\x89PNG\r\n\x1a\n garbage")
+    with pytest.raises(SceneError, match="0_1.png"):
+        read_scene(tmp_path)
+
+
+def test_empty_and_nonimage_folders(tmp_path):
+    with pytest.raises(SceneError, match="empty"):
+        read_scene(tmp_path)
+    (tmp_path / "notes.txt").write_text("hello")
+    (tmp_path / "data.csv").write_text("1,2")
+    with pytest.raises(SceneError, match="no recognizable"):
+        read_scene(tmp_path)
+    with pytest.raises(SceneError, match="no such"):
+        read_scene(tmp_path / "nope")
+    with pytest.raises(SceneError, match="folder"):
+        read_scene(tmp_path / "notes.txt")
+
+
+def test_bad_scene_json(tmp_path):
+    (tmp_path / "scene.json").write_text("{not json")
+    with pytest.raises(SceneError, match="JSON"):
+        read_scene(tmp_path)
+    (tmp_path / "scene.json").write_text('{"rows": 2}')
+    with pytest.raises(SceneError, match="rows, cols and views"):
+        read_scene(tmp_path)
+
+
+def test_write_views_roundtrip_16bit(tmp_path):
+    v = np.stack([np.stack([_img(dtype=np.uint16, seed=s) for s in range(2)])])
+    paths = write_views(tmp_path / "out", v)
+    assert [p.name for p in paths] == ["r00_c00.png", "r00_c01.png"]
+    back = read_image(paths[1])
+    assert back.dtype == np.uint16 and (back == v[0, 1]).all()
+
+
+@pytest.mark.parametrize("name,shape", [
+    ("hci_antinous", (9, 9, 512, 512, 3)), ("lytro_dino_2067", (9, 9, 304, 432, 3)),
+    ("llff_statue", (1, 27, 960, 540, 3)), ("mitsuba_objects_360", (1, 100, 256, 256, 4))])
+def test_shared_scenes(name, shape):
+    lf = read_scene(shared_scene(name))
+    assert lf.views.shape == shape and lf.views.dtype == np.uint8
+    if lf.layout == "posed":
+        rot = lf.c2w[0, :, :3, :3]
+        assert np.allclose(rot @ rot.transpose(0, 2, 1), np.eye(3), atol=1e-4)
+
+
+def test_errors_are_lfc_errors():
+    assert issubclass(SceneError, LfcError)

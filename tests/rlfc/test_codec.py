@@ -1,0 +1,124 @@
+"""RLFC end to end on synthetic and hard cases: exactness, decoder agreement, progressive."""
+import numpy as np
+import pytest
+
+from formats.errors import LfcError, ParameterError, UnsupportedError
+from formats.metrics import psnr_rgb
+from rlfc import RlfcParams
+from rlfc.color import from_planes, to_planes
+from tests.rlfc.helpers import check_agreement, make_lf, roundtrip, smooth_lf
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_ycocg_r_is_lossless(dtype, rng):
+    x = rng.integers(0, np.iinfo(dtype).max, (1000, 3), endpoint=True).astype(dtype)
+    x[:4] = [[0, 0, 0], [np.iinfo(dtype).max] * 3, [np.iinfo(dtype).max, 0, 0], [0, np.iinfo(dtype).max, 0]]
+    p = to_planes(x)
+    assert (from_planes(p, dtype) == x).all()
+    peak = int(np.iinfo(dtype).max)
+    assert p[:, 0].min() >= 0 and p[:, 0].max() <= peak              # Y keeps the depth
+    assert p[:, 1:].min() >= -peak and p[:, 1:].max() <= peak         # Co/Cg need one extra bit
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(c=2),
+                                dict(h=13, w=19), dict(rows=1, cols=5), dict(rows=5, cols=1)])
+def test_lossless_exact_and_decoders_agree(kw):
+    lf = smooth_lf(**kw)
+    d, n, loop = roundtrip(lf, RlfcParams(block_size=4, quant=1, tree_height=2))
+    assert (d.decode_all() == lf.views).all()
+    check_agreement(d, lf.views.shape)
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(h=13, w=19)])
+def test_lossy_decoders_agree_and_match_encoder(kw):
+    lf = smooth_lf(**kw)
+    d, n, loop = roundtrip(lf, RlfcParams(block_size=4, quant=6, threshold=3, energy=9, tree_height=2))
+    full = d.decode_all()
+    enc_view = from_planes(loop.dec0[:, :lf.height, :lf.width], lf.views.dtype)
+    assert (full.reshape(enc_view.shape) == enc_view).all()   # closed loop: encoder == decoder
+    check_agreement(d, lf.views.shape)
+    assert psnr_rgb(lf.views, full) > 30
+
+
+def test_alpha_is_lossless_in_lossy_mode():
+    lf = smooth_lf(c=4)
+    d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=12, threshold=6, energy=36))
+    assert (d.decode_all()[..., 3] == lf.views[..., 3]).all()
+
+
+def test_progressive_levels_improve_monotonically():
+    lf = smooth_lf(rows=5, cols=5)
+    d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=2, tree_height=3))
+    ps = [psnr_rgb(lf.views, d.decode_all(L)) for L in range(d.levels + 1)]
+    assert all(a >= b for a, b in zip(ps, ps[1:])), ps
+
+
+def test_constant_light_field_costs_little():
+    v = np.full((4, 4, 32, 32, 3), 77, dtype=np.uint8)
+    d, n, _ = roundtrip(make_lf(v), RlfcParams(quant=4))
+    assert (d.decode_all() == v).all()
+    assert n < 4000                      # header + tiny key views; no residual blocks at all
+    assert d.file.meta["config"]["n_blocks"] == 0
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_saturated_colours(dtype):
+    peak = np.iinfo(dtype).max
+    v = np.zeros((3, 3, 16, 16, 3), dtype=dtype)
+    v[..., 0] = peak
+    v[::2, :, :8, :, 1] = peak
+    v[:, 1::2, :, 8:, 2] = peak
+    d, _, _ = roundtrip(make_lf(v), RlfcParams(block_size=4, quant=1))
+    assert (d.decode_all() == v).all()
+    d, _, _ = roundtrip(make_lf(v), RlfcParams(block_size=4, quant=8, threshold=4, energy=16))
+    out = d.decode_all()
+    assert out.min() >= 0 and out.max() <= peak and psnr_rgb(v, out) > 20
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_uniform_noise_stays_near_raw_size(dtype, rng):
+    v = rng.integers(0, np.iinfo(dtype).max, (4, 4, 32, 32, 3), endpoint=True).astype(dtype)
+    raw = v.nbytes
+    for q in (1, 4):
+        d, n, _ = roundtrip(make_lf(v), RlfcParams(quant=q, threshold=0 if q == 1 else 2))
+        assert n <= raw * 1.15 + 4096, (q, n, raw)
+    d, n, _ = roundtrip(make_lf(v), RlfcParams(quant=1))
+    assert (d.decode_all() == v).all()
+
+
+@pytest.mark.parametrize("shape", [(1, 1, 3, 5, 3), (2, 2, 3, 5, 3), (1, 1, 40, 40, 3), (2, 3, 1, 1, 1)])
+def test_tiny_views_and_single_view(shape, rng):
+    v = rng.integers(0, 256, shape).astype(np.uint8)
+    d, _, _ = roundtrip(make_lf(v), RlfcParams(quant=1))
+    assert (d.decode_all() == v).all()
+    assert d.decode_block(0, 0, 0, 0).shape == (min(8, shape[2]), min(8, shape[3]), shape[4])
+
+
+def test_irregular_cameras_cluster_by_distance(rng):
+    lf = smooth_lf(rows=1, cols=9)
+    lf.layout = "posed"
+    lf.positions = rng.random((1, 9, 3))
+    d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=1, tree_height=2))
+    assert (d.decode_all() == lf.views).all()
+    assert d.tree.sizes[1] == 3
+
+
+def test_float_views_are_unsupported():
+    lf = make_lf(np.zeros((1, 2, 4, 4, 3), np.float32))
+    with pytest.raises(UnsupportedError, match="16-bit"):
+        roundtrip(lf)
+
+
+@pytest.mark.parametrize("kw", [dict(block_size=3), dict(quant=0.5), dict(tree_height=-1), dict(threshold=-1),
+                                dict(top_codec="png"), dict(profile="nope")])
+def test_bad_params(kw):
+    with pytest.raises(ParameterError):
+        RlfcParams(**kw)
+
+
+def test_bad_requests_are_typed():
+    d, _, _ = roundtrip(smooth_lf(), RlfcParams(block_size=4))
+    for bad in (lambda: d.decode_block(9, 0, 0, 0), lambda: d.decode_block(0, 0, 99, 0),
+                lambda: d.decode_view(0, 0, level=7), lambda: d.decode_blocks([0], [0], [99])):
+        with pytest.raises(LfcError):
+            bad()
