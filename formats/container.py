@@ -289,6 +289,13 @@ class Container:
         """A whole section as a read-only uint8 array (zero-copy for memory-mapped files)."""
         return np.frombuffer(self.read(name, verify=verify), dtype=np.uint8)
 
+    def verify_span(self, name: str, start: int, stop: int) -> None:
+        """Verify the chunks of one byte range [start, stop) of a section (scalar fast path)."""
+        info = self.sections[name]
+        for c in range(start // info.chunk_size, max(start, stop - 1) // info.chunk_size + 1):
+            if (info.first_crc, c) not in self._verified:
+                self.read(name, c * info.chunk_size, min((c + 1) * info.chunk_size, info.length))
+
     def verify_ranges(self, name: str, starts: np.ndarray, stops: np.ndarray) -> None:
         """Verify the chunks touched by many byte ranges [start, stop) of a section, each chunk once."""
         info = self.info(name)

@@ -180,7 +180,7 @@ class BlockStore:
     """
 
     def __init__(self, index: np.ndarray, buf: np.ndarray, planes: int, block: int, channels: int, bps: int,
-                 layout: dict, verify=None):
+                 layout: dict, verify=None, verify_span=None):
         self.index = index.astype(np.int64)
         self.buf = buf
         self.P, self.B, self.C, self.bps = planes, block, channels, bps
@@ -188,6 +188,7 @@ class BlockStore:
         self.hs = self.off_bytes + planes + planes * self.min_bytes
         self.table = mode_bytes_table(block * block)
         self.verify = verify
+        self.verify_span = verify_span
         if len(self.index) < 2 or (np.diff(self.index) < 0).any() or self.index[-1] + PAD > buf.size:
             raise ChecksumError("rlfc block-offset table is inconsistent with the blocks section")
 
@@ -198,31 +199,28 @@ class BlockStore:
             g: (M,) BFS node ids; loc: (M,) location ids.
 
         Returns:
-            present (M,) bool; raw (M,) bool; q (M, B·B, P) int32 quantization indices
-            (zeros where absent); px (M, B·B, C) int64 raw samples (where raw).
+            sel (S,) indices of the pairs that have a block; raw (S,) bool; q (S, B·B, P)
+            int32 quantization indices (zero for raw blocks); px (S, B·B, C) int64 raw samples
+            (meaningful where raw).
         """
         n = self.B * self.B
-        M = len(g)
         buf = self.buf
         o0, o1 = self.index[loc], self.index[loc + 1]
         if self.verify is not None:
             u = np.unique(loc)
             self.verify(self.index[u], self.index[u + 1])
         nonempty = o1 > o0
-        gb = g >> 3
-        byte = buf[np.where(nonempty, o0 + gb, 0)]
+        byte = buf[np.where(nonempty, o0 + (g >> 3), 0)]
         present = nonempty & (((byte >> (g & 7).astype(np.uint8)) & 1) == 1)
-        q = np.zeros((M, n, self.P), dtype=np.int32)
-        raw = np.zeros(M, dtype=bool)
-        px = np.zeros((M, n, self.C), dtype=np.int64)
         sel = np.flatnonzero(present)
-        if sel.size == 0:
-            return present, raw, q, px
+        S = sel.size
+        if S == 0:
+            return sel, np.zeros(0, bool), np.zeros((0, n, self.P), np.int32), np.zeros((0, n, self.C), np.int64)
         s0, sg = o0[sel], g[sel]
         bm = buf[s0[:, None] + np.arange(self.nbm)]                     # (S, nbm)
         pc = _POPCOUNT[bm]
         pc[np.arange(self.nbm)[None, :] >= (sg >> 3)[:, None]] = 0
-        part = _POPCOUNT[bm[np.arange(sel.size), sg >> 3] & ((1 << (sg & 7)) - 1).astype(np.uint8)]
+        part = _POPCOUNT[bm[np.arange(S), sg >> 3] & ((1 << (sg & 7)) - 1).astype(np.uint8)]
         rank = pc.sum(axis=1) + part
         hdr = buf[(s0 + self.nbm + rank * self.hs)[:, None] + np.arange(self.hs)]   # (S, hs)
         pay = s0 + _from_le(hdr[:, :self.off_bytes], False)
@@ -234,24 +232,82 @@ class BlockStore:
         pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)
         if (pstart + psize).max(initial=0) > self.index[-1]:
             raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
-        vals = np.zeros((sel.size, self.P, n), dtype=np.int64)
-        for m in np.unique(modes[~is_raw]).tolist():
+        q = np.empty((S, n, self.P), dtype=np.int32)
+        qt = q.transpose(0, 2, 1)                                        # (S, P, n) view
+        for m in np.unique(modes).tolist():                              # <= ~30 distinct modes
             kk, cc = np.nonzero((modes == m) & ~is_raw[:, None])
-            if m == MODE_CONST:
+            if kk.size == 0:
                 continue
-            if m < MODE_CONST:
-                vals[kk, cc] = bise.decode_at(buf, pstart[kk, cc], RANGE_VALUES[m], n)
+            if m == MODE_CONST:
+                qt[kk, cc] = mins[kk, cc][:, None]
+            elif m < MODE_CONST:
+                qt[kk, cc] = bise.decode_at(buf, pstart[kk, cc], RANGE_VALUES[m], n) + mins[kk, cc][:, None]
             elif MODE_PLAIN < m < MODE_PLAIN + 32:
-                vals[kk, cc] = unpack_plain_at(buf, pstart[kk, cc], m - MODE_PLAIN, n)
+                qt[kk, cc] = unpack_plain_at(buf, pstart[kk, cc], m - MODE_PLAIN, n) + mins[kk, cc][:, None]
             else:
                 raise ChecksumError(f"rlfc block has invalid plane mode {m} (corrupt file)")
-        q[sel] = (vals + mins[:, :, None]).transpose(0, 2, 1)
+        px = np.zeros((S, n, self.C), dtype=np.int64)
         rsel = np.flatnonzero(is_raw)
         if rsel.size:
             nbytes = n * self.C * self.bps
             data = buf[pay[rsel][:, None] + np.arange(nbytes)]
             smp = data.view("<u2").astype(np.int64) if self.bps == 2 else data.astype(np.int64)
-            px[sel[rsel]] = smp.reshape(-1, n, self.C)
-            raw[sel[rsel]] = True
-            q[sel[rsel]] = 0
-        return present, raw, q, px
+            px[rsel] = smp.reshape(-1, n, self.C)
+            q[rsel] = 0
+        return sel, is_raw, q, px
+
+    def fetch_one(self, loc: int, nodes: list[int]):
+        """One location, a few nodes (a single-block request): header parsing in Python ints.
+
+        Returns:
+            list, per node in ``nodes``: None (no block), ("raw", px (n, C)) or ("q", q (n, P)).
+        """
+        a, b = int(self.index[loc]), int(self.index[loc + 1])
+        out = [None] * len(nodes)
+        if a == b:
+            return out
+        if self.verify_span is not None:
+            self.verify_span(a, b)
+        buf = self.buf
+        n, P = self.B * self.B, self.P
+        bitmap = int.from_bytes(buf[a:a + self.nbm].tobytes(), "little")
+        jobs = {}
+        for i, g in enumerate(nodes):
+            if not (bitmap >> g) & 1:
+                continue
+            h = a + self.nbm + bin(bitmap & ((1 << g) - 1)).count("1") * self.hs
+            hb = buf[h:h + self.hs].tobytes()
+            pos = a + int.from_bytes(hb[:self.off_bytes], "little")
+            modes = hb[self.off_bytes:self.off_bytes + P]
+            if modes[0] == MODE_RAW:
+                nbytes = n * self.C * self.bps
+                if pos + nbytes > self.index[-1]:
+                    raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+                dt = "<u2" if self.bps == 2 else np.uint8
+                out[i] = ("raw", np.frombuffer(buf[pos:pos + nbytes].tobytes(), dtype=dt).astype(np.int64).reshape(n, self.C))
+                continue
+            mb = self.off_bytes + P
+            mins = [int.from_bytes(hb[mb + c * self.min_bytes:mb + (c + 1) * self.min_bytes], "little", signed=True)
+                    for c in range(P)]
+            q = np.empty((n, P), dtype=np.int32)
+            out[i] = ("q", q)
+            for c in range(P):
+                m = modes[c]
+                if m == MODE_CONST:
+                    q[:, c] = mins[c]
+                else:
+                    jobs.setdefault(m, []).append((pos, i, c, mins[c]))
+                pos += int(self.table[m])
+            if pos > self.index[-1]:
+                raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+        for m, js in jobs.items():                       # one vectorized decode per distinct mode
+            starts = np.fromiter((j[0] for j in js), dtype=np.int64, count=len(js))
+            if m < MODE_CONST:
+                vals = bise.decode_at(buf, starts, RANGE_VALUES[m], n)
+            elif MODE_PLAIN < m < MODE_PLAIN + 32:
+                vals = unpack_plain_at(buf, starts, m - MODE_PLAIN, n)
+            else:
+                raise ChecksumError(f"rlfc block has invalid plane mode {m} (corrupt file)")
+            for (_, i, c, mn), v in zip(js, vals):
+                out[i][1][:, c] = v.astype(np.int32) + mn
+        return out

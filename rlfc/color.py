@@ -26,7 +26,7 @@ def to_planes(x: np.ndarray) -> np.ndarray:
 def from_planes(p: np.ndarray, dtype=np.uint8) -> np.ndarray:
     """Inverse of :func:`to_planes`, clipped to the range of ``dtype`` (uint8 or uint16)."""
     p = np.asarray(p, dtype=np.int32)
-    peak = np.iinfo(dtype).max
+    peak = 65535 if np.dtype(dtype) == np.uint16 else 255
     c = p.shape[-1]
     if c >= 3:
         y, co, cg = p[..., 0], p[..., 1], p[..., 2]

@@ -16,7 +16,7 @@ from formats.lfcfile import LfcFile, check_codec_version
 from .blocks import PAD, BlockStore
 from .color import from_planes, to_planes
 from .encoder import CODEC_ID, CODEC_VERSION
-from .residual import dequantize, from_blocks
+from .residual import dequantize, from_blocks, to_blocks
 from .topcodec import decode_image
 from .tree import Tree
 
@@ -65,6 +65,9 @@ class RlfcDecoder:
                 raise FormatError(f"{c.name}: top-level image {i} lies outside section 'rlfc.top'")
             imgs.append(decode_image(t["codec"], bytes(top[a:a + n]), (self.Hp, self.Wp, self.channels), self.dtype))
         self.top = to_planes(np.stack(imgs))                  # (N_H, Hp, Wp, P) int32
+        # the same pixels laid out per block, so a block request is one contiguous row gather
+        self.top_blocks = np.ascontiguousarray(to_blocks(self.top, B)).reshape(
+            len(imgs), self.nby, self.nbx, B * B, self.P)      # (N_H, nby, nbx, B·B, P)
         idx = c.read("rlfc.index")
         if len(idx) != 4 * (self.nby * self.nbx + 1):
             raise FormatError(f"{c.name}: section 'rlfc.index' has {len(idx)} bytes, expected {4 * (self.nby * self.nbx + 1)}")
@@ -73,16 +76,17 @@ class RlfcDecoder:
         info = c.info("rlfc.blocks")
         if self._remote:
             buf = np.zeros(0, np.uint8)
-            verify = None
+            verify = verify_span = None
         else:
             buf = c.array("rlfc.blocks", verify=False)
             verify = lambda a, b: c.verify_ranges("rlfc.blocks", a, b)  # noqa: E731
+            verify_span = lambda a, b: c.verify_span("rlfc.blocks", a, b)  # noqa: E731
         if info.length != index[-1] + PAD:
             raise FormatError(f"{c.name}: section 'rlfc.blocks' has {info.length} bytes, index says {index[-1] + PAD}")
         self._layout = layout
         self._index = index
         self.store = None if self._remote else BlockStore(index, buf, self.P, B, self.channels, self.dtype.itemsize,
-                                                           layout, verify)
+                                                           layout, verify, verify_span)
 
     # -- helpers ----------------------------------------------------------------------------
     def _store_for(self, locs: np.ndarray) -> tuple[BlockStore, np.ndarray]:
@@ -114,13 +118,11 @@ class RlfcDecoder:
         return row * self.cols + col
 
     def _residual(self, store: BlockStore, g: np.ndarray, loc: np.ndarray):
-        present, raw, q, px = store.fetch(g, loc)
+        """Compact residuals of the pairs that have blocks: (sel, raw, deq (S, n, P), raw planes)."""
+        sel, raw, q, px = store.fetch(g, loc)
         deq = dequantize(q, self.q16)
-        if raw.any():
-            rawp = to_planes(px.astype(self.dtype))
-        else:
-            rawp = None
-        return raw, deq, rawp
+        rawp = to_planes(px.astype(self.dtype)) if raw.any() else None
+        return sel, raw, deq, rawp
 
     # -- decoders ---------------------------------------------------------------------------
     def decode_blocks(self, views: np.ndarray, by: np.ndarray, bx: np.ndarray, level: int = 0,
@@ -146,21 +148,21 @@ class RlfcDecoder:
             raise ParameterError(f"block index out of range (blocks are {self.nby} rows x {self.nbx} cols of {B} px)")
         H = self.levels
         top = self.anc[H][views]
-        ys = by[:, None] * B + np.arange(B)
-        xs = bx[:, None] * B + np.arange(B)
-        acc = self.top[top[:, None, None], ys[:, :, None], xs[:, None, :]].reshape(M, B * B, self.P)
+        acc = self.top_blocks[top, by, bx]                    # (M, B·B, P)
         loc = by * self.nbx + bx
         if H > level:
             levs = list(range(H - 1, level - 1, -1))
             g = np.concatenate([self.level_offset[lv] + self.anc[lv][views] for lv in levs])
             store, lloc = self._store_for(loc)
-            raw, deq, rawp = self._residual(store, g, np.tile(lloc, len(levs)))
+            sel, raw, deq, rawp = self._residual(store, g, np.tile(lloc, len(levs)))
+            lev_of = sel // M
             for i in range(len(levs)):       # top-down over the tree height
-                s = slice(i * M, (i + 1) * M)
-                acc = acc + deq[s]
-                if raw[s].any():
-                    r = raw[s]
-                    acc[r] = rawp[s][r]
+                k = np.flatnonzero(lev_of == i)    # each request at most once per level
+                req = sel[k] - i * M
+                acc[req] += deq[k]
+                r = raw[k]
+                if r.any():
+                    acc[req[r]] = rawp[k[r]]
         acc = acc.reshape(M, B, B, self.P)
         return acc if planes else from_planes(acc, self.dtype)
 
@@ -173,8 +175,22 @@ class RlfcDecoder:
         if not (0 <= by < self.nby and 0 <= bx < self.nbx):
             raise ParameterError(f"block ({by},{bx}) is outside the {self.nby}x{self.nbx} block grid "
                                  f"({self.height}x{self.width} px, B={self.block_size})")
-        out = self.decode_blocks(np.array([v]), np.array([by]), np.array([bx]), level)[0]
+        level = self._check_level(level)
         B = self.block_size
+        if self.store is None:
+            out = self.decode_blocks(np.array([v]), np.array([by]), np.array([bx]), level)[0]
+        else:   # lean path: Python-int header parsing, one decode per distinct mode
+            acc = self.top_blocks[self.anc[self.levels][v], by, bx]
+            levs = range(self.levels - 1, level - 1, -1)
+            got = self.store.fetch_one(by * self.nbx + bx, [self.level_offset[lv] + int(self.anc[lv][v]) for lv in levs])
+            for item in got:                                  # top-down
+                if item is None:
+                    continue
+                if item[0] == "raw":
+                    acc = to_planes(item[1].astype(self.dtype))
+                else:
+                    acc = acc + dequantize(item[1], self.q16)
+            out = from_planes(acc.reshape(B, B, self.P), self.dtype)
         return out[:min(B, self.height - by * B), :min(B, self.width - bx * B)]
 
     def _decode_nodes(self, level: int, nodes: np.ndarray | None = None) -> np.ndarray:
@@ -198,14 +214,15 @@ class RlfcDecoder:
                 chunk = ids[a:a + 8]
                 g = np.repeat(self.level_offset[lv] + chunk, nloc)
                 loc = np.tile(np.arange(nloc), len(chunk))
-                raw, deq, rawp = self._residual(self.store if not self._remote else self._store_for(loc)[0], g,
-                                                loc if not self._remote else self._store_for(loc)[1])
-                res = deq.reshape(len(chunk), self.nby, self.nbx, B, B, self.P)
-                rec = dec[ppos[a:a + 8]] + from_blocks(res)
+                store, lloc = self._store_for(loc)
+                sel, raw, deq, rawp = self._residual(store, g, lloc)
+                res = np.zeros((len(chunk) * nloc, B * B, self.P), dtype=np.int32)
+                res[sel] = deq
+                rec = dec[ppos[a:a + 8]] + from_blocks(res.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
                 if raw.any():
                     rb = rec.reshape(len(chunk), self.nby, B, self.nbx, B, self.P).transpose(0, 1, 3, 2, 4, 5).copy()
                     flat = rb.reshape(-1, B * B, self.P)
-                    flat[raw] = rawp[raw]
+                    flat[sel[raw]] = rawp[raw]
                     rec = from_blocks(flat.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
                 out[a:a + 8] = rec
             dec, ids_above = out, ids

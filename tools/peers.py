@@ -1,0 +1,116 @@
+"""Baseline codecs a user would pick instead of lfcodec, with one interface.
+
+Each peer's ``run(views, setting)`` returns the encoded size, the decoded views and decode
+times. Per-view JPEG 2000 and JPEG XL go through imagecodecs (in memory); HEVC through
+ffmpeg/libx265 as a pseudo-sequence of the views in serpentine order (4:4:4, no random
+access: the unit is the whole sequence).
+"""
+from __future__ import annotations
+
+import shutil
+import statistics
+import subprocess
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+def _median(fn, repeats=3):
+    ts, out = [], None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts), out
+
+
+class PerViewImageCodec:
+    """Every view coded alone (random-access unit: one view)."""
+
+    unit = "view"
+
+    def __init__(self, name, enc, dec, settings):
+        self.name, self._enc, self._dec, self.settings = name, enc, dec, settings
+
+    def available(self) -> str | None:
+        return None
+
+    def run(self, views: np.ndarray, setting):
+        blobs = [self._enc(v, setting) for v in views]
+        t_one, _ = _median(lambda: self._dec(blobs[len(blobs) // 2]), 5)
+        t0 = time.perf_counter()
+        dec = np.stack([self._dec(b).reshape(views.shape[1:]) for b in blobs])
+        t_all = time.perf_counter() - t0
+        return {"bytes": sum(len(b) for b in blobs), "decoded": dec, "decode_view_s": t_one, "decode_all_s": t_all}
+
+
+def j2k():
+    import imagecodecs
+
+    def enc(v, s):
+        a = v[..., 0] if v.shape[-1] == 1 else v
+        return imagecodecs.jpeg2k_encode(a, level=0, reversible=True) if s == "lossless" else imagecodecs.jpeg2k_encode(a, level=float(s))
+    return PerViewImageCodec("JPEG 2000 (per view)", enc, imagecodecs.jpeg2k_decode, [32, 35, 38, 40, 42, 45, "lossless"])
+
+
+def jxl():
+    import imagecodecs
+
+    def enc(v, s):
+        a = v[..., 0] if v.shape[-1] == 1 else v
+        if s == "lossless":
+            return imagecodecs.jpegxl_encode(a, lossless=True, effort=3)
+        return imagecodecs.jpegxl_encode(a, distance=float(s), effort=5)
+    return PerViewImageCodec("JPEG XL (per view)", enc, imagecodecs.jpegxl_decode, [6.0, 3.0, 1.5, 0.8, 0.4, "lossless"])
+
+
+def serpentine(rows: int, cols: int) -> list[int]:
+    return [r * cols + (c if r % 2 == 0 else cols - 1 - c) for r in range(rows) for c in range(cols)]
+
+
+class Hevc:
+    """x265 pseudo-sequence (views in serpentine order), 4:4:4, one GOP."""
+
+    name = "HEVC x265 (pseudo-sequence)"
+    unit = "whole sequence (no random access)"
+    settings = [40, 34, 28, 22, 16]   # CRF
+
+    def __init__(self, preset: str = "medium"):
+        self.preset = preset
+
+    def available(self) -> str | None:
+        if not shutil.which("ffmpeg"):
+            return "ffmpeg not on PATH"
+        r = subprocess.run(["ffmpeg", "-hide_banner", "-encoders"], capture_output=True, text=True)
+        return None if "libx265" in r.stdout else "ffmpeg has no libx265"
+
+    def run(self, views: np.ndarray, crf, order=None):
+        n, h, w, c = views.shape
+        order = order or list(range(n))
+        if c != 3 or views.dtype != np.uint8:
+            raise RuntimeError("HEVC peer handles 8-bit RGB")
+        with tempfile.TemporaryDirectory() as td:
+            out = Path(td) / "seq.mkv"
+            frames = np.ascontiguousarray(views[order])
+            pad_h, pad_w = h % 2, w % 2
+            subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{w}x{h}",
+                            "-r", "25", "-i", "-", "-c:v", "libx265", "-preset", self.preset, "-crf", str(crf),
+                            "-pix_fmt", "yuv444p", "-x265-params", f"log-level=error:keyint={n}", str(out)],
+                           input=frames.tobytes(), check=True)
+            size = out.stat().st_size
+
+            def decode():
+                r = subprocess.run(["ffmpeg", "-v", "error", "-i", str(out), "-f", "rawvideo", "-pix_fmt", "rgb24", "-"],
+                                   capture_output=True, check=True)
+                return np.frombuffer(r.stdout, np.uint8).reshape(-1, h, w, 3)
+            t_all, dec = _median(decode, 2)
+        out_views = np.empty_like(views)
+        out_views[order] = dec[:n]
+        del pad_h, pad_w
+        return {"bytes": size, "decoded": out_views, "decode_view_s": t_all, "decode_all_s": t_all}
+
+
+def all_peers():
+    return [j2k(), jxl(), Hevc()]
