@@ -163,6 +163,15 @@ def _save_npy(path: Path, arr: np.ndarray) -> None:
             tmp.unlink()
 
 
+def _int_level(d, level: float):
+    """RLFC levels are integers; LFN levels are fractional widths."""
+    if hasattr(d, "block_size"):
+        if level != int(level):
+            raise ParameterError(f"RLFC --level must be an integer 0..{d.levels}, got {level}")
+        return int(level)
+    return level
+
+
 def cmd_decode(a) -> int:
     from .codecs import open_decoder
     from .lfcfile import open_lfc
@@ -177,7 +186,7 @@ def cmd_decode(a) -> int:
         t0 = time.perf_counter()
         if a.block is not None:
             r, c, by, bx = _pair(a.block, 4, "--block")
-            blk = d.decode_block(r, c, by, bx, level=a.level)
+            blk = d.decode_block(r, c, by, bx, level=_int_level(d, a.level))
             out = Path(a.out)
             _save_npy(out, blk)
             if not a.quiet:
@@ -189,11 +198,11 @@ def cmd_decode(a) -> int:
             raise ParameterError(f"{outdir}: exists and is not a folder")
         if a.view is not None:
             r, c = _pair(a.view, 2, "--view")
-            img = d.decode_view(r, c, level=a.level)
+            img = d.decode_view(r, c, level=_int_level(d, a.level))
             paths = write_views(outdir, img[None, None], rows=[r], cols=[c])
         else:
             bar = _progress(a.quiet, total=d.rows, desc="decode")
-            views = d.decode_all(level=a.level)
+            views = d.decode_all(level=_int_level(d, a.level))
             paths = []
             for r in range(d.rows):   # write row by row for the progress bar
                 paths += write_views(outdir, views[r:r + 1], rows=[r])
@@ -251,15 +260,70 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--block", metavar="ROW,COL,BY,BX",
                    help="decode one block: view (ROW,COL), block row BY and column BX (pixels [BY*B,(BY+1)*B) x [BX*B,(BX+1)*B))")
     d.add_argument("--out", metavar="FILE.npy", help="where --block writes its (B, B, C) array")
-    d.add_argument("--level", type=int, default=0, help="progressive level: 0 = full quality .. H = top key views")
+    d.add_argument("--level", type=float, default=0,
+                   help="RLFC: 0 = full quality .. H = top key views; LFN: network width (fractional), 0 = widest")
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_decode)
+
+    t = sub.add_parser("train", help="train a light field network (LFN stream) on a scene",
+                       description="Train a nested-width light field network with continuous levels of detail and "
+                                   "write it as an .lfc stream (any prefix of which is a smaller network).")
+    t.add_argument("scene")
+    t.add_argument("out")
+    t.add_argument("--depth", type=int, default=6)
+    t.add_argument("--min-width", type=int, default=16)
+    t.add_argument("--max-width", type=int, default=128)
+    t.add_argument("--occupancy-width", type=int, default=32, help="occupancy net width (used when the scene has alpha)")
+    t.add_argument("--steps", type=int, default=2000)
+    t.add_argument("--batch", type=int, default=4096)
+    t.add_argument("--lr", type=float, default=3e-3)
+    t.add_argument("--resolution", type=int, default=128, help="train at this many pixels on the long side (0 = full)")
+    t.add_argument("--holdout", type=int, default=4, help="hold out every k-th view for evaluation (0 = none)")
+    t.add_argument("--device", default="cpu")
+    t.add_argument("--weights", default="fp16", choices=["fp16", "fp32"])
+    t.add_argument("--checkpoint", default=None, help="checkpoint .npz (saved periodically; resumed from if present)")
+    t.add_argument("--split", default="train")
+    t.add_argument("--json", action="store_true")
+    t.add_argument("--quiet", action="store_true")
+    t.set_defaults(func=cmd_train)
 
     b = sub.add_parser("bench", help="run the benchmark suite (same as python -m tools.bench)",
                        description="Benchmark lfcodec against per-view JPEG 2000 / JPEG XL and HEVC.")
     b.add_argument("rest", nargs=argparse.REMAINDER)
     b.set_defaults(func=cmd_bench)
     return p
+
+
+def cmd_train(a) -> int:
+    from lfn_stream import CODEC_ID, CODEC_VERSION, LfnConfig, TrainOptions, to_sections, train
+
+    from .lfcfile import write_lfc
+    from .scenes import read_scene
+    from .transform import resize_lightfield
+
+    scene, out = Path(a.scene), Path(a.out)
+    _refuse_input_overwrite(scene, out)
+    lf = read_scene(scene, split=a.split)
+    if a.resolution:
+        lf = resize_lightfield(lf, a.resolution)
+    cfg = LfnConfig(depth=a.depth, min_width=a.min_width, max_width=a.max_width, occupancy_width=a.occupancy_width)
+    bar = _progress(a.quiet, total=a.steps, desc="train")
+    opts = TrainOptions(steps=a.steps, batch=a.batch, lr=a.lr, holdout=a.holdout, device=a.device,
+                        checkpoint=a.checkpoint)
+
+    def prog(step, loss):
+        bar.update(1)
+        if step % 20 == 0:
+            bar.set_postfix(loss=f"{loss:.5f}")
+
+    model, occ, info = train(lf, cfg, opts, progress=prog)
+    bar.close()
+    config, sections = to_sections(model, occ, info, a.weights)
+    nbytes = write_lfc(out, CODEC_ID, CODEC_VERSION, config, lf.geometry(), sections)
+    rep = {"file": str(out), "bytes": nbytes, "steps": info["steps"], "train_s": round(info["train_s"], 1),
+           "height": lf.height, "width": lf.width, "params": model.n_params(), "final_loss": opts.history[-1][1]}
+    print(json.dumps(rep) if a.json else f"wrote {out}: {nbytes} bytes, {info['steps']} steps in {info['train_s']:.0f} s")
+    return 0
 
 
 def cmd_bench(a) -> int:

@@ -10,7 +10,7 @@ import importlib
 from .errors import UnsupportedError
 from .lfcfile import LfcFile
 
-DECODERS = {"rlfc": ("rlfc.decoder", "RlfcDecoder")}
+DECODERS = {"rlfc": ("rlfc.decoder", "RlfcDecoder"), "lfn": ("lfn_stream.render", "LfnRenderer")}
 
 
 def open_decoder(f: LfcFile):

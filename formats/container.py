@@ -169,7 +169,8 @@ class Container:
         FormatError / TruncatedError / ChecksumError / UnsupportedError on bad files.
     """
 
-    def __init__(self, source, *, name: str | None = None):
+    def __init__(self, source, *, name: str | None = None, partial: bool = False):
+        self.partial = partial   # a byte prefix of a file: sections past its end are unavailable
         self._mm = None
         self._file = None
         if isinstance(source, (str, os.PathLike)):
@@ -233,11 +234,13 @@ class Container:
                                   f"(offset {off}, expected {expect}; chunk {chunk}; duplicate={nm in self.sections})")
             expect = off + ln
             self.sections[nm] = info
-        if expect > self.size:
+        if expect > self.size and self.partial:
+            pass
+        elif expect > self.size:
             cut = next(s for s in self.sections.values() if s.offset + s.length > self.size)
             raise TruncatedError(f"{self.name}: truncated: section {cut.name!r} ends at byte "
                                  f"{cut.offset + cut.length}, file has {self.size} bytes")
-        if expect != self.size:
+        if expect < self.size:
             raise FormatError(f"{self.name}: {self.size - expect} unexpected bytes after the last section")
         if "meta" not in self.sections:
             raise FormatError(f"{self.name}: no 'meta' section")
@@ -251,6 +254,11 @@ class Container:
 
     def has(self, name: str) -> bool:
         return name in self.sections
+
+    def available(self, name: str) -> bool:
+        """The section exists and lies wholly inside the bytes we have (prefix reads)."""
+        s = self.sections.get(name)
+        return s is not None and s.offset + s.length <= self.size
 
     def _verify(self, info: SectionInfo, c0: int, c1: int, data, base: int) -> None:
         """Check chunks [c0, c1) of a section; ``data`` holds bytes from section offset ``base``."""
@@ -276,6 +284,9 @@ class Container:
             raise FormatError(f"{self.name}: read [{start}, {stop}) outside section {name!r} of {info.length} bytes")
         if start == stop:
             return b""
+        if info.offset + stop > self.size:
+            raise TruncatedError(f"{self.name}: section {name!r} is not in the available prefix of the file "
+                                 f"({self.size} bytes; it ends at {info.offset + info.length})")
         c0, c1 = start // info.chunk_size, -(-stop // info.chunk_size)
         if verify and any((info.first_crc, c) not in self._verified for c in range(c0, c1)):
             a = c0 * info.chunk_size

@@ -51,9 +51,13 @@ class LfcFile:
         self.close()
 
 
-def open_lfc(source, *, name: str | None = None) -> LfcFile:
-    """Open an .lfc file (path, bytes or ByteRangeSource) and parse its metadata."""
-    c = Container(source, name=name)
+def open_lfc(source, *, name: str | None = None, partial: bool = False) -> LfcFile:
+    """Open an .lfc file (path, bytes or ByteRangeSource) and parse its metadata.
+
+    ``partial=True`` accepts a byte prefix of a file (progressive streams): sections past the
+    prefix are reported unavailable instead of the file being rejected as truncated.
+    """
+    c = Container(source, name=name, partial=partial)
     try:
         meta = json.loads(bytes(c.read("meta")).decode("utf-8"))
         if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME or "codec" not in meta:

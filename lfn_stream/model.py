@@ -1,0 +1,83 @@
+"""The nested-width light field network (one file, readable top to bottom).
+
+Width w uses the top-left w×w block of every hidden matrix (first layer: all 6 inputs; last
+layer: all 4 outputs), so every smaller network is inside the larger one. A fractional width
+w + α (0 < α < 1) activates neuron w with weight α: it enters each LayerNorm's statistics
+with weight α and its activation is multiplied by α, so level w + 0 is exactly the width-w
+network and quality changes continuously in between (neuron masking).
+"""
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+from .config import LfnConfig
+
+
+def _mask(width: float, device, dtype) -> tuple[int, torch.Tensor]:
+    """Active neuron count and per-neuron weights [1, …, 1, α] for a fractional width."""
+    w = int(math.floor(width + 1e-9))
+    a = float(width - w)
+    if a > 1e-6:
+        m = torch.ones(w + 1, device=device, dtype=dtype)
+        m[-1] = a
+        return w + 1, m
+    return w, torch.ones(w, device=device, dtype=dtype)
+
+
+class NestedLFN(nn.Module):
+    """Plücker ray (N, 6) → RGBA (N, 4) in [0, 1], at any width in [min_width, max_width]."""
+
+    def __init__(self, cfg: LfnConfig):
+        super().__init__()
+        self.cfg = cfg
+        W, D = cfg.max_width, cfg.depth
+        dims_in = [cfg.in_features] + [W] * (D - 1)
+        self.weights = nn.ParameterList([nn.Parameter(torch.empty(W, d)) for d in dims_in])     # (W, in)
+        self.biases = nn.ParameterList([nn.Parameter(torch.zeros(W)) for _ in range(D)])
+        self.gammas = nn.ParameterList([nn.Parameter(torch.ones(W)) for _ in range(D)])
+        self.betas = nn.ParameterList([nn.Parameter(torch.zeros(W)) for _ in range(D)])
+        self.out_w = nn.Parameter(torch.empty(cfg.out_features, W))                             # (4, W)
+        self.out_b = nn.Parameter(torch.zeros(cfg.out_features))
+        for w in self.weights:
+            nn.init.kaiming_uniform_(w, a=math.sqrt(5))
+        nn.init.uniform_(self.out_w, -1 / math.sqrt(W), 1 / math.sqrt(W))
+
+    def forward(self, x: torch.Tensor, width: float | None = None) -> torch.Tensor:
+        """x: (N, 6) Plücker rays; width: fractional level (default: full). Returns (N, 4)."""
+        width = float(self.cfg.max_width if width is None else width)
+        if not self.cfg.min_width - 1e-9 <= width <= self.cfg.max_width + 1e-9:
+            raise ValueError(f"width {width} outside [{self.cfg.min_width}, {self.cfg.max_width}]")
+        n, m = _mask(min(width, self.cfg.max_width), x.device, x.dtype)
+        msum = m.sum()
+        h = x
+        for i in range(self.cfg.depth):
+            k = h.shape[1]
+            z = h @ self.weights[i][:n, :k].T + self.biases[i][:n]                              # (N, n)
+            mean = (z * m).sum(1, keepdim=True) / msum
+            var = (((z - mean) ** 2) * m).sum(1, keepdim=True) / msum
+            z = (z - mean) * torch.rsqrt(var + 1e-5) * self.gammas[i][:n] + self.betas[i][:n]
+            h = torch.relu(z) * m                                                               # (N, n)
+        return torch.sigmoid(h @ self.out_w[:, :n].T + self.out_b)                              # (N, 4)
+
+    def n_params(self, width: int | None = None) -> int:
+        """Parameters used at an integer width."""
+        w = width or self.cfg.max_width
+        c = self.cfg
+        first = w * c.in_features + 3 * w
+        hidden = (c.depth - 1) * (w * w + 3 * w)
+        return first + hidden + c.out_features * w + c.out_features
+
+
+class OccupancyNet(nn.Module):
+    """Tiny MLP: Plücker ray (N, 6) → logit that the ray hits the object (alpha > 0)."""
+
+    def __init__(self, width: int = 32, in_features: int = 6):
+        super().__init__()
+        self.net = nn.Sequential(nn.Linear(in_features, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU(),
+                                 nn.Linear(width, 1))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)[:, 0]

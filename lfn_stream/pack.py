@@ -1,0 +1,122 @@
+"""Stream format of a nested-width network: base network + one delta per width step.
+
+Sections (in file order, so any prefix that ends on a section boundary is a complete network):
+
+- ``lfn.base``: the network at min_width m, little-endian floats (fp16 by default), in order:
+  for each hidden layer i: W_i[:m, :k_i] (row-major; k_0 = 6, else m), b_i[:m], γ_i[:m], β_i[:m];
+  then W_out[:, :m], b_out.
+- ``lfn.occ``: the occupancy net (if any): its Linear weights and biases in order.
+- ``lfn.step.NNNN`` for each added neuron j = m … M-1 (NNNN = j - m): for layer 0:
+  W_0[j, :6], b_0[j], γ_0[j], β_0[j]; for each hidden layer i >= 1: the new row W_i[j, :j+1],
+  the new column W_i[:j, j], b_i[j], γ_i[j], β_i[j]; then the output layer's new column W_out[:, j].
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from formats.errors import FormatError
+
+from .config import LfnConfig
+from .model import NestedLFN, OccupancyNet
+
+DTYPES = {"fp16": "<f2", "fp32": "<f4"}
+
+
+def step_name(j: int) -> str:
+    return f"lfn.step.{j:04d}"
+
+
+def _np(p) -> np.ndarray:
+    return p.detach().cpu().double().numpy()
+
+
+def pack_network(model: NestedLFN, occ: OccupancyNet | None, dtype: str = "fp16") -> list[tuple[str, bytes]]:
+    """(name, bytes) sections of a trained network."""
+    cfg, dt = model.cfg, DTYPES[dtype]
+    m = cfg.min_width
+    W = [_np(w) for w in model.weights]
+    b, g, be = [_np(x) for x in model.biases], [_np(x) for x in model.gammas], [_np(x) for x in model.betas]
+    ow, ob = _np(model.out_w), _np(model.out_b)
+    base = []
+    for i in range(cfg.depth):
+        k = cfg.in_features if i == 0 else m
+        base += [W[i][:m, :k].ravel(), b[i][:m], g[i][:m], be[i][:m]]
+    base += [ow[:, :m].ravel(), ob]
+    out = [("lfn.base", np.concatenate(base).astype(dt).tobytes())]
+    if occ is not None:
+        out.append(("lfn.occ", np.concatenate([_np(p).ravel() for p in occ.parameters()]).astype(dt).tobytes()))
+    for j in range(m, cfg.max_width):
+        parts = [W[0][j, :cfg.in_features], b[0][j:j + 1], g[0][j:j + 1], be[0][j:j + 1]]
+        for i in range(1, cfg.depth):
+            parts += [W[i][j, :j + 1], W[i][:j, j], b[i][j:j + 1], g[i][j:j + 1], be[i][j:j + 1]]
+        parts.append(ow[:, j])
+        out.append((step_name(j - m), np.concatenate(parts).astype(dt).tobytes()))
+    return out
+
+
+def step_bytes(cfg: LfnConfig, j: int, dtype: str = "fp16") -> int:
+    """Size of the delta that adds neuron j."""
+    n = cfg.in_features + 3 + (cfg.depth - 1) * (2 * j + 1 + 3) + cfg.out_features
+    return n * np.dtype(DTYPES[dtype]).itemsize
+
+
+def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes | None = None,
+                   dtype: str = "fp16") -> tuple[NestedLFN, OccupancyNet | None]:
+    """Rebuild the network of width min_width + len(steps) (a smaller cfg) from sections."""
+    dt = DTYPES[dtype]
+    width = cfg.min_width + len(steps)
+    sub = LfnConfig(**{**cfg.to_dict(), "max_width": width})
+    model = NestedLFN(sub)
+    m = cfg.min_width
+    vals = np.frombuffer(base, dtype=dt).astype(np.float64)
+    pos = 0
+
+    def take(n):
+        nonlocal pos, vals
+        if pos + n > vals.size:
+            raise FormatError("lfn network section is shorter than its configuration needs")
+        out = vals[pos:pos + n]
+        pos += n
+        return out
+
+    W = [np.zeros((width, cfg.in_features if i == 0 else width)) for i in range(cfg.depth)]
+    b, g, be = (np.zeros((cfg.depth, width)) for _ in range(3))
+    ow = np.zeros((cfg.out_features, width))
+    for i in range(cfg.depth):
+        k = cfg.in_features if i == 0 else m
+        W[i][:m, :k] = take(m * k).reshape(m, k)
+        b[i, :m], g[i, :m], be[i, :m] = take(m), take(m), take(m)
+    ow[:, :m] = take(cfg.out_features * m).reshape(cfg.out_features, m)
+    ob = take(cfg.out_features)
+    if pos != vals.size:
+        raise FormatError("lfn.base has trailing data")
+    for s, data in enumerate(steps):
+        j = m + s
+        vals, pos = np.frombuffer(data, dtype=dt).astype(np.float64), 0
+        W[0][j, :cfg.in_features] = take(cfg.in_features)
+        b[0, j], g[0, j], be[0, j] = take(1)[0], take(1)[0], take(1)[0]
+        for i in range(1, cfg.depth):
+            W[i][j, :j + 1] = take(j + 1)
+            W[i][:j, j] = take(j)
+            b[i, j], g[i, j], be[i, j] = take(1)[0], take(1)[0], take(1)[0]
+        ow[:, j] = take(cfg.out_features)
+        if pos != vals.size:
+            raise FormatError(f"{step_name(s)} has {vals.size} values, expected {pos}")
+    with torch.no_grad():
+        for i in range(cfg.depth):
+            model.weights[i].copy_(torch.from_numpy(W[i]).float())
+            model.biases[i].copy_(torch.from_numpy(b[i]).float())
+            model.gammas[i].copy_(torch.from_numpy(g[i]).float())
+            model.betas[i].copy_(torch.from_numpy(be[i]).float())
+        model.out_w.copy_(torch.from_numpy(ow).float())
+        model.out_b.copy_(torch.from_numpy(ob).float())
+    occ_net = None
+    if occ is not None and cfg.occupancy_width:
+        occ_net = OccupancyNet(cfg.occupancy_width, cfg.in_features)
+        vals = np.frombuffer(occ, dtype=dt).astype(np.float64)
+        pos = 0
+        with torch.no_grad():
+            for p in occ_net.parameters():
+                p.copy_(torch.from_numpy(take(p.numel()).reshape(p.shape)).float())
+    return model, occ_net

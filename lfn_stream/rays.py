@@ -1,0 +1,47 @@
+"""Rays of a light field's cameras, as normalized Plücker coordinates.
+
+A ray with origin o and unit direction d is (d, o × d): 6 numbers independent of where on the
+ray o lies. Origins are first normalized (o - centre) / radius with the training cameras'
+centre and radius, stored in the stream's config.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.lightfield import LightField
+
+
+def normalization(lf: LightField, views: np.ndarray | None = None) -> tuple[list[float], float]:
+    """(centre, radius) of the camera centres (all views, or the given flat indices)."""
+    pos = lf.positions.reshape(-1, 3)
+    if views is not None:
+        pos = pos[views]
+    c = pos.mean(0)
+    r = float(np.linalg.norm(pos - c, axis=1).max())
+    return c.tolist(), (r if r > 0 else 1.0)
+
+
+def view_rays(lf: LightField, view: int, scale: float = 1.0, centre=(0, 0, 0), radius: float = 1.0,
+              size: tuple[int, int] | None = None) -> np.ndarray:
+    """Plücker rays through the pixel centres of one view rendered at ``scale``.
+
+    Returns:
+        (h, w, 6) float32 with h, w = round(H·scale), round(W·scale) (or ``size``).
+    """
+    H, W = lf.height, lf.width
+    h, w = size or (max(1, round(H * scale)), max(1, round(W * scale)))
+    sy, sx = h / H, w / W
+    r, c = divmod(view, lf.cols)
+    if lf.c2w is not None:
+        c2w = lf.c2w[r, c]
+    else:
+        c2w = np.eye(4)
+        c2w[:3, 3] = lf.positions[r, c]
+    fx, fy = lf.focal[0] * sx, lf.focal[1] * sy
+    cx, cy = lf.principal[0] * sx, lf.principal[1] * sy
+    ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    d = np.stack([(xs - cx) / fx, -(ys - cy) / fy, -np.ones_like(xs)], -1) @ c2w[:3, :3].T
+    d /= np.linalg.norm(d, axis=-1, keepdims=True)
+    o = (c2w[:3, 3] - np.asarray(centre)) / radius
+    m = np.cross(np.broadcast_to(o, d.shape), d)
+    return np.concatenate([d, m], -1).astype(np.float32)

@@ -1,0 +1,173 @@
+"""Rendering from an LFN stream (or any prefix of it): a view at a fractional level, or with a
+per-pixel level map (foveation, dithered transitions), in batches; fp32 on CPU, fp16 on GPU.
+"""
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from formats.errors import FormatError, ParameterError, UnsupportedError
+from formats.lfcfile import LfcFile, check_codec_version
+from formats.lightfield import LightField
+
+from .config import LfnConfig
+from .pack import step_name, unpack_network
+from .rays import view_rays
+
+CODEC_ID = "lfn"
+CODEC_VERSION = 1
+
+# 4×4 ordered-dither (Bayer) thresholds in (0, 1): a pixel takes the upper level where its
+# fractional part exceeds the threshold, so two levels mix without a visible seam.
+BAYER4 = (np.array([[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]]) + 0.5) / 16
+
+
+class LfnRenderer:
+    """Renderer over an opened .lfc file holding an LFN stream (possibly a prefix of it).
+
+    Attributes:
+        cfg: the full network's config; width: the widest network the available bytes give.
+        rows, cols, height, width_px, channels, dtype: the light field's geometry.
+    """
+
+    def __init__(self, f: LfcFile, device: str | None = None, max_width: float | None = None):
+        check_codec_version(f, CODEC_ID, CODEC_VERSION)
+        self.file = f
+        c = f.container
+        try:
+            conf = f.meta["config"]
+            self.cfg = LfnConfig(**conf["network"])
+            self.norm = conf["norm"]
+            self.dtype_w = conf.get("weights", "fp16")
+            scene = f.meta["scene"]
+        except (KeyError, TypeError) as e:
+            raise FormatError(f"{c.name}: lfn metadata is incomplete ({e})") from None
+        if not c.available("lfn.base"):
+            raise FormatError(f"{c.name}: the stream prefix does not hold the base network")
+        shape = (scene["rows"], scene["cols"], scene["height"], scene["width"], 1)
+        # geometry only: a zero-stride placeholder of the views' shape (no pixel memory)
+        self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene)
+        self.rows, self.cols = scene["rows"], scene["cols"]
+        self.height, self.width_px, self.channels = scene["height"], scene["width"], scene["channels"]
+        self.dtype = np.dtype(scene["dtype"])
+        steps = []
+        limit = self.cfg.max_width if max_width is None else int(np.ceil(max_width))
+        for j in range(self.cfg.max_width - self.cfg.min_width):
+            if self.cfg.min_width + j >= limit or not c.available(step_name(j)):
+                break
+            steps.append(bytes(c.read(step_name(j))))
+        occ = bytes(c.read("lfn.occ")) if c.available("lfn.occ") else None
+        self.model, self.occ = unpack_network(self.cfg, bytes(c.read("lfn.base")), steps, occ, self.dtype_w)
+        self.width = self.model.cfg.max_width
+        self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        self.half = self.device.type == "cuda"
+        self.model.to(self.device).eval()
+        if self.occ is not None:
+            self.occ.to(self.device).eval()
+        if self.half:
+            self.model.half()
+            if self.occ is not None:
+                self.occ.half()
+
+    @property
+    def levels(self) -> tuple[float, float]:
+        return float(self.cfg.min_width), float(self.width)
+
+    def _check(self, level: float) -> float:
+        lo, hi = self.levels
+        if not lo <= level <= hi:
+            raise ParameterError(f"level {level} outside the available range [{lo:g}, {hi:g}] (widths)")
+        return float(level)
+
+    @torch.no_grad()
+    def render_rays(self, rays: np.ndarray, level: float, batch: int = 65536) -> np.ndarray:
+        """(N, 6) Plücker rays → (N, 4) RGBA in [0, 1] (premultiplied), skipping empty rays."""
+        level = self._check(level)
+        out = np.zeros((rays.shape[0], 4), np.float32)
+        dt = torch.float16 if self.half else torch.float32
+        for a in range(0, rays.shape[0], batch):
+            x = torch.from_numpy(rays[a:a + batch]).to(self.device, dt)
+            if self.occ is not None:
+                hit = torch.sigmoid(self.occ(x).float()) > 0.1
+                idx = torch.nonzero(hit)[:, 0]        # the occupancy net really skips rays
+                if idx.numel():
+                    out[a + idx.cpu().numpy()] = self.model(x[idx], level).float().cpu().numpy()
+            else:
+                out[a:a + batch] = self.model(x, level).float().cpu().numpy()
+        return out
+
+    def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
+        if not (0 <= row < self.rows and 0 <= col < self.cols):
+            raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+        return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"])
+
+    def render(self, row: int, col: int, level: float | None = None, scale: float | None = None) -> np.ndarray:
+        """One view at a fractional level; scale defaults to the level's own (1/8 … 1).
+
+        Returns:
+            (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
+        """
+        level = self.width if level is None else level
+        scale = self.cfg.scale_of(level) if scale is None else scale
+        rays = self.view_rays(row, col, scale)
+        h, w = rays.shape[:2]
+        return self.render_rays(rays.reshape(-1, 6), level).reshape(h, w, 4)
+
+    def render_lod_map(self, row: int, col: int, lod: np.ndarray, quantum: float = 1 / 8) -> np.ndarray:
+        """A full-size view where pixel (y, x) is rendered at level ``lod[y, x]``.
+
+        Levels are rounded to ``quantum`` and each distinct level runs once on its pixels.
+        """
+        rays = self.view_rays(row, col, 1.0).reshape(-1, 6)
+        lod = np.clip(np.round(np.asarray(lod, np.float64).reshape(-1) / quantum) * quantum, *self.levels)
+        out = np.zeros((rays.shape[0], 4), np.float32)
+        for lv in np.unique(lod):
+            sel = np.flatnonzero(lod == lv)
+            out[sel] = self.render_rays(rays[sel], float(lv))
+        return out.reshape(self.height, self.width_px, 4)
+
+    def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
+                      dither: bool = True) -> np.ndarray:
+        """Per-pixel levels around a gaze point (x, y in pixels): full width inside ``inner``·diag,
+        falling log-linearly to min width at ``outer``·diag; with ``dither``, the fractional
+        part becomes an ordered-dither choice between the two neighbouring integer levels."""
+        h, w = self.height, self.width_px
+        ys, xs = np.mgrid[0:h, 0:w] + 0.5
+        diag = float(np.hypot(h, w))
+        e = np.hypot(xs - gaze[0], ys - gaze[1]) / diag
+        t = np.clip((e - inner) / max(outer - inner, 1e-9), 0, 1)
+        lo, hi = self.levels
+        lod = hi - t * (hi - lo)
+        if dither:
+            frac = lod - np.floor(lod)
+            thr = np.tile(BAYER4, (h // 4 + 1, w // 4 + 1))[:h, :w]
+            lod = np.floor(lod) + (frac > thr)
+        return np.clip(lod, lo, hi)
+
+    # -- the decoder interface the CLI uses ---------------------------------------------------
+    def to_pixels(self, rgba: np.ndarray) -> np.ndarray:
+        peak = float(np.iinfo(self.dtype).max)
+        a = np.clip(rgba, 0, 1)
+        if self.channels == 4:
+            alpha = a[..., 3:4]
+            rgb = np.where(alpha > 0, a[..., :3] / np.maximum(alpha, 1e-6), 0)
+            px = np.concatenate([rgb, alpha], -1)
+        elif self.channels == 2:
+            alpha = a[..., 3:4]
+            px = np.concatenate([np.where(alpha > 0, a[..., :1] / np.maximum(alpha, 1e-6), 0), alpha], -1)
+        elif self.channels == 1:
+            px = a[..., :1]
+        else:
+            px = a[..., :3]
+        return np.rint(np.clip(px, 0, 1) * peak).astype(self.dtype)
+
+    def decode_view(self, row: int, col: int, level: float | None = None) -> np.ndarray:
+        """Full-size pixels of one view at a level (default: the widest available)."""
+        level = self.width if level in (None, 0) else level
+        return self.to_pixels(self.render(row, col, level, scale=1.0))
+
+    def decode_all(self, level: float | None = None) -> np.ndarray:
+        return np.stack([np.stack([self.decode_view(r, c, level) for c in range(self.cols)]) for r in range(self.rows)])
+
+    def decode_block(self, *a, **k):
+        raise UnsupportedError("block random access is an RLFC feature; an LFN renders rays (use --view)")

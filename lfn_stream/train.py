@@ -1,0 +1,169 @@
+"""Training a nested-width light field network with continuous levels of detail.
+
+Each step trains the full width on full-resolution targets plus one random fractional width
+w whose target is the summed-area-table box filter of the image at w's scale (1/8 at
+min_width … 1 at max_width). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
+occupancy net learns which rays hit the object (alpha > 0) when the scene has alpha.
+Checkpoints hold raw arrays (``.npz`` without pickle) and training resumes from them.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from formats.errors import ParameterError
+from formats.lightfield import LightField
+
+from .config import LfnConfig
+from .model import NestedLFN, OccupancyNet
+from .rays import normalization, view_rays
+from .sampling import RaySampler
+from .sat import box_mean, summed_area_table
+
+
+@dataclass
+class TrainOptions:
+    """Training settings (not stored in the stream).
+
+    Attributes:
+        steps: optimizer steps; batch: rays per step (each of the two terms).
+        lr: Adam learning rate (cosine decay to lr/20).
+        holdout: every k-th view is held out for evaluation (0 = none); ``train_views`` overrides.
+        device: "cpu" or "cuda"; seed: RNG seed; checkpoint: path of a .npz to save/resume.
+        checkpoint_every: steps between checkpoints.
+        lod_weight: weight of the random-level term.
+    """
+
+    steps: int = 2000
+    batch: int = 4096
+    lr: float = 3e-3
+    holdout: int = 4
+    device: str = "cpu"
+    seed: int = 0
+    checkpoint: str | None = None
+    checkpoint_every: int = 500
+    lod_weight: float = 1.0
+    train_views: list | None = None
+    time_limit_s: float | None = None
+    history: list = field(default_factory=list)
+
+
+def split_views(lf: LightField, holdout: int) -> tuple[np.ndarray, np.ndarray]:
+    """(train, held-out) flat view indices: every ``holdout``-th view is held out."""
+    n = lf.rows * lf.cols
+    idx = np.arange(n)
+    if holdout and n > 1:
+        test = idx[(idx % holdout) == holdout // 2]
+        return np.setdiff1d(idx, test), test
+    return idx, np.zeros(0, np.int64)
+
+
+def targets_of(views: np.ndarray, has_alpha: bool) -> np.ndarray:
+    """(N, H, W, C) uint → (N, H, W, 4) targets in the views' integer units: RGB premultiplied
+    by alpha (as integers scaled by peak), and alpha; opaque scenes get alpha = peak."""
+    peak = np.iinfo(views.dtype).max
+    v = views.astype(np.int64)
+    c = views.shape[-1]
+    rgb = v[..., :3] if c >= 3 else np.repeat(v[..., :1], 3, -1)
+    a = v[..., -1:] if has_alpha else np.full(v.shape[:-1] + (1,), peak, np.int64)
+    if has_alpha:
+        rgb = (rgb * a + peak // 2) // peak
+    return np.concatenate([rgb, a], -1)
+
+
+def _save(path: Path, model, occ, opt, step: int, extra: dict) -> None:
+    arrays = {f"m.{k}": v.detach().cpu().numpy() for k, v in model.state_dict().items()}
+    if occ is not None:
+        arrays.update({f"o.{k}": v.detach().cpu().numpy() for k, v in occ.state_dict().items()})
+    st = opt.state_dict()
+    for pid, s in st["state"].items():
+        for k, v in s.items():
+            arrays[f"opt.{pid}.{k}"] = v.detach().cpu().numpy() if torch.is_tensor(v) else np.asarray(v)
+    arrays["step"] = np.asarray(step)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    tmp.replace(path)
+
+
+def _load(path: Path, model, occ, opt) -> int:
+    with np.load(path, allow_pickle=False) as z:
+        model.load_state_dict({k[2:]: torch.from_numpy(z[k]) for k in z.files if k.startswith("m.")})
+        if occ is not None:
+            occ.load_state_dict({k[2:]: torch.from_numpy(z[k]) for k in z.files if k.startswith("o.")})
+        st = opt.state_dict()
+        for k in z.files:
+            if k.startswith("opt."):
+                _, pid, name = k.split(".", 2)
+                st["state"].setdefault(int(pid), {})[name] = torch.from_numpy(z[k]).to(
+                    next(model.parameters()).device) if name != "step" else torch.tensor(float(z[k]))
+        opt.load_state_dict(st)
+        return int(z["step"])
+
+
+def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
+    """Train; returns (model, occupancy net or None, info dict with norm, views, history)."""
+    if lf.views.dtype not in (np.uint8, np.uint16):
+        raise ParameterError("LFN training needs 8- or 16-bit views")
+    torch.manual_seed(opts.seed)
+    rng = np.random.default_rng(opts.seed)
+    dev = torch.device(opts.device)
+    train_v, test_v = split_views(lf, opts.holdout)
+    if opts.train_views is not None:
+        train_v = np.asarray(opts.train_views)
+    flat = lf.views.reshape(-1, lf.height, lf.width, lf.channels)[train_v]
+    peak = float(np.iinfo(lf.views.dtype).max)
+    tg = targets_of(flat, lf.has_alpha)                                    # (N, H, W, 4) int64
+    sat = summed_area_table(tg)
+    alpha = tg[..., 3] / peak if lf.has_alpha else None
+    sampler = RaySampler(flat, alpha)
+    centre, radius = normalization(lf, train_v)
+    rays = torch.from_numpy(np.stack([view_rays(lf, int(v), 1.0, centre, radius) for v in train_v])).to(dev)
+    model = NestedLFN(cfg).to(dev)
+    occ = OccupancyNet(cfg.occupancy_width).to(dev) if (lf.has_alpha and cfg.occupancy_width) else None
+    params = list(model.parameters()) + (list(occ.parameters()) if occ is not None else [])
+    opt = torch.optim.Adam(params, lr=opts.lr)
+    start = 0
+    ck = Path(opts.checkpoint) if opts.checkpoint else None
+    if ck is not None and ck.exists():
+        start = _load(ck, model, occ, opt)
+    t0 = time.perf_counter()
+    step = start
+    for step in range(start, opts.steps):
+        lr = opts.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * step / max(opts.steps, 1))))
+        for gr in opt.param_groups:
+            gr["lr"] = lr
+        v, y, x = sampler.sample(opts.batch, rng)
+        tgt = torch.from_numpy(tg[v, y, x] / peak).float().to(dev)
+        xr = rays[torch.from_numpy(v).to(dev), torch.from_numpy(y).to(dev), torch.from_numpy(x).to(dev)]
+        loss = ((model(xr) - tgt) ** 2).mean()
+        # one random fractional level against the box-filtered target at its scale
+        wlev = float(rng.uniform(cfg.min_width, cfg.max_width))
+        k = max(1, int(round(1.0 / cfg.scale_of(wlev))))
+        v2, y2, x2 = sampler.sample(opts.batch, rng)
+        tgt2 = torch.from_numpy(box_mean(sat, v2, y2, x2, np.full(v2.size, k)) / peak).float().to(dev)
+        xr2 = rays[torch.from_numpy(v2).to(dev), torch.from_numpy(y2).to(dev), torch.from_numpy(x2).to(dev)]
+        loss = loss + opts.lod_weight * ((model(xr2, wlev) - tgt2) ** 2).mean()
+        if occ is not None:
+            lab = (tgt[:, 3] > 0).float()
+            loss = loss + 0.1 * torch.nn.functional.binary_cross_entropy_with_logits(occ(xr), lab)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        if step % 50 == 0 or step == opts.steps - 1:
+            opts.history.append((step, float(loss)))
+        if progress:
+            progress(step, float(loss))
+        if ck is not None and (step + 1) % opts.checkpoint_every == 0:
+            _save(ck, model, occ, opt, step + 1, {})
+        if opts.time_limit_s and time.perf_counter() - t0 > opts.time_limit_s:
+            break
+    if ck is not None:
+        _save(ck, model, occ, opt, step + 1, {})
+    info = {"norm": {"centre": centre, "radius": radius}, "train_views": train_v.tolist(),
+            "test_views": test_v.tolist(), "steps": step + 1, "train_s": time.perf_counter() - t0}
+    return model.cpu(), (occ.cpu() if occ is not None else None), info
