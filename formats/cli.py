@@ -311,10 +311,10 @@ def cmd_train(a) -> int:
     opts = TrainOptions(steps=a.steps, batch=a.batch, lr=a.lr, holdout=a.holdout, device=a.device,
                         checkpoint=a.checkpoint)
 
-    def prog(step, loss):
-        bar.update(1)
-        if step % 20 == 0:
-            bar.set_postfix(loss=f"{loss:.5f}")
+    def prog(step, loss):   # called every 50 steps
+        bar.n = step + 1
+        bar.set_postfix(loss=f"{loss:.5f}")
+        bar.refresh()
 
     model, occ, info = train(lf, cfg, opts, progress=prog)
     bar.close()

@@ -59,6 +59,7 @@ class LfnRenderer:
         occ = bytes(c.read("lfn.occ")) if c.available("lfn.occ") else None
         self.model, self.occ = unpack_network(self.cfg, bytes(c.read("lfn.base")), steps, occ, self.dtype_w)
         self.width = self.model.cfg.max_width
+        self.rays_evaluated = 0   # network evaluations so far (rays the occupancy net let through)
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.half = self.device.type == "cuda"
         self.model.to(self.device).eval()
@@ -80,19 +81,22 @@ class LfnRenderer:
         return float(level)
 
     @torch.no_grad()
-    def render_rays(self, rays: np.ndarray, level: float, batch: int = 65536) -> np.ndarray:
-        """(N, 6) Plücker rays → (N, 4) RGBA in [0, 1] (premultiplied), skipping empty rays."""
+    def render_rays(self, rays: np.ndarray, level: float, batch: int = 65536, use_occupancy: bool = True) -> np.ndarray:
+        """(N, 6) Plücker rays → (N, 4) RGBA in [0, 1] (premultiplied), skipping empty rays
+        (those the occupancy net rejects, when the stream has one and ``use_occupancy``)."""
         level = self._check(level)
         out = np.zeros((rays.shape[0], 4), np.float32)
         dt = torch.float16 if self.half else torch.float32
         for a in range(0, rays.shape[0], batch):
             x = torch.from_numpy(rays[a:a + batch]).to(self.device, dt)
-            if self.occ is not None:
+            if self.occ is not None and use_occupancy:
                 hit = torch.sigmoid(self.occ(x).float()) > 0.1
                 idx = torch.nonzero(hit)[:, 0]        # the occupancy net really skips rays
+                self.rays_evaluated += int(idx.numel())
                 if idx.numel():
                     out[a + idx.cpu().numpy()] = self.model(x[idx], level).float().cpu().numpy()
             else:
+                self.rays_evaluated += x.shape[0]
                 out[a:a + batch] = self.model(x, level).float().cpu().numpy()
         return out
 

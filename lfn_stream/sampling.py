@@ -8,6 +8,7 @@ drawn with that weight.
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 FG_FRACTION = 0.67
 
@@ -84,3 +85,30 @@ class RaySampler:
         v, rem = np.divmod(idx, h * w)
         y, x = np.divmod(rem, w)
         return v, y, x
+
+
+class TorchRaySampler:
+    """The same distribution as :class:`RaySampler`, drawn on a torch device (no host sync)."""
+
+    def __init__(self, base: RaySampler, device):
+        self.shape = base.shape
+        self.has_bg = base.has_bg
+        self.fg = torch.from_numpy(base.fg_idx).to(device)
+        self.bg = torch.from_numpy(base.bg_idx if base.bg_idx.size else base.fg_idx).to(device)
+        self.cdf = torch.from_numpy(base.fg_cdf).to(device, torch.float64) if base.fg_cdf is not None else None
+        self.device = device
+
+    def sample(self, count: int, gen) -> tuple:
+        """(view, y, x) int64 tensors of length ``count`` on the device."""
+        n_fg = int(round(count * FG_FRACTION)) if self.has_bg else count
+        if self.cdf is None:
+            n_fg = 0
+        parts = []
+        if n_fg:
+            u = torch.rand(n_fg, generator=gen, device=self.device, dtype=torch.float64)
+            parts.append(self.fg[torch.clamp(torch.searchsorted(self.cdf, u), max=self.fg.numel() - 1)])
+        if count > n_fg:
+            parts.append(self.bg[torch.randint(0, self.bg.numel(), (count - n_fg,), generator=gen, device=self.device)])
+        idx = torch.cat(parts)
+        n, h, w = self.shape
+        return idx // (h * w), (idx % (h * w)) // w, idx % w

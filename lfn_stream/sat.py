@@ -46,3 +46,16 @@ def area_downsample(img: np.ndarray, scale: float) -> np.ndarray:
     nh, nw = max(1, round(h * scale)), max(1, round(w * scale))
     out = cv2.resize(img.astype(np.float32), (nw, nh), interpolation=cv2.INTER_AREA)
     return out.reshape(nh, nw, -1)
+
+
+def box_mean_torch(sat, view, y, x, k: int):
+    """:func:`box_mean` on torch tensors (SAT as float64 holding exact integer sums)."""
+    import torch
+
+    h, w = sat.shape[1] - 1, sat.shape[2] - 1
+    y0 = torch.clamp(y - (k - 1) // 2, 0, h)
+    x0 = torch.clamp(x - (k - 1) // 2, 0, w)
+    y1 = torch.clamp(y0 + k, 0, h)
+    x1 = torch.clamp(x0 + k, 0, w)
+    s = sat[view, y1, x1] - sat[view, y0, x1] - sat[view, y1, x0] + sat[view, y0, x0]
+    return s / ((y1 - y0) * (x1 - x0)).to(sat.dtype)[:, None]

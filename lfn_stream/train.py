@@ -22,8 +22,8 @@ from formats.lightfield import LightField
 from .config import LfnConfig
 from .model import NestedLFN, OccupancyNet
 from .rays import normalization, view_rays
-from .sampling import RaySampler
-from .sat import box_mean, summed_area_table
+from .sampling import RaySampler, TorchRaySampler
+from .sat import box_mean_torch, summed_area_table
 
 
 @dataclass
@@ -131,23 +131,29 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
     ck = Path(opts.checkpoint) if opts.checkpoint else None
     if ck is not None and ck.exists():
         start = _load(ck, model, occ, opt)
+    # everything a step touches lives on the device: targets, SAT (float64 holds the exact
+    # integer sums), sampler tables; no host round trip inside the loop
+    tsampler = TorchRaySampler(sampler, dev)
+    tgt_all = torch.from_numpy(tg).to(dev, torch.float32) / peak                  # (N, H, W, 4)
+    sat_t = torch.from_numpy(sat.astype(np.float64)).to(dev)
+    gen = torch.Generator(device=dev)
+    gen.manual_seed(opts.seed)
     t0 = time.perf_counter()
     step = start
     for step in range(start, opts.steps):
         lr = opts.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * step / max(opts.steps, 1))))
         for gr in opt.param_groups:
             gr["lr"] = lr
-        v, y, x = sampler.sample(opts.batch, rng)
-        tgt = torch.from_numpy(tg[v, y, x] / peak).float().to(dev)
-        xr = rays[torch.from_numpy(v).to(dev), torch.from_numpy(y).to(dev), torch.from_numpy(x).to(dev)]
+        v, y, x = tsampler.sample(opts.batch, gen)
+        tgt = tgt_all[v, y, x]
+        xr = rays[v, y, x]
         loss = ((model(xr) - tgt) ** 2).mean()
         # one random fractional level against the box-filtered target at its scale
         wlev = float(rng.uniform(cfg.min_width, cfg.max_width))
         k = max(1, int(round(1.0 / cfg.scale_of(wlev))))
-        v2, y2, x2 = sampler.sample(opts.batch, rng)
-        tgt2 = torch.from_numpy(box_mean(sat, v2, y2, x2, np.full(v2.size, k)) / peak).float().to(dev)
-        xr2 = rays[torch.from_numpy(v2).to(dev), torch.from_numpy(y2).to(dev), torch.from_numpy(x2).to(dev)]
-        loss = loss + opts.lod_weight * ((model(xr2, wlev) - tgt2) ** 2).mean()
+        v2, y2, x2 = tsampler.sample(opts.batch, gen)
+        tgt2 = (box_mean_torch(sat_t, v2, y2, x2, k) / peak).float()
+        loss = loss + opts.lod_weight * ((model(rays[v2, y2, x2], wlev) - tgt2) ** 2).mean()
         if occ is not None:
             lab = (tgt[:, 3] > 0).float()
             loss = loss + 0.1 * torch.nn.functional.binary_cross_entropy_with_logits(occ(xr), lab)
@@ -155,12 +161,13 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
         loss.backward()
         opt.step()
         if step % 50 == 0 or step == opts.steps - 1:
-            opts.history.append((step, float(loss)))
-        if progress:
-            progress(step, float(loss))
+            lv = loss.item()
+            opts.history.append((step, lv))
+            if progress:
+                progress(step, lv)
         if ck is not None and (step + 1) % opts.checkpoint_every == 0:
             _save(ck, model, occ, opt, step + 1, {})
-        if opts.time_limit_s and time.perf_counter() - t0 > opts.time_limit_s:
+        if opts.time_limit_s and step % 50 == 0 and time.perf_counter() - t0 > opts.time_limit_s:
             break
     if ck is not None:
         _save(ck, model, occ, opt, step + 1, {})

@@ -64,6 +64,7 @@ def main(argv=None) -> int:
     ap.add_argument("--test-scene", default=None, help="held-out views from another file (e.g. transforms_test)")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--no-single-scale", action="store_true")
+    ap.add_argument("--time-limit", type=float, default=None, help="stop each training after this many seconds")
     ap.add_argument("--export", default=None, help="write the (resized) scene as .npz and stop")
     a = ap.parse_args(argv)
     lf = load(a.scene, a.resolution)
@@ -82,9 +83,9 @@ def main(argv=None) -> int:
 
     def fit(lod_weight):
         opts = TrainOptions(steps=a.steps, batch=a.batch, lr=a.lr, holdout=holdout, device=a.device,
-                            lod_weight=lod_weight)
+                            lod_weight=lod_weight, time_limit_s=a.time_limit)
         t = time.perf_counter()
-        m, o, info = train(lf, cfg, opts, progress=lambda s, l: log(f"  step {s} loss {l:.5f}") if s % 500 == 0 else None)
+        m, o, info = train(lf, cfg, opts, progress=lambda s, l: log(f"  step {s} loss {l:.5f}") if s % 1000 == 0 else None)
         info["train_s"] = time.perf_counter() - t
         return m, o, info
 
@@ -120,7 +121,7 @@ def main(argv=None) -> int:
     with torch.no_grad():
         ref = model.to("cpu")(x).numpy()
     rc = LfnRenderer(open_lfc(path), device="cpu")
-    got = rc.render_rays(x.numpy(), float(cfg.max_width))
+    got = rc.render_rays(x.numpy(), float(cfg.max_width), use_occupancy=False)
     results["stream_vs_trained_max_abs"] = float(np.abs(got - ref).max())
     mid = int(cfg.width_of(0.25))
     cut = prefix_bytes(rc, mid)
