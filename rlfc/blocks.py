@@ -205,33 +205,10 @@ class BlockStore:
         """
         n = self.B * self.B
         buf = self.buf
-        o0, o1 = self.index[loc], self.index[loc + 1]
-        if self.verify is not None:
-            u = np.unique(loc)
-            self.verify(self.index[u], self.index[u + 1])
-        nonempty = o1 > o0
-        byte = buf[np.where(nonempty, o0 + (g >> 3), 0)]
-        present = nonempty & (((byte >> (g & 7).astype(np.uint8)) & 1) == 1)
-        sel = np.flatnonzero(present)
+        sel, is_raw, pay, modes, mins, pstart = self.locate(g, loc)
         S = sel.size
         if S == 0:
             return sel, np.zeros(0, bool), np.zeros((0, n, self.P), np.int32), np.zeros((0, n, self.C), np.int64)
-        s0, sg = o0[sel], g[sel]
-        bm = buf[s0[:, None] + np.arange(self.nbm)]                     # (S, nbm)
-        pc = _POPCOUNT[bm]
-        pc[np.arange(self.nbm)[None, :] >= (sg >> 3)[:, None]] = 0
-        part = _POPCOUNT[bm[np.arange(S), sg >> 3] & ((1 << (sg & 7)) - 1).astype(np.uint8)]
-        rank = pc.sum(axis=1) + part
-        hdr = buf[(s0 + self.nbm + rank * self.hs)[:, None] + np.arange(self.hs)]   # (S, hs)
-        pay = s0 + _from_le(hdr[:, :self.off_bytes], False)
-        modes = hdr[:, self.off_bytes:self.off_bytes + self.P]
-        mins = _from_le(hdr[:, self.off_bytes + self.P:].reshape(-1, self.min_bytes), True).reshape(-1, self.P)
-        is_raw = modes[:, 0] == MODE_RAW
-        psize = self.table[modes]
-        psize[is_raw] = 0
-        pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)
-        if (pstart + psize).max(initial=0) > self.index[-1]:
-            raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
         q = np.empty((S, n, self.P), dtype=np.int32)
         qt = q.transpose(0, 2, 1)                                        # (S, P, n) view
         for m in np.unique(modes).tolist():                              # <= ~30 distinct modes
@@ -255,6 +232,45 @@ class BlockStore:
             px[rsel] = smp.reshape(-1, n, self.C)
             q[rsel] = 0
         return sel, is_raw, q, px
+
+    def locate(self, g: np.ndarray, loc: np.ndarray):
+        """Header parsing for many (node, location) pairs (vectorized numpy).
+
+        Returns:
+            sel (S,) pairs that have a block; is_raw (S,); pay (S,) payload byte offsets;
+            modes (S, P) uint8; mins (S, P) int64; pstart (S, P) byte offset of each plane.
+        """
+        buf = self.buf
+        o0, o1 = self.index[loc], self.index[loc + 1]
+        if self.verify is not None:
+            u = np.unique(loc)
+            self.verify(self.index[u], self.index[u + 1])
+        nonempty = o1 > o0
+        byte = buf[np.where(nonempty, o0 + (g >> 3), 0)]
+        present = nonempty & (((byte >> (g & 7).astype(np.uint8)) & 1) == 1)
+        sel = np.flatnonzero(present)
+        S = sel.size
+        if S == 0:
+            z = np.zeros((0, self.P), np.int64)
+            return sel, np.zeros(0, bool), np.zeros(0, np.int64), z.astype(np.uint8), z, z
+        s0, sg = o0[sel], g[sel]
+        bm = buf[s0[:, None] + np.arange(self.nbm)]                     # (S, nbm)
+        pc = _POPCOUNT[bm]
+        pc[np.arange(self.nbm)[None, :] >= (sg >> 3)[:, None]] = 0
+        part = _POPCOUNT[bm[np.arange(S), sg >> 3] & ((1 << (sg & 7)) - 1).astype(np.uint8)]
+        rank = pc.sum(axis=1) + part
+        hdr = buf[(s0 + self.nbm + rank * self.hs)[:, None] + np.arange(self.hs)]   # (S, hs)
+        pay = s0 + _from_le(hdr[:, :self.off_bytes], False)
+        modes = hdr[:, self.off_bytes:self.off_bytes + self.P]
+        mins = _from_le(hdr[:, self.off_bytes + self.P:].reshape(-1, self.min_bytes), True).reshape(-1, self.P)
+        is_raw = modes[:, 0] == MODE_RAW
+        psize = self.table[modes]
+        psize[is_raw] = 0
+        pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)
+        end = np.where(is_raw, pay + self.B * self.B * self.C * self.bps, (pstart + psize).max(axis=1))
+        if end.max(initial=0) > self.index[-1]:
+            raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+        return sel, is_raw, pay, modes, mins, pstart
 
     def fetch_one(self, loc: int, nodes: list[int]):
         """One location, a few nodes (a single-block request): header parsing in Python ints.

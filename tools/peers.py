@@ -112,5 +112,52 @@ class Hevc:
         return {"bytes": size, "decoded": out_views, "decode_view_s": t_all, "decode_all_s": t_all}
 
 
+class Astc:
+    """ASTC (ARM astcenc), every view alone; fixed rate set by the block footprint. Its random
+    access unit is one block, decoded in GPU texture hardware; CPU decode times here include
+    the astcenc process start."""
+
+    name = "ASTC astcenc (per view)"
+    unit = "block (GPU texture hardware)"
+    settings = ["12x12", "10x10", "8x8", "6x6", "4x4"]
+
+    def __init__(self, quality: str = "-fast"):
+        self.quality = quality
+
+    def exe(self):
+        for n in ("astcenc", "astcenc-avx2", "astcenc-sse4.1", "astcenc-sse2"):
+            if shutil.which(n):
+                return shutil.which(n)
+        return None
+
+    def available(self) -> str | None:
+        return None if self.exe() else "astcenc not on PATH"
+
+    def run(self, views: np.ndarray, block: str):
+        from formats.imageio import read_image, write_image
+
+        if views.dtype != np.uint8 or views.shape[-1] not in (3, 4):
+            raise RuntimeError("ASTC peer handles 8-bit RGB(A)")
+        exe = self.exe()
+        total = 0
+        dec = np.empty_like(views)
+        t_one = None
+        with tempfile.TemporaryDirectory() as td:
+            for i, v in enumerate(views):
+                src, cmp, out = Path(td) / f"{i}.png", Path(td) / f"{i}.astc", Path(td) / f"{i}d.png"
+                write_image(src, v)
+                subprocess.run([exe, "-cl", str(src), str(cmp), block, self.quality, "-silent"], check=True,
+                               capture_output=True)
+                total += cmp.stat().st_size - 16          # 16-byte .astc file header is not payload
+                t = time.perf_counter()
+                subprocess.run([exe, "-dl", str(cmp), str(out), "-silent"], check=True, capture_output=True)
+                if i == len(views) // 2:
+                    t_one = time.perf_counter() - t
+                dec[i] = read_image(out)[..., :views.shape[-1]]
+        # block access happens in GPU texture hardware: no CPU latency to compare with
+        return {"bytes": total, "decoded": dec, "decode_view_s": t_one, "decode_all_s": t_one * len(views),
+                "ra_latency_s": None}
+
+
 def all_peers():
-    return [j2k(), jxl(), Hevc()]
+    return [j2k(), jxl(), Hevc(), Astc()]
