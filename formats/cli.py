@@ -342,6 +342,12 @@ def main(argv: list[str] | None = None) -> int:
     except LfcError as e:
         print(f"lfcodec: error: {e}", file=sys.stderr)
         return 2
+    except BrokenPipeError:          # output piped into e.g. `head`: stop quietly
+        try:
+            sys.stdout = open(os.devnull, "w")
+        except OSError:
+            pass
+        return 0
     except OSError as e:
         print(f"lfcodec: error: {e.filename or ''}: {e.strerror or e}".replace(": : ", ": "), file=sys.stderr)
         return 2
