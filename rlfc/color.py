@@ -8,9 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 
-def to_planes(x: np.ndarray) -> np.ndarray:
-    """(…, C) uint8/uint16 → (…, C) int32 planes (YCoCg-R for RGB; grey and alpha pass through)."""
-    x = x.astype(np.int32)
+def forward_int(x):
+    """YCoCg-R forward on integer arrays of numpy or torch (same code for both): (…, C) → (…, C)."""
     c = x.shape[-1]
     if c < 3:
         return x
@@ -19,23 +18,38 @@ def to_planes(x: np.ndarray) -> np.ndarray:
     t = b + (co >> 1)
     cg = g - t
     y = t + (cg >> 1)
-    out = [y, co, cg] + ([x[..., 3]] if c == 4 else [])
-    return np.stack(out, axis=-1)
+    parts = [y, co, cg] + ([x[..., 3]] if c == 4 else [])
+    return np.stack(parts, axis=-1) if isinstance(x, np.ndarray) else _torch_stack(parts)
+
+
+def inverse_int(p):
+    """YCoCg-R inverse on integer arrays of numpy or torch (no clipping)."""
+    if p.shape[-1] < 3:
+        return p
+    y, co, cg = p[..., 0], p[..., 1], p[..., 2]
+    t = y - (cg >> 1)
+    g = cg + t
+    b = t - (co >> 1)
+    r = b + co
+    parts = [r, g, b] + ([p[..., 3]] if p.shape[-1] == 4 else [])
+    return np.stack(parts, axis=-1) if isinstance(p, np.ndarray) else _torch_stack(parts)
+
+
+def _torch_stack(parts):
+    import torch
+
+    return torch.stack(parts, -1)
+
+
+def to_planes(x: np.ndarray) -> np.ndarray:
+    """(…, C) uint8/uint16 → (…, C) int32 planes (YCoCg-R for RGB; grey and alpha pass through)."""
+    return forward_int(x.astype(np.int32))
 
 
 def from_planes(p: np.ndarray, dtype=np.uint8) -> np.ndarray:
     """Inverse of :func:`to_planes`, clipped to the range of ``dtype`` (uint8 or uint16)."""
-    p = np.asarray(p, dtype=np.int32)
     peak = 65535 if np.dtype(dtype) == np.uint16 else 255
-    c = p.shape[-1]
-    if c >= 3:
-        y, co, cg = p[..., 0], p[..., 1], p[..., 2]
-        t = y - (cg >> 1)
-        g = cg + t
-        b = t - (co >> 1)
-        r = b + co
-        p = np.stack([r, g, b] + ([p[..., 3]] if c == 4 else []), axis=-1)
-    return np.clip(p, 0, peak).astype(dtype)
+    return np.clip(inverse_int(np.asarray(p, dtype=np.int32)), 0, peak).astype(dtype)
 
 
 def plane_weights(channels: int) -> np.ndarray:

@@ -16,6 +16,7 @@ from formats.errors import ChecksumError, ParameterError
 from .bise import _group_layout
 from .bise_tables import QUINT_DIGITS, RANGE_VALUES, RANGES, TRIT_DIGITS
 from .blocks import MODE_CONST, MODE_PLAIN
+from .color import forward_int, inverse_int
 
 
 def _gather_word(buf: torch.Tensor, byte: torch.Tensor, nbytes: int) -> torch.Tensor:
@@ -24,28 +25,6 @@ def _gather_word(buf: torch.Tensor, byte: torch.Tensor, nbytes: int) -> torch.Te
     for i in range(1, nbytes):
         w = w | (buf[byte + i].to(torch.int64) << (8 * i))
     return w
-
-
-def _planes_from_rgb(x: torch.Tensor) -> torch.Tensor:
-    if x.shape[-1] < 3:
-        return x
-    r, g, b = x[..., 0], x[..., 1], x[..., 2]
-    co = r - b
-    t = b + (co >> 1)
-    cg = g - t
-    y = t + (cg >> 1)
-    return torch.stack([y, co, cg] + ([x[..., 3]] if x.shape[-1] == 4 else []), -1)
-
-
-def _rgb_from_planes(p: torch.Tensor, peak: int) -> torch.Tensor:
-    if p.shape[-1] >= 3:
-        y, co, cg = p[..., 0], p[..., 1], p[..., 2]
-        t = y - (cg >> 1)
-        g = cg + t
-        b = t - (co >> 1)
-        r = b + co
-        p = torch.stack([r, g, b] + ([p[..., 3]] if p.shape[-1] == 4 else []), -1)
-    return torch.clamp(p, 0, peak)
 
 
 class TorchBlockDecoder:
@@ -141,7 +120,7 @@ class TorchBlockDecoder:
                 nb = n * d.channels * d.dtype.itemsize
                 byt = self.buf[t(pay[is_raw])[:, None] + torch.arange(nb, device=self.dev)[None]].to(torch.int64)
                 smp = byt[:, 0::2] | (byt[:, 1::2] << 8) if d.dtype.itemsize == 2 else byt
-                rawp = _planes_from_rgb(smp.reshape(-1, n, d.channels)).to(torch.int32)
+                rawp = forward_int(smp.reshape(-1, n, d.channels)).to(torch.int32)
                 deq[ridx] = 0
             sel_t, raw_t = t(sel), t(is_raw)
             lev_of = sel_t // M
@@ -154,7 +133,7 @@ class TorchBlockDecoder:
                     if bool(r.any()):
                         pos = torch.cumsum(raw_t.to(torch.int64), 0) - 1          # index into rawp
                         acc[req[r]] = rawp[pos[k[r]]]
-        out = _rgb_from_planes(acc.reshape(M, B, B, P), self.peak)
+        out = torch.clamp(inverse_int(acc.reshape(M, B, B, P)), 0, self.peak)
         if not to_numpy:
             return out
         return out.cpu().numpy().astype(d.dtype)

@@ -31,22 +31,13 @@ from formats.metrics import bpp, psnr_rgb, psnr_ycocg, ssim
 from formats.scenes import read_scene
 from rlfc import Encoder, RlfcDecoder, RlfcParams
 from rlfc.ratecontrol import params_for_quant
+from tools.bench_bise import _median_time as _median
 from tools.bench_bise import machine
 from tools.peers import all_peers, serpentine
 
 
 def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
-
-
-def _median(fn, repeats):
-    fn()
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
 
 
 def bench_rlfc(lf, quants, repeats, n_single, n_batch, block_size=8):
