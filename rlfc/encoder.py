@@ -104,7 +104,10 @@ class Encoder:
                 db = to_blocks(deq, B)
                 keep = np.any(qb != 0, axis=(3, 4, 5))
                 if params.energy > 0:
-                    keep &= block_energy(db, w) >= params.energy
+                    strong = block_energy(db, w) >= params.energy
+                    if P in (2, 4):   # alpha is lossless: a block with any alpha residual stays
+                        strong |= np.any(qb[..., -1] != 0, axis=(3, 4))
+                    keep &= strong
                 # raw escape: a block whose coded size is not clearly below its raw pixels is stored
                 # raw (exact, and it frees its ancestors' blocks for pruning)
                 kn, ky, kx = np.nonzero(keep)

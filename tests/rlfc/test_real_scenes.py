@@ -70,3 +70,14 @@ def test_sparse_llff_capture_roundtrips():
     full = d.decode_all()
     assert psnr_rgb(lf.views, full) > 36
     _check_blocks_match_full(d, full, n=100)
+
+
+def test_rgba_capture_keeps_alpha_exact():
+    """The 360° capture with alpha, at default lossy settings: alpha is coded losslessly."""
+    lf = read_scene(shared_scene("mitsuba_objects_360"))
+    lf.views = np.ascontiguousarray(lf.views[:, :24])
+    lf.positions, lf.c2w = lf.positions[:, :24], lf.c2w[:, :24]
+    d, _, _ = roundtrip(lf, DEFAULT)
+    full = d.decode_all()
+    assert (full[..., 3] == lf.views[..., 3]).all()
+    assert psnr_rgb(lf.views[..., :3], full[..., :3]) > 38
