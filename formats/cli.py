@@ -91,7 +91,7 @@ def cmd_encode(a) -> int:
     from rlfc import Encoder, RlfcParams
     from rlfc.color import from_planes
     from rlfc.encoder import CODEC_ID, CODEC_VERSION
-    from rlfc.ratecontrol import params_for_quant, search
+    from rlfc.ratecontrol import default_quant, params_for_quant, search
 
     from .lfcfile import write_lfc
     from .metrics import bpp, psnr_rgb, psnr_ycocg, ssim
@@ -118,7 +118,8 @@ def cmd_encode(a) -> int:
                                            fixed_threshold=a.threshold, fixed_energy=a.energy, progress=prog)
         bar.close()
     else:
-        params = params_for_quant(base, a.quant, a.threshold, a.energy)
+        params = params_for_quant(base, a.quant if a.quant is not None else default_quant(lf.views.dtype),
+                                  a.threshold, a.energy)
         res = enc.closed_loop(params)
     if search_trace is not None and a.target_bpp is None:
         res = enc.closed_loop(params)     # the PSNR search ran without keeping blocks
@@ -234,7 +235,8 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--tree-height", type=int, default=3, help="key-view tree height (default 3)")
     e.add_argument("--block-size", type=int, default=8, help="residual block size in pixels (default 8)")
     e.add_argument("--threshold", type=float, default=None, help="pixel threshold T (default Q/2)")
-    e.add_argument("--quant", type=float, default=8.0, help="quantizer step Q, 1 = lossless (default 8)")
+    e.add_argument("--quant", type=float, default=None,
+                   help="quantizer step Q in pixel units, 1 = lossless (default 8 for 8-bit input, 8*257 for 16-bit)")
     e.add_argument("--energy", type=float, default=None, help="block-energy threshold E (default (Q/2)^2)")
     g = e.add_mutually_exclusive_group()
     g.add_argument("--target-psnr", type=float, default=None, metavar="DB", help="choose Q for PSNR_RGB >= DB")

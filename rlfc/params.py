@@ -17,7 +17,8 @@ class RlfcParams:
             would have a single node).
         block_size: B, residual block edge in pixels (blocks are B×B×planes).
         threshold: pixel threshold T: residual values with |r| <= T (pixel units) become 0.
-        quant: quantization step Q (pixel units, >= 1, resolution 1/16); 1 = lossless.
+        quant: quantization step Q (pixel units of the input depth, >= 1, resolution 1/16);
+            1 = lossless. The CLI's default is 8 for 8-bit input and 8·65535/255 for 16-bit.
         energy: block-energy threshold E: a block whose weighted mean squared dequantized
             residual is below E (pixel units²) is not stored.
         sigma: Gaussian filter width, in units of a level's view spacing.
@@ -44,8 +45,8 @@ class RlfcParams:
             raise ParameterError(f"block size must be 2, 4, 8, 16 or 32, got {self.block_size}")
         if not self.threshold >= 0:
             raise ParameterError(f"threshold must be >= 0, got {self.threshold}")
-        if not 1 <= self.quant <= 4096:
-            raise ParameterError(f"quant step must be within 1..4096, got {self.quant}")
+        if not 1 <= self.quant <= 131072:
+            raise ParameterError(f"quant step must be within 1..131072, got {self.quant}")
         if not self.energy >= 0:
             raise ParameterError(f"energy threshold must be >= 0, got {self.energy}")
         if not self.sigma > 0:

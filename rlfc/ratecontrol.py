@@ -12,6 +12,8 @@ import math
 from dataclasses import replace
 
 
+import numpy as np
+
 from formats.errors import ParameterError
 from formats.metrics import bpp as bpp_of
 from formats.metrics import psnr_rgb
@@ -20,7 +22,18 @@ from .color import from_planes
 from .encoder import Encoder
 from .params import RlfcParams
 
-Q_MAX = 256.0
+Q_MAX = 256.0          # in 8-bit pixel units; scaled by peak/255 for deeper input
+DEFAULT_QUANT = 8.0    # likewise
+
+
+def depth_scale(dtype) -> float:
+    """Pixel-unit scale of an input depth relative to 8-bit (1 for uint8, 257 for uint16)."""
+    return 65535.0 / 255.0 if np.dtype(dtype) == np.uint16 else 1.0
+
+
+def default_quant(dtype) -> float:
+    """The default quantizer step for an input depth (8 in 8-bit units)."""
+    return DEFAULT_QUANT * depth_scale(dtype)
 
 
 def params_for_quant(base: RlfcParams, q: float, fixed_threshold: float | None = None,
@@ -79,7 +92,7 @@ def search(enc: Encoder, base: RlfcParams, *, target_psnr: float | None = None, 
 
     # PSNR target: feasible at fine steps, find the largest feasible Q.
     # bpp target: feasible at coarse steps, find the smallest feasible Q.
-    fine, coarse = 0.0, math.log2(Q_MAX)
+    fine, coarse = 0.0, math.log2(Q_MAX * depth_scale(lf.views.dtype))
     good_end, bad_end = (fine, coarse) if target_psnr is not None else (coarse, fine)
     ok, p, res = evaluate(2 ** good_end)
     if not ok:                                # even the best end misses the target: closest we have
@@ -107,4 +120,4 @@ def loop_psnr(enc: Encoder, res) -> float:
     return _psnr(enc, res)
 
 
-__all__ = ["search", "params_for_quant", "loop_psnr", "Q_MAX"]
+__all__ = ["search", "params_for_quant", "loop_psnr", "Q_MAX", "default_quant", "depth_scale"]

@@ -30,7 +30,7 @@ from formats.lfcfile import encode_meta, open_lfc
 from formats.metrics import bpp, psnr_rgb, psnr_ycocg, ssim
 from formats.scenes import read_scene
 from rlfc import Encoder, RlfcDecoder, RlfcParams
-from rlfc.ratecontrol import params_for_quant
+from rlfc.ratecontrol import depth_scale, params_for_quant
 from tools.bench_bise import _median_time as _median
 from tools.bench_bise import machine
 from tools.peers import all_peers, serpentine
@@ -49,7 +49,7 @@ def bench_rlfc(lf, quants, repeats, n_single, n_batch, block_size=8):
     t_prep = time.perf_counter() - t0
     rng = np.random.default_rng(0)
     for q in quants:
-        p = params_for_quant(base, q)
+        p = params_for_quant(base, q * depth_scale(lf.views.dtype))   # q in 8-bit units
         t0 = time.perf_counter()
         res = enc.closed_loop(p)
         cfg, secs = enc.pack(p, res)

@@ -143,3 +143,39 @@ def test_help_for_each_command():
     for cmd in ("info", "encode", "decode"):
         code, out, _ = _run(cmd, "--help")
         assert code == 0 and "usage" in out
+
+
+@pytest.fixture(scope="module")
+def grey16_scene(tmp_path_factory):
+    """The sample as a 16-bit greyscale grid in HCI naming (a layout and depth users have)."""
+    from formats.imageio import write_image
+
+    out = tmp_path_factory.mktemp("g16")
+    lf = read_scene(SAMPLE)
+    for r in range(9):
+        for c in range(9):
+            g = lf.views[r, c].astype(np.float64) @ [0.299, 0.587, 0.114]
+            write_image(out / f"input_Cam{r * 9 + c:03d}.png", np.round(g * 257).astype(np.uint16))
+    return out
+
+
+def test_16bit_grey_works_like_rgb(grey16_scene, tmp_path, capsys):
+    out = tmp_path / "g.lfc"
+    assert main(["encode", str(grey16_scene), str(out), "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["channels"] == 1 and rep["dtype"] == "uint16"
+    assert 36 < rep["psnr_rgb"] < 46 and rep["bpp"] < 3        # default step scales with the depth
+    assert main(["encode", str(grey16_scene), str(out), "--target-psnr", "40", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert 40 <= rep["psnr_rgb"] < 40.6
+    assert main(["decode", str(out), str(tmp_path / "v"), "--view", "8,8", "--quiet"]) == 0
+    img = read_image(tmp_path / "v" / "r08_c08.png")
+    assert img.shape == (128, 160, 1) and img.dtype == np.uint16
+    assert main(["decode", str(out), "--block", "8,8,15,19", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
+    blk = np.load(tmp_path / "b.npy")
+    assert blk.dtype == np.uint16 and (blk == img[120:128, 152:160]).all()
+    assert main(["encode", str(grey16_scene), str(out), "--lossless", "--quiet"]) == 0
+    from formats.codecs import open_decoder
+    from formats.lfcfile import open_lfc
+    with open_lfc(out) as f:
+        assert (open_decoder(f).decode_all() == read_scene(grey16_scene).views).all()
