@@ -3,6 +3,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
+
+# deterministic property tests: the same examples on every run and machine, no example database
+settings.register_profile("lfcodec", derandomize=True, database=None, deadline=None)
+settings.load_profile("lfcodec")
 
 ROOT = Path(__file__).resolve().parents[1]
 SHARED = Path(os.environ.get("LFC_SHARED", ROOT.parent / "shared"))
