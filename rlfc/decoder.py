@@ -46,12 +46,29 @@ class RlfcDecoder:
             self.q16 = np.asarray(cfg["q16"], dtype=np.int64)
             self.tree = Tree.from_config(cfg["tree"])
             self.level_offset = [int(x) for x in cfg["level_offset"]]
-            layout = cfg["layout"]
-            top_cfg = cfg["top"]
-        except (KeyError, TypeError, ValueError) as e:
-            raise FormatError(f"{c.name}: rlfc metadata is incomplete ({e})") from None
-        if self.dtype not in (np.uint8, np.uint16) or self.Hp != self.nby * B or self.Wp != self.nbx * B:
-            raise FormatError(f"{c.name}: rlfc metadata is inconsistent (dtype/padded size/blocks)")
+            layout = {k: int(cfg["layout"][k]) for k in ("off_bytes", "min_bytes", "bitmap_bytes")}
+            top_cfg = list(cfg["top"])
+            n_res = int(cfg["n_res_nodes"])
+        except (KeyError, TypeError, ValueError, ParameterError) as e:
+            raise FormatError(f"{c.name}: rlfc metadata is incomplete or invalid ({type(e).__name__}: {e})") from None
+        H = self.tree.height
+        sizes = self.tree.sizes
+        expect_off = [sum(sizes[lv + 1:H]) for lv in range(H)]
+        problems = [
+            (self.dtype not in (np.uint8, np.uint16), "dtype"),
+            (B not in (2, 4, 8, 16, 32), "block size"),
+            (not (1 <= self.channels <= 4 and self.P == self.channels), "channels/planes"),
+            (not (0 < self.height <= self.Hp == self.nby * B and 0 < self.width <= self.Wp == self.nbx * B),
+             "padded size/blocks"),
+            (self.nby * self.nbx > 1 << 26, "block count"),
+            (self.q16.shape != (self.P,) or (self.q16 < 16).any(), "q16"),
+            (layout["off_bytes"] not in (2, 4) or layout["min_bytes"] not in (2, 4), "layout"),
+            (n_res != sum(sizes[:H]) or layout["bitmap_bytes"] != -(-n_res // 8), "node count/bitmap"),
+            (self.level_offset != expect_off, "level offsets"),
+        ]
+        bad = [what for cond, what in problems if cond]
+        if bad:
+            raise FormatError(f"{c.name}: rlfc metadata is inconsistent ({', '.join(bad)})")
         if self.tree.sizes[0] != self.rows * self.cols or len(top_cfg) != self.tree.sizes[-1]:
             raise FormatError(f"{c.name}: rlfc tree does not match the {self.rows}x{self.cols} grid")
         self.levels = self.tree.height
