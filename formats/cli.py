@@ -56,22 +56,29 @@ def cmd_info(a) -> int:
         }
         if {"rows", "cols", "height", "width"} <= scene.keys():
             out["bpp"] = 8.0 * c.size / (scene["rows"] * scene["cols"] * scene["height"] * scene["width"])
-        for k in ("block_size", "n_blocks", "n_raw_blocks", "params"):
+        for k in ("block_size", "n_blocks", "n_raw_blocks", "params", "network", "weights"):
             if k in cfg:
                 out[k] = cfg[k]
+        if "network" in cfg:
+            out["levels"] = [cfg["network"].get("min_width"), cfg["network"].get("max_width")]
         if "tree" in cfg:
             out["tree_levels"] = cfg["tree"]["sizes"]
     if a.json:
         print(json.dumps(out, indent=1))
         return 0
     s = out["scene"]
+    detail = f" (profile {out['profile']})" if out.get("profile") else ""
     print(f"{out['file']}: {out['bytes']} bytes, .lfc {out['format_version']}, codec {out['codec']} "
-          f"v{out['codec_version']} (profile {out['profile']}), {out['encoder']}")
+          f"v{out['codec_version']}{detail}, {out['encoder']}")
     print(f"scene: {s['rows']}x{s['cols']} views of {s['width']}x{s['height']}x{s['channels']} {s['dtype']} "
           f"({s['layout']})" + (f", {out['bpp']:.4f} bpp" if "bpp" in out else ""))
     if "tree_levels" in out:
         print(f"tree: nodes per level {out['tree_levels']}, block {out.get('block_size')} px, "
               f"{out.get('n_blocks')} residual blocks ({out.get('n_raw_blocks')} raw)")
+    if "network" in out:
+        n = out["network"]
+        print(f"network: depth {n.get('depth')}, widths {n.get('min_width')}..{n.get('max_width')} "
+              f"(levels; any prefix ending on a step section is a complete network), {out.get('weights')} weights")
     print("sections:")
     for sec in out["sections"]:
         print(f"  {sec['name']:<16} offset {sec['offset']:>10}  {sec['bytes']:>10} bytes  {sec['chunks']} chunk(s)")
