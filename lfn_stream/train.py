@@ -76,7 +76,7 @@ def targets_of(views: np.ndarray, has_alpha: bool) -> np.ndarray:
     return np.concatenate([rgb, a], -1)
 
 
-def _save(path: Path, model, occ, opt, step: int, extra: dict) -> None:
+def _save(path: Path, model, occ, opt, step: int) -> None:
     arrays = {f"m.{k}": v.detach().cpu().numpy() for k, v in model.state_dict().items()}
     if occ is not None:
         arrays.update({f"o.{k}": v.detach().cpu().numpy() for k, v in occ.state_dict().items()})
@@ -166,11 +166,11 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
             if progress:
                 progress(step, lv)
         if ck is not None and (step + 1) % opts.checkpoint_every == 0:
-            _save(ck, model, occ, opt, step + 1, {})
+            _save(ck, model, occ, opt, step + 1)
         if opts.time_limit_s and step % 50 == 0 and time.perf_counter() - t0 > opts.time_limit_s:
             break
     if ck is not None:
-        _save(ck, model, occ, opt, step + 1, {})
+        _save(ck, model, occ, opt, step + 1)
     info = {"norm": {"centre": centre, "radius": radius}, "train_views": train_v.tolist(),
             "test_views": test_v.tolist(), "steps": step + 1, "train_s": time.perf_counter() - t0}
     return model.cpu(), (occ.cpu() if occ is not None else None), info

@@ -117,11 +117,9 @@ class RlfcDecoder:
             parts.append(np.frombuffer(c.read("rlfc.blocks", a, b), dtype=np.uint8))
             idx.append(idx[-1] + (b - a))
         buf = np.concatenate(parts + [np.zeros(PAD, np.uint8)])
-        local_index = np.zeros(len(u) * 2, dtype=np.int64)
-        # runs are stored back to back: run i is local_index[2i]..[2i+1]
+        # the fetched runs are stored back to back: run i is idx[i]..idx[i+1] of the local buffer
         st = BlockStore(np.asarray(idx, dtype=np.int64), buf, self.P, self.block_size, self.channels,
                         self.dtype.itemsize, self._layout)
-        del local_index
         return st, inv.reshape(-1)
 
     def _check_level(self, level: int) -> int:

@@ -56,7 +56,6 @@ class Encoder:
                                    "(convert float/EXR views to 16-bit first)")
         self.lf = lf
         self.B = params.block_size
-        self.shape_params = (params.tree_height, params.block_size, params.sigma, params.top_codec, params.top_psnr)
         r, c, h, w, ch = lf.views.shape
         self.dtype = lf.views.dtype
         self.bps = lf.views.dtype.itemsize
@@ -90,7 +89,6 @@ class Encoder:
         w = plane_weights(P)
         dec = self.top_dec
         levels = []
-        nloc = self.nby * self.nbx
         for lev in range(self.tree.height - 1, -1, -1):
             par = self.tree.parents[lev]
             n_l = len(par)
@@ -131,7 +129,6 @@ class Encoder:
                     loc = ky * self.nbx + kx
                     levels.append((g, loc, np.where(raw[:, None, None], 0, qk), raw, raw_full))
             dec = nxt
-        del nloc
         return LoopResult(self.tree, dec, levels, self.top, self.top_dec)
 
     def prune(self, res: LoopResult) -> list:

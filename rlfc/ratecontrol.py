@@ -115,9 +115,4 @@ def search(enc: Encoder, base: RlfcParams, *, target_psnr: float | None = None, 
     return best[0], best[1], trace
 
 
-def loop_psnr(enc: Encoder, res) -> float:
-    """PSNR_RGB of a closed-loop result against the encoder's input."""
-    return _psnr(enc, res)
-
-
-__all__ = ["search", "params_for_quant", "loop_psnr", "Q_MAX", "default_quant", "depth_scale"]
+__all__ = ["search", "params_for_quant", "Q_MAX", "default_quant", "depth_scale"]

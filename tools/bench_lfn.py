@@ -161,7 +161,7 @@ class _AtScale:
 
 class _CfgAt:
     def __init__(self, cfg, scale):
-        self._c, self._s = cfg, scale
+        self._s = scale
         self.min_width = cfg.min_width
 
     def scale_of(self, _):

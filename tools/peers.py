@@ -94,7 +94,6 @@ class Hevc:
         with tempfile.TemporaryDirectory() as td:
             out = Path(td) / "seq.mkv"
             frames = np.ascontiguousarray(views[order])
-            pad_h, pad_w = h % 2, w % 2
             subprocess.run(["ffmpeg", "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", f"{w}x{h}",
                             "-r", "25", "-i", "-", "-c:v", "libx265", "-preset", self.preset, "-crf", str(crf),
                             "-pix_fmt", "yuv444p", "-x265-params", f"log-level=error:keyint={n}", str(out)],
@@ -108,7 +107,6 @@ class Hevc:
             t_all, dec = _median(decode, 2)
         out_views = np.empty_like(views)
         out_views[order] = dec[:n]
-        del pad_h, pad_w
         return {"bytes": size, "decoded": out_views, "decode_view_s": t_all, "decode_all_s": t_all}
 
 

@@ -36,7 +36,7 @@ def read_llff(folder: Path) -> LightField:
     views = load_views(files, str(folder))
     n, h, w = views.shape[:3]
     m = pb[:, :15].reshape(n, 3, 5)
-    rot_llff, t, hwf = m[:, :, :4 - 1], m[:, :, 3], m[:, :, 4]
+    rot_llff, t, hwf = m[:, :, :3], m[:, :, 3], m[:, :, 4]
     rot = np.stack([rot_llff[:, :, 1], -rot_llff[:, :, 0], rot_llff[:, :, 2]], axis=-1)
     c2w = np.tile(np.eye(4), (n, 1, 1))
     c2w[:, :3, :3] = rot
