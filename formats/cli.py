@@ -98,7 +98,7 @@ def cmd_encode(a) -> int:
     from rlfc import Encoder, RlfcParams
     from rlfc.color import from_planes
     from rlfc.encoder import CODEC_ID, CODEC_VERSION
-    from rlfc.ratecontrol import default_quant, params_for_quant, search
+    from rlfc.ratecontrol import default_quant, params_for_quant, search, search_dcp
 
     from .lfcfile import write_lfc
     from .metrics import bpp, psnr_rgb, psnr_ycocg, ssim
@@ -110,26 +110,34 @@ def cmd_encode(a) -> int:
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
     t0 = time.perf_counter()
     lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split)
+    top_psnr = a.top_psnr
+    if a.profile == "dcp" and top_psnr is None:   # dcp key views are lossy by default, a little above the target
+        top_psnr = a.target_psnr + 3 if a.target_psnr is not None else 44.0
     base = RlfcParams(tree_height=a.tree_height, block_size=a.block_size, sigma=a.sigma, top_codec=a.top_codec,
-                      top_psnr=a.top_psnr, profile=a.profile)
-    enc = Encoder(lf, base)
+                      top_psnr=top_psnr, profile=a.profile, max_disparity=a.max_disparity)
     search_trace = None
-    if a.target_psnr is not None or a.target_bpp is not None:
-        bar = _progress(a.quiet, desc="rate control")
+    bar = _progress(a.quiet, desc="rate control")
 
-        def prog(i, p, ps, b):
-            bar.update(1)
-            bar.set_postfix(quant=p.quant, psnr=f"{ps:.2f}", **({"bpp": f"{b:.3f}"} if b is not None else {}))
+    def prog(i, p, ps, b):
+        bar.update(1)
+        bar.set_postfix(quant=p.quant, psnr=f"{ps:.2f}", **({"bpp": f"{b:.3f}"} if b is not None else {}))
 
-        params, res, search_trace = search(enc, base, target_psnr=a.target_psnr, target_bpp=a.target_bpp,
-                                           fixed_threshold=a.threshold, fixed_energy=a.energy, progress=prog)
-        bar.close()
+    if a.profile == "dcp" and a.target_psnr is not None and a.top_psnr is None:
+        # the key views' quality is a second knob: search_dcp returns a result with its blocks
+        enc, params, res, search_trace = search_dcp(lf, base, target_psnr=a.target_psnr, fixed_threshold=a.threshold,
+                                                    fixed_energy=a.energy, progress=prog)
     else:
-        params = params_for_quant(base, a.quant if a.quant is not None else default_quant(lf.views.dtype),
-                                  a.threshold, a.energy)
-        res = enc.closed_loop(params)
-    if search_trace is not None and a.target_bpp is None:
-        res = enc.closed_loop(params)     # the PSNR search ran without keeping blocks
+        enc = Encoder(lf, base)
+        if a.target_psnr is not None or a.target_bpp is not None:
+            params, res, search_trace = search(enc, base, target_psnr=a.target_psnr, target_bpp=a.target_bpp,
+                                               fixed_threshold=a.threshold, fixed_energy=a.energy, progress=prog)
+            if a.target_bpp is None:
+                res = enc.closed_loop(params)     # the PSNR search ran without keeping blocks
+        else:
+            params = params_for_quant(base, a.quant if a.quant is not None else default_quant(lf.views.dtype),
+                                      a.threshold, a.energy)
+            res = enc.closed_loop(params)
+    bar.close()
     cfg, sections = enc.pack(params, res)
     nbytes = write_lfc(out, CODEC_ID, CODEC_VERSION, cfg, lf.geometry(), sections,
                        extra={"source": {k: v for k, v in lf.meta.items() if k in ("reader", "assumed", "source", "license")}})
@@ -251,8 +259,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--lossless", action="store_const", dest="quant", const=1.0, help="same as --quant 1")
     e.add_argument("--sigma", type=float, default=1.0, help="Gaussian filter width (view spacings)")
     e.add_argument("--top-codec", default="auto", choices=["auto", "j2k", "jxl"], help="top key-view image codec")
-    e.add_argument("--top-psnr", type=float, default=None, help="lossy top level: JPEG 2000 at this PSNR")
-    e.add_argument("--profile", default="bise", help="RLFC profile (bise)")
+    e.add_argument("--top-psnr", type=float, default=None,
+                   help="lossy top level: JPEG 2000 at this PSNR (dcp default: target + 3 dB, or 44)")
+    e.add_argument("--profile", default="bise", choices=["bise", "dcp"],
+                   help="RLFC profile: bise (the paper's key-view tree, default) or dcp "
+                        "(disparity-compensated prediction from 3x3-cluster key views; grids)")
+    e.add_argument("--max-disparity", type=int, default=4, help="dcp: largest disparity searched (px per view)")
     e.add_argument("--baseline", type=float, default=None, help="grid baseline when the scene has none")
     e.add_argument("--focal", type=float, default=None, help="focal length in pixels when the scene has none")
     e.add_argument("--split", default="train", help="transforms_<split>.json to read (default train)")

@@ -15,6 +15,7 @@ from formats.lfcfile import LfcFile, check_codec_version
 
 from .blocks import PAD, BlockStore
 from .color import from_planes, to_planes
+from .disparity import predict_blocks, predict_views
 from .encoder import CODEC_ID, CODEC_VERSION
 from .residual import dequantize, from_blocks, to_blocks
 from .topcodec import decode_image
@@ -49,6 +50,10 @@ class RlfcDecoder:
             layout = {k: int(cfg["layout"][k]) for k in ("off_bytes", "min_bytes", "bitmap_bytes")}
             top_cfg = list(cfg["top"])
             n_res = int(cfg["n_res_nodes"])
+            self.profile = str(cfg.get("profile", "bise"))
+            dcp = cfg.get("dcp") if self.profile == "dcp" else None
+            if dcp is not None:
+                self.offsets = np.asarray(dcp["offsets"], dtype=np.int64)
         except (KeyError, TypeError, ValueError, ParameterError) as e:
             raise FormatError(f"{c.name}: rlfc metadata is incomplete or invalid ({type(e).__name__}: {e})") from None
         H = self.tree.height
@@ -65,6 +70,9 @@ class RlfcDecoder:
             (layout["off_bytes"] not in (2, 4) or layout["min_bytes"] not in (2, 4), "layout"),
             (n_res != sum(sizes[:H]) or layout["bitmap_bytes"] != -(-n_res // 8), "node count/bitmap"),
             (self.level_offset != expect_off, "level offsets"),
+            (self.profile not in ("bise", "dcp"), f"profile {self.profile!r}"),
+            (self.profile == "dcp" and (dcp is None or H != 1 or
+                                        self.offsets.shape != (self.rows * self.cols, 2)), "dcp config"),
         ]
         bad = [what for cond, what in problems if cond]
         if bad:
@@ -82,6 +90,13 @@ class RlfcDecoder:
                 raise FormatError(f"{c.name}: top-level image {i} lies outside section 'rlfc.top'")
             imgs.append(decode_image(t["codec"], bytes(top[a:a + n]), (self.Hp, self.Wp, self.channels), self.dtype))
         self.top = to_planes(np.stack(imgs))                  # (N_H, Hp, Wp, P) int32
+        if self.profile == "dcp":
+            raw_d = c.read("rlfc.disp")
+            if len(raw_d) != len(imgs) * self.nby * self.nbx:
+                raise FormatError(f"{c.name}: section 'rlfc.disp' has {len(raw_d)} bytes, expected "
+                                  f"{len(imgs) * self.nby * self.nbx}")
+            self.disp = np.frombuffer(raw_d, dtype=np.int8).astype(np.int64).reshape(len(imgs), -1)
+            self.key_of = self.tree.parents[0]
         # the same pixels laid out per block, so a block request is one contiguous row gather
         self.top_blocks = np.ascontiguousarray(to_blocks(self.top, B)).reshape(
             len(imgs), self.nby, self.nbx, B * B, self.P)      # (N_H, nby, nbx, B·B, P)
@@ -121,6 +136,14 @@ class RlfcDecoder:
         st = BlockStore(np.asarray(idx, dtype=np.int64), buf, self.P, self.block_size, self.channels,
                         self.dtype.itemsize, self._layout)
         return st, inv.reshape(-1)
+
+    def _pred_blocks(self, views: np.ndarray, by: np.ndarray, bx: np.ndarray) -> np.ndarray:
+        """What each requested block starts from before residuals: (M, B·B, P) int32 planes —
+        the top key view's block (bise) or the disparity-shifted key view (dcp)."""
+        if self.profile == "dcp":
+            return predict_blocks(self.top, self.key_of, self.offsets, self.disp, views, by, bx,
+                                  self.block_size, self.nbx)
+        return self.top_blocks[self.anc[self.levels][views], by, bx]
 
     def _check_level(self, level: int) -> int:
         if not 0 <= int(level) <= self.levels:
@@ -163,7 +186,7 @@ class RlfcDecoder:
             raise ParameterError(f"block index out of range (blocks are {self.nby} rows x {self.nbx} cols of {B} px)")
         H = self.levels
         top = self.anc[H][views]
-        acc = self.top_blocks[top, by, bx]                    # (M, B·B, P)
+        acc = self._pred_blocks(views, by, bx)                # (M, B·B, P)
         loc = by * self.nbx + bx
         if H > level:
             levs = list(range(H - 1, level - 1, -1))
@@ -195,7 +218,7 @@ class RlfcDecoder:
         if self.store is None:
             out = self.decode_blocks(np.array([v]), np.array([by]), np.array([bx]), level)[0]
         else:   # lean path: Python-int header parsing, one decode per distinct mode
-            acc = self.top_blocks[self.anc[self.levels][v], by, bx]
+            acc = self._pred_blocks(np.array([v]), np.array([by]), np.array([bx]))[0]
             levs = range(self.levels - 1, level - 1, -1)
             got = self.store.fetch_one(by * self.nbx + bx, [self.level_offset[lv] + int(self.anc[lv][v]) for lv in levs])
             for item in got:                                  # top-down
@@ -233,7 +256,9 @@ class RlfcDecoder:
                 sel, raw, deq, rawp = self._residual(store, g, lloc)
                 res = np.zeros((len(chunk) * nloc, B * B, self.P), dtype=np.int32)
                 res[sel] = deq
-                rec = dec[ppos[a:a + 8]] + from_blocks(res.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
+                base = (predict_views(self.top, self.key_of, self.offsets, self.disp, chunk, B)
+                        if self.profile == "dcp" else dec[ppos[a:a + 8]])
+                rec = base + from_blocks(res.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
                 if raw.any():
                     rb = rec.reshape(len(chunk), self.nby, B, self.nbx, B, self.P).transpose(0, 1, 3, 2, 4, 5).copy()
                     flat = rb.reshape(-1, B * B, self.P)
@@ -253,6 +278,10 @@ class RlfcDecoder:
         views = np.arange(self.rows * self.cols) if views is None else np.asarray(views, dtype=np.int64).reshape(-1)
         if self.store is not None and views.size == self.rows * self.cols:
             self.file.container.verify_ranges("rlfc.blocks", np.array([0]), np.array([int(self._index[-1])]))
+        if self.profile == "dcp" and level == self.levels:     # the prediction itself
+            out = predict_views(self.top, self.key_of, self.offsets, self.disp, views, self.block_size)
+            out = out[:, :self.height, :self.width]
+            return out if planes else from_planes(out, self.dtype)
         nodes = self.anc[level][views]
         un = np.unique(nodes)
         dec = self._decode_nodes(level, None if un.size == self.tree.sizes[level] else un)

@@ -20,6 +20,7 @@ from .color import plane_weights, to_planes
 from .params import RlfcParams
 from .residual import block_energy, from_blocks, quantize_dequantize, to_blocks
 from .topcodec import decode_image, encode_image
+from .disparity import dcp_clusters, estimate, predict_views
 from .tree import Tree, build_tree, filter_level
 
 CODEC_ID = "rlfc"
@@ -60,16 +61,30 @@ class Encoder:
         self.dtype = lf.views.dtype
         self.bps = lf.views.dtype.itemsize
         self.P = ch
-        self.tree = build_tree(r, c, lf.positions, params.tree_height, lf.layout)
+        self.profile = params.profile
         views = _pad(lf.views.reshape(r * c, h, w, ch), self.B)
         self.Hp, self.Wp = views.shape[1:3]
         self.rkv = [views]
-        for lev in range(self.tree.height):
-            self.rkv.append(filter_level(self.rkv[-1], self.tree, lev, params.sigma))
+        if self.profile == "dcp":
+            if lf.layout != "grid":
+                raise UnsupportedError("the dcp profile needs a grid of parallel cameras; use --profile bise "
+                                       "for posed captures")
+            par, key, self.offsets = dcp_clusters(r, c, lf.positions)
+            pos = lf.positions.reshape(-1, 3)
+            self.tree = Tree((par,), (r * c, len(key)), (pos, pos[key]))
+            self.key_of = par
+            self.rkv.append(views[key])                       # key views are views, not averages
+        else:
+            self.tree = build_tree(r, c, lf.positions, params.tree_height, lf.layout)
+            for lev in range(self.tree.height):
+                self.rkv.append(filter_level(self.rkv[-1], self.tree, lev, params.sigma))
         self.top = [encode_image(im, params.top_codec, params.top_psnr) for im in self.rkv[-1]]
         top_px = np.stack([decode_image(cd, data, im.shape, im.dtype) for (cd, data), im in zip(self.top, self.rkv[-1])])
         self.top_dec = to_planes(top_px)
         self.nby, self.nbx = self.Hp // self.B, self.Wp // self.B
+        if self.profile == "dcp":
+            self.disp = estimate(to_planes(views), self.top_dec, self.key_of, self.offsets, self.B,
+                                 int(params.max_disparity), plane_weights(self.P))
         H = self.tree.height
         # BFS numbering of residual nodes: level H-1 first, level 0 last
         self.level_offset = {}
@@ -95,7 +110,11 @@ class Encoder:
             nxt = np.empty((n_l, self.Hp, self.Wp, P), dtype=np.int32)
             for a in range(0, n_l, 16):   # chunks of nodes bound the memory of one level
                 s = slice(a, min(a + 16, n_l))
-                pred = dec[par[s]]
+                if self.profile == "dcp":
+                    pred = predict_views(self.top_dec, self.key_of, self.offsets, self.disp,
+                                         np.arange(s.start, s.stop), B)
+                else:
+                    pred = dec[par[s]]
                 target = to_planes(self.rkv[lev][s])
                 q, deq = quantize_dequantize(target - pred, q16, thr)
                 qb = to_blocks(q, B)                                      # (n, nby, nbx, B, B, P)
@@ -204,8 +223,11 @@ class Encoder:
             "level_offset": [self.level_offset[lev] for lev in range(self.tree.height)],
             "top": top_cfg, "layout": layout, "n_blocks": int(len(g)), "n_raw_blocks": int(raw.sum()),
         }
-        sections = [("rlfc.top", b"".join(top_bytes)), ("rlfc.index", index.astype("<u4").tobytes()),
-                    ("rlfc.blocks", blocks.tobytes())]
+        sections = [("rlfc.top", b"".join(top_bytes))]
+        if self.profile == "dcp":
+            cfg["dcp"] = {"offsets": self.offsets.tolist(), "max_disparity": int(params.max_disparity)}
+            sections.append(("rlfc.disp", self.disp.astype(np.int8).tobytes()))
+        sections += [("rlfc.index", index.astype("<u4").tobytes()), ("rlfc.blocks", blocks.tobytes())]
         return cfg, sections
 
 

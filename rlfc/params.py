@@ -5,7 +5,7 @@ from dataclasses import asdict, dataclass
 
 from formats.errors import ParameterError
 
-PROFILES = ("bise",)
+PROFILES = ("bise", "dcp")
 
 
 @dataclass(frozen=True)
@@ -25,7 +25,10 @@ class RlfcParams:
         top_codec: "auto" (smaller of lossless JPEG 2000 and JPEG XL), "j2k" or "jxl".
         top_psnr: None = lossless top level; a number = lossy JPEG 2000 at that PSNR (dB),
             whose decoded pixels feed the closed loop.
-        profile: "bise" (the paper's: every significant block BISE-packed).
+        profile: "bise" (the paper's: Gaussian key-view tree, every significant block
+            BISE-packed) or "dcp" (disparity-compensated prediction from 3×3-cluster key views,
+            residual blocks BISE-packed; grids only).
+        max_disparity: dcp: largest |disparity| searched, pixels per view step.
     """
 
     tree_height: int = 3
@@ -37,6 +40,7 @@ class RlfcParams:
     top_codec: str = "auto"
     top_psnr: float | None = None
     profile: str = "bise"
+    max_disparity: int = 4
 
     def __post_init__(self) -> None:
         if not 0 <= int(self.tree_height) <= 16 or int(self.tree_height) != self.tree_height:
@@ -55,6 +59,8 @@ class RlfcParams:
             raise ParameterError(f"top codec must be auto, j2k or jxl, got {self.top_codec!r}")
         if self.top_psnr is not None and not 10 <= self.top_psnr <= 120:
             raise ParameterError(f"top-level PSNR must be within 10..120 dB, got {self.top_psnr}")
+        if not 0 <= int(self.max_disparity) <= 64:
+            raise ParameterError(f"max disparity must be 0..64, got {self.max_disparity}")
         if self.profile not in PROFILES:
             raise ParameterError(f"unknown profile {self.profile!r} (available: {', '.join(PROFILES)})")
 

@@ -115,4 +115,27 @@ def search(enc: Encoder, base: RlfcParams, *, target_psnr: float | None = None, 
     return best[0], best[1], trace
 
 
-__all__ = ["search", "params_for_quant", "Q_MAX", "default_quant", "depth_scale"]
+def search_dcp(lf, base: RlfcParams, *, target_psnr: float, fixed_threshold=None, fixed_energy=None,
+               top_margins=(3.0, 1.0), progress=None):
+    """dcp rate control: the key views' quality is a second knob. For each margin m, key views
+    are coded at target + m dB and Q is searched as in :func:`search`; the smallest file that
+    meets the target wins. Returns (encoder, params, loop result, trace)."""
+    best = None
+    trace = []
+    for m in top_margins:
+        enc = Encoder(lf, replace(base, top_psnr=target_psnr + m))
+        p, res, tr = search(enc, replace(base, top_psnr=target_psnr + m), target_psnr=target_psnr,
+                            fixed_threshold=fixed_threshold, fixed_energy=fixed_energy, progress=progress)
+        trace += [(q, ps, b) for q, ps, b in tr]
+        res = enc.closed_loop(p)
+        ok = _psnr(enc, res) >= target_psnr
+        _, secs = enc.pack(p, res)
+        size = sum(len(s) for _, s in secs)
+        if ok and (best is None or size < best[0]):
+            best = (size, enc, p, res)
+        if best is None and m == top_margins[-1]:
+            best = (size, enc, p, res)
+    return best[1], best[2], best[3], trace
+
+
+__all__ = ["search_dcp", "search", "params_for_quant", "Q_MAX", "default_quant", "depth_scale"]

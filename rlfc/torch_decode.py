@@ -93,7 +93,10 @@ class TorchBlockDecoder:
         M, B, P, n = views.size, d.block_size, d.P, d.block_size ** 2
         H = d.levels
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.dev)  # noqa: E731
-        acc = self.top[t(d.anc[H][views]), t(by), t(bx)]                                # (M, n, P) int32
+        if d.profile == "dcp":
+            acc = t(d._pred_blocks(views, by, bx))                                      # (M, n, P) int32
+        else:
+            acc = self.top[t(d.anc[H][views]), t(by), t(bx)]                            # (M, n, P) int32
         if H > level:
             levs = list(range(H - 1, level - 1, -1))
             g = np.concatenate([d.level_offset[lv] + d.anc[lv][views] for lv in levs])

@@ -179,3 +179,18 @@ def test_16bit_grey_works_like_rgb(grey16_scene, tmp_path, capsys):
     from formats.lfcfile import open_lfc
     with open_lfc(out) as f:
         assert (open_decoder(f).decode_all() == read_scene(grey16_scene).views).all()
+
+
+def test_dcp_profile_from_the_cli(tmp_path, capsys):
+    out = tmp_path / "dcp.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--profile", "dcp", "--target-psnr", "40", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["profile"] == "dcp" and rep["psnr_rgb"] >= 40
+    assert rep["params"]["top_psnr"] in (43, 41)          # key-view quality is searched too
+    assert rep["bpp"] < 0.5                                # bise needs 1.73 bpp for 40 dB on the sample
+    assert main(["info", str(out), "--json"]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["profile"] == "dcp" and "rlfc.disp" in [s["name"] for s in info["sections"]]
+    assert main(["decode", str(out), "--block", "4,4,2,3", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
+    assert main(["decode", str(out), str(tmp_path / "v"), "--view", "4,4", "--quiet"]) == 0
+    assert (np.load(tmp_path / "b.npy") == read_image(tmp_path / "v" / "r04_c04.png")[16:24, 24:32]).all()
