@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from formats.container import ByteRangeSource
-from formats.errors import ChecksumError, FormatError, ParameterError
+from formats.errors import FormatError, ParameterError
 from formats.lfcfile import LfcFile, check_codec_version
 
 from .blocks import PAD, BlockStore
@@ -137,6 +137,18 @@ class RlfcDecoder:
                         self.dtype.itemsize, self._layout)
         return st, inv.reshape(-1)
 
+    def _requests(self, views, by, bx) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Batched (view, block row, block column) requests as int64 arrays, range-checked."""
+        views = np.asarray(views, dtype=np.int64).reshape(-1)
+        by = np.asarray(by, dtype=np.int64).reshape(-1)
+        bx = np.asarray(bx, dtype=np.int64).reshape(-1)
+        if views.size and (views.min() < 0 or views.max() >= self.rows * self.cols):
+            raise ParameterError("view index out of range")
+        if by.size and (by.min() < 0 or by.max() >= self.nby or bx.min() < 0 or bx.max() >= self.nbx):
+            raise ParameterError(f"block index out of range (blocks are {self.nby} rows x {self.nbx} cols of "
+                                 f"{self.block_size} px)")
+        return views, by, bx
+
     def _pred_blocks(self, views: np.ndarray, by: np.ndarray, bx: np.ndarray) -> np.ndarray:
         """What each requested block starts from before residuals: (M, B·B, P) int32 planes —
         the top key view's block (bise) or the disparity-shifted key view (dcp)."""
@@ -176,16 +188,9 @@ class RlfcDecoder:
             (M, B, B, C) pixels (uint8/uint16; blocks past the image edge hold padding).
         """
         level = self._check_level(level)
-        views = np.asarray(views, dtype=np.int64).reshape(-1)
-        by = np.asarray(by, dtype=np.int64).reshape(-1)
-        bx = np.asarray(bx, dtype=np.int64).reshape(-1)
+        views, by, bx = self._requests(views, by, bx)
         M, B = views.size, self.block_size
-        if views.size and (views.min() < 0 or views.max() >= self.rows * self.cols):
-            raise ParameterError("view index out of range")
-        if by.size and (by.min() < 0 or by.max() >= self.nby or bx.min() < 0 or bx.max() >= self.nbx):
-            raise ParameterError(f"block index out of range (blocks are {self.nby} rows x {self.nbx} cols of {B} px)")
         H = self.levels
-        top = self.anc[H][views]
         acc = self._pred_blocks(views, by, bx)                # (M, B·B, P)
         loc = by * self.nbx + bx
         if H > level:

@@ -84,12 +84,7 @@ class TorchBlockDecoder:
         """Same contract as :meth:`RlfcDecoder.decode_blocks`; returns numpy (or a device tensor)."""
         d = self.d
         level = d._check_level(level)
-        views = np.asarray(views, dtype=np.int64).reshape(-1)
-        by = np.asarray(by, dtype=np.int64).reshape(-1)
-        bx = np.asarray(bx, dtype=np.int64).reshape(-1)
-        if views.size and (views.min() < 0 or views.max() >= d.rows * d.cols or by.min() < 0 or by.max() >= d.nby
-                           or bx.min() < 0 or bx.max() >= d.nbx):
-            raise ParameterError("view or block index out of range")
+        views, by, bx = d._requests(views, by, bx)
         M, B, P, n = views.size, d.block_size, d.P, d.block_size ** 2
         H = d.levels
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.dev)  # noqa: E731
