@@ -73,7 +73,7 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
     pos = 0
 
     def take(n):
-        nonlocal pos, vals
+        nonlocal pos
         if pos + n > vals.size:
             raise FormatError("lfn network section is shorter than its configuration needs")
         out = vals[pos:pos + n]

@@ -7,7 +7,6 @@ rebuilt from the quantized residual (closed loop) → blocks packed per location
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
