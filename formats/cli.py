@@ -98,7 +98,7 @@ def cmd_encode(a) -> int:
     from rlfc import Encoder, RlfcParams
     from rlfc.color import from_planes
     from rlfc.encoder import CODEC_ID, CODEC_VERSION
-    from rlfc.ratecontrol import default_quant, params_for_quant, search, search_dcp
+    from rlfc.ratecontrol import default_quant, params_for_quant, search, search_dcp, search_dcp_bpp
 
     from .lfcfile import write_lfc
     from .metrics import bpp, psnr_rgb, psnr_ycocg, ssim
@@ -110,11 +110,16 @@ def cmd_encode(a) -> int:
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
     t0 = time.perf_counter()
     lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split)
+    profile = a.profile
+    if profile == "auto":     # dcp wins on every grid measured (BENCHMARKS.md); posed captures need bise
+        profile = "dcp" if lf.layout == "grid" else "bise"
     top_psnr = a.top_psnr
-    if a.profile == "dcp" and top_psnr is None:   # dcp key views are lossy by default, a little above the target
+    lossless = a.quant is not None and a.quant <= 1
+    if profile == "dcp" and top_psnr is None and not lossless:   # dcp key views are lossy by default
         top_psnr = a.target_psnr + 3 if a.target_psnr is not None else 44.0
     base = RlfcParams(tree_height=a.tree_height, block_size=a.block_size, sigma=a.sigma, top_codec=a.top_codec,
-                      top_psnr=top_psnr, profile=a.profile, max_disparity=a.max_disparity)
+                      top_psnr=top_psnr, profile=profile, max_disparity=a.max_disparity,
+                      disp_frac_bits=a.disparity_bits)
     search_trace = None
     bar = _progress(a.quiet, desc="rate control")
 
@@ -122,10 +127,12 @@ def cmd_encode(a) -> int:
         bar.update(1)
         bar.set_postfix(quant=p.quant, psnr=f"{ps:.2f}", **({"bpp": f"{b:.3f}"} if b is not None else {}))
 
-    if a.profile == "dcp" and a.target_psnr is not None and a.top_psnr is None:
-        # the key views' quality is a second knob: search_dcp returns a result with its blocks
+    if profile == "dcp" and a.target_psnr is not None and a.top_psnr is None:
+        # the key views' quality is the main knob: search_dcp returns a result with its blocks
         enc, params, res, search_trace = search_dcp(lf, base, target_psnr=a.target_psnr, fixed_threshold=a.threshold,
                                                     fixed_energy=a.energy, progress=prog)
+    elif profile == "dcp" and a.target_bpp is not None and a.top_psnr is None:
+        enc, params, res, search_trace = search_dcp_bpp(lf, base, target_bpp=a.target_bpp, progress=prog)
     else:
         enc = Encoder(lf, base)
         if a.target_psnr is not None or a.target_bpp is not None:
@@ -261,10 +268,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--top-codec", default="auto", choices=["auto", "j2k", "jxl"], help="top key-view image codec")
     e.add_argument("--top-psnr", type=float, default=None,
                    help="lossy top level: JPEG 2000 at this PSNR (dcp default: target + 3 dB, or 44)")
-    e.add_argument("--profile", default="bise", choices=["bise", "dcp"],
-                   help="RLFC profile: bise (the paper's key-view tree, default) or dcp "
-                        "(disparity-compensated prediction from 3x3-cluster key views; grids)")
+    e.add_argument("--profile", default="auto", choices=["auto", "bise", "dcp"],
+                   help="RLFC profile: dcp (disparity-compensated prediction from 3x3-cluster key views; grids), "
+                        "bise (the paper's key-view tree), or auto (default: dcp for grids, bise for posed captures)")
     e.add_argument("--max-disparity", type=int, default=4, help="dcp: largest disparity searched (px per view)")
+    e.add_argument("--disparity-bits", type=int, default=3,
+                   help="dcp: fractional bits of the disparity (3 = 1/8 px per view step; 0 = whole pixels)")
     e.add_argument("--baseline", type=float, default=None, help="grid baseline when the scene has none")
     e.add_argument("--focal", type=float, default=None, help="focal length in pixels when the scene has none")
     e.add_argument("--split", default="train", help="transforms_<split>.json to read (default train)")

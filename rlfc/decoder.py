@@ -15,7 +15,7 @@ from formats.lfcfile import LfcFile, check_codec_version
 
 from .blocks import PAD, BlockStore
 from .color import from_planes, to_planes
-from .disparity import predict_blocks, predict_views
+from .disparity import predict_blocks, predict_views, unpack_disparity
 from .encoder import CODEC_ID, CODEC_VERSION
 from .residual import dequantize, from_blocks, to_blocks
 from .topcodec import decode_image
@@ -52,8 +52,12 @@ class RlfcDecoder:
             n_res = int(cfg["n_res_nodes"])
             self.profile = str(cfg.get("profile", "bise"))
             dcp = cfg.get("dcp") if self.profile == "dcp" else None
+            self.frac_bits, disp_coding, disp_dtype = 0, "raw-i8", "<i1"
             if dcp is not None:
                 self.offsets = np.asarray(dcp["offsets"], dtype=np.int64)
+                self.frac_bits = int(dcp.get("frac_bits", 0))
+                disp_coding = str(dcp.get("disp_coding", "raw-i8"))
+                disp_dtype = str(dcp.get("disp_dtype", "<i1"))
         except (KeyError, TypeError, ValueError, ParameterError) as e:
             raise FormatError(f"{c.name}: rlfc metadata is incomplete or invalid ({type(e).__name__}: {e})") from None
         H = self.tree.height
@@ -72,7 +76,9 @@ class RlfcDecoder:
             (self.level_offset != expect_off, "level offsets"),
             (self.profile not in ("bise", "dcp"), f"profile {self.profile!r}"),
             (self.profile == "dcp" and (dcp is None or H != 1 or
-                                        self.offsets.shape != (self.rows * self.cols, 2)), "dcp config"),
+                                        self.offsets.shape != (self.rows * self.cols, 2) or
+                                        not 0 <= self.frac_bits <= 4 or
+                                        disp_coding not in ("raw-i8", "zlib-delta")), "dcp config"),
         ]
         bad = [what for cond, what in problems if cond]
         if bad:
@@ -92,10 +98,13 @@ class RlfcDecoder:
         self.top = to_planes(np.stack(imgs))                  # (N_H, Hp, Wp, P) int32
         if self.profile == "dcp":
             raw_d = c.read("rlfc.disp")
-            if len(raw_d) != len(imgs) * self.nby * self.nbx:
-                raise FormatError(f"{c.name}: section 'rlfc.disp' has {len(raw_d)} bytes, expected "
-                                  f"{len(imgs) * self.nby * self.nbx}")
-            self.disp = np.frombuffer(raw_d, dtype=np.int8).astype(np.int64).reshape(len(imgs), -1)
+            if disp_coding == "zlib-delta":
+                self.disp = unpack_disparity(bytes(raw_d), disp_dtype, (len(imgs), self.nby * self.nbx), c.name)
+            else:
+                if len(raw_d) != len(imgs) * self.nby * self.nbx:
+                    raise FormatError(f"{c.name}: section 'rlfc.disp' has {len(raw_d)} bytes, expected "
+                                      f"{len(imgs) * self.nby * self.nbx}")
+                self.disp = np.frombuffer(raw_d, dtype=np.int8).astype(np.int64).reshape(len(imgs), -1)
             self.key_of = self.tree.parents[0]
         # the same pixels laid out per block, so a block request is one contiguous row gather
         self.top_blocks = np.ascontiguousarray(to_blocks(self.top, B)).reshape(
@@ -154,7 +163,7 @@ class RlfcDecoder:
         the top key view's block (bise) or the disparity-shifted key view (dcp)."""
         if self.profile == "dcp":
             return predict_blocks(self.top, self.key_of, self.offsets, self.disp, views, by, bx,
-                                  self.block_size, self.nbx)
+                                  self.block_size, self.nbx, self.frac_bits)
         return self.top_blocks[self.anc[self.levels][views], by, bx]
 
     def _check_level(self, level: int) -> int:
@@ -261,7 +270,7 @@ class RlfcDecoder:
                 sel, raw, deq, rawp = self._residual(store, g, lloc)
                 res = np.zeros((len(chunk) * nloc, B * B, self.P), dtype=np.int32)
                 res[sel] = deq
-                base = (predict_views(self.top, self.key_of, self.offsets, self.disp, chunk, B)
+                base = (predict_views(self.top, self.key_of, self.offsets, self.disp, chunk, B, self.frac_bits)
                         if self.profile == "dcp" else dec[ppos[a:a + 8]])
                 rec = base + from_blocks(res.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
                 if raw.any():
@@ -284,7 +293,8 @@ class RlfcDecoder:
         if self.store is not None and views.size == self.rows * self.cols:
             self.file.container.verify_ranges("rlfc.blocks", np.array([0]), np.array([int(self._index[-1])]))
         if self.profile == "dcp" and level == self.levels:     # the prediction itself
-            out = predict_views(self.top, self.key_of, self.offsets, self.disp, views, self.block_size)
+            out = predict_views(self.top, self.key_of, self.offsets, self.disp, views, self.block_size,
+                                self.frac_bits)
             out = out[:, :self.height, :self.width]
             return out if planes else from_planes(out, self.dtype)
         nodes = self.anc[level][views]

@@ -2,14 +2,21 @@
 
 Views on a grid are clustered 3×3; each cluster's key view is its most central member, coded
 as a top-level image. A view at grid offset (oy, ox) from its key view is predicted, block by
-block, from the decoded key view shifted by d·(oy, ox) pixels, d an integer disparity stored per
-(cluster, block location). The prediction reads only the key view (held decoded in memory), so
-one block of one view still depends on exactly one stored residual block: the dependency cone
-does not grow with anything.
+block, from the decoded key view shifted by d·(oy, ox) pixels, d a disparity stored per
+(cluster, block location) in units of 1/2^F pixel per view step (F = ``frac_bits``). Sub-pixel
+positions are sampled bilinearly in integer arithmetic (weights in 1/2^F, one rounding at the
+end), so every decoder computes the same prediction bit for bit; F = 0 is a plain integer
+shift. The prediction reads only the key view (held decoded in memory), so one block of one
+view still depends on exactly one stored residual block: the dependency cone does not grow
+with anything.
 """
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
+
+from formats.errors import FormatError
 
 
 def dcp_clusters(rows: int, cols: int, positions: np.ndarray):
@@ -28,69 +35,150 @@ def dcp_clusters(rows: int, cols: int, positions: np.ndarray):
     return par.astype(np.int64), key, offsets
 
 
+def _sample(img: np.ndarray, py: np.ndarray, px: np.ndarray, frac_bits: int) -> np.ndarray:
+    """Bilinear samples of ``img`` (Hp, Wp, P) int32 at fixed-point positions.
+
+    ``py`` (..., B, 1) and ``px`` (..., 1, B) or broadcastable int64 positions in 1/2^F pixels;
+    edges clamp. Returns int32 (..., P) with round-half-up at 2F fractional bits.
+    """
+    hp, wp = img.shape[:2]
+    if frac_bits == 0:
+        return img[np.clip(py, 0, hp - 1), np.clip(px, 0, wp - 1)]
+    s = 1 << frac_bits
+    y0, fy = py >> frac_bits, (py & (s - 1))[..., None]
+    x0, fx = px >> frac_bits, (px & (s - 1))[..., None]
+    ya, yb = np.clip(y0, 0, hp - 1), np.clip(y0 + 1, 0, hp - 1)
+    xa, xb = np.clip(x0, 0, wp - 1), np.clip(x0 + 1, 0, wp - 1)
+    top = img[ya, xa].astype(np.int64) * (s - fx) + img[ya, xb] * fx
+    bot = img[yb, xa].astype(np.int64) * (s - fx) + img[yb, xb] * fx
+    return ((top * (s - fy) + bot * fy + (1 << (2 * frac_bits - 1))) >> (2 * frac_bits)).astype(np.int32)
+
+
 def predict_blocks(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,
-                   views: np.ndarray, by: np.ndarray, bx: np.ndarray, B: int, nbx: int) -> np.ndarray:
+                   views: np.ndarray, by: np.ndarray, bx: np.ndarray, B: int, nbx: int,
+                   frac_bits: int = 0) -> np.ndarray:
     """Predicted planes of many (view, block) requests.
 
     Args:
         top: (n_top, Hp, Wp, P) int32 decoded key-view planes.
         key_of: (N0,) cluster of each view; offsets: (N0, 2) grid offset (oy, ox) to the key view.
-        disp: (n_top, n_loc) int disparities (pixels per view step).
+        disp: (n_top, n_loc) int disparities (1/2^frac_bits pixels per view step).
         views, by, bx: (M,) requests.
 
     Returns:
         (M, B·B, P) int32.
     """
-    hp, wp = top.shape[1:3]
     k = key_of[views]
     d = disp[k, by * nbx + bx]                                           # (M,)
-    ys = np.clip(by[:, None] * B + np.arange(B) + (d * offsets[views, 0])[:, None], 0, hp - 1)   # (M, B)
-    xs = np.clip(bx[:, None] * B + np.arange(B) + (d * offsets[views, 1])[:, None], 0, wp - 1)
-    out = top[k[:, None, None], ys[:, :, None], xs[:, None, :]]          # (M, B, B, P)
+    ar = np.arange(B) << frac_bits
+    py = ((by * B) << frac_bits)[:, None] + ar + (d * offsets[views, 0])[:, None]     # (M, B)
+    px = ((bx * B) << frac_bits)[:, None] + ar + (d * offsets[views, 1])[:, None]
+    out = _sample_many(top, k, py, px, frac_bits)                        # (M, B, B, P)
     return out.reshape(len(views), B * B, top.shape[3])
 
 
+def _sample_many(top, k, py, px, frac_bits):
+    """Per-request bilinear gather: k (M,), py/px (M, B) → (M, B, B, P) int32."""
+    hp, wp = top.shape[1:3]
+    kk = k[:, None, None]
+    if frac_bits == 0:
+        return top[kk, np.clip(py, 0, hp - 1)[:, :, None], np.clip(px, 0, wp - 1)[:, None, :]]
+    s = 1 << frac_bits
+    y0, fy = py >> frac_bits, (py & (s - 1))[:, :, None, None]
+    x0, fx = px >> frac_bits, (px & (s - 1))[:, None, :, None]
+    ya, yb = np.clip(y0, 0, hp - 1)[:, :, None], np.clip(y0 + 1, 0, hp - 1)[:, :, None]
+    xa, xb = np.clip(x0, 0, wp - 1)[:, None, :], np.clip(x0 + 1, 0, wp - 1)[:, None, :]
+    t0 = top[kk, ya, xa].astype(np.int64) * (s - fx) + top[kk, ya, xb] * fx
+    t1 = top[kk, yb, xa].astype(np.int64) * (s - fx) + top[kk, yb, xb] * fx
+    return ((t0 * (s - fy) + t1 * fy + (1 << (2 * frac_bits - 1))) >> (2 * frac_bits)).astype(np.int32)
+
+
 def predict_views(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,
-                  views: np.ndarray, B: int) -> np.ndarray:
+                  views: np.ndarray, B: int, frac_bits: int = 0) -> np.ndarray:
     """Predicted planes of whole views: (n, Hp, Wp, P) int32 (same pixels as predict_blocks)."""
     hp, wp = top.shape[1:3]
     nby, nbx = hp // B, wp // B
     out = np.empty((len(views), hp, wp, top.shape[3]), dtype=top.dtype)
-    yy, xx = np.arange(hp), np.arange(wp)
+    yy, xx = np.arange(hp) << frac_bits, np.arange(wp) << frac_bits
     for i, v in enumerate(np.asarray(views).tolist()):                  # one gather per view
         k = key_of[v]
         dpx = np.repeat(np.repeat(disp[k].reshape(nby, nbx), B, 0), B, 1)    # (Hp, Wp)
-        ys = np.clip(yy[:, None] + dpx * offsets[v, 0], 0, hp - 1)
-        xs = np.clip(xx[None, :] + dpx * offsets[v, 1], 0, wp - 1)
-        out[i] = top[k][ys, xs]
+        out[i] = _sample(top[k], yy[:, None] + dpx * offsets[v, 0], xx[None, :] + dpx * offsets[v, 1], frac_bits)
     return out
 
 
+def _costs(target, top, key_of, offsets, B, maps, frac_bits):
+    """(len(maps), n_top, n_loc) SSE of each candidate disparity map on the first (luma) plane.
+
+    Key views themselves (offset 0) are skipped: no disparity changes their prediction.
+    """
+    n0, hp, wp, _ = target.shape
+    nby, nbx = hp // B, wp // B
+    cost = np.zeros((len(maps), top.shape[0], nby * nbx))
+    moving = np.flatnonzero(np.any(offsets != 0, axis=1))
+    luma = np.ascontiguousarray(top[..., :1])
+    for j, m in enumerate(maps):
+        for a in range(0, len(moving), 16):
+            vs = moving[a:a + 16]
+            pred = predict_views(luma, key_of, offsets, m, vs, B, frac_bits)[..., 0]
+            err = (target[vs, :, :, 0] - pred).astype(np.float32) ** 2                # (n, Hp, Wp)
+            e = err.reshape(len(vs), nby, B, nbx, B).sum(axis=(2, 4)).reshape(len(vs), -1)
+            np.add.at(cost[j], key_of[vs], e)
+    return cost
+
+
 def estimate(target: np.ndarray, top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, B: int,
-             max_disparity: int, weights: np.ndarray) -> np.ndarray:
-    """Per (cluster, block) integer disparity in [-D, D] minimizing the cluster's weighted SSE.
+             max_disparity: int, frac_bits: int = 0) -> np.ndarray:
+    """Per (cluster, block) disparity in [-D, D] px (units 1/2^F) minimizing the cluster's luma SSE.
+
+    Coarse to fine: whole pixels first, then the 2^(F+1) - 2 sub-pixel steps around the best.
 
     Args:
         target: (N0, Hp, Wp, P) int32 planes of the views; top: decoded key-view planes.
 
     Returns:
-        (n_top, nby·nbx) int64 disparities.
+        (n_top, nby·nbx) int64 disparities in 1/2^F pixels per view step.
     """
-    n0, hp, wp, P = target.shape
-    nby, nbx = hp // B, wp // B
     n_top = top.shape[0]
+    nloc = (target.shape[1] // B) * (target.shape[2] // B)
+    s = 1 << frac_bits
     cands = np.arange(-max_disparity, max_disparity + 1)
-    cost = np.zeros((len(cands), n_top, nby * nbx))
-    for j, d in enumerate(cands.tolist()):                              # 2D+1 candidate shifts
-        flat = np.full((n_top, nby * nbx), d, dtype=np.int64)
-        for a in range(0, n0, 9):
-            vs = np.arange(a, min(a + 9, n0))
-            pred = predict_views(top, key_of, offsets, flat, vs, B)
-            err = (target[vs].astype(np.float32) - pred) ** 2 @ weights.astype(np.float32)   # (n, Hp, Wp)
-            e = err.reshape(len(vs), nby, B, nbx, B).sum(axis=(2, 4)).reshape(len(vs), -1)
-            np.add.at(cost[j], key_of[vs], e)
-    best = np.argmin(cost, axis=0)
-    # ties (flat or occluded blocks): prefer the smallest |d|
-    zero = cost[max_disparity]
-    best = np.where(cost[best, np.arange(n_top)[:, None], np.arange(nby * nbx)[None]] < zero, best, max_disparity)
-    return cands[best]
+    maps = [np.full((n_top, nloc), d * s, dtype=np.int64) for d in cands.tolist()]
+    cost = _costs(target, top, key_of, offsets, B, maps, frac_bits)
+    best = cands[np.argmin(cost, axis=0)] * s
+    best_cost = cost.min(axis=0)
+    zero_cost = cost[max_disparity]
+    if frac_bits:
+        lim = max_disparity * s
+        fine = [np.clip(best + f, -lim, lim) for f in range(-s + 1, s) if f]
+        fc = _costs(target, top, key_of, offsets, B, fine, frac_bits)
+        j = np.argmin(fc, axis=0)
+        fbest = np.take_along_axis(np.stack(fine), j[None], 0)[0]
+        better = np.take_along_axis(fc, j[None], 0)[0] < best_cost
+        best = np.where(better, fbest, best)
+        best_cost = np.where(better, np.take_along_axis(fc, j[None], 0)[0], best_cost)
+    # ties (flat or occluded blocks): prefer zero
+    return np.where(best_cost < zero_cost, best, 0)
+
+
+def pack_disparity(disp: np.ndarray) -> tuple[bytes, str]:
+    """(n_top, n_loc) ints → (zlib-compressed bytes of the row-wise deltas, dtype string)."""
+    dt = "<i1" if -128 <= disp.min(initial=0) and disp.max(initial=0) <= 127 else "<i2"
+    delta = np.diff(disp, axis=1, prepend=0).astype(dt)
+    return zlib.compress(delta.tobytes(), 9), dt
+
+
+def unpack_disparity(data: bytes, dt: str, shape: tuple[int, int], name: str) -> np.ndarray:
+    """Inverse of :func:`pack_disparity`; a bad stream raises a FormatError naming ``name``."""
+    if dt not in ("<i1", "<i2"):
+        raise FormatError(f"{name}: unknown disparity type {dt!r}")
+    want = shape[0] * shape[1] * np.dtype(dt).itemsize
+    try:
+        d = zlib.decompressobj()
+        raw = d.decompress(data, want + 1)
+    except zlib.error as e:
+        raise FormatError(f"{name}: section 'rlfc.disp' is not a valid stream ({e})") from None
+    if len(raw) != want or not d.eof or d.unused_data:
+        raise FormatError(f"{name}: section 'rlfc.disp' holds {len(raw)} bytes of disparities, expected {want}")
+    delta = np.frombuffer(raw, dtype=dt).astype(np.int64).reshape(shape)
+    return np.cumsum(delta, axis=1).astype(np.dtype(dt)).astype(np.int64)   # wrap like the encoder's cast

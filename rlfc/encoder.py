@@ -19,11 +19,12 @@ from .color import plane_weights, to_planes
 from .params import RlfcParams
 from .residual import block_energy, from_blocks, quantize_dequantize, to_blocks
 from .topcodec import decode_image, encode_image
-from .disparity import dcp_clusters, estimate, predict_views
+from .disparity import dcp_clusters, estimate, pack_disparity, predict_views
 from .tree import Tree, build_tree, filter_level
 
 CODEC_ID = "rlfc"
 CODEC_VERSION = 1
+PRED_CACHE_BYTES = 1 << 30    # dcp: cache the (Q-independent) prediction of all views up to this size
 
 
 @dataclass
@@ -50,7 +51,9 @@ class Encoder:
     """Holds the parameter-independent work (RKVs, top images) so rate control can re-run
     the closed loop for many quantizer settings cheaply."""
 
-    def __init__(self, lf: LightField, params: RlfcParams):
+    def __init__(self, lf: LightField, params: RlfcParams, disparity: np.ndarray | None = None):
+        """``disparity``: dcp only, a (n_clusters, n_blocks) map to use instead of estimating one
+        (rate control re-uses one map across key-view qualities)."""
         if lf.views.dtype not in (np.uint8, np.uint16):
             raise UnsupportedError(f"RLFC codes 8- or 16-bit integer views; this light field is {lf.views.dtype} "
                                    "(convert float/EXR views to 16-bit first)")
@@ -61,6 +64,7 @@ class Encoder:
         self.bps = lf.views.dtype.itemsize
         self.P = ch
         self.profile = params.profile
+        self.frac_bits = int(params.disp_frac_bits)
         views = _pad(lf.views.reshape(r * c, h, w, ch), self.B)
         self.Hp, self.Wp = views.shape[1:3]
         self.rkv = [views]
@@ -82,8 +86,14 @@ class Encoder:
         self.top_dec = to_planes(top_px)
         self.nby, self.nbx = self.Hp // self.B, self.Wp // self.B
         if self.profile == "dcp":
-            self.disp = estimate(to_planes(views), self.top_dec, self.key_of, self.offsets, self.B,
-                                 int(params.max_disparity), plane_weights(self.P))
+            self.disp = disparity if disparity is not None else estimate(
+                to_planes(views), self.top_dec, self.key_of, self.offsets, self.B, int(params.max_disparity),
+                self.frac_bits)
+            # the prediction does not depend on the quantizer: keep it for rate control when it fits
+            self._pred = None
+            if views.size * 4 <= PRED_CACHE_BYTES:
+                self._pred = predict_views(self.top_dec, self.key_of, self.offsets, self.disp,
+                                           np.arange(len(views)), self.B, self.frac_bits)
         H = self.tree.height
         # BFS numbering of residual nodes: level H-1 first, level 0 last
         self.level_offset = {}
@@ -109,9 +119,11 @@ class Encoder:
             nxt = np.empty((n_l, self.Hp, self.Wp, P), dtype=np.int32)
             for a in range(0, n_l, 16):   # chunks of nodes bound the memory of one level
                 s = slice(a, min(a + 16, n_l))
-                if self.profile == "dcp":
+                if self.profile == "dcp" and self._pred is not None:
+                    pred = self._pred[s]
+                elif self.profile == "dcp":
                     pred = predict_views(self.top_dec, self.key_of, self.offsets, self.disp,
-                                         np.arange(s.start, s.stop), B)
+                                         np.arange(s.start, s.stop), B, self.frac_bits)
                 else:
                     pred = dec[par[s]]
                 target = to_planes(self.rkv[lev][s])
@@ -224,8 +236,10 @@ class Encoder:
         }
         sections = [("rlfc.top", b"".join(top_bytes))]
         if self.profile == "dcp":
-            cfg["dcp"] = {"offsets": self.offsets.tolist(), "max_disparity": int(params.max_disparity)}
-            sections.append(("rlfc.disp", self.disp.astype(np.int8).tobytes()))
+            data, dt = pack_disparity(self.disp)
+            cfg["dcp"] = {"offsets": self.offsets.tolist(), "max_disparity": int(params.max_disparity),
+                          "frac_bits": self.frac_bits, "disp_coding": "zlib-delta", "disp_dtype": dt}
+            sections.append(("rlfc.disp", data))
         sections += [("rlfc.index", index.astype("<u4").tobytes()), ("rlfc.blocks", blocks.tobytes())]
         return cfg, sections
 

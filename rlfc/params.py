@@ -29,6 +29,8 @@ class RlfcParams:
             BISE-packed) or "dcp" (disparity-compensated prediction from 3×3-cluster key views,
             residual blocks BISE-packed; grids only).
         max_disparity: dcp: largest |disparity| searched, pixels per view step.
+        disp_frac_bits: dcp: disparity precision, 1/2^F pixel per view step (0 = whole pixels;
+            3 = 1/8 px, bilinear sub-pixel prediction).
     """
 
     tree_height: int = 3
@@ -41,6 +43,7 @@ class RlfcParams:
     top_psnr: float | None = None
     profile: str = "bise"
     max_disparity: int = 4
+    disp_frac_bits: int = 3
 
     def __post_init__(self) -> None:
         if not 0 <= int(self.tree_height) <= 16 or int(self.tree_height) != self.tree_height:
@@ -61,6 +64,8 @@ class RlfcParams:
             raise ParameterError(f"top-level PSNR must be within 10..120 dB, got {self.top_psnr}")
         if not 0 <= int(self.max_disparity) <= 64:
             raise ParameterError(f"max disparity must be 0..64, got {self.max_disparity}")
+        if not 0 <= int(self.disp_frac_bits) <= 4 or int(self.disp_frac_bits) != self.disp_frac_bits:
+            raise ParameterError(f"disparity precision must be 0..4 fractional bits, got {self.disp_frac_bits}")
         if self.profile not in PROFILES:
             raise ParameterError(f"unknown profile {self.profile!r} (available: {', '.join(PROFILES)})")
 

@@ -116,26 +116,135 @@ def search(enc: Encoder, base: RlfcParams, *, target_psnr: float | None = None, 
 
 
 def search_dcp(lf, base: RlfcParams, *, target_psnr: float, fixed_threshold=None, fixed_energy=None,
-               top_margins=(3.0, 1.0), progress=None):
-    """dcp rate control: the key views' quality is a second knob. For each margin m, key views
-    are coded at target + m dB and Q is searched as in :func:`search`; the smallest file that
-    meets the target wins. Returns (encoder, params, loop result, trace)."""
-    best = None
+               margins=(-1.0, 6.0), tol: float = 0.25, residual_steps=(0.5,), progress=None):
+    """dcp rate control: the key views' quality is the main knob.
+
+    With sub-pixel disparity the prediction alone often meets the target, and key-view bits
+    are cheaper than residual blocks. So: (1) bisect the key views' PSNR (target + m dB, m in
+    ``margins``) for the cheapest key views whose prediction alone meets the target (Q at its
+    coarsest: no residual blocks); (2) for m* − each of ``residual_steps``, search Q as in
+    :func:`search` (key views a little worse, residual blocks make up the difference); the
+    smallest file that meets the target wins. When even the best key views miss the target,
+    Q is searched at margins 3 and 1 dB. The disparity map is estimated once (against the
+    best key views) and re-used. Returns (encoder, params, loop result, trace).
+    """
+    lo, hi = margins
     trace = []
-    for m in top_margins:
-        enc = Encoder(lf, replace(base, top_psnr=target_psnr + m))
-        p, res, tr = search(enc, replace(base, top_psnr=target_psnr + m), target_psnr=target_psnr,
-                            fixed_threshold=fixed_threshold, fixed_energy=fixed_energy, progress=progress)
-        trace += [(q, ps, b) for q, ps, b in tr]
-        res = enc.closed_loop(p)
-        ok = _psnr(enc, res) >= target_psnr
+    state = {"disp": None}
+    coarse_q = Q_MAX * depth_scale(lf.views.dtype)
+
+    def encoder(m):
+        p = replace(base, top_psnr=target_psnr + m)
+        enc = Encoder(lf, p, disparity=state["disp"])
+        state["disp"] = enc.disp
+        return enc, p
+
+    def packed_size(enc, p, res):
         _, secs = enc.pack(p, res)
-        size = sum(len(s) for _, s in secs)
-        if ok and (best is None or size < best[0]):
-            best = (size, enc, p, res)
-        if best is None and m == top_margins[-1]:
+        return sum(len(s) for _, s in secs)
+
+    def coarse(m):
+        enc, p0 = encoder(m)
+        p = params_for_quant(p0, coarse_q, fixed_threshold, fixed_energy)
+        res = enc.closed_loop(p, keep_blocks=False)
+        ps = _psnr(enc, res)
+        trace.append((p.quant, ps, None))
+        if progress:
+            progress(len(trace), p, ps, None)
+        return ps >= target_psnr, enc, p
+
+    def with_residuals(m):
+        enc, p0 = encoder(m)
+        p, res, tr = search(enc, p0, target_psnr=target_psnr, fixed_threshold=fixed_threshold,
+                            fixed_energy=fixed_energy, progress=progress)
+        trace.extend(tr)
+        res = enc.closed_loop(p)
+        return _psnr(enc, res) >= target_psnr, enc, p, res
+
+    ok, enc, p = coarse(hi)
+    if not ok:                                  # prediction alone never suffices: residuals needed
+        best = None
+        for m in (3.0, 1.0):
+            ok, enc, p, res = with_residuals(m)
+            size = packed_size(enc, p, res)
+            if best is None or (ok, -size) > (best[0], -best[1]):
+                best = (ok, size, enc, p, res)
+        return best[2], best[3], best[4], trace
+    found = (enc, p)
+    ok, enc, p = coarse(lo)
+    if ok:
+        found, hi = (enc, p), lo
+    else:
+        while hi - lo > tol:
+            mid = (lo + hi) / 2
+            ok, enc, p = coarse(mid)
+            if ok:
+                found, hi = (enc, p), mid
+            else:
+                lo = mid
+    enc, p = found
+    res = enc.closed_loop(p)
+    best = (packed_size(enc, p, res), enc, p, res)
+    for step in residual_steps:
+        if hi - step < margins[0]:
+            continue
+        ok, enc, p, res = with_residuals(hi - step)
+        size = packed_size(enc, p, res)
+        if ok and size < best[0]:
             best = (size, enc, p, res)
     return best[1], best[2], best[3], trace
 
 
-__all__ = ["search_dcp", "search", "params_for_quant", "Q_MAX", "default_quant", "depth_scale"]
+def search_dcp_bpp(lf, base: RlfcParams, *, target_bpp: float, db_range=(10.0, 50.0), iters: int = 8,
+                   meta_bytes: int = 4096, progress=None):
+    """dcp rate control for a bpp ceiling.
+
+    Bisects the key views' PSNR (dB, within ``db_range``) for the best key views whose
+    prediction-only file (no residual blocks) fits under the ceiling. When even the best key
+    views fit, the quantizer is searched as in :func:`search` to spend the rest on residual
+    blocks. The disparity map is estimated once, against the best key views.
+    Returns (encoder, params, loop result, trace).
+    """
+    if not target_bpp > 0:
+        raise ParameterError(f"target bpp must be > 0, got {target_bpp}")
+    nv = lf.rows * lf.cols
+    coarse_q = Q_MAX * depth_scale(lf.views.dtype)
+    trace = []
+    state = {"disp": None}
+
+    def evaluate(db):
+        p0 = replace(base, top_psnr=db)
+        enc = Encoder(lf, p0, disparity=state["disp"])
+        state["disp"] = enc.disp
+        p = params_for_quant(p0, coarse_q)
+        res = enc.closed_loop(p)
+        _, secs = enc.pack(p, res)
+        b = bpp_of(sum(len(s) for _, s in secs) + meta_bytes, nv, lf.height, lf.width)
+        ps = _psnr(enc, res)
+        trace.append((p.quant, ps, b))
+        if progress:
+            progress(len(trace), p, ps, b)
+        return b <= target_bpp, enc, p, res
+
+    lo, hi = db_range
+    ok, enc, p, res = evaluate(hi)
+    if ok:                                       # room for residual blocks on top of the best key views
+        p2, res2, tr = search(enc, replace(base, top_psnr=hi), target_bpp=target_bpp, meta_bytes=meta_bytes,
+                              progress=progress)
+        trace.extend(tr)
+        return enc, p2, res2, trace
+    ok, enc, p, res = evaluate(lo)
+    best = (enc, p, res)
+    if not ok:                                   # even the worst key views are over: closest we have
+        return enc, p, res, trace
+    for _ in range(iters):
+        mid = (lo + hi) / 2
+        ok, enc, p, res = evaluate(mid)
+        if ok:
+            lo, best = mid, (enc, p, res)
+        else:
+            hi = mid
+    return best[0], best[1], best[2], trace
+
+
+__all__ = ["search_dcp_bpp", "search_dcp", "search", "params_for_quant", "Q_MAX", "default_quant", "depth_scale"]

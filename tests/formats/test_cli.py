@@ -67,7 +67,9 @@ def test_info(encoded, capsys):
     assert main(["info", str(encoded), "--json", "--verify"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["codec"] == "rlfc" and rep["scene"]["rows"] == 9 and rep["verified"]
-    assert [s["name"] for s in rep["sections"]] == ["meta", "rlfc.top", "rlfc.index", "rlfc.blocks"]
+    # a grid encodes with the dcp profile by default (--profile auto)
+    assert rep["profile"] == "dcp"
+    assert [s["name"] for s in rep["sections"]] == ["meta", "rlfc.top", "rlfc.disp", "rlfc.index", "rlfc.blocks"]
     assert main(["info", str(encoded)]) == 0
     assert "rlfc.blocks" in capsys.readouterr().out
 
@@ -90,11 +92,15 @@ def test_decode_views_view_and_block(encoded, tmp_path):
     assert np.load(tmp_path / "e.npy").shape == (8, 8, 3)
 
 
-def test_progressive_decode_levels(encoded, tmp_path):
-    for L in (0, 3):
-        assert main(["decode", str(encoded), str(tmp_path / f"L{L}"), "--view", "0,0", "--level", str(L), "--quiet"]) == 0
-    a, b = read_image(tmp_path / "L0" / "r00_c00.png"), read_image(tmp_path / "L3" / "r00_c00.png")
+@pytest.mark.parametrize("profile,top", [("auto", 1), ("bise", 3)])
+def test_progressive_decode_levels(profile, top, tmp_path):
+    enc = tmp_path / "p.lfc"
+    assert main(["encode", str(SAMPLE), str(enc), "--profile", profile, "--quiet"]) == 0
+    for L in (0, top):
+        assert main(["decode", str(enc), str(tmp_path / f"L{L}"), "--view", "0,0", "--level", str(L), "--quiet"]) == 0
+    a, b = read_image(tmp_path / "L0" / "r00_c00.png"), read_image(tmp_path / f"L{top}" / "r00_c00.png")
     assert a.shape == b.shape and not (a == b).all()
+    assert main(["decode", str(enc), str(tmp_path / "bad"), "--level", str(top + 1), "--quiet"]) == 2
 
 
 def _run(*args):
@@ -186,8 +192,8 @@ def test_dcp_profile_from_the_cli(tmp_path, capsys):
     assert main(["encode", str(SAMPLE), str(out), "--profile", "dcp", "--target-psnr", "40", "--json", "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["profile"] == "dcp" and rep["psnr_rgb"] >= 40
-    assert rep["params"]["top_psnr"] in (43, 41)          # key-view quality is searched too
-    assert rep["bpp"] < 0.5                                # bise needs 1.73 bpp for 40 dB on the sample
+    assert 39 <= rep["params"]["top_psnr"] <= 46          # key-view quality is searched too
+    assert rep["bpp"] < 0.15                               # bise needs 1.73 bpp for 40 dB on the sample
     assert main(["info", str(out), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info["profile"] == "dcp" and "rlfc.disp" in [s["name"] for s in info["sections"]]

@@ -29,7 +29,7 @@ def test_lossy_agreement_torch_and_bits(top_psnr, rng):
     v, by, bx = rng.integers(0, 30, 300), rng.integers(0, d.nby, 300), rng.integers(0, d.nbx, 300)
     for level in (0, 1):
         assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level) == d.decode_blocks(v, by, bx, level)).all()
-    assert (d.disp == 1).mean() > 0.5          # the synthetic parallax is 1 px per view
+    assert (d.disp == 1 << d.frac_bits).mean() > 0.5          # the synthetic parallax is 1 px per view
     db, nb, _ = roundtrip(lf, RlfcParams(block_size=4, quant=6, threshold=3, energy=9))
     assert n < nb and psnr_rgb(lf.views, d.decode_all()) >= psnr_rgb(lf.views, db.decode_all()) - 0.5
 
