@@ -20,9 +20,11 @@ The section ends with 8 zero bytes so that decoders may read 64-bit words past t
 """
 from __future__ import annotations
 
+import zlib
+
 import numpy as np
 
-from formats.errors import ChecksumError
+from formats.errors import ChecksumError, FormatError
 
 from . import bise
 from .bise_tables import RANGE_VALUES
@@ -33,6 +35,25 @@ MODE_RAW = 255
 PAD = 8
 _RANGES = np.asarray(RANGE_VALUES, dtype=np.int64)
 _POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.int64)
+
+
+def pack_index(index: np.ndarray) -> bytes:
+    """(nloc + 1,) run start offsets → zlib-compressed u32 run lengths (the dcp index coding:
+    the whole index is read once at open, so compressing it costs random access nothing)."""
+    return zlib.compress(np.diff(index).astype("<u4").tobytes(), 9)
+
+
+def unpack_index(data: bytes, nloc: int, name: str) -> np.ndarray:
+    """Inverse of :func:`pack_index` → (nloc + 1,) int64 offsets; bad data raises FormatError."""
+    want = 4 * nloc
+    try:
+        d = zlib.decompressobj()
+        raw = d.decompress(data, want + 1)
+    except zlib.error as e:
+        raise FormatError(f"{name}: section 'rlfc.index' is not a valid stream ({e})") from None
+    if len(raw) != want or not d.eof or d.unused_data:
+        raise FormatError(f"{name}: section 'rlfc.index' holds {len(raw)} bytes of run lengths, expected {want}")
+    return np.concatenate([[0], np.cumsum(np.frombuffer(raw, dtype="<u4").astype(np.int64))])
 
 
 def plane_modes(mn: np.ndarray, mx: np.ndarray) -> np.ndarray:

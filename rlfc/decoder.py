@@ -13,7 +13,7 @@ from formats.container import ByteRangeSource
 from formats.errors import FormatError, ParameterError
 from formats.lfcfile import LfcFile, check_codec_version
 
-from .blocks import PAD, BlockStore
+from .blocks import PAD, BlockStore, unpack_index
 from .color import from_planes, to_planes
 from .disparity import predict_blocks, predict_views, unpack_disparity
 from .encoder import CODEC_ID, CODEC_VERSION
@@ -51,6 +51,7 @@ class RlfcDecoder:
             top_cfg = list(cfg["top"])
             n_res = int(cfg["n_res_nodes"])
             self.profile = str(cfg.get("profile", "bise"))
+            index_coding = str(cfg.get("index_coding", "raw-u32"))
             dcp = cfg.get("dcp") if self.profile == "dcp" else None
             self.frac_bits, disp_coding, disp_dtype = 0, "raw-i8", "<i1"
             if dcp is not None:
@@ -75,6 +76,7 @@ class RlfcDecoder:
             (n_res != sum(sizes[:H]) or layout["bitmap_bytes"] != -(-n_res // 8), "node count/bitmap"),
             (self.level_offset != expect_off, "level offsets"),
             (self.profile not in ("bise", "dcp"), f"profile {self.profile!r}"),
+            (index_coding not in ("raw-u32", "zlib-runlen"), "index coding"),
             (self.profile == "dcp" and (dcp is None or H != 1 or
                                         self.offsets.shape != (self.rows * self.cols, 2) or
                                         not 0 <= self.frac_bits <= 4 or
@@ -110,9 +112,14 @@ class RlfcDecoder:
         self.top_blocks = np.ascontiguousarray(to_blocks(self.top, B)).reshape(
             len(imgs), self.nby, self.nbx, B * B, self.P)      # (N_H, nby, nbx, B·B, P)
         idx = c.read("rlfc.index")
-        if len(idx) != 4 * (self.nby * self.nbx + 1):
+        if index_coding == "zlib-runlen":
+            index = unpack_index(bytes(idx), self.nby * self.nbx, c.name)
+        elif len(idx) != 4 * (self.nby * self.nbx + 1):
             raise FormatError(f"{c.name}: section 'rlfc.index' has {len(idx)} bytes, expected {4 * (self.nby * self.nbx + 1)}")
-        index = np.frombuffer(idx, dtype="<u4").astype(np.int64)
+        else:
+            index = np.frombuffer(idx, dtype="<u4").astype(np.int64)
+        if index[0] != 0 or (np.diff(index) < 0).any():
+            raise FormatError(f"{c.name}: section 'rlfc.index' is not a non-decreasing offset table")
         self._remote = isinstance(c._src, ByteRangeSource)
         info = c.info("rlfc.blocks")
         if self._remote:

@@ -240,7 +240,12 @@ class Encoder:
             cfg["dcp"] = {"offsets": self.offsets.tolist(), "max_disparity": int(params.max_disparity),
                           "frac_bits": self.frac_bits, "disp_coding": "zlib-delta", "disp_dtype": dt}
             sections.append(("rlfc.disp", data))
-        sections += [("rlfc.index", index.astype("<u4").tobytes()), ("rlfc.blocks", blocks.tobytes())]
+        if self.profile == "dcp":
+            cfg["index_coding"] = "zlib-runlen"
+            sections.append(("rlfc.index", blk.pack_index(index)))
+        else:
+            sections.append(("rlfc.index", index.astype("<u4").tobytes()))
+        sections.append(("rlfc.blocks", blocks.tobytes()))
         return cfg, sections
 
 
