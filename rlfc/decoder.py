@@ -15,7 +15,7 @@ from formats.lfcfile import LfcFile, check_codec_version
 
 from .blocks import PAD, BlockStore, unpack_index
 from .color import from_planes, to_planes
-from .disparity import predict_blocks, predict_views, unpack_disparity
+from .disparity import planar, predict_blocks, predict_views, unpack_disparity
 from .encoder import CODEC_ID, CODEC_VERSION
 from .residual import dequantize, from_blocks, to_blocks
 from .topcodec import decode_image
@@ -108,6 +108,7 @@ class RlfcDecoder:
                                       f"{len(imgs) * self.nby * self.nbx}")
                 self.disp = np.frombuffer(raw_d, dtype=np.int8).astype(np.int64).reshape(len(imgs), -1)
             self.key_of = self.tree.parents[0]
+            self.top_planar = planar(self.top)                # (P, n_top·Hp·Wp): fast per-plane gathers
         # the same pixels laid out per block, so a block request is one contiguous row gather
         self.top_blocks = np.ascontiguousarray(to_blocks(self.top, B)).reshape(
             len(imgs), self.nby, self.nbx, B * B, self.P)      # (N_H, nby, nbx, B·B, P)
@@ -170,7 +171,7 @@ class RlfcDecoder:
         the top key view's block (bise) or the disparity-shifted key view (dcp)."""
         if self.profile == "dcp":
             return predict_blocks(self.top, self.key_of, self.offsets, self.disp, views, by, bx,
-                                  self.block_size, self.nbx, self.frac_bits)
+                                  self.block_size, self.nbx, self.frac_bits, self.top_planar)
         return self.top_blocks[self.anc[self.levels][views], by, bx]
 
     def _check_level(self, level: int) -> int:

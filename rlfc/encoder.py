@@ -88,7 +88,7 @@ class Encoder:
         if self.profile == "dcp":
             self.disp = disparity if disparity is not None else estimate(
                 to_planes(views), self.top_dec, self.key_of, self.offsets, self.B, int(params.max_disparity),
-                self.frac_bits)
+                self.frac_bits, smooth_tol=float(params.disp_smooth), smooth_iters=3 if params.disp_smooth > 0 else 0)
             # the prediction does not depend on the quantizer: keep it for rate control when it fits
             self._pred = None
             if views.size * 4 <= PRED_CACHE_BYTES:

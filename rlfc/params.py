@@ -31,6 +31,8 @@ class RlfcParams:
         max_disparity: dcp: largest |disparity| searched, pixels per view step.
         disp_frac_bits: dcp: disparity precision, 1/2^F pixel per view step (0 = whole pixels;
             3 = 1/8 px, bilinear sub-pixel prediction).
+        disp_smooth: dcp: the disparity map takes its 3×3 median wherever that costs less than
+            this fraction more prediction error (0 = off); a smoother map compresses better.
     """
 
     tree_height: int = 3
@@ -44,6 +46,7 @@ class RlfcParams:
     profile: str = "bise"
     max_disparity: int = 4
     disp_frac_bits: int = 3
+    disp_smooth: float = 0.1
 
     def __post_init__(self) -> None:
         if not 0 <= int(self.tree_height) <= 16 or int(self.tree_height) != self.tree_height:
@@ -66,6 +69,8 @@ class RlfcParams:
             raise ParameterError(f"max disparity must be 0..64, got {self.max_disparity}")
         if not 0 <= int(self.disp_frac_bits) <= 4 or int(self.disp_frac_bits) != self.disp_frac_bits:
             raise ParameterError(f"disparity precision must be 0..4 fractional bits, got {self.disp_frac_bits}")
+        if not 0 <= self.disp_smooth <= 10:
+            raise ParameterError(f"disparity smoothing tolerance must be within 0..10, got {self.disp_smooth}")
         if self.profile not in PROFILES:
             raise ParameterError(f"unknown profile {self.profile!r} (available: {', '.join(PROFILES)})")
 

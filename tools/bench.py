@@ -40,15 +40,22 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
-def bench_rlfc(lf, quants, repeats, n_single, n_batch, block_size=8, profile="bise"):
+def bench_rlfc(lf, points, repeats, n_single, n_batch, block_size=8, profile="bise"):
+    """RLFC rows for ``points``: a list of (key-view PSNR dB or None = lossless, Q in 8-bit units).
+
+    Points sharing a key-view quality share one encoder; the dcp disparity map is estimated
+    once (on the first point's key views) and re-used, as the rate control does."""
     rows = []
     views = lf.views.reshape(-1, *lf.views.shape[2:])
-    t0 = time.perf_counter()
-    base = RlfcParams(block_size=block_size, profile=profile, top_psnr=43.0 if profile == "dcp" else None)
-    enc = Encoder(lf, base)
-    t_prep = time.perf_counter() - t0
     rng = np.random.default_rng(0)
-    for q in quants:
+    encoders, disp = {}, None
+    for top_psnr, q in points:
+        base = RlfcParams(block_size=block_size, profile=profile, top_psnr=top_psnr)
+        t0 = time.perf_counter()
+        if top_psnr not in encoders:
+            encoders[top_psnr] = (Encoder(lf, base, disparity=disp), time.perf_counter() - t0)
+            disp = encoders[top_psnr][0].disp if profile == "dcp" else None
+        enc, t_prep = encoders[top_psnr]
         p = params_for_quant(base, q * depth_scale(lf.views.dtype))   # q in 8-bit units
         t0 = time.perf_counter()
         res = enc.closed_loop(p)
@@ -75,7 +82,8 @@ def bench_rlfc(lf, quants, repeats, n_single, n_batch, block_size=8, profile="bi
             out = d.decode_all(L)
             prog.append({"level": L, "psnr_rgb": psnr_rgb(lf.views, out), "decode_s": time.perf_counter() - t})
         dec = full.reshape(views.shape)
-        row = {"codec": f"lfcodec RLFC ({profile})", "setting": f"Q={q:g}", "bytes": len(blob),
+        setting = f"Q={q:g}" if top_psnr is None else f"K={top_psnr:g} Q={q:g}"
+        row = {"codec": f"lfcodec RLFC ({profile})", "setting": setting, "bytes": len(blob),
                "bpp": bpp(len(blob), nv, lf.height, lf.width), "psnr_rgb": psnr_rgb(views, dec),
                "psnr_ycocg": psnr_ycocg(views, dec), "ssim": ssim(views, dec), "encode_s": t_enc,
                "decode_all_s": t_full, "decode_view_s": None, "block_us": t_single * 1e6, "batch_block_us": t_batch * 1e6,
@@ -84,7 +92,7 @@ def bench_rlfc(lf, quants, repeats, n_single, n_batch, block_size=8, profile="bi
         d.decode_view(d.rows // 2, d.cols // 2)
         row["decode_view_s"] = time.perf_counter() - t
         rows.append(row)
-        log(f"  RLFC {profile} Q={q:g}: {row['bpp']:.3f} bpp, {row['psnr_rgb']:.2f} dB, block {row['block_us']:.0f} µs, "
+        log(f"  RLFC {profile} {setting}: {row['bpp']:.3f} bpp, {row['psnr_rgb']:.2f} dB, block {row['block_us']:.0f} µs, "
             f"batched {row['batch_block_us']:.2f} µs/block, full decode {t_full:.2f} s")
     return rows
 
@@ -235,7 +243,8 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--quick", action="store_true", help="a smoke run: one RLFC point, three per peer, few repeats")
     ap.add_argument("--quants", default="4,8,16", help="RLFC quantizer steps to sweep (bise profile)")
-    ap.add_argument("--dcp-quants", default="8,16,32", help="quantizer steps for the dcp profile (grids only)")
+    ap.add_argument("--dcp-points", default="48:4,48:8,44:256,42:256,40:256,38:256",
+                    help="dcp profile (grids only): KEY_PSNR:Q pairs; Q=256 is prediction only (no residual blocks)")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -249,9 +258,10 @@ def main(argv=None) -> int:
         if a.quick and lf.height * lf.width > 256 * 256:
             lf.views = np.ascontiguousarray(lf.views[:, :, :128, :128])
         kw = dict(repeats=1 if a.quick else 3, n_single=50 if a.quick else 300, n_batch=2000 if a.quick else 20000)
-        rows = bench_rlfc(lf, quants, **kw)
+        rows = bench_rlfc(lf, [(None, q) for q in quants], **kw)
         if lf.layout == "grid":
-            rows += bench_rlfc(lf, [16.0] if a.quick else [float(x) for x in a.dcp_quants.split(",")], profile="dcp", **kw)
+            pts = [(42.0, 256.0)] if a.quick else [tuple(float(v) for v in x.split(":")) for x in a.dcp_points.split(",")]
+            rows += bench_rlfc(lf, pts, profile="dcp", **kw)
         rows += bench_peers(lf, a.quick)
         scene_rows[name] = rows
     meta = {"machine": machine(), "date": date.today().isoformat(), "quick": a.quick,
