@@ -174,6 +174,30 @@ class RlfcDecoder:
                                   self.block_size, self.nbx, self.frac_bits, self.top_planar)
         return self.top_blocks[self.anc[self.levels][views], by, bx]
 
+    def _pred_one(self, v: int, by: int, bx: int) -> np.ndarray:
+        """dcp prediction of one block with Python-int arithmetic and a slice of the key view
+        (the same integers as :func:`predict_blocks`, without its per-request arrays): (B·B, P)."""
+        B, F = self.block_size, self.frac_bits
+        k = int(self.key_of[v])
+        d = int(self.disp[k, by * self.nbx + bx])
+        oy, ox = int(self.offsets[v, 0]), int(self.offsets[v, 1])
+        Y, X = ((by * B) << F) + d * oy, ((bx * B) << F) + d * ox
+        y0, x0, m = Y >> F, X >> F, (1 << F) - 1
+        fy, fx = Y & m, X & m
+        img = self.top[k]
+        if 0 <= y0 and y0 + B < self.Hp and 0 <= x0 and x0 + B < self.Wp:
+            win = img[y0:y0 + B + 1, x0:x0 + B + 1]
+        else:   # clamp at the padded image's edges
+            ys = np.clip(np.arange(y0, y0 + B + 1), 0, self.Hp - 1)
+            xs = np.clip(np.arange(x0, x0 + B + 1), 0, self.Wp - 1)
+            win = img[ys[:, None], xs[None, :]]
+        if fy == 0 and fx == 0:
+            return np.ascontiguousarray(win[:B, :B]).reshape(B * B, self.P)
+        s = 1 << F
+        t0 = win[:B, :B] * (s - fx) + win[:B, 1:] * fx
+        t1 = win[1:, :B] * (s - fx) + win[1:, 1:] * fx
+        return ((t0 * (s - fy) + t1 * fy + (1 << (2 * F - 1))) >> (2 * F)).reshape(B * B, self.P)
+
     def _check_level(self, level: int) -> int:
         if not 0 <= int(level) <= self.levels:
             raise ParameterError(f"level must be within 0..{self.levels} (0 = full quality, {self.levels} = top key views), got {level}")
@@ -240,7 +264,8 @@ class RlfcDecoder:
         if self.store is None:
             out = self.decode_blocks(np.array([v]), np.array([by]), np.array([bx]), level)[0]
         else:   # lean path: Python-int header parsing, one decode per distinct mode
-            acc = self._pred_blocks(np.array([v]), np.array([by]), np.array([bx]))[0]
+            acc = (self._pred_one(v, by, bx) if self.profile == "dcp"
+                   else self._pred_blocks(np.array([v]), np.array([by]), np.array([bx]))[0])
             levs = range(self.levels - 1, level - 1, -1)
             got = self.store.fetch_one(by * self.nbx + bx, [self.level_offset[lv] + int(self.anc[lv][v]) for lv in levs])
             for item in got:                                  # top-down

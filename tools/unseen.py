@@ -1,0 +1,149 @@
+"""Dense grids the codec was not tuned on: RLFC dcp against per-view JPEG 2000 at a target PSNR.
+
+Usage: ``python -m tools.unseen DATA_DIR --out DIR [--target 40] [--save-scenes]``
+
+The grids are derived deterministically from ../shared/data:
+
+- ``layers_9x9``: a synthetic 9×9 grid of 320×256 px: a background and two occluding
+  foreground shapes textured with photographs from the LLFF captures, at disparities of
+  -0.35, 0.9 and 2.2 px per view (bicubic sub-pixel shifts), plus sensor-like noise (σ = 1.5).
+- ``antinous_5x5_wide``: every second view of hci_antinous: a 5×5 grid with twice the baseline.
+- ``dino_grey16``: lytro_dino_2067 as 16-bit greyscale (BT.601 luma × 257), 1 channel.
+
+For each: per-view JPEG 2000 (imagecodecs) at several PSNRs, interpolated at the target like
+tools/bench.py; and ``rlfc.ratecontrol.search_dcp`` at the target (the CLI's
+``--target-psnr``), with the whole ``.lfc`` file counted. Writes ``unseen.json`` and
+``unseen.md`` to DIR (and the scenes as PNG folders with ``--save-scenes``).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from formats.container import build_container
+from formats.lfcfile import encode_meta
+from formats.lightfield import LightField, grid_positions
+from formats.metrics import bpp, psnr_rgb
+from formats.scenes import read_scene, write_views
+from rlfc import RlfcParams
+from rlfc.ratecontrol import search_dcp
+from tools.bench import bpp_at
+from tools.peers import j2k
+
+
+def _log(msg: str) -> None:
+    print(msg, file=sys.stderr, flush=True)
+
+
+def _grid(views: np.ndarray, name: str) -> LightField:
+    r, c = views.shape[:2]
+    f = float(max(views.shape[2:4]))
+    return LightField(views=np.ascontiguousarray(views), positions=grid_positions(r, c), focal=(f, f),
+                      layout="grid", meta={"source": name})
+
+
+def layers(data: Path, rows=9, cols=9, h=256, w=320, seed=0) -> LightField:
+    """Three textured layers with occlusion at sub-pixel disparities, plus noise."""
+    tex = []
+    for s in ("llff_statue", "llff_ollie", "llff_canclip"):
+        sv = read_scene(data / s).views
+        v = sv.reshape(-1, *sv.shape[2:])[0].astype(np.float32)
+        tex.append(cv2.resize(v[..., :3], (w + 80, h + 80), interpolation=cv2.INTER_AREA))
+    yy, xx = np.mgrid[0:h + 80, 0:w + 80]
+    disc = ((yy - (h + 80) * 0.55) ** 2 + (xx - (w + 80) * 0.35) ** 2 < (0.28 * h) ** 2).astype(np.float32)
+    rect = ((np.abs(yy - (h + 80) * 0.35) < 0.18 * h) & (np.abs(xx - (w + 80) * 0.68) < 0.16 * w)).astype(np.float32)
+    layers_ = [(tex[0], None, -0.35), (tex[1], disc, 0.9), (tex[2], rect, 2.2)]
+    rng = np.random.default_rng(seed)
+    out = np.zeros((rows, cols, h, w, 3), np.uint8)
+    for r in range(rows):
+        for c in range(cols):
+            acc = np.zeros((h, w, 3), np.float32)
+            for img, mask, d in layers_:
+                dy, dx = (r - rows // 2) * d, (c - cols // 2) * d
+                m = np.float32([[1, 0, dx + 40], [0, 1, dy + 40]])
+                warped = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
+                                        borderMode=cv2.BORDER_REFLECT)
+                if mask is None:
+                    acc = warped
+                else:
+                    a = cv2.warpAffine(mask, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)[..., None]
+                    acc = acc * (1 - a) + warped * a
+            acc += rng.normal(0, 1.5, acc.shape).astype(np.float32)
+            out[r, c] = np.clip(np.rint(acc), 0, 255).astype(np.uint8)
+    return _grid(out, "synthetic layers (textures: LLFF statue, ollie, canclip)")
+
+
+def scenes(data: Path) -> dict[str, LightField]:
+    ant = read_scene(data / "hci_antinous")
+    dino = read_scene(data / "lytro_dino_2067")
+    y = dino.views.astype(np.float64) @ np.array([0.299, 0.587, 0.114])
+    grey16 = np.clip(np.rint(y * 257), 0, 65535).astype(np.uint16)[..., None]
+    return {"layers_9x9": layers(data), "antinous_5x5_wide": _grid(ant.views[::2, ::2], "hci_antinous[::2, ::2]"),
+            "dino_grey16": _grid(grey16, "lytro_dino_2067 luma x257")}
+
+
+def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
+    views = lf.views.reshape(-1, *lf.views.shape[2:])
+    peer, pts = j2k(), []
+    for lev in (target - 4, target - 2, target, target + 2, target + 4, target + 6):
+        r = peer.run(views, lev)
+        pts.append({"codec": "j2k", "bpp": bpp(r["bytes"], len(views), lf.height, lf.width),
+                    "psnr_rgb": psnr_rgb(views, r["decoded"])})
+    return bpp_at(pts, "j2k", target), pts
+
+
+def dcp_at(lf: LightField, target: float) -> dict:
+    t = time.perf_counter()
+    enc, p, res, _ = search_dcp(lf, RlfcParams(profile="dcp"), target_psnr=target)
+    cfg, secs = enc.pack(p, res)
+    blob = b"".join(bytes(x) for x in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), secs))
+    from rlfc.color import from_planes
+    dec = from_planes(res.dec0[:, :lf.height, :lf.width], lf.views.dtype)
+    return {"bpp": bpp(len(blob), lf.rows * lf.cols, lf.height, lf.width),
+            "psnr_rgb": psnr_rgb(lf.views.reshape(dec.shape), dec), "top_psnr": p.top_psnr, "quant": p.quant,
+            "blocks": cfg["n_blocks"], "encode_s": time.perf_counter() - t}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m tools.unseen", description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("data", help="the shared data folder (../shared/data)")
+    ap.add_argument("--out", required=True)
+    ap.add_argument("--target", type=float, default=40.0)
+    ap.add_argument("--only", default="", help="comma-separated scene names to run (default all)")
+    ap.add_argument("--save-scenes", action="store_true")
+    a = ap.parse_args(argv)
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    result = {}
+    lines = [f"| grid | views | size | JPEG 2000 bpp at {a.target:g} dB | dcp bpp | dcp PSNR_RGB | ratio | key views dB | "
+             "residual blocks | encode s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, lf in scenes(Path(a.data)).items():
+        if a.only and name not in a.only.split(","):
+            continue
+        _log(f"[{name}] {lf.rows}x{lf.cols} of {lf.height}x{lf.width}x{lf.channels} {lf.views.dtype}")
+        if a.save_scenes:
+            write_views(out / name, lf.views)
+        jb, pts = j2k_at(lf, a.target)
+        r = dcp_at(lf, a.target)
+        r.update({"j2k_bpp": jb, "j2k_points": pts})
+        result[name] = r
+        ratio = f"{r['bpp'] / jb:.2f}×" if jb else "—"
+        lines.append(f"| {name} | {lf.rows}×{lf.cols} | {lf.width}×{lf.height}×{lf.channels} {lf.views.dtype} | "
+                     f"{jb:.3f} | {r['bpp']:.4f} | {r['psnr_rgb']:.2f} | {ratio} | {r['top_psnr']:.2f} | {r['blocks']} | "
+                     f"{r['encode_s']:.0f} |" if jb else f"| {name} | … | … | — | {r['bpp']:.4f} | {r['psnr_rgb']:.2f} | — | | | |")
+        _log("  " + lines[-1])
+    (out / "unseen.json").write_text(json.dumps(result, indent=1, default=float))
+    (out / "unseen.md").write_text("\n".join(lines) + "\n")
+    print("\n".join(lines))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
