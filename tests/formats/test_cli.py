@@ -200,3 +200,30 @@ def test_dcp_profile_from_the_cli(tmp_path, capsys):
     assert main(["decode", str(out), "--block", "4,4,2,3", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
     assert main(["decode", str(out), str(tmp_path / "v"), "--view", "4,4", "--quiet"]) == 0
     assert (np.load(tmp_path / "b.npy") == read_image(tmp_path / "v" / "r04_c04.png")[16:24, 24:32]).all()
+
+
+def test_auto_profile_is_bise_for_posed_captures(tmp_path, capsys):
+    """--profile auto (the default) picks dcp for grids (test_info) and bise for posed captures,
+    which dcp refuses."""
+    from formats.imageio import write_image
+
+    scene = tmp_path / "posed"
+    (scene / "train").mkdir(parents=True)
+    rng = np.random.default_rng(0)
+    frames = []
+    for i in range(3):
+        write_image(scene / "train" / f"r_{i}.png", rng.integers(0, 256, (16, 24, 3), dtype=np.uint8))
+        m = np.eye(4)
+        m[0, 3] = 0.1 * i
+        frames.append({"file_path": f"./train/r_{i}", "transform_matrix": m.tolist()})
+    (scene / "transforms_train.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames}))
+    assert main(["encode", str(scene), str(tmp_path / "p.lfc"), "--json", "--quiet"]) == 0
+    assert json.loads(capsys.readouterr().out)["profile"] == "bise"
+    assert main(["encode", str(scene), str(tmp_path / "q.lfc"), "--profile", "dcp", "--quiet"]) == 2
+
+
+def test_dcp_target_bpp(tmp_path, capsys):
+    out = tmp_path / "b.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--target-bpp", "0.1", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["profile"] == "dcp" and 0.05 < rep["bpp"] <= 0.1 and rep["psnr_rgb"] > 38
