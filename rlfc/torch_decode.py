@@ -47,6 +47,36 @@ class TorchBlockDecoder:
         self.trit = torch.from_numpy(TRIT_DIGITS.astype(np.int64)).to(self.dev)
         self.quint = torch.from_numpy(QUINT_DIGITS.astype(np.int64)).to(self.dev)
         self.peak = int(np.iinfo(dec.dtype).max)
+        if dec.profile == "dcp":      # key views (planar), disparities and offsets on the device
+            self.top_planar = torch.from_numpy(dec.top_planar).to(self.dev)          # (P, n_top·Hp·Wp) int32
+            self.disp = torch.from_numpy(dec.disp.astype(np.int64)).to(self.dev)
+            self.offsets = torch.from_numpy(dec.offsets.astype(np.int64)).to(self.dev)
+            self.key_of = torch.from_numpy(dec.key_of.astype(np.int64)).to(self.dev)
+
+    def _pred_dcp(self, views: torch.Tensor, by: torch.Tensor, bx: torch.Tensor) -> torch.Tensor:
+        """dcp prediction on the device, the integers of :func:`rlfc.disparity.predict_blocks`:
+        (M,) requests → (M, B·B, P) int32."""
+        d = self.d
+        B, F, hp, wp = d.block_size, d.frac_bits, d.Hp, d.Wp
+        k = self.key_of[views]
+        disp = self.disp[k, by * d.nbx + bx]
+        Y = ((by * B) << F) + disp * self.offsets[views, 0]                            # (M,)
+        X = ((bx * B) << F) + disp * self.offsets[views, 1]
+        ext = torch.arange(B + 1, device=self.dev)
+        rows = ((Y >> F)[:, None] + ext).clamp(0, hp - 1)
+        cols = ((X >> F)[:, None] + ext).clamp(0, wp - 1)
+        idx = ((k * hp)[:, None, None] + rows[:, :, None]) * wp + cols[:, None, :]    # (M, B+1, B+1)
+        win = self.top_planar[:, idx].permute(1, 2, 3, 0)                               # (M, B+1, B+1, P)
+        if F == 0:
+            out = win[:, :B, :B]
+        else:
+            s = 1 << F
+            fy = (Y & (s - 1)).to(torch.int32)[:, None, None, None]
+            fx = (X & (s - 1)).to(torch.int32)[:, None, None, None]
+            t0 = win[:, :B, :B] * (s - fx) + win[:, :B, 1:] * fx
+            t1 = win[:, 1:, :B] * (s - fx) + win[:, 1:, 1:] * fx
+            out = (t0 * (s - fy) + t1 * fy + (1 << (2 * F - 1))) >> (2 * F)
+        return out.reshape(views.shape[0], B * B, d.P)
 
     def _unpack(self, starts: torch.Tensor, mode: int, n: int) -> torch.Tensor:
         """(S,) plane byte offsets → (S, n) int64 values of one mode."""
@@ -89,7 +119,7 @@ class TorchBlockDecoder:
         H = d.levels
         t = lambda a: torch.from_numpy(np.ascontiguousarray(a)).to(self.dev)  # noqa: E731
         if d.profile == "dcp":
-            acc = t(d._pred_blocks(views, by, bx))                                      # (M, n, P) int32
+            acc = self._pred_dcp(t(views), t(by), t(bx))                               # (M, n, P) int32
         else:
             acc = self.top[t(d.anc[H][views]), t(by), t(bx)]                            # (M, n, P) int32
         if H > level:

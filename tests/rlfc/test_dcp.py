@@ -117,6 +117,8 @@ def test_subpixel_disparity_predicts_half_pixel_parallax(rng):
         if fb == 3:
             check_agreement(d, lf.views.shape)
             assert (np.abs(d.disp) == 4).mean() > 0.5          # 0.5 px = 4/8 per view step
+            v, by, bx = rng.integers(0, 9, 500), rng.integers(0, d.nby, 500), rng.integers(0, d.nbx, 500)
+            assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
     assert errs[3] > errs[0] + 3, errs
 
 
