@@ -303,7 +303,8 @@ class RlfcDecoder:
                 sel, raw, deq, rawp = self._residual(store, g, lloc)
                 res = np.zeros((len(chunk) * nloc, B * B, self.P), dtype=np.int32)
                 res[sel] = deq
-                base = (predict_views(self.top, self.key_of, self.offsets, self.disp, chunk, B, self.frac_bits)
+                base = (predict_views(self.top, self.key_of, self.offsets, self.disp, chunk, B, self.frac_bits,
+                                      self.top_planar)
                         if self.profile == "dcp" else dec[ppos[a:a + 8]])
                 rec = base + from_blocks(res.reshape(len(chunk), self.nby, self.nbx, B, B, self.P))
                 if raw.any():
@@ -327,7 +328,7 @@ class RlfcDecoder:
             self.file.container.verify_ranges("rlfc.blocks", np.array([0]), np.array([int(self._index[-1])]))
         if self.profile == "dcp" and level == self.levels:     # the prediction itself
             out = predict_views(self.top, self.key_of, self.offsets, self.disp, views, self.block_size,
-                                self.frac_bits)
+                                self.frac_bits, self.top_planar)
             out = out[:, :self.height, :self.width]
             return out if planes else from_planes(out, self.dtype)
         nodes = self.anc[level][views]

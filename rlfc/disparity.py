@@ -35,25 +35,6 @@ def dcp_clusters(rows: int, cols: int, positions: np.ndarray):
     return par.astype(np.int64), key, offsets
 
 
-def _sample(img: np.ndarray, py: np.ndarray, px: np.ndarray, frac_bits: int) -> np.ndarray:
-    """Bilinear samples of ``img`` (Hp, Wp, P) int32 at fixed-point positions.
-
-    ``py`` (..., B, 1) and ``px`` (..., 1, B) or broadcastable int64 positions in 1/2^F pixels;
-    edges clamp. Returns int32 (..., P) with round-half-up at 2F fractional bits.
-    """
-    hp, wp = img.shape[:2]
-    if frac_bits == 0:
-        return img[np.clip(py, 0, hp - 1), np.clip(px, 0, wp - 1)]
-    s = 1 << frac_bits
-    y0, fy = py >> frac_bits, (py & (s - 1))[..., None]
-    x0, fx = px >> frac_bits, (px & (s - 1))[..., None]
-    ya, yb = np.clip(y0, 0, hp - 1), np.clip(y0 + 1, 0, hp - 1)
-    xa, xb = np.clip(x0, 0, wp - 1), np.clip(x0 + 1, 0, wp - 1)
-    top = img[ya, xa].astype(np.int64) * (s - fx) + img[ya, xb] * fx
-    bot = img[yb, xa].astype(np.int64) * (s - fx) + img[yb, xb] * fx
-    return ((top * (s - fy) + bot * fy + (1 << (2 * frac_bits - 1))) >> (2 * frac_bits)).astype(np.int32)
-
-
 def planar(top: np.ndarray) -> np.ndarray:
     """(n_top, Hp, Wp, P) key-view planes → (P, n_top·Hp·Wp) contiguous, for fast gathers."""
     return np.ascontiguousarray(np.moveaxis(top, -1, 0)).reshape(top.shape[-1], -1)
@@ -113,16 +94,18 @@ def _sample_many(tp, hw, k, py, px, frac_bits):
 
 
 def predict_views(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,
-                  views: np.ndarray, B: int, frac_bits: int = 0) -> np.ndarray:
-    """Predicted planes of whole views: (n, Hp, Wp, P) int32 (same pixels as predict_blocks)."""
-    hp, wp = top.shape[1:3]
+                  views: np.ndarray, B: int, frac_bits: int = 0, top_planar: np.ndarray | None = None) -> np.ndarray:
+    """Predicted planes of whole views: (n, Hp, Wp, P) int32, the pixels of predict_blocks for
+    every block (computed block-wise with its window gather, one view at a time)."""
+    n_top, hp, wp, P = top.shape
     nby, nbx = hp // B, wp // B
-    out = np.empty((len(views), hp, wp, top.shape[3]), dtype=top.dtype)
-    yy, xx = np.arange(hp) << frac_bits, np.arange(wp) << frac_bits
-    for i, v in enumerate(np.asarray(views).tolist()):                  # one gather per view
-        k = key_of[v]
-        dpx = np.repeat(np.repeat(disp[k].reshape(nby, nbx), B, 0), B, 1)    # (Hp, Wp)
-        out[i] = _sample(top[k], yy[:, None] + dpx * offsets[v, 0], xx[None, :] + dpx * offsets[v, 1], frac_bits)
+    tp = planar(top) if top_planar is None else top_planar
+    out = np.empty((len(views), hp, wp, P), dtype=np.int32)
+    by, bx = np.divmod(np.arange(nby * nbx), nbx)
+    for i, v in enumerate(np.asarray(views).tolist()):                  # one batched gather per view
+        vv = np.full(nby * nbx, v)
+        blocks = predict_blocks(top, key_of, offsets, disp, vv, by, bx, B, nbx, frac_bits, tp)
+        out[i] = blocks.reshape(nby, nbx, B, B, P).transpose(0, 2, 1, 3, 4).reshape(hp, wp, P)
     return out
 
 
