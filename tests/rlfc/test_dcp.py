@@ -58,6 +58,24 @@ def test_hard_cases(rng):
     assert (d.decode_all() == tiny).all()
 
 
+def test_lossy_noise_stays_near_raw_and_levels_are_monotone(rng):
+    """Lossy dcp on uniform noise (nothing to predict) stays within raw size + 15% + 4 KB, and on
+    the real sample the full decode beats the prediction-only level."""
+    from pathlib import Path
+
+    from formats.scenes import read_scene
+
+    noise = rng.integers(0, 256, (3, 3, 32, 32, 3)).astype(np.uint8)
+    for p in (RlfcParams(profile="dcp", quant=8, threshold=4, energy=16, top_psnr=44),
+              RlfcParams(profile="dcp", quant=2, top_psnr=30)):
+        d, n, _ = roundtrip(make_lf(noise), p)
+        assert n <= noise.nbytes * 1.15 + 4096, (p, n)
+    lf = read_scene(Path(__file__).resolve().parents[2] / "samples" / "dino_crop")
+    d, _, _ = roundtrip(lf, RlfcParams(profile="dcp", quant=4, threshold=2, energy=4, top_psnr=44))
+    full, pred = psnr_rgb(lf.views, d.decode_all(0)), psnr_rgb(lf.views, d.decode_all(1))
+    assert full > pred + 1, (full, pred)
+
+
 def test_posed_captures_are_refused():
     from formats.errors import UnsupportedError
 
