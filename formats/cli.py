@@ -271,7 +271,9 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--profile", default="auto", choices=["auto", "bise", "dcp"],
                    help="RLFC profile: dcp (disparity-compensated prediction from 3x3-cluster key views; grids), "
                         "bise (the paper's key-view tree), or auto (default: dcp for grids, bise for posed captures)")
-    e.add_argument("--max-disparity", type=int, default=4, help="dcp: largest disparity searched (px per view)")
+    e.add_argument("--max-disparity", type=int, default=32,
+                   help="dcp: largest disparity searched, px per view step (default 32; the search starts at 4 "
+                        "and widens where blocks need it)")
     e.add_argument("--disparity-bits", type=int, default=3,
                    help="dcp: fractional bits of the disparity (3 = 1/8 px per view step; 0 = whole pixels)")
     e.add_argument("--baseline", type=float, default=None, help="grid baseline when the scene has none")

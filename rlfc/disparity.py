@@ -130,10 +130,13 @@ def _costs(target, top, key_of, offsets, B, maps, frac_bits):
 
 
 def estimate(target: np.ndarray, top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, B: int,
-             max_disparity: int, frac_bits: int = 0, smooth_tol: float = 0.1, smooth_iters: int = 3) -> np.ndarray:
-    """Per (cluster, block) disparity in [-D, D] px (units 1/2^F) minimizing the cluster's luma SSE.
+             max_disparity: int, frac_bits: int = 0, smooth_tol: float = 0.1, smooth_iters: int = 3,
+             start_disparity: int = 4) -> np.ndarray:
+    """Per (cluster, block) disparity (units 1/2^F px per view step) minimizing the cluster's luma SSE.
 
-    Coarse to fine: whole pixels first, then ±1/2, ±1/4, ... pixel around the best so far.
+    Coarse to fine: whole pixels in [-4, 4] first, widened by doubling up to ``max_disparity``
+    while more than 2% of the blocks pick the edge of the range and the wider range lowers the
+    total error by at least 0.5%; then ±1/2, ±1/4, ... pixel around the best so far.
 
     Args:
         target: (N0, Hp, Wp, P) int32 planes of the views; top: decoded key-view planes.
@@ -144,13 +147,24 @@ def estimate(target: np.ndarray, top: np.ndarray, key_of: np.ndarray, offsets: n
     n_top = top.shape[0]
     nloc = (target.shape[1] // B) * (target.shape[2] // B)
     s = 1 << frac_bits
-    cands = np.arange(-max_disparity, max_disparity + 1)
-    maps = [np.full((n_top, nloc), d, dtype=np.int64) for d in cands.tolist()]
-    cost = _costs(target, top, key_of, offsets, B, maps, 0)          # whole pixels: plain gathers
+    D = min(start_disparity, max_disparity)
+    cands = np.arange(-D, D + 1)
+    cost = _costs(target, top, key_of, offsets, B, [np.full((n_top, nloc), d) for d in cands.tolist()], 0)
+    # widen the search while many blocks sit at its edge and widening pays (wide baselines)
+    while D < max_disparity:
+        at_edge = np.abs(cands[np.argmin(cost, axis=0)]) == D
+        if at_edge.mean() <= 0.02:
+            break
+        D2 = min(2 * D, max_disparity)
+        more = np.r_[np.arange(-D2, -D), np.arange(D + 1, D2 + 1)]
+        mc = _costs(target, top, key_of, offsets, B, [np.full((n_top, nloc), d) for d in more.tolist()], 0)
+        if np.minimum(mc.min(axis=0), cost.min(axis=0)).sum() >= 0.995 * cost.min(axis=0).sum():
+            break                                     # the wider range does not pay
+        cands, cost, D = np.r_[cands, more], np.concatenate([cost, mc]), D2
     best = cands[np.argmin(cost, axis=0)] * s
     best_cost = cost.min(axis=0)
-    zero_cost = cost[max_disparity]
-    lim = max_disparity * s
+    zero_cost = cost[np.flatnonzero(cands == 0)[0]]
+    lim = D * s
     step = s // 2
     while step >= 1:                                  # refine: ±1/2, then ±1/4, ... pixel
         fine = [np.clip(best - step, -lim, lim), np.clip(best + step, -lim, lim)]

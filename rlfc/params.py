@@ -28,7 +28,8 @@ class RlfcParams:
         profile: "bise" (the paper's: Gaussian key-view tree, every significant block
             BISE-packed) or "dcp" (disparity-compensated prediction from 3×3-cluster key views,
             residual blocks BISE-packed; grids only).
-        max_disparity: dcp: largest |disparity| searched, pixels per view step.
+        max_disparity: dcp: largest |disparity| searched, pixels per view step (the search starts
+            at ±4 and widens only where blocks need it).
         disp_frac_bits: dcp: disparity precision, 1/2^F pixel per view step (0 = whole pixels;
             3 = 1/8 px, bilinear sub-pixel prediction).
         disp_smooth: dcp: the disparity map takes its 3×3 median wherever that costs less than
@@ -44,7 +45,7 @@ class RlfcParams:
     top_codec: str = "auto"
     top_psnr: float | None = None
     profile: str = "bise"
-    max_disparity: int = 4
+    max_disparity: int = 32
     disp_frac_bits: int = 3
     disp_smooth: float = 0.1
 
