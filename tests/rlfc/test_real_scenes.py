@@ -1,6 +1,5 @@
 """RLFC on real light fields from ../shared/data and the bundled sample: quality floors, bit
 ceilings, exactness, decoder agreement and progressive refinement."""
-from pathlib import Path
 
 import numpy as np
 import pytest
