@@ -76,6 +76,19 @@ def test_lossy_noise_stays_near_raw_and_levels_are_monotone(rng):
     assert full > pred + 1, (full, pred)
 
 
+@pytest.mark.parametrize("c", [2, 4])
+def test_lossy_alpha_stays_exact(c):
+    """Grey+alpha and RGBA grids, lossy key views and residuals: alpha decodes exactly."""
+    lf = smooth_lf(rows=4, cols=4, c=c)
+    v = lf.views.copy()
+    v[..., -1] = np.where(v[..., 0] > 128, 255, 0)          # a hard-edged, parallax-shifted mask
+    lf = make_lf(v)
+    d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=16, threshold=8, energy=64, profile="dcp", top_psnr=35))
+    full = d.decode_all()
+    assert (full[..., -1] == v[..., -1]).all()
+    check_agreement(d, lf.views.shape)
+
+
 def test_posed_captures_are_refused():
     from formats.errors import UnsupportedError
 
