@@ -194,9 +194,8 @@ class RlfcDecoder:
         if fy == 0 and fx == 0:
             return np.ascontiguousarray(win[:B, :B]).reshape(B * B, self.P)
         s = 1 << F
-        t0 = win[:B, :B] * (s - fx) + win[:B, 1:] * fx
-        t1 = win[1:, :B] * (s - fx) + win[1:, 1:] * fx
-        return ((t0 * (s - fy) + t1 * fy + (1 << (2 * F - 1))) >> (2 * F)).reshape(B * B, self.P)
+        h = win[:, :B] * (s - fx) + win[:, 1:] * fx                  # (B+1, B, P): horizontal pass
+        return ((h[:B] * (s - fy) + h[1:] * fy + (1 << (2 * F - 1))) >> (2 * F)).reshape(B * B, self.P)
 
     def _check_level(self, level: int) -> int:
         if not 0 <= int(level) <= self.levels:

@@ -87,10 +87,8 @@ def _sample_many(tp, hw, k, py, px, frac_bits):
     rows = np.clip((py[:, :1] >> frac_bits) + ext, 0, hp - 1)                        # (M, B+1)
     cols = np.clip((px[:, :1] >> frac_bits) + ext, 0, wp - 1)
     win = np.moveaxis(tp.take((base + rows[:, :, None]) * wp + cols[:, None, :], axis=1), 0, -1)  # (M, B+1, B+1, P)
-    wx0 = s - fx
-    t0 = win[:, :B, :B] * wx0 + win[:, :B, 1:] * fx
-    t1 = win[:, 1:, :B] * wx0 + win[:, 1:, 1:] * fx
-    return (t0 * (s - fy) + t1 * fy + np.int32(1 << (2 * frac_bits - 1))) >> (2 * frac_bits)
+    h = win[:, :, :B] * (s - fx) + win[:, :, 1:] * fx                                # (M, B+1, B, P)
+    return (h[:, :B] * (s - fy) + h[:, 1:] * fy + np.int32(1 << (2 * frac_bits - 1))) >> (2 * frac_bits)
 
 
 def predict_views(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,

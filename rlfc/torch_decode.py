@@ -73,9 +73,8 @@ class TorchBlockDecoder:
             s = 1 << F
             fy = (Y & (s - 1)).to(torch.int32)[:, None, None, None]
             fx = (X & (s - 1)).to(torch.int32)[:, None, None, None]
-            t0 = win[:, :B, :B] * (s - fx) + win[:, :B, 1:] * fx
-            t1 = win[:, 1:, :B] * (s - fx) + win[:, 1:, 1:] * fx
-            out = (t0 * (s - fy) + t1 * fy + (1 << (2 * F - 1))) >> (2 * F)
+            h = win[:, :, :B] * (s - fx) + win[:, :, 1:] * fx                      # (M, B+1, B, P)
+            out = (h[:, :B] * (s - fy) + h[:, 1:] * fy + (1 << (2 * F - 1))) >> (2 * F)
         return out.reshape(views.shape[0], B * B, d.P)
 
     def _unpack(self, starts: torch.Tensor, mode: int, n: int) -> torch.Tensor:
