@@ -27,6 +27,8 @@ def _psnr(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:
+    """SSIM of two (h, w, c) images in [0, 1]; NaN where the image is smaller than SSIM's 7-px
+    window (tiny low levels), which the caller reports as None."""
     from skimage.metrics import structural_similarity
 
     if min(a.shape[:2]) < 7:
@@ -70,7 +72,8 @@ def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, ba
                 base_near.append(np.mean((area_downsample(tg[near], scale)[..., :nch] - ref) ** 2))
                 base_mean.append(np.mean((mean_img - ref) ** 2))
         row = {"level": level, "width": level, "scale": scale, "bytes": prefix_bytes(r, level),
-               "psnr": 10 * math.log10(1 / float(np.mean(ps))), "ssim": float(np.nanmean(ss)),
+               "psnr": 10 * math.log10(1 / float(np.mean(ps))),
+               "ssim": None if np.isnan(ss).all() else float(np.nanmean(ss)),
                "ms_per_256sq": 1e3 * ts / npx * 65536}
         if baselines:
             row["psnr_nearest_view"] = 10 * math.log10(1 / float(np.mean(base_near)))

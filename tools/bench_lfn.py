@@ -179,7 +179,7 @@ def table(res: dict) -> str:
              "|---|---|---|---|---|---|---|---|" + ("---|" if "single_scale" in res else "")]
     for i, r in enumerate(res["lod"]):
         extra = f" {res['single_scale'][i]['psnr']:.2f} |" if "single_scale" in res else ""
-        lines.append(f"| {r['level']:g} | 1/{1 / r['scale']:.2f} | {r['bytes']} | {r['psnr']:.2f} | {r['ssim']:.3f} | "
+        lines.append(f"| {r['level']:g} | 1/{1 / r['scale']:.2f} | {r['bytes']} | {r['psnr']:.2f} | {'—' if r['ssim'] is None else format(r['ssim'], '.3f')} | "
                      f"{r['ms_per_256sq']:.1f} | {r['psnr_nearest_view']:.2f} | {r['psnr_mean_view']:.2f} |{extra}")
     return "\n".join(lines)
 
