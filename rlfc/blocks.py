@@ -43,16 +43,23 @@ def pack_index(index: np.ndarray) -> bytes:
     return zlib.compress(np.diff(index).astype("<u4").tobytes(), 9)
 
 
-def unpack_index(data: bytes, nloc: int, name: str) -> np.ndarray:
-    """Inverse of :func:`pack_index` → (nloc + 1,) int64 offsets; bad data raises FormatError."""
-    want = 4 * nloc
+def inflate_exact(data: bytes, want: int, name: str, section: str, what: str) -> bytes:
+    """A zlib stream that must inflate to exactly ``want`` bytes (``what``: what they hold);
+    anything else (bad stream, short, long, trailing bytes) is a FormatError naming the file
+    ``name`` and the section."""
     try:
         d = zlib.decompressobj()
         raw = d.decompress(data, want + 1)
     except zlib.error as e:
-        raise FormatError(f"{name}: section 'rlfc.index' is not a valid stream ({e})") from None
+        raise FormatError(f"{name}: section {section!r} is not a valid stream ({e})") from None
     if len(raw) != want or not d.eof or d.unused_data:
-        raise FormatError(f"{name}: section 'rlfc.index' holds {len(raw)} bytes of run lengths, expected {want}")
+        raise FormatError(f"{name}: section {section!r} holds {len(raw)} bytes of {what}, expected {want}")
+    return raw
+
+
+def unpack_index(data: bytes, nloc: int, name: str) -> np.ndarray:
+    """Inverse of :func:`pack_index` → (nloc + 1,) int64 offsets; bad data raises FormatError."""
+    raw = inflate_exact(data, 4 * nloc, name, "rlfc.index", "run lengths")
     return np.concatenate([[0], np.cumsum(np.frombuffer(raw, dtype="<u4").astype(np.int64))])
 
 

@@ -18,6 +18,8 @@ import numpy as np
 
 from formats.errors import FormatError
 
+from .blocks import inflate_exact
+
 
 def dcp_clusters(rows: int, cols: int, positions: np.ndarray):
     """3×3 grid clusters: (parent (N0,) cluster id, key (n_top,) key-view index, offsets (N0, 2))."""
@@ -201,13 +203,6 @@ def unpack_disparity(data: bytes, dt: str, shape: tuple[int, int], name: str) ->
     """Inverse of :func:`pack_disparity`; a bad stream raises a FormatError naming ``name``."""
     if dt not in ("<i1", "<i2"):
         raise FormatError(f"{name}: unknown disparity type {dt!r}")
-    want = shape[0] * shape[1] * np.dtype(dt).itemsize
-    try:
-        d = zlib.decompressobj()
-        raw = d.decompress(data, want + 1)
-    except zlib.error as e:
-        raise FormatError(f"{name}: section 'rlfc.disp' is not a valid stream ({e})") from None
-    if len(raw) != want or not d.eof or d.unused_data:
-        raise FormatError(f"{name}: section 'rlfc.disp' holds {len(raw)} bytes of disparities, expected {want}")
+    raw = inflate_exact(data, shape[0] * shape[1] * np.dtype(dt).itemsize, name, "rlfc.disp", "disparities")
     delta = np.frombuffer(raw, dtype=dt).astype(np.int64).reshape(shape)
     return np.cumsum(delta, axis=1).astype(np.dtype(dt)).astype(np.int64)   # wrap like the encoder's cast

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import statistics
 import sys
 import time
 from dataclasses import replace
@@ -40,6 +39,7 @@ from formats.metrics import bpp, psnr_rgb
 from formats.scenes import read_scene
 from rlfc import Encoder, RlfcDecoder, RlfcParams
 from rlfc.ratecontrol import search, search_dcp
+from tools.bench import random_access_times
 
 META = 4096
 
@@ -50,23 +50,8 @@ def _log(msg: str) -> None:
 
 def _timings(blob: bytes, n_single: int = 200, n_batch: int = 20000) -> tuple[float, float]:
     """(median single-block µs, batched µs per block) of an encoded file."""
-    d = RlfcDecoder(open_lfc(blob))
-    rng = np.random.default_rng(0)
-    nv = d.rows * d.cols
-    v, by, bx = rng.integers(0, nv, n_single), rng.integers(0, d.nby, n_single), rng.integers(0, d.nbx, n_single)
-    ts = []
-    for i in range(n_single):
-        r, c = divmod(int(v[i]), d.cols)
-        t = time.perf_counter()
-        d.decode_block(r, c, int(by[i]), int(bx[i]))
-        ts.append(time.perf_counter() - t)
-    v, by, bx = rng.integers(0, nv, n_batch), rng.integers(0, d.nby, n_batch), rng.integers(0, d.nbx, n_batch)
-    tb = []
-    for _ in range(3):
-        t = time.perf_counter()
-        d.decode_blocks(v, by, bx)
-        tb.append(time.perf_counter() - t)
-    return statistics.median(ts[5:]) * 1e6, min(tb) / n_batch * 1e6
+    single, batch = random_access_times(RlfcDecoder(open_lfc(blob)), np.random.default_rng(0), n_single, n_batch, 3)
+    return single * 1e6, batch * 1e6
 
 
 def _row(lf, name, enc, p, res, t_enc, raw_tables=False):

@@ -40,6 +40,21 @@ def log(msg: str) -> None:
     print(msg, file=sys.stderr, flush=True)
 
 
+def random_access_times(d, rng, n_single: int, n_batch: int, repeats: int) -> tuple[float, float]:
+    """(median seconds of one ``decode_block`` over random requests after 5 warm-ups, median
+    seconds per block of one ``decode_blocks`` call of ``n_batch`` random requests)."""
+    nv = d.rows * d.cols
+    sv, sby, sbx = rng.integers(0, nv, n_single), rng.integers(0, d.nby, n_single), rng.integers(0, d.nbx, n_single)
+    ts = []
+    for i in range(n_single):
+        r, c = divmod(int(sv[i]), d.cols)
+        t = time.perf_counter()
+        d.decode_block(r, c, int(sby[i]), int(sbx[i]))
+        ts.append(time.perf_counter() - t)
+    bv, bby, bbx = rng.integers(0, nv, n_batch), rng.integers(0, d.nby, n_batch), rng.integers(0, d.nbx, n_batch)
+    return statistics.median(ts[5:]), _median(lambda: d.decode_blocks(bv, bby, bbx), repeats) / n_batch
+
+
 def bench_rlfc(lf, points, repeats, n_single, n_batch, block_size=8, profile="bise"):
     """RLFC rows for ``points``: a list of (key-view PSNR dB or None = lossless, Q in 8-bit units).
 
@@ -66,16 +81,7 @@ def bench_rlfc(lf, points, repeats, n_single, n_batch, block_size=8, profile="bi
         full = d.decode_all()
         t_full = _median(lambda: d.decode_all(), repeats)
         nv = d.rows * d.cols
-        sv, sby, sbx = rng.integers(0, nv, n_single), rng.integers(0, d.nby, n_single), rng.integers(0, d.nbx, n_single)
-        ts = []
-        for i in range(n_single):
-            r, c = divmod(int(sv[i]), d.cols)
-            t = time.perf_counter()
-            d.decode_block(r, c, int(sby[i]), int(sbx[i]))
-            ts.append(time.perf_counter() - t)
-        t_single = statistics.median(ts[5:])
-        bv, bby, bbx = rng.integers(0, nv, n_batch), rng.integers(0, d.nby, n_batch), rng.integers(0, d.nbx, n_batch)
-        t_batch = _median(lambda: d.decode_blocks(bv, bby, bbx), repeats) / n_batch
+        t_single, t_batch = random_access_times(d, rng, n_single, n_batch, repeats)
         prog = []
         for L in range(d.levels + 1):
             t = time.perf_counter()
