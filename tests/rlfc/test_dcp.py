@@ -89,6 +89,32 @@ def test_lossy_alpha_stays_exact(c):
     check_agreement(d, lf.views.shape)
 
 
+def test_first_version_dcp_files_still_decode():
+    """Files of the first dcp version (whole-pixel int8 disparity map stored raw, raw u32 block
+    index, no frac_bits / coding keys) decode to the same pixels as today's encoding."""
+    from formats.container import build_container
+    from formats.lfcfile import encode_meta, open_lfc
+    from rlfc import RlfcDecoder, encode_lightfield
+    from rlfc.blocks import unpack_index
+
+    lf = smooth_lf(rows=4, cols=5)
+    cfg, sections, _ = encode_lightfield(lf, RlfcParams(block_size=4, quant=4, threshold=2, energy=4, profile="dcp",
+                                                        disp_frac_bits=0))
+    new = RlfcDecoder(open_lfc(b"".join(bytes(p) for p in build_container(
+        encode_meta("rlfc", 1, cfg, lf.geometry()), sections))))
+    old_cfg = {k: v for k, v in cfg.items() if k != "index_coding"}
+    old_cfg["dcp"] = {k: v for k, v in cfg["dcp"].items() if k in ("offsets", "max_disparity")}
+    sec = dict(sections)
+    nloc = cfg["blocks"][0] * cfg["blocks"][1]
+    sec["rlfc.disp"] = new.disp.astype(np.int8).tobytes()
+    sec["rlfc.index"] = unpack_index(sec["rlfc.index"], nloc, "x").astype("<u4").tobytes()
+    old = RlfcDecoder(open_lfc(b"".join(bytes(p) for p in build_container(
+        encode_meta("rlfc", 1, old_cfg, lf.geometry()), list(sec.items())))))
+    assert old.frac_bits == 0 and (old.disp == new.disp).all()
+    assert (old.decode_all() == new.decode_all()).all()
+    check_agreement(old, lf.views.shape)
+
+
 def test_posed_captures_are_refused():
     from formats.errors import UnsupportedError
 
