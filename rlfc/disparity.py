@@ -119,10 +119,11 @@ def _costs(target, top, key_of, offsets, B, maps, frac_bits):
     cost = np.zeros((len(maps), top.shape[0], nby * nbx))
     moving = np.flatnonzero(np.any(offsets != 0, axis=1))
     luma = np.ascontiguousarray(top[..., :1])
+    luma_planar = planar(luma)                       # once, not per candidate map and chunk
     for j, m in enumerate(maps):
         for a in range(0, len(moving), 16):
             vs = moving[a:a + 16]
-            pred = predict_views(luma, key_of, offsets, m, vs, B, frac_bits)[..., 0]
+            pred = predict_views(luma, key_of, offsets, m, vs, B, frac_bits, luma_planar)[..., 0]
             err = (target[vs, :, :, 0] - pred).astype(np.float32) ** 2                # (n, Hp, Wp)
             e = err.reshape(len(vs), nby, B, nbx, B).sum(axis=(2, 4)).reshape(len(vs), -1)
             np.add.at(cost[j], key_of[vs], e)
