@@ -115,6 +115,20 @@ def search(enc: Encoder, base: RlfcParams, *, target_psnr: float | None = None, 
     return best[0], best[1], trace
 
 
+class _KeyViewEncoders:
+    """dcp encoders at different key-view PSNRs sharing one disparity map, estimated by the
+    first encoder built (callers build the best key views first)."""
+
+    def __init__(self, lf, base: RlfcParams):
+        self.lf, self.base, self.disp = lf, base, None
+
+    def __call__(self, top_psnr: float):
+        p = replace(self.base, top_psnr=top_psnr)
+        enc = Encoder(self.lf, p, disparity=self.disp)
+        self.disp = enc.disp
+        return enc, p
+
+
 def search_dcp(lf, base: RlfcParams, *, target_psnr: float, fixed_threshold=None, fixed_energy=None,
                margins=(-1.0, 6.0), tol: float = 0.25, residual_steps=(0.5,), progress=None):
     """dcp rate control: the key views' quality is the main knob.
@@ -130,14 +144,11 @@ def search_dcp(lf, base: RlfcParams, *, target_psnr: float, fixed_threshold=None
     """
     lo, hi = margins
     trace = []
-    state = {"disp": None}
     coarse_q = Q_MAX * depth_scale(lf.views.dtype)
+    encoders = _KeyViewEncoders(lf, base)
 
     def encoder(m):
-        p = replace(base, top_psnr=target_psnr + m)
-        enc = Encoder(lf, p, disparity=state["disp"])
-        state["disp"] = enc.disp
-        return enc, p
+        return encoders(target_psnr + m)
 
     def packed_size(enc, p, res):
         _, secs = enc.pack(p, res)
@@ -210,12 +221,10 @@ def search_dcp_bpp(lf, base: RlfcParams, *, target_bpp: float, db_range=(10.0, 5
     nv = lf.rows * lf.cols
     coarse_q = Q_MAX * depth_scale(lf.views.dtype)
     trace = []
-    state = {"disp": None}
+    encoders = _KeyViewEncoders(lf, base)
 
     def evaluate(db):
-        p0 = replace(base, top_psnr=db)
-        enc = Encoder(lf, p0, disparity=state["disp"])
-        state["disp"] = enc.disp
+        enc, p0 = encoders(db)
         p = params_for_quant(p0, coarse_q)
         res = enc.closed_loop(p)
         _, secs = enc.pack(p, res)
