@@ -1,0 +1,135 @@
+"""Write the golden .lfc fixtures in tests/data/golden/ and the hashes of their decoded pixels.
+
+The fixtures are decoded by the test suite for ever (tests/test_golden.py): a change that
+alters how an existing file decodes fails there. Run this only to add a fixture for a new
+codec version or profile; never to refresh an existing one.
+
+    python -m tools.make_golden [--only NAME ...]
+
+Inputs: a 4x4-view, 29x37-pixel crop of samples/dino_crop (a real Lytro capture; provenance in
+samples/dino_crop/PROVENANCE.md), and derived 16-bit grey+alpha / RGBA variants.
+"""
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+
+from formats.lfcfile import open_lfc, write_lfc
+from formats.lightfield import LightField, grid_positions
+from formats.scenes import read_scene
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "tests" / "data" / "golden"
+
+
+def sample_crop() -> np.ndarray:
+    """(4, 4, 29, 37, 3) uint8: views (2..5, 2..5), pixels y 40..68, x 60..96 of the sample."""
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    return np.ascontiguousarray(lf.views[2:6, 2:6, 40:69, 60:97])
+
+
+def variants() -> dict[str, np.ndarray]:
+    rgb = sample_crop()
+    grey = rgb.astype(np.uint32) @ np.array([77, 150, 29], np.uint32) // 256          # (4,4,29,37)
+    alpha = np.where(grey > np.median(grey), 255, 0)
+    ga16 = (np.stack([grey, alpha], -1) * 257).astype(np.uint16)
+    rgba = np.concatenate([rgb, alpha[..., None].astype(np.uint8)], -1)
+    return {"rgb8": rgb, "ga16": ga16, "rgba8": rgba}
+
+
+def lf_of(views: np.ndarray) -> LightField:
+    r, c = views.shape[:2]
+    return LightField(views=views, positions=grid_positions(r, c), layout="grid", meta={"reader": "golden"})
+
+
+def digest(a: np.ndarray) -> str:
+    return hashlib.sha256(np.ascontiguousarray(a).tobytes()).hexdigest()
+
+
+def decoded_hashes(path: Path) -> dict:
+    """sha256 of every level's full decode and of all blocks, batched (the same bytes every
+    decoder must produce)."""
+    from formats.codecs import open_decoder
+
+    with open_lfc(path) as f:
+        d = open_decoder(f)
+        out = {"levels": {}, "shape": None}
+        for level in range(d.levels + 1):
+            full = d.decode_all(level)
+            out["levels"][str(level)] = digest(full)
+            out["shape"] = list(full.shape)
+        return out
+
+
+def rlfc_fixtures() -> dict:
+    from rlfc import RlfcParams, encode_lightfield
+
+    v = variants()
+    specs = {
+        "rlfc_bise_lossless_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=1)),
+        "rlfc_bise_lossy_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=8, threshold=4, energy=16)),
+        "rlfc_bise_lossy_rgba8": (v["rgba8"], RlfcParams(block_size=4, quant=6, threshold=3, energy=9, top_psnr=36)),
+        "rlfc_dcp_lossless_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=1, profile="dcp")),
+        "rlfc_dcp_lossy_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=6, threshold=3, energy=9, profile="dcp",
+                                                      top_psnr=38)),
+        "rlfc_dcp_lossy_ga16": (v["ga16"], RlfcParams(block_size=4, quant=6 * 257, threshold=3 * 257,
+                                                      energy=9 * 257 ** 2, profile="dcp", top_psnr=40)),
+    }
+    out = {}
+    for name, (views, params) in specs.items():
+        lf = lf_of(views)
+        cfg, sections, _ = encode_lightfield(lf, params)
+        out[name] = (cfg, sections, lf)
+    return out
+
+
+def lfn_fixture(index: dict) -> None:
+    """A tiny nested-width LFN (depth 2, widths 4..8) trained briefly on the RGBA crop; the
+    expected renders are stored as .npy (float networks match within 1 LSB, not bit for bit)."""
+    import torch
+
+    from lfn_stream import LfnConfig, LfnRenderer, TrainOptions, to_sections, train
+
+    torch.manual_seed(0)
+    lf = lf_of(variants()["rgba8"])
+    cfg = LfnConfig(depth=2, min_width=4, max_width=8, occupancy_width=4)
+    model, occ, info = train(lf, cfg, TrainOptions(steps=30, batch=256, holdout=0, seed=0))
+    config, sections = to_sections(model, occ, info, "fp16")
+    path = OUT / "lfn_tiny_rgba8.lfc"
+    write_lfc(path, "lfn", 1, config, lf.geometry(), sections)
+    with open_lfc(path) as f:
+        r = LfnRenderer(f, device="cpu")
+        renders = np.stack([r.decode_view(1, 2, level) for level in (4.0, 6.5, 8.0)])
+    np.save(OUT / "lfn_tiny_rgba8.expected.npy", renders, allow_pickle=False)
+    index["lfn_tiny_rgba8"] = {"file": path.name, "bytes": path.stat().st_size, "view": [1, 2],
+                               "levels": [4.0, 6.5, 8.0], "expected": "lfn_tiny_rgba8.expected.npy",
+                               "shape": list(renders.shape)}
+    print("lfn_tiny_rgba8", path.stat().st_size, "bytes")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--only", nargs="*", help="write only these fixtures (names without .lfc)")
+    a = ap.parse_args(argv)
+    OUT.mkdir(parents=True, exist_ok=True)
+    index_path = OUT / "golden.json"
+    index = json.loads(index_path.read_text()) if index_path.exists() else {}
+    for name, (cfg, sections, lf) in rlfc_fixtures().items():
+        if a.only and name not in a.only:
+            continue
+        path = OUT / f"{name}.lfc"
+        write_lfc(path, "rlfc", 1, cfg, lf.geometry(), sections)
+        index[name] = {"file": path.name, "bytes": path.stat().st_size, **decoded_hashes(path)}
+        print(name, index[name]["bytes"], "bytes")
+    if not a.only or "lfn_tiny_rgba8" in a.only:
+        lfn_fixture(index)
+    index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
