@@ -86,10 +86,9 @@ class ByteRangeSource:
 
 
 class _BufferSource:
-    def __init__(self, buf, owner=None):
+    def __init__(self, buf):
         self._buf = memoryview(buf).cast("B") if not isinstance(buf, memoryview) else buf.cast("B")
         self.size = len(self._buf)
-        self._owner = owner
         self.bytes_fetched = 0
         self.requests = 0
 
@@ -97,9 +96,6 @@ class _BufferSource:
         self.bytes_fetched += stop - start
         self.requests += 1
         return self._buf[start:stop]
-
-    def buffer(self):
-        return self._buf
 
 
 def build_container(meta_json: bytes, sections: Iterable[tuple[str, bytes]], chunk_size: int = DEFAULT_CHUNK) -> list:
@@ -184,7 +180,7 @@ class Container:
                 self._src = _BufferSource(b"")
             else:
                 self._mm = mmap.mmap(self._file.fileno(), 0, access=mmap.ACCESS_READ)
-                self._src = _BufferSource(self._mm, owner=self._mm)
+                self._src = _BufferSource(self._mm)
         elif isinstance(source, ByteRangeSource):
             self.name = name or "<byte-range source>"
             self._src = source
@@ -328,6 +324,11 @@ class Container:
         for info in self.sections.values():
             if info.length:
                 self.read(info.name)
+
+    @property
+    def is_remote(self) -> bool:
+        """True when bytes come from a byte-range source (fetch per request), not memory."""
+        return isinstance(self._src, ByteRangeSource)
 
     @property
     def bytes_fetched(self) -> int:

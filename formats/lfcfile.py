@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 from .container import DEFAULT_CHUNK, Container, write_container
 from .errors import FormatError, UnsupportedError
+from .limits import DEFAULT, Limits
 
 FORMAT_NAME = "lfc"
 
@@ -20,7 +21,10 @@ def encode_meta(codec: str, codec_version: int, config: dict, scene: dict, extra
             "scene": scene, "encoder": f"lfcodec {__version__}"}
     if extra:
         meta.update(extra)
-    return json.dumps(meta, separators=(",", ":"), sort_keys=True).encode()
+    try:
+        return json.dumps(meta, separators=(",", ":"), sort_keys=True, allow_nan=False).encode()
+    except ValueError as e:     # NaN/Infinity somewhere (e.g. a camera matrix): not JSON
+        raise FormatError(f"metadata holds a value JSON cannot represent ({e}); check the scene's cameras") from None
 
 
 def write_lfc(path: str | os.PathLike, codec: str, codec_version: int, config: dict, scene: dict,
@@ -51,7 +55,43 @@ class LfcFile:
         self.close()
 
 
-def open_lfc(source, *, name: str | None = None, partial: bool = False) -> LfcFile:
+def _reject_constant(name):
+    raise ValueError(f"non-standard JSON constant {name}")
+
+
+def _depth(obj, limit: int, d: int = 0) -> int:
+    """Nesting depth of parsed JSON, stopping past ``limit``."""
+    if d > limit:
+        return d
+    if isinstance(obj, dict):
+        return max([_depth(v, limit, d + 1) for v in obj.values()], default=d + 1)
+    if isinstance(obj, list):
+        return max([_depth(v, limit, d + 1) for v in obj], default=d + 1)
+    return d
+
+
+def parse_meta(data, name: str, limits: Limits = DEFAULT) -> dict:
+    """Strict, bounded parse of a metadata section: UTF-8 JSON (no NaN/Infinity), at most
+    ``limits.max_meta_bytes`` bytes and ``limits.max_json_depth`` levels deep."""
+    if len(data) > limits.max_meta_bytes:
+        raise FormatError(f"{name}: metadata section of {len(data)} bytes exceeds the limit of {limits.max_meta_bytes}")
+    try:
+        meta = json.loads(bytes(data).decode("utf-8"), parse_constant=_reject_constant)
+    except RecursionError:
+        raise FormatError(f"{name}: metadata JSON is nested too deeply") from None
+    except (ValueError, UnicodeDecodeError) as e:
+        raise FormatError(f"{name}: metadata section is not valid JSON ({e})") from None
+    if _depth(meta, limits.max_json_depth) > limits.max_json_depth:
+        raise FormatError(f"{name}: metadata JSON is nested deeper than {limits.max_json_depth} levels")
+    if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME or not isinstance(meta.get("codec"), str):
+        raise FormatError(f"{name}: metadata is not lfcodec metadata")
+    v = meta.get("codec_version", 1)
+    if isinstance(v, bool) or not isinstance(v, int) or v < 0:
+        raise FormatError(f"{name}: metadata codec_version must be a non-negative integer, got {v!r}")
+    return meta
+
+
+def open_lfc(source, *, name: str | None = None, partial: bool = False, limits: Limits = DEFAULT) -> LfcFile:
     """Open an .lfc file (path, bytes or ByteRangeSource) and parse its metadata.
 
     ``partial=True`` accepts a byte prefix of a file (progressive streams): sections past the
@@ -59,12 +99,10 @@ def open_lfc(source, *, name: str | None = None, partial: bool = False) -> LfcFi
     """
     c = Container(source, name=name, partial=partial)
     try:
-        meta = json.loads(bytes(c.read("meta")).decode("utf-8"))
-        if not isinstance(meta, dict) or meta.get("format") != FORMAT_NAME or "codec" not in meta:
-            raise FormatError(f"{c.name}: metadata is not lfcodec metadata")
-    except (ValueError, UnicodeDecodeError) as e:
-        c.close()
-        raise FormatError(f"{c.name}: metadata section is not valid JSON ({e})") from None
+        if c.info("meta").length > limits.max_meta_bytes:
+            raise FormatError(f"{c.name}: metadata section of {c.info('meta').length} bytes exceeds the limit of "
+                              f"{limits.max_meta_bytes}")
+        meta = parse_meta(c.read("meta"), c.name, limits)
     except Exception:
         c.close()
         raise
@@ -74,6 +112,6 @@ def open_lfc(source, *, name: str | None = None, partial: bool = False) -> LfcFi
 def check_codec_version(f: LfcFile, codec: str, supported: int) -> None:
     if f.meta.get("codec") != codec:
         raise UnsupportedError(f"{f.container.name}: codec {f.meta.get('codec')!r} is not {codec!r}")
-    if int(f.meta.get("codec_version", 0)) > supported:
+    if f.meta.get("codec_version", 1) > supported:
         raise UnsupportedError(f"{f.container.name}: {codec} version {f.meta['codec_version']} is newer than "
                                f"this decoder ({supported})")

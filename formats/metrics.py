@@ -1,12 +1,17 @@
 """Quality and rate metrics, one definition everywhere (CLI --json, tests, benchmarks).
 
 - bpp = 8 × file bytes / (views × H × W): bits per pixel of a view, all channels together.
-- PSNR_RGB = 10·log10(peak² / MSE), MSE pooled over all views, pixels and channels;
-  peak = 255 (8-bit), 65535 (16-bit), 1.0 (float).
+- Colour channels: RGB (3 or 4 channels) or the grey channel (1 or 2); alpha is never pooled
+  with colour.
+- PSNR_RGB = 10·log10(peak² / MSE), MSE pooled over all views, pixels and colour channels;
+  peak = 255 (8-bit), 65535 (16-bit), 1.0 (float). Per-view PSNRs use each view's own MSE.
+- PSNR over visible pixels (RGBA / grey+alpha): the same MSE restricted to pixels whose
+  reference alpha is > 0.
+- Alpha: reported apart, as exact (bool) and its own PSNR.
 - PSNR_YCoCg = (6·PSNR_Y + PSNR_Co + PSNR_Cg) / 8 on the YCoCg-R planes, same peak
   (grey input: PSNR_Y).
-- SSIM = scikit-image structural_similarity per view (channel_axis=-1, data_range=peak),
-  averaged over views.
+- SSIM = scikit-image structural_similarity per view on the colour channels
+  (channel_axis=-1, data_range=peak), averaged over views.
 """
 from __future__ import annotations
 
@@ -14,59 +19,111 @@ import math
 
 import numpy as np
 
+from .pixels import peak_of, to_planes
 
-def peak_of(dtype) -> float:
-    return {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(np.dtype(dtype), 1.0)
+__all__ = ["peak_of", "mse", "psnr_rgb", "psnr_views", "psnr_visible", "psnr_alpha", "psnr_ycocg", "ssim", "bpp",
+           "colour_channels", "quality_report", "finite"]
 
 
-def _psnr_from_mse(mse: float, peak: float) -> float:
-    return float("inf") if mse == 0 else 10.0 * math.log10(peak * peak / mse)
+def colour_channels(c: int) -> slice:
+    """The colour channels of a C-channel image: RGB for 3/4, grey for 1/2."""
+    return slice(0, 3) if c >= 3 else slice(0, 1)
+
+
+def _flat(a: np.ndarray) -> np.ndarray:
+    return a.reshape(-1, *a.shape[-3:]) if a.ndim > 3 else a[None]
+
+
+def _psnr_from_mse(m: float, peak: float) -> float:
+    return float("inf") if m == 0 else 10.0 * math.log10(peak * peak / m)
+
+
+def _sq_err_per_view(ref: np.ndarray, dec: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(per-view sum of squared errors, per-view element count), float64, chunked."""
+    r, d = _flat(ref), _flat(dec).reshape(_flat(ref).shape)
+    sse = np.zeros(r.shape[0])
+    cnt = np.zeros(r.shape[0])
+    for i in range(0, r.shape[0], 8):
+        e = r[i:i + 8].astype(np.float64) - d[i:i + 8]
+        e = e * e
+        if mask is not None:
+            m = mask[i:i + 8][..., None]
+            e = e * m
+            cnt[i:i + 8] = m.sum(axis=(1, 2, 3)) * r.shape[-1]
+        else:
+            cnt[i:i + 8] = np.prod(r.shape[1:])
+        sse[i:i + 8] = e.sum(axis=(1, 2, 3))
+    return sse, cnt
 
 
 def mse(ref: np.ndarray, dec: np.ndarray) -> float:
-    """Mean squared error pooled over every element, computed in float64 in chunks."""
-    ref = ref.reshape(-1, *ref.shape[-3:]) if ref.ndim > 3 else ref[None]
-    dec = dec.reshape(ref.shape)
-    tot = 0.0
-    for i in range(0, ref.shape[0], 8):
-        d = ref[i:i + 8].astype(np.float64) - dec[i:i + 8]
-        tot += float((d * d).sum())
-    return tot / ref.size
+    """Mean squared error pooled over every element given (all channels), in float64."""
+    sse, cnt = _sq_err_per_view(ref, dec)
+    return float(sse.sum() / cnt.sum())
 
 
 def psnr_rgb(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
-    """PSNR over all views, pixels and channels (dB; inf when identical)."""
-    return _psnr_from_mse(mse(ref, dec), peak or peak_of(ref.dtype))
+    """PSNR over all views, pixels and colour channels (alpha excluded), dB; inf when identical."""
+    cs = colour_channels(ref.shape[-1])
+    return _psnr_from_mse(mse(ref[..., cs], dec[..., cs]), peak or peak_of(ref.dtype))
+
+
+def psnr_views(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> np.ndarray:
+    """(N,) PSNR of each view over its colour channels (inf where a view is exact)."""
+    cs = colour_channels(ref.shape[-1])
+    sse, cnt = _sq_err_per_view(ref[..., cs], dec[..., cs])
+    peak = peak or peak_of(ref.dtype)
+    return np.array([_psnr_from_mse(s / n, peak) for s, n in zip(sse, cnt)])
+
+
+def psnr_visible(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float | None:
+    """Colour PSNR over pixels whose reference alpha is > 0 (None without alpha or visible pixels)."""
+    c = ref.shape[-1]
+    if c not in (2, 4):
+        return None
+    cs = colour_channels(c)
+    mask = _flat(ref)[..., -1] > 0
+    if not mask.any():
+        return None
+    sse, cnt = _sq_err_per_view(ref[..., cs], dec[..., cs], mask)
+    return _psnr_from_mse(float(sse.sum() / cnt.sum()), peak or peak_of(ref.dtype))
+
+
+def psnr_alpha(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float | None:
+    """PSNR of the alpha channel alone (None without alpha; inf when exact)."""
+    if ref.shape[-1] not in (2, 4):
+        return None
+    return _psnr_from_mse(mse(ref[..., -1:], dec[..., -1:]), peak or peak_of(ref.dtype))
 
 
 def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
     """The RLFC paper's weighted PSNR (6·Y + Co + Cg)/8 on YCoCg-R planes (grey: Y only)."""
-    from rlfc.color import to_planes
-
     peak = peak or peak_of(ref.dtype)
-    c = ref.shape[-1]
-    if c in (1, 2):
+    if ref.shape[-1] in (1, 2):
         return psnr_rgb(ref[..., :1], dec[..., :1], peak)
     sums = np.zeros(3)
-    flat_r = ref.reshape(-1, *ref.shape[-3:])
-    flat_d = dec.reshape(flat_r.shape)
+    flat_r = _flat(ref)
+    flat_d = _flat(dec).reshape(flat_r.shape)
     for i in range(0, flat_r.shape[0], 8):
         d = (to_planes(flat_r[i:i + 8, ..., :3]) - to_planes(flat_d[i:i + 8, ..., :3])).astype(np.float64)
         sums += (d * d).reshape(-1, 3).sum(0)
     n = flat_r[..., 0].size
     ps = [_psnr_from_mse(s / n, peak) for s in sums]
     if any(math.isinf(p) for p in ps):
-        return float("inf") if all(math.isinf(p) for p in ps) else (6 * min(ps[0], 200) + min(ps[1], 200) + min(ps[2], 200)) / 8
+        if all(math.isinf(p) for p in ps):
+            return float("inf")
+        return (6 * min(ps[0], 200) + min(ps[1], 200) + min(ps[2], 200)) / 8
     return (6 * ps[0] + ps[1] + ps[2]) / 8
 
 
 def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
-    """Mean SSIM over views (scikit-image, channel_axis=-1, data_range=peak)."""
+    """Mean SSIM over views of the colour channels (scikit-image, channel_axis=-1, data_range=peak)."""
     from skimage.metrics import structural_similarity
 
     peak = peak or peak_of(ref.dtype)
-    r = ref.reshape(-1, *ref.shape[-3:])
-    d = dec.reshape(r.shape)
+    cs = colour_channels(ref.shape[-1])
+    r = _flat(ref)[..., cs]
+    d = _flat(dec).reshape(_flat(ref).shape)[..., cs]
     vals = [structural_similarity(a, b, channel_axis=-1, data_range=peak) if min(a.shape[:2]) >= 7 else
             float(np.all(a == b)) for a, b in zip(r, d)]
     return float(np.mean(vals))
@@ -75,3 +132,36 @@ def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
 def bpp(nbytes: int, n_views: int, height: int, width: int) -> float:
     """Bits per pixel of a view: 8 × bytes / (views × H × W)."""
     return 8.0 * nbytes / (n_views * height * width)
+
+
+def finite(x):
+    """A float for strict JSON: inf/NaN become None (callers report exactness apart)."""
+    if isinstance(x, float) and (math.isinf(x) or math.isnan(x)):
+        return None
+    return x
+
+
+def quality_report(ref: np.ndarray, dec: np.ndarray, *, with_ssim: bool = True) -> dict:
+    """Every quality figure of a decode, JSON-able (inf → None, exactness as booleans).
+
+    Args:
+        ref, dec: (..., H, W, C) original and decoded views, same dtype.
+    """
+    cs = colour_channels(ref.shape[-1])
+    per_view = psnr_views(ref, dec)
+    out = {
+        "psnr_rgb": finite(psnr_rgb(ref, dec)),
+        "psnr_ycocg": finite(psnr_ycocg(ref, dec)),
+        "psnr_view_min": finite(float(per_view.min())),
+        "psnr_view_mean": finite(float(np.mean(per_view[np.isfinite(per_view)]))) if np.isfinite(per_view).any()
+        else None,
+        "views_exact": int(np.isinf(per_view).sum()),
+        "exact": bool(np.array_equal(ref[..., cs], dec[..., cs])),
+    }
+    if ref.shape[-1] in (2, 4):
+        out["psnr_visible"] = finite(psnr_visible(ref, dec))
+        out["alpha_exact"] = bool(np.array_equal(ref[..., -1], dec[..., -1]))
+        out["psnr_alpha"] = finite(psnr_alpha(ref, dec))
+    if with_ssim:
+        out["ssim"] = ssim(ref, dec)
+    return out

@@ -1,10 +1,14 @@
-"""LFN ↔ .lfc: config + sections for the container (the codec never opens files)."""
+"""LFN as an lfcodec codec plug-in (entry point ``lfn`` in the ``lfcodec.codecs`` group):
+config + sections for the container (the codec never opens files)."""
 from __future__ import annotations
+
+from formats.codec_api import Codec, EncodeOptions, Encoded
+from formats.errors import ParameterError
 
 from .config import LfnConfig
 from .model import NestedLFN, OccupancyNet
 from .pack import pack_network, step_bytes
-from .render import CODEC_ID, CODEC_VERSION
+from .render import CODEC_ID, CODEC_VERSION, LfnRenderer
 
 
 def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: str = "fp16"):
@@ -13,8 +17,78 @@ def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: s
     sections = pack_network(model, occ, dtype)
     config = {"network": cfg.to_dict(), "norm": info["norm"], "weights": dtype, "train": {
         k: info[k] for k in ("train_views", "test_views", "steps", "train_s") if k in info},
-        "step_bytes": [step_bytes(cfg, j, dtype) for j in (cfg.min_width, cfg.max_width - 1)]}
+        "step_bytes": [step_bytes(cfg, j, dtype) for j in (cfg.min_neurons, cfg.max_neurons - 1)]}
     return config, sections
 
 
-__all__ = ["to_sections", "CODEC_ID", "CODEC_VERSION"]
+NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
+TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s")
+OPTIONS = {"depth": int, "min_neurons": int, "max_neurons": int, "occupancy_neurons": int, "steps": int,
+           "batch": int, "lr": float, "holdout": int, "device": str, "checkpoint": str, "weights": str,
+           "resolution": int}
+
+
+class LfnCodec(Codec):
+    codec_id = CODEC_ID
+    version = CODEC_VERSION
+    description = "light field network with continuous levels of detail, streamed by network size"
+
+    def encode(self, lf, options: EncodeOptions, progress=None) -> Encoded:
+        from .train import TrainOptions, train
+
+        if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
+            raise ParameterError("light field networks take no --target-psnr/--target-bpp/--lossless "
+                                 "(train longer or larger instead)")
+        from formats.transform import resize_lightfield
+
+        p = dict(options.params)
+        weights = p.pop("weights", "fp16")
+        resolution = p.pop("resolution", 128)
+        if resolution:   # train at reduced resolution; the file keeps the scene's geometry (renders full size)
+            if resolution < 8:
+                raise ParameterError(f"--resolution must be 0 (full) or >= 8 pixels, got {resolution}")
+            lf = resize_lightfield(lf, resolution)
+        if weights not in ("fp16", "fp32"):
+            raise ParameterError(f"weights must be fp16 or fp32, got {weights!r}")
+        unknown = set(p) - set(NET_KEYS) - set(TRAIN_KEYS)
+        if unknown:
+            raise ParameterError(f"unknown LFN option(s): {', '.join(sorted(unknown))}")
+        cfg = LfnConfig(**{k: p[k] for k in NET_KEYS if k in p})
+        opts = TrainOptions(**{k: p[k] for k in TRAIN_KEYS if k in p})
+
+        def prog(step, loss):
+            if progress:
+                progress("train", step + 1, opts.steps)
+
+        model, occ, info = train(lf, cfg, opts, progress=prog)
+        config, sections = to_sections(model, occ, info, weights)
+        return Encoded(config, sections, None, [], [], None,
+                       summary={"steps": info["steps"], "train_s": round(info["train_s"], 1),
+                                "params": model.n_params(), "final_loss": opts.history[-1][1] if opts.history else None})
+
+    def open(self, f, **kw) -> LfnRenderer:
+        return LfnRenderer(f, **kw)
+
+    def add_arguments(self, g) -> None:
+        g.add_argument("--depth", type=int, default=None, help="lfn: hidden layers (default 6)")
+        g.add_argument("--min-neurons", type=int, default=None, help="lfn: neurons per layer of the base network "
+                                                                       "(default 16)")
+        g.add_argument("--max-neurons", type=int, default=None, help="lfn: neurons per layer of the full network "
+                                                                       "(default 128)")
+        g.add_argument("--occupancy-neurons", type=int, default=None,
+                       help="lfn: occupancy net size, used when the scene has alpha (default 32; 0 = none)")
+        g.add_argument("--steps", type=int, default=None, help="lfn: optimizer steps (default 2000)")
+        g.add_argument("--batch", type=int, default=None, help="lfn: rays per step (default 4096)")
+        g.add_argument("--lr", type=float, default=None, help="lfn: Adam learning rate (default 0.003)")
+        g.add_argument("--resolution", type=int, default=None,
+                       help="lfn: train at this many pixels on the long side (default 128; 0 = full)")
+        g.add_argument("--holdout", type=int, default=None, help="lfn: hold out every k-th view (default 4; 0 = none)")
+        g.add_argument("--device", default=None, help="lfn: cpu or cuda (default cpu)")
+        g.add_argument("--weights", default=None, choices=["fp16", "fp32"], help="lfn: stored weight precision")
+        g.add_argument("--checkpoint", default=None, help="lfn: checkpoint .npz (saved periodically; resumed from)")
+
+    def params_from_args(self, a) -> dict:
+        return {k: getattr(a, k) for k in OPTIONS if getattr(a, k, None) is not None}
+
+
+__all__ = ["to_sections", "LfnCodec", "CODEC_ID", "CODEC_VERSION"]

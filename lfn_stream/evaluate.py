@@ -21,11 +21,6 @@ from .sat import area_downsample
 from .train import targets_of
 
 
-def _psnr(a: np.ndarray, b: np.ndarray) -> float:
-    mse = float(np.mean((a.astype(np.float64) - b) ** 2))
-    return float("inf") if mse == 0 else 10 * math.log10(1.0 / mse)
-
-
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:
     """SSIM of two (h, w, c) images in [0, 1]; NaN where the image is smaller than SSIM's 7-px
     window (tiny low levels), which the caller reports as None."""
@@ -39,7 +34,7 @@ def _ssim(a: np.ndarray, b: np.ndarray) -> float:
 def prefix_bytes(r: LfnRenderer, level: float) -> int:
     """Bytes of the file prefix holding everything a level needs (meta, base, occupancy, steps)."""
     c = r.file.container
-    n = int(math.ceil(level - 1e-9)) - r.cfg.min_width
+    n = int(math.ceil(level - 1e-9)) - r.cfg.min_neurons
     names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else []) + [step_name(j) for j in range(n)]
     return max(c.info(nm).offset + c.info(nm).length for nm in names)
 
@@ -71,7 +66,7 @@ def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, ba
                 near = train_views[int(np.argmin(np.linalg.norm(pos[train_views] - pos[v], axis=1)))]
                 base_near.append(np.mean((area_downsample(tg[near], scale)[..., :nch] - ref) ** 2))
                 base_mean.append(np.mean((mean_img - ref) ** 2))
-        row = {"level": level, "width": level, "scale": scale, "bytes": prefix_bytes(r, level),
+        row = {"level": level, "neurons": level, "scale": scale, "bytes": prefix_bytes(r, level),
                "psnr": 10 * math.log10(1 / float(np.mean(ps))),
                "ssim": None if np.isnan(ss).all() else float(np.nanmean(ss)),
                "ms_per_256sq": 1e3 * ts / npx * 65536}

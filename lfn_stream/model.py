@@ -16,10 +16,10 @@ from torch import nn
 from .config import LfnConfig
 
 
-def _mask(width: float, device, dtype) -> tuple[int, torch.Tensor]:
-    """Active neuron count and per-neuron weights [1, …, 1, α] for a fractional width."""
-    w = int(math.floor(width + 1e-9))
-    a = float(width - w)
+def _mask(neurons: float, device, dtype) -> tuple[int, torch.Tensor]:
+    """Active neuron count and per-neuron weights [1, …, 1, α] for a fractional neuron count."""
+    w = int(math.floor(neurons + 1e-9))
+    a = float(neurons - w)
     if a > 1e-6:
         m = torch.ones(w + 1, device=device, dtype=dtype)
         m[-1] = a
@@ -28,12 +28,12 @@ def _mask(width: float, device, dtype) -> tuple[int, torch.Tensor]:
 
 
 class NestedLFN(nn.Module):
-    """Plücker ray (N, 6) → RGBA (N, 4) in [0, 1], at any width in [min_width, max_width]."""
+    """Plücker ray (N, 6) → RGBA (N, 4) in [0, 1], at any width in [min_neurons, max_neurons]."""
 
     def __init__(self, cfg: LfnConfig):
         super().__init__()
         self.cfg = cfg
-        W, D = cfg.max_width, cfg.depth
+        W, D = cfg.max_neurons, cfg.depth
         dims_in = [cfg.in_features] + [W] * (D - 1)
         self.weights = nn.ParameterList([nn.Parameter(torch.empty(W, d)) for d in dims_in])     # (W, in)
         self.biases = nn.ParameterList([nn.Parameter(torch.zeros(W)) for _ in range(D)])
@@ -45,12 +45,12 @@ class NestedLFN(nn.Module):
             nn.init.kaiming_uniform_(w, a=math.sqrt(5))
         nn.init.uniform_(self.out_w, -1 / math.sqrt(W), 1 / math.sqrt(W))
 
-    def forward(self, x: torch.Tensor, width: float | None = None) -> torch.Tensor:
-        """x: (N, 6) Plücker rays; width: fractional level (default: full). Returns (N, 4)."""
-        width = float(self.cfg.max_width if width is None else width)
-        if not self.cfg.min_width - 1e-9 <= width <= self.cfg.max_width + 1e-9:
-            raise ValueError(f"width {width} outside [{self.cfg.min_width}, {self.cfg.max_width}]")
-        n, m = _mask(min(width, self.cfg.max_width), x.device, x.dtype)
+    def forward(self, x: torch.Tensor, neurons: float | None = None) -> torch.Tensor:
+        """x: (N, 6) Plücker rays; neurons: fractional network size (default: full). Returns (N, 4)."""
+        neurons = float(self.cfg.max_neurons if neurons is None else neurons)
+        if not self.cfg.min_neurons - 1e-9 <= neurons <= self.cfg.max_neurons + 1e-9:
+            raise ValueError(f"{neurons} neurons outside [{self.cfg.min_neurons}, {self.cfg.max_neurons}]")
+        n, m = _mask(min(neurons, self.cfg.max_neurons), x.device, x.dtype)
         msum = m.sum()
         h = x
         for i in range(self.cfg.depth):
@@ -62,9 +62,9 @@ class NestedLFN(nn.Module):
             h = torch.relu(z) * m                                                               # (N, n)
         return torch.sigmoid(h @ self.out_w[:, :n].T + self.out_b)                              # (N, 4)
 
-    def n_params(self, width: int | None = None) -> int:
-        """Parameters used at an integer width."""
-        w = width or self.cfg.max_width
+    def n_params(self, neurons: int | None = None) -> int:
+        """Parameters used at an integer neuron count."""
+        w = neurons or self.cfg.max_neurons
         c = self.cfg
         first = w * c.in_features + 3 * w
         hidden = (c.depth - 1) * (w * w + 3 * w)
@@ -74,10 +74,10 @@ class NestedLFN(nn.Module):
 class OccupancyNet(nn.Module):
     """Tiny MLP: Plücker ray (N, 6) → logit that the ray hits the object (alpha > 0)."""
 
-    def __init__(self, width: int = 32, in_features: int = 6):
+    def __init__(self, neurons: int = 32, in_features: int = 6):
         super().__init__()
-        self.net = nn.Sequential(nn.Linear(in_features, width), nn.ReLU(), nn.Linear(width, width), nn.ReLU(),
-                                 nn.Linear(width, 1))
+        self.net = nn.Sequential(nn.Linear(in_features, neurons), nn.ReLU(), nn.Linear(neurons, neurons), nn.ReLU(),
+                                 nn.Linear(neurons, 1))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x)[:, 0]

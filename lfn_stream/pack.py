@@ -2,7 +2,7 @@
 
 Sections (in file order, so any prefix that ends on a section boundary is a complete network):
 
-- ``lfn.base``: the network at min_width m, little-endian floats (fp16 by default), in order:
+- ``lfn.base``: the network at min_neurons m, little-endian floats (fp16 by default), in order:
   for each hidden layer i: W_i[:m, :k_i] (row-major; k_0 = 6, else m), b_i[:m], γ_i[:m], β_i[:m];
   then W_out[:, :m], b_out.
 - ``lfn.occ``: the occupancy net (if any): its Linear weights and biases in order.
@@ -34,7 +34,7 @@ def _np(p) -> np.ndarray:
 def pack_network(model: NestedLFN, occ: OccupancyNet | None, dtype: str = "fp16") -> list[tuple[str, bytes]]:
     """(name, bytes) sections of a trained network."""
     cfg, dt = model.cfg, DTYPES[dtype]
-    m = cfg.min_width
+    m = cfg.min_neurons
     W = [_np(w) for w in model.weights]
     b, g, be = [_np(x) for x in model.biases], [_np(x) for x in model.gammas], [_np(x) for x in model.betas]
     ow, ob = _np(model.out_w), _np(model.out_b)
@@ -46,7 +46,7 @@ def pack_network(model: NestedLFN, occ: OccupancyNet | None, dtype: str = "fp16"
     out = [("lfn.base", np.concatenate(base).astype(dt).tobytes())]
     if occ is not None:
         out.append(("lfn.occ", np.concatenate([_np(p).ravel() for p in occ.parameters()]).astype(dt).tobytes()))
-    for j in range(m, cfg.max_width):
+    for j in range(m, cfg.max_neurons):
         parts = [W[0][j, :cfg.in_features], b[0][j:j + 1], g[0][j:j + 1], be[0][j:j + 1]]
         for i in range(1, cfg.depth):
             parts += [W[i][j, :j + 1], W[i][:j, j], b[i][j:j + 1], g[i][j:j + 1], be[i][j:j + 1]]
@@ -63,12 +63,12 @@ def step_bytes(cfg: LfnConfig, j: int, dtype: str = "fp16") -> int:
 
 def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes | None = None,
                    dtype: str = "fp16") -> tuple[NestedLFN, OccupancyNet | None]:
-    """Rebuild the network of width min_width + len(steps) (a smaller cfg) from sections."""
+    """Rebuild the network of width min_neurons + len(steps) (a smaller cfg) from sections."""
     dt = DTYPES[dtype]
-    width = cfg.min_width + len(steps)
-    sub = LfnConfig(**{**cfg.to_dict(), "max_width": width})
+    width = cfg.min_neurons + len(steps)
+    sub = LfnConfig(**{**cfg.to_dict(), "max_neurons": width})
     model = NestedLFN(sub)
-    m = cfg.min_width
+    m = cfg.min_neurons
     vals = np.frombuffer(base, dtype=dt).astype(np.float64)
     pos = 0
 
@@ -112,8 +112,8 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
         model.out_w.copy_(torch.from_numpy(ow).float())
         model.out_b.copy_(torch.from_numpy(ob).float())
     occ_net = None
-    if occ is not None and cfg.occupancy_width:
-        occ_net = OccupancyNet(cfg.occupancy_width, cfg.in_features)
+    if occ is not None and cfg.occupancy_neurons:
+        occ_net = OccupancyNet(cfg.occupancy_neurons, cfg.in_features)
         vals = np.frombuffer(occ, dtype=dt).astype(np.float64)
         pos = 0
         with torch.no_grad():

@@ -1,11 +1,14 @@
-"""Rendering from an LFN stream (or any prefix of it): a view at a fractional level, or with a
-per-pixel level map (foveation, dithered transitions), in batches; fp32 on CPU, fp16 on GPU.
+"""Rendering from an LFN stream (or any prefix of it): a view at a fractional network size, or
+with a per-pixel size map (foveation, dithered transitions), in batches; fp32 on CPU, fp16 on
+GPU. :class:`LfnRenderer` is also the codec's :class:`~formats.codec_api.Decoder`: level 0 is
+the full network, level L the network with L fewer (fractional) neurons per layer.
 """
 from __future__ import annotations
 
 import numpy as np
 import torch
 
+from formats.codec_api import Decoder
 from formats.errors import FormatError, ParameterError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
 from formats.lightfield import LightField
@@ -15,50 +18,54 @@ from .pack import step_name, unpack_network
 from .rays import view_rays
 
 CODEC_ID = "lfn"
-CODEC_VERSION = 1
+CODEC_VERSION = 2          # 2: network sizes named *_neurons on the wire (1: *_width)
 
-# 4×4 ordered-dither (Bayer) thresholds in (0, 1): a pixel takes the upper level where its
-# fractional part exceeds the threshold, so two levels mix without a visible seam.
+# 4×4 ordered-dither (Bayer) thresholds in (0, 1): a pixel takes the upper size where its
+# fractional part exceeds the threshold, so two sizes mix without a visible seam.
 BAYER4 = (np.array([[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]]) + 0.5) / 16
 
 
-class LfnRenderer:
+class LfnRenderer(Decoder):
     """Renderer over an opened .lfc file holding an LFN stream (possibly a prefix of it).
 
     Attributes:
-        cfg: the full network's config; width: the widest network the available bytes give.
-        rows, cols, height, width_px, channels, dtype: the light field's geometry.
+        cfg: the full network's config; neurons: the largest network the available bytes give.
+        rows, cols, height, width, channels, dtype: the light field's geometry (pixels).
+        levels: the coarsest level (neurons − min_neurons; levels are fractional).
     """
 
-    def __init__(self, f: LfcFile, device: str | None = None, max_width: float | None = None):
+    def __init__(self, f: LfcFile, device: str | None = None, max_neurons: float | None = None, *, limits=None):
         check_codec_version(f, CODEC_ID, CODEC_VERSION)
         self.file = f
         c = f.container
         try:
             conf = f.meta["config"]
-            self.cfg = LfnConfig(**conf["network"])
+            self.cfg = LfnConfig.from_dict(conf["network"], int(f.meta.get("codec_version", 1)))
             self.norm = conf["norm"]
             self.dtype_w = conf.get("weights", "fp16")
             scene = f.meta["scene"]
-        except (KeyError, TypeError) as e:
-            raise FormatError(f"{c.name}: lfn metadata is incomplete ({e})") from None
+            if self.dtype_w not in ("fp16", "fp32"):
+                raise ValueError(f"weights {self.dtype_w!r}")
+        except (KeyError, TypeError, ValueError) as e:
+            raise FormatError(f"{c.name}: lfn metadata is incomplete or invalid ({e})") from None
         if not c.available("lfn.base"):
             raise FormatError(f"{c.name}: the stream prefix does not hold the base network")
         shape = (scene["rows"], scene["cols"], scene["height"], scene["width"], 1)
         # geometry only: a zero-stride placeholder of the views' shape (no pixel memory)
         self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene)
         self.rows, self.cols = scene["rows"], scene["cols"]
-        self.height, self.width_px, self.channels = scene["height"], scene["width"], scene["channels"]
+        self.height, self.width, self.channels = scene["height"], scene["width"], scene["channels"]
         self.dtype = np.dtype(scene["dtype"])
         steps = []
-        limit = self.cfg.max_width if max_width is None else int(np.ceil(max_width))
-        for j in range(self.cfg.max_width - self.cfg.min_width):
-            if self.cfg.min_width + j >= limit or not c.available(step_name(j)):
+        limit = self.cfg.max_neurons if max_neurons is None else int(np.ceil(max_neurons))
+        for j in range(self.cfg.max_neurons - self.cfg.min_neurons):
+            if self.cfg.min_neurons + j >= limit or not c.available(step_name(j)):
                 break
             steps.append(bytes(c.read(step_name(j))))
         occ = bytes(c.read("lfn.occ")) if c.available("lfn.occ") else None
         self.model, self.occ = unpack_network(self.cfg, bytes(c.read("lfn.base")), steps, occ, self.dtype_w)
-        self.width = self.model.cfg.max_width
+        self.neurons = self.model.cfg.max_neurons
+        self.levels = float(self.neurons - self.cfg.min_neurons)
         self.rays_evaluated = 0   # network evaluations so far (rays the occupancy net let through)
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.half = self.device.type == "cuda"
@@ -71,20 +78,28 @@ class LfnRenderer:
                 self.occ.half()
 
     @property
-    def levels(self) -> tuple[float, float]:
-        return float(self.cfg.min_width), float(self.width)
+    def neuron_range(self) -> tuple[float, float]:
+        return float(self.cfg.min_neurons), float(self.neurons)
 
-    def _check(self, level: float) -> float:
-        lo, hi = self.levels
-        if not lo <= level <= hi:
-            raise ParameterError(f"level {level} outside the available range [{lo:g}, {hi:g}] (widths)")
-        return float(level)
+    def neurons_at(self, level: float) -> float:
+        """Neurons of a level (0 = the largest available network)."""
+        if isinstance(level, bool) or not isinstance(level, (int, float, np.integer, np.floating)) \
+                or not 0 <= level <= self.levels:
+            raise ParameterError(f"level must be within 0..{self.levels:g} (0 = the full network, {self.levels:g} = "
+                                 f"the base network), got {level!r}")
+        return float(self.neurons - level)
+
+    def _check(self, neurons: float) -> float:
+        lo, hi = self.neuron_range
+        if not lo <= neurons <= hi:
+            raise ParameterError(f"{neurons} neurons outside the available range [{lo:g}, {hi:g}]")
+        return float(neurons)
 
     @torch.no_grad()
-    def render_rays(self, rays: np.ndarray, level: float, batch: int = 65536, use_occupancy: bool = True) -> np.ndarray:
+    def render_rays(self, rays: np.ndarray, neurons: float, batch: int = 65536, use_occupancy: bool = True) -> np.ndarray:
         """(N, 6) Plücker rays → (N, 4) RGBA in [0, 1] (premultiplied), skipping empty rays
         (those the occupancy net rejects, when the stream has one and ``use_occupancy``)."""
-        level = self._check(level)
+        neurons = self._check(neurons)
         out = np.zeros((rays.shape[0], 4), np.float32)
         dt = torch.float16 if self.half else torch.float32
         for a in range(0, rays.shape[0], batch):
@@ -94,10 +109,10 @@ class LfnRenderer:
                 idx = torch.nonzero(hit)[:, 0]        # the occupancy net really skips rays
                 self.rays_evaluated += int(idx.numel())
                 if idx.numel():
-                    out[a + idx.cpu().numpy()] = self.model(x[idx], level).float().cpu().numpy()
+                    out[a + idx.cpu().numpy()] = self.model(x[idx], neurons).float().cpu().numpy()
             else:
                 self.rays_evaluated += x.shape[0]
-                out[a:a + batch] = self.model(x, level).float().cpu().numpy()
+                out[a:a + batch] = self.model(x, neurons).float().cpu().numpy()
         return out
 
     def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
@@ -105,42 +120,43 @@ class LfnRenderer:
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"])
 
-    def render(self, row: int, col: int, level: float | None = None, scale: float | None = None) -> np.ndarray:
-        """One view at a fractional level; scale defaults to the level's own (1/8 … 1).
+    def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
+        """One view with a (fractional) network size; scale defaults to the size's own (1/8 … 1).
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
-        level = self.width if level is None else level
-        scale = self.cfg.scale_of(level) if scale is None else scale
+        neurons = self.neurons if neurons is None else neurons
+        scale = self.cfg.scale_of(neurons) if scale is None else scale
         rays = self.view_rays(row, col, scale)
         h, w = rays.shape[:2]
-        return self.render_rays(rays.reshape(-1, 6), level).reshape(h, w, 4)
+        return self.render_rays(rays.reshape(-1, 6), neurons).reshape(h, w, 4)
 
     def render_lod_map(self, row: int, col: int, lod: np.ndarray, quantum: float = 1 / 8) -> np.ndarray:
-        """A full-size view where pixel (y, x) is rendered at level ``lod[y, x]``.
+        """A full-size view where pixel (y, x) is rendered with ``lod[y, x]`` neurons.
 
-        Levels are rounded to ``quantum`` and each distinct level runs once on its pixels.
+        Sizes are rounded to ``quantum`` and each distinct size runs once on its pixels.
         """
         rays = self.view_rays(row, col, 1.0).reshape(-1, 6)
-        lod = np.clip(np.round(np.asarray(lod, np.float64).reshape(-1) / quantum) * quantum, *self.levels)
+        lod = np.clip(np.round(np.asarray(lod, np.float64).reshape(-1) / quantum) * quantum, *self.neuron_range)
         out = np.zeros((rays.shape[0], 4), np.float32)
         for lv in np.unique(lod):
             sel = np.flatnonzero(lod == lv)
             out[sel] = self.render_rays(rays[sel], float(lv))
-        return out.reshape(self.height, self.width_px, 4)
+        return out.reshape(self.height, self.width, 4)
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
                       dither: bool = True) -> np.ndarray:
-        """Per-pixel levels around a gaze point (x, y in pixels): full width inside ``inner``·diag,
-        falling log-linearly to min width at ``outer``·diag; with ``dither``, the fractional
-        part becomes an ordered-dither choice between the two neighbouring integer levels."""
-        h, w = self.height, self.width_px
+        """Per-pixel network sizes around a gaze point (x, y in pixels): the full network inside
+        ``inner``·diag, falling log-linearly to the base network at ``outer``·diag; with
+        ``dither``, the fractional part becomes an ordered-dither choice between the two
+        neighbouring integer sizes."""
+        h, w = self.height, self.width
         ys, xs = np.mgrid[0:h, 0:w] + 0.5
         diag = float(np.hypot(h, w))
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / diag
         t = np.clip((e - inner) / max(outer - inner, 1e-9), 0, 1)
-        lo, hi = self.levels
+        lo, hi = self.neuron_range
         lod = hi - t * (hi - lo)
         if dither:
             frac = lod - np.floor(lod)
@@ -148,7 +164,7 @@ class LfnRenderer:
             lod = np.floor(lod) + (frac > thr)
         return np.clip(lod, lo, hi)
 
-    # -- the decoder interface the CLI uses ---------------------------------------------------
+    # -- the Decoder interface ---------------------------------------------------------------
     def to_pixels(self, rgba: np.ndarray) -> np.ndarray:
         peak = float(np.iinfo(self.dtype).max)
         a = np.clip(rgba, 0, 1)
@@ -165,13 +181,21 @@ class LfnRenderer:
             px = a[..., :3]
         return np.rint(np.clip(px, 0, 1) * peak).astype(self.dtype)
 
-    def decode_view(self, row: int, col: int, level: float | None = None) -> np.ndarray:
-        """Full-size pixels of one view at a level (default: the widest available)."""
-        level = self.width if level in (None, 0) else level
-        return self.to_pixels(self.render(row, col, level, scale=1.0))
+    def decode_view(self, row: int, col: int, level: float = 0) -> np.ndarray:
+        """Full-size pixels of one view at a level (0 = the largest available network)."""
+        return self.to_pixels(self.render(row, col, self.neurons_at(level), scale=1.0))
 
-    def decode_all(self, level: float | None = None) -> np.ndarray:
+    def decode_all(self, level: float = 0) -> np.ndarray:
         return np.stack([np.stack([self.decode_view(r, c, level) for c in range(self.cols)]) for r in range(self.rows)])
 
     def decode_block(self, *a, **k):
         raise UnsupportedError("block random access is an RLFC feature; an LFN renders rays (use --view)")
+
+    def info(self) -> dict:
+        c = self.cfg
+        return {"codec": CODEC_ID, "levels": self.levels, "network": c.to_dict(), "weights": self.dtype_w,
+                "neurons_available": self.neurons,
+                "summary": f"light field network, depth {c.depth}, {c.min_neurons}..{c.max_neurons} neurons per "
+                           f"layer ({self.neurons} in the available bytes); levels 0..{self.levels:g} (0 = full "
+                           f"network; any prefix ending on a step section is a complete network), "
+                           f"{self.dtype_w} weights"}

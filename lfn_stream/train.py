@@ -2,7 +2,7 @@
 
 Each step trains the full width on full-resolution targets plus one random fractional width
 w whose target is the summed-area-table box filter of the image at w's scale (1/8 at
-min_width … 1 at max_width). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
+min_neurons … 1 at max_neurons). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
 occupancy net learns which rays hit the object (alpha > 0) when the scene has alpha.
 Checkpoints hold raw arrays (``.npz`` without pickle) and training resumes from them.
 """
@@ -124,7 +124,7 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
     centre, radius = normalization(lf, train_v)
     rays = torch.from_numpy(np.stack([view_rays(lf, int(v), 1.0, centre, radius) for v in train_v])).to(dev)
     model = NestedLFN(cfg).to(dev)
-    occ = OccupancyNet(cfg.occupancy_width).to(dev) if (lf.has_alpha and cfg.occupancy_width) else None
+    occ = OccupancyNet(cfg.occupancy_neurons).to(dev) if (lf.has_alpha and cfg.occupancy_neurons) else None
     params = list(model.parameters()) + (list(occ.parameters()) if occ is not None else [])
     opt = torch.optim.Adam(params, lr=opts.lr)
     start = 0
@@ -149,7 +149,7 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
         xr = rays[v, y, x]
         loss = ((model(xr) - tgt) ** 2).mean()
         # one random fractional level against the box-filtered target at its scale
-        wlev = float(rng.uniform(cfg.min_width, cfg.max_width))
+        wlev = float(rng.uniform(cfg.min_neurons, cfg.max_neurons))
         k = max(1, int(round(1.0 / cfg.scale_of(wlev))))
         v2, y2, x2 = tsampler.sample(opts.batch, gen)
         tgt2 = (box_mean_torch(sat_t, v2, y2, x2, k) / peak).float()

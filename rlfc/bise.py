@@ -7,7 +7,8 @@ groups of 3 (7-bit packed quint code). See :mod:`rlfc.bise_tables`.
 
 Everything here is vectorized numpy: the batched forms handle many blocks in one call with no
 Python loop over values or blocks (the grouped forms loop over the at most 21 distinct ranges).
-Decoding gathers unaligned little-endian 32-bit words at each field's byte offset.
+Decoding gathers unaligned little-endian words at each field's byte offset; the decode kernel
+(:func:`decode_words`) is written once for numpy and torch.
 """
 from __future__ import annotations
 
@@ -17,6 +18,7 @@ import numpy as np
 
 from formats.errors import ParameterError, TruncatedError
 
+from .xp import NUMPY
 from .bise_tables import (QUINT_CODE, QUINT_DIGITS, QUINT_LAYOUT, RANGE_INDEX, RANGE_VALUES, RANGES, TRIT_CODE,
                           TRIT_DIGITS, TRIT_LAYOUT)
 
@@ -75,25 +77,64 @@ def decode_at(buf: np.ndarray, starts, n: int, count: int) -> np.ndarray:
     Returns:
         (nb, count) uint8 values.
     """
-    bits, trits, quints = _check_range(n)
+    _check_range(n)
     starts = np.asarray(starts, dtype=np.int64).reshape(-1)
     nb = starts.size
     if nb == 0 or count == 0:
         return np.zeros((nb, count), dtype=np.uint8)
-    total = bit_length(count, n)
-    nbytes = -(-total // 8)
+    nbytes = -(-bit_length(count, n) // 8)
     if starts.min() < 0 or starts.max() + nbytes + SLACK - 1 > buf.size:
         raise TruncatedError(f"BISE buffer of {buf.size} bytes is too short for {nb} blocks of {count} values "
                              f"in range {n} ({nbytes} bytes each + {SLACK} slack) at the given offsets")
-    buf = np.ascontiguousarray(buf, dtype=np.uint8)
-    if trits or quints:
-        return _decode_groups(buf, starts, bits, trits, count, total)
-    # plain range: one unaligned 32-bit gather per value (a field spans <= 8 + 7 bits)
-    m_pos = np.arange(count, dtype=np.int64) * bits
-    w = np.ndarray((buf.size - 3,), dtype="<u4", buffer=buf, strides=(1,))
-    byte = starts[:, None] + (m_pos >> 3)[None, :]                           # (nb, count)
-    m = (w[byte] >> (m_pos & 7).astype(np.uint32)[None, :]) & np.uint32((1 << bits) - 1)
-    return m.astype(np.uint8)
+    return decode_words(NUMPY, np.ascontiguousarray(buf, dtype=np.uint8), starts, n, count)
+
+
+def decode_words(xp, buf, starts, n: int, count: int):
+    """The BISE decode kernel, for numpy or torch (``xp`` from :mod:`rlfc.xp`).
+
+    Bounds are the caller's job (``buf`` needs :data:`SLACK` bytes after the last block).
+
+    Args:
+        buf: 1-D uint8 array/tensor; starts: (nb,) int64 byte offsets; n: ASTC range.
+
+    Returns:
+        (nb, count) values (uint8 on numpy; integer tensors on torch).
+    """
+    bits, trits, quints = _check_range(n)
+    if not (trits or quints):
+        # plain range: one unaligned 16-bit gather per value (a field spans <= 8 + 7 bits)
+        pos = np.arange(count, dtype=np.int64) * bits
+        w = xp.word(buf, starts[:, None] + xp.asarray(pos >> 3)[None, :], 2)
+        return xp.cast((w >> xp.cast(xp.asarray(pos & 7), w.dtype)[None, :]) & ((1 << bits) - 1), xp.uint8)
+    gpos, gmask, fields, group = _group_layout(bits, trits, count, bit_length(count, n))
+    gsize = 5 * bits + 8 if trits else 3 * bits + 7
+    # trit/quint groups: one unaligned gather of <= 7 bytes per group (a group spans <= 45 bits)
+    word = xp.word(buf, starts[:, None] + xp.asarray(gpos >> 3)[None, :], 7)
+    word = xp.narrow((word >> xp.cast(xp.asarray(gpos & 7), word.dtype)[None, :]) &
+                     xp.cast(xp.asarray(gmask), word.dtype)[None, :], gsize)
+    code = None
+    ms = [None] * group
+    for kind, slot, off, width in fields:   # fixed ~10 bit fields of the group layout, all blocks at once
+        val = (word >> off) & ((1 << width) - 1)
+        if kind == "m":
+            ms[slot] = xp.cast(val, xp.uint8)
+        else:
+            code = val << slot if code is None else code | (val << slot)
+    digits = xp.take_rows(_digit_table(xp, trits), code)                       # (nb, G, group) uint8
+    if bits:
+        digits = (digits << bits) | xp.stack(ms, -1)
+    return digits.reshape(starts.shape[0], -1)[:, :count]
+
+
+def _digit_table(xp, trits: bool):
+    """TRIT_DIGITS / QUINT_DIGITS (uint8) in the backend, cached per backend and device."""
+    key = (xp.name, str(getattr(xp, "device", "")), trits)
+    if key not in _DIGITS:
+        _DIGITS[key] = xp.asarray(TRIT_DIGITS if trits else QUINT_DIGITS)
+    return _DIGITS[key]
+
+
+_DIGITS: dict = {}
 
 
 @lru_cache(maxsize=512)
@@ -110,32 +151,6 @@ def _group_layout(bits: int, trits: int, count: int, total: int):
         fields.append((f[0], f[1], pos, width))
         pos += width
     return gpos, gmask, tuple(fields), group
-
-
-def _decode_groups(buf, starts, bits: int, trits: int, count: int, total: int) -> np.ndarray:
-    """Trit/quint blocks: one unaligned 64-bit gather per group (a group spans <= 45 bits)."""
-    gpos, gmask, fields, group = _group_layout(bits, trits, count, total)
-    w64 = np.ndarray((buf.size - 7,), dtype="<u8", buffer=np.ascontiguousarray(buf, dtype=np.uint8), strides=(1,))
-    word = w64[starts[:, None] + (gpos >> 3)[None, :]]                       # (nb, G) uint64
-    word = (word >> (gpos & 7).astype(np.uint64)[None, :]) & gmask[None, :]
-    word32 = word.astype(np.uint32) if (5 * bits + 8 if trits else 3 * bits + 7) <= 32 else None
-    src = word32 if word32 is not None else word
-    typ = src.dtype.type
-    code = np.zeros(word.shape, dtype=src.dtype)
-    ms = [None] * group
-    for kind, slot, off, width in fields:   # fixed ~10 bit fields of the group layout, all blocks at once
-        val = (src >> typ(off)) & typ((1 << width) - 1)
-        if kind == "m":
-            ms[slot] = val
-        else:
-            code |= val << typ(slot)
-    digits = np.take(TRIT_DIGITS if trits else QUINT_DIGITS, code, axis=0)    # (nb, G, group) uint8
-    if bits:
-        digits <<= np.uint8(bits)
-        for k in range(group):
-            digits[:, :, k] |= ms[k].astype(np.uint8)
-    out = digits.reshape(starts.size, -1)
-    return out if out.shape[1] == count else out[:, :count]
 
 
 def _as_values(values, n: int) -> np.ndarray:

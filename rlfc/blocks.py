@@ -28,10 +28,9 @@ from formats.errors import ChecksumError, FormatError
 
 from . import bise
 from .bise_tables import RANGE_VALUES
+from .kernels import MODE_CONST, MODE_PLAIN, MODE_RAW, plain_values
+from .xp import NUMPY
 
-MODE_CONST = 21
-MODE_PLAIN = 32
-MODE_RAW = 255
 PAD = 8
 _RANGES = np.asarray(RANGE_VALUES, dtype=np.int64)
 _POPCOUNT = np.array([bin(i).count("1") for i in range(256)], dtype=np.int64)
@@ -90,14 +89,6 @@ def pack_plain(values: np.ndarray, k: int) -> np.ndarray:
     out = np.zeros((nb, nbytes * 8), dtype=np.uint8)
     out[:, :count * k] = bits.reshape(nb, count * k)
     return np.packbits(out, axis=1, bitorder="little")
-
-
-def unpack_plain_at(buf: np.ndarray, starts: np.ndarray, k: int, count: int) -> np.ndarray:
-    """Inverse of :func:`pack_plain` for blocks at byte offsets of ``buf`` (>= 8 bytes slack)."""
-    pos = np.arange(count, dtype=np.int64) * k
-    w = np.ndarray((buf.size - 7,), dtype="<u8", buffer=buf, strides=(1,))
-    word = w[starts[:, None] + (pos >> 3)[None, :]]
-    return ((word >> (pos & 7).astype(np.uint64)[None, :]) & np.uint64((1 << k) - 1)).astype(np.int64)
 
 
 def _le_bytes(x: np.ndarray, nbytes: int) -> np.ndarray:
@@ -220,46 +211,12 @@ class BlockStore:
         if len(self.index) < 2 or (np.diff(self.index) < 0).any() or self.index[-1] + PAD > buf.size:
             raise ChecksumError("rlfc block-offset table is inconsistent with the blocks section")
 
-    def fetch(self, g: np.ndarray, loc: np.ndarray):
-        """Decode the blocks of many (node, location) pairs at once.
-
-        Args:
-            g: (M,) BFS node ids; loc: (M,) location ids.
-
-        Returns:
-            sel (S,) indices of the pairs that have a block; raw (S,) bool; q (S, B·B, P)
-            int32 quantization indices (zero for raw blocks); px (S, B·B, C) int64 raw samples
-            (meaningful where raw).
-        """
+    def raw_samples(self, xp, buf, pay):
+        """Raw blocks' samples: (R,) payload offsets → (R, B·B, C) int64 (uint8 or u16 LE)."""
         n = self.B * self.B
-        buf = self.buf
-        sel, is_raw, pay, modes, mins, pstart = self.locate(g, loc)
-        S = sel.size
-        if S == 0:
-            return sel, np.zeros(0, bool), np.zeros((0, n, self.P), np.int32), np.zeros((0, n, self.C), np.int64)
-        q = np.empty((S, n, self.P), dtype=np.int32)
-        qt = q.transpose(0, 2, 1)                                        # (S, P, n) view
-        for m in np.unique(modes).tolist():                              # <= ~30 distinct modes
-            kk, cc = np.nonzero((modes == m) & ~is_raw[:, None])
-            if kk.size == 0:
-                continue
-            if m == MODE_CONST:
-                qt[kk, cc] = mins[kk, cc][:, None]
-            elif m < MODE_CONST:
-                qt[kk, cc] = bise.decode_at(buf, pstart[kk, cc], RANGE_VALUES[m], n) + mins[kk, cc][:, None]
-            elif MODE_PLAIN < m < MODE_PLAIN + 32:
-                qt[kk, cc] = unpack_plain_at(buf, pstart[kk, cc], m - MODE_PLAIN, n) + mins[kk, cc][:, None]
-            else:
-                raise ChecksumError(f"rlfc block has invalid plane mode {m} (corrupt file)")
-        px = np.zeros((S, n, self.C), dtype=np.int64)
-        rsel = np.flatnonzero(is_raw)
-        if rsel.size:
-            nbytes = n * self.C * self.bps
-            data = buf[pay[rsel][:, None] + np.arange(nbytes)]
-            smp = data.view("<u2").astype(np.int64) if self.bps == 2 else data.astype(np.int64)
-            px[rsel] = smp.reshape(-1, n, self.C)
-            q[rsel] = 0
-        return sel, is_raw, q, px
+        nb = n * self.C * self.bps
+        byte = pay[:, None] + xp.asarray(np.arange(0, nb, self.bps, dtype=np.int64))[None, :]
+        return xp.cast(xp.word(buf, byte, self.bps), xp.int64).reshape(-1, n, self.C)
 
     def locate(self, g: np.ndarray, loc: np.ndarray):
         """Header parsing for many (node, location) pairs (vectorized numpy).
@@ -347,9 +304,9 @@ class BlockStore:
         for m, js in jobs.items():                       # one vectorized decode per distinct mode
             starts = np.fromiter((j[0] for j in js), dtype=np.int64, count=len(js))
             if m < MODE_CONST:
-                vals = bise.decode_at(buf, starts, RANGE_VALUES[m], n)
+                vals = bise.decode_words(NUMPY, buf, starts, RANGE_VALUES[m], n)
             elif MODE_PLAIN < m < MODE_PLAIN + 32:
-                vals = unpack_plain_at(buf, starts, m - MODE_PLAIN, n)
+                vals = plain_values(NUMPY, buf, starts, m - MODE_PLAIN, n)
             else:
                 raise ChecksumError(f"rlfc block has invalid plane mode {m} (corrupt file)")
             for (_, i, c, mn), v in zip(js, vals):

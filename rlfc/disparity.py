@@ -19,6 +19,8 @@ import numpy as np
 from formats.errors import FormatError
 
 from .blocks import inflate_exact
+from .kernels import bilinear
+from .xp import NUMPY
 
 
 def dcp_clusters(rows: int, cols: int, positions: np.ndarray):
@@ -42,55 +44,39 @@ def planar(top: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.moveaxis(top, -1, 0)).reshape(top.shape[-1], -1)
 
 
-def predict_blocks(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,
-                   views: np.ndarray, by: np.ndarray, bx: np.ndarray, B: int, nbx: int,
-                   frac_bits: int = 0, top_planar: np.ndarray | None = None) -> np.ndarray:
-    """Predicted planes of many (view, block) requests.
+def predict_blocks(xp, tp, hw: tuple[int, int], key_of, offsets, disp, views, by, bx, B: int, nbx: int,
+                   frac_bits: int = 0):
+    """Predicted planes of many (view, block) requests (numpy or torch, ``xp`` from rlfc.xp).
+
+    A block's shift is the same for all its pixels, so its sub-pixel phase is one (fy, fx) and
+    its samples come from one (B+1)×(B+1) window: one gather per request window for all planes,
+    then the 2×2 filter with per-block weights (:func:`rlfc.kernels.bilinear`). int32
+    arithmetic is exact (|planes| < 2^18, weights <= 2^8).
 
     Args:
-        top: (n_top, Hp, Wp, P) int32 decoded key-view planes.
+        tp: (P, n_top·Hp·Wp) int32 planar key views (:func:`planar`); hw: (Hp, Wp).
         key_of: (N0,) cluster of each view; offsets: (N0, 2) grid offset (oy, ox) to the key view.
-        disp: (n_top, n_loc) int disparities (1/2^frac_bits pixels per view step).
-        views, by, bx: (M,) requests.
-        top_planar: optional ``planar(top)``, cached by decoders (saves a copy per call).
+        disp: (n_top, n_loc) int64 disparities (1/2^frac_bits pixels per view step).
+        views, by, bx: (M,) int64 requests.
 
     Returns:
         (M, B·B, P) int32.
     """
-    k = key_of[views]
-    d = disp[k, by * nbx + bx]                                           # (M,)
-    ar = np.arange(B) << frac_bits
-    py = ((by * B) << frac_bits)[:, None] + ar + (d * offsets[views, 0])[:, None]     # (M, B)
-    px = ((bx * B) << frac_bits)[:, None] + ar + (d * offsets[views, 1])[:, None]
-    tp = planar(top) if top_planar is None else top_planar
-    out = _sample_many(tp, top.shape[1:3], k, py, px, frac_bits)        # (M, B, B, P)
-    return out.reshape(len(views), B * B, top.shape[3])
-
-
-def _sample_many(tp, hw, k, py, px, frac_bits):
-    """Per-request bilinear gather from planar key views ``tp`` (P, n_top·Hp·Wp):
-    k (M,), py/px (M, B) fixed-point positions → (M, B, B, P) int32.
-
-    A block's shift is the same for all its pixels, so its sub-pixel phase is one (fy, fx) and
-    its samples come from one (B+1)×(B+1) window: one gather per request window for all planes,
-    then the 2×2 filter with per-block weights. int32 arithmetic is exact (|planes| < 2^18,
-    weights <= 2^8).
-    """
     hp, wp = hw
-    base = (k * hp)[:, None, None]
-    if frac_bits == 0:
-        idx = (base + np.clip(py, 0, hp - 1)[:, :, None]) * wp + np.clip(px, 0, wp - 1)[:, None, :]
-        return np.moveaxis(tp.take(idx, axis=1), 0, -1)
-    s = 1 << frac_bits
-    B = py.shape[1]
-    fy = (py[:, :1] & (s - 1)).astype(np.int32)[:, :, None, None]                  # (M, 1, 1, 1)
-    fx = (px[:, :1] & (s - 1)).astype(np.int32)[:, :, None, None]
-    ext = np.arange(B + 1)
-    rows = np.clip((py[:, :1] >> frac_bits) + ext, 0, hp - 1)                        # (M, B+1)
-    cols = np.clip((px[:, :1] >> frac_bits) + ext, 0, wp - 1)
-    win = np.moveaxis(tp.take((base + rows[:, :, None]) * wp + cols[:, None, :], axis=1), 0, -1)  # (M, B+1, B+1, P)
-    h = win[:, :, :B] * (s - fx) + win[:, :, 1:] * fx                                # (M, B+1, B, P)
-    return (h[:, :B] * (s - fy) + h[:, 1:] * fy + np.int32(1 << (2 * frac_bits - 1))) >> (2 * frac_bits)
+    F = frac_bits
+    k = key_of[views]
+    d = disp[k, by * nbx + bx]                                                     # (M,)
+    Y = ((by * B) << F) + d * offsets[views, 0]
+    X = ((bx * B) << F) + d * offsets[views, 1]
+    ext = xp.arange(B + 1)
+    rows = ((Y >> F)[:, None] + ext[None, :]).clip(0, hp - 1)                       # (M, B+1)
+    cols = ((X >> F)[:, None] + ext[None, :]).clip(0, wp - 1)
+    idx = ((k * hp)[:, None, None] + rows[:, :, None]) * wp + cols[:, None, :]      # (M, B+1, B+1)
+    win = xp.moveaxis(xp.take_cols(tp, idx), 0, -1)                                # (M, B+1, B+1, P)
+    s = 1 << F
+    fy = xp.cast(Y & (s - 1), xp.int32)[:, None, None, None]
+    fx = xp.cast(X & (s - 1), xp.int32)[:, None, None, None]
+    return bilinear(win, fy, fx, F).reshape(views.shape[0], B * B, tp.shape[0])
 
 
 def predict_views(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,
@@ -104,7 +90,7 @@ def predict_views(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp
     by, bx = np.divmod(np.arange(nby * nbx), nbx)
     for i, v in enumerate(np.asarray(views).tolist()):                  # one batched gather per view
         vv = np.full(nby * nbx, v)
-        blocks = predict_blocks(top, key_of, offsets, disp, vv, by, bx, B, nbx, frac_bits, tp)
+        blocks = predict_blocks(NUMPY, tp, (hp, wp), key_of, offsets, disp, vv, by, bx, B, nbx, frac_bits)
         out[i] = blocks.reshape(nby, nbx, B, B, P).transpose(0, 2, 1, 3, 4).reshape(hp, wp, P)
     return out
 

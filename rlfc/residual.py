@@ -42,20 +42,6 @@ def quantize_dequantize(r: np.ndarray, q16, threshold) -> tuple[np.ndarray, np.n
     return q, dq
 
 
-def quantize(r: np.ndarray, q16, threshold) -> np.ndarray:
-    """Residual → quantization indices (see :func:`quantize_dequantize`)."""
-    return quantize_dequantize(r, q16, threshold)[0]
-
-
-def dequantize(q: np.ndarray, q16) -> np.ndarray:
-    """Indices → residual: sign(q)·((|q|·q16 + 8) >> 4), int32 (int64 inside where needed)."""
-    q16 = np.asarray(q16, dtype=np.int64)
-    big = q.size and int(np.abs(q).max()) * int(q16.max()) >= 2 ** 30
-    a = np.abs(q).astype(np.int64 if big else np.int32)
-    d = (a * q16.astype(a.dtype) + 8) >> 4
-    return np.where(q < 0, -d, d).astype(np.int32, copy=False)
-
-
 def to_blocks(x: np.ndarray, b: int) -> np.ndarray:
     """(N, Hp, Wp, P) → (N, nby, nbx, b, b, P) view-copy of B×B blocks."""
     n, h, w, p = x.shape

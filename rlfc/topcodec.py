@@ -9,9 +9,6 @@ import numpy as np
 
 from formats.errors import ChecksumError, UnsupportedError
 
-CODECS = ("j2k", "jxl")
-
-
 def encode_image(img: np.ndarray, codec: str = "auto", psnr: float | None = None) -> tuple[str, bytes]:
     """Encode (H, W, C) uint8/uint16 → (codec name, bytes). ``psnr`` makes JPEG 2000 lossy."""
     import imagecodecs

@@ -39,17 +39,6 @@ class Tree:
     def to_config(self) -> dict:
         return {"parents": [np.asarray(p).tolist() for p in self.parents], "sizes": list(self.sizes)}
 
-    @staticmethod
-    def from_config(cfg: dict) -> "Tree":
-        parents = tuple(np.asarray(p, dtype=np.int64) for p in cfg["parents"])
-        sizes = tuple(int(s) for s in cfg["sizes"])
-        if len(sizes) != len(parents) + 1 or any(len(p) != s for p, s in zip(parents, sizes)):
-            raise ParameterError("tree config is inconsistent")
-        for p, s in zip(parents, sizes[1:]):
-            if len(p) and (p.min() < 0 or p.max() >= s):
-                raise ParameterError("tree config has parent indices out of range")
-        return Tree(parents, sizes, ())
-
 
 def _kmeans(pos: np.ndarray, k: int, iters: int = 20) -> np.ndarray:
     """Deterministic k-means (farthest-point init) → (N,) labels 0..k-1, every label used."""

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from formats import open_lfc
-from formats.codecs import open_decoder
+from formats.registry import open_decoder
 from tests.conftest import ROOT
 
 GOLDEN = ROOT / "tests" / "data" / "golden"
@@ -51,5 +51,6 @@ def test_lfn_fixture_renders_within_one_level():
     want = np.load(GOLDEN / g["expected"], allow_pickle=False)
     with open_lfc(GOLDEN / g["file"]) as f:
         r = LfnRenderer(f, device="cpu")
-        got = np.stack([r.decode_view(*g["view"], level) for level in g["levels"]])
+        # stored by network size (neurons); level 0 is the full network, level L has L fewer
+        got = np.stack([r.decode_view(*g["view"], r.neurons - n) for n in g["neurons"]])
     assert got.shape == want.shape and np.abs(got.astype(int) - want.astype(int)).max() <= 1

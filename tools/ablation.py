@@ -26,44 +26,42 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
-from formats.container import build_container
-from formats.lfcfile import encode_meta, open_lfc
+from formats.codec_api import EncodeOptions
 from formats.metrics import bpp, psnr_rgb
 from formats.scenes import read_scene
-from rlfc import Encoder, RlfcDecoder, RlfcParams
-from rlfc.ratecontrol import search, search_dcp
+from rlfc import RlfcParams, get_profile
+from rlfc.keytree import KeyTreeEncoder
+from rlfc.profiles.dcp import search_psnr
+from rlfc.ratecontrol import search_quant
 from tools.bench import random_access_times
+from tools.common import log as _log
+from tools.common import open_encoded
 
 META = 4096
 
 
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
-
-
-def _timings(blob: bytes, n_single: int = 200, n_batch: int = 20000) -> tuple[float, float]:
-    """(median single-block µs, batched µs per block) of an encoded file."""
-    single, batch = random_access_times(RlfcDecoder(open_lfc(blob)), np.random.default_rng(0), n_single, n_batch, 3)
+def _timings(d, n_single: int = 200, n_batch: int = 20000) -> tuple[float, float]:
+    """(median single-block µs, batched µs per block) of an opened file."""
+    single, batch = random_access_times(d, np.random.default_rng(0), n_single, n_batch, 3)
     return single * 1e6, batch * 1e6
 
 
 def _row(lf, name, enc, p, res, t_enc, raw_tables=False):
     cfg, secs = enc.pack(p, res)
     sizes = {n: len(s) for n, s in secs}
-    if raw_tables and enc.profile == "dcp":          # the first dcp version's raw index and map
+    if raw_tables and getattr(enc, "disp", None) is not None:   # the first dcp version's raw index and map
         sizes["rlfc.index"] = 4 * (enc.nby * enc.nbx + 1)
         sizes["rlfc.disp"] = enc.disp.size * (1 if np.abs(enc.disp).max(initial=0) < 128 else 2)
-    blob = b"".join(bytes(x) for x in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), secs))
+    d, _ = open_encoded(lf, (cfg, secs))
     nv = lf.rows * lf.cols
-    dec = RlfcDecoder(open_lfc(blob)).decode_all()
-    us1, usb = _timings(blob)
+    dec = d.decode_all()
+    us1, usb = _timings(d)
     row = {"variant": name, "bpp": bpp(sum(sizes.values()) + META, nv, lf.height, lf.width),
            "psnr_rgb": psnr_rgb(lf.views, dec), "top_psnr": p.top_psnr, "quant": p.quant,
            "sections": {k: bpp(v, nv, lf.height, lf.width) for k, v in sizes.items()},
@@ -78,14 +76,13 @@ def ablate(lf, target: float, block_sizes=(4, 16)) -> list[dict]:
 
     def q_search(name, base, raw_tables):
         t = time.perf_counter()
-        enc = Encoder(lf, base)
-        p, res, _ = search(enc, base, target_psnr=target)
-        res = enc.closed_loop(p)
+        enc = KeyTreeEncoder(lf, base, get_profile(base.profile).strategy(lf))
+        _, p, res, _ = search_quant(enc, base, target_psnr=target)
         rows.append(_row(lf, name, enc, p, res, time.perf_counter() - t, raw_tables))
 
     def dcp_search(name, base, raw_tables=False):
         t = time.perf_counter()
-        enc, p, res, _ = search_dcp(lf, base, target_psnr=target, tol=0.1)
+        _, enc, p, res, _ = search_psnr(lf, base, EncodeOptions(target_psnr=target), lambda *x: None, tol=0.1)
         rows.append(_row(lf, name, enc, p, res, time.perf_counter() - t, raw_tables))
 
     q_search("bise (paper profile)", RlfcParams(), False)

@@ -18,26 +18,20 @@ import csv
 import json
 import math
 import statistics
-import sys
 import time
 from datetime import date
 from pathlib import Path
 
 import numpy as np
 
-from formats.container import build_container
-from formats.lfcfile import encode_meta, open_lfc
 from formats.metrics import bpp, psnr_rgb, psnr_ycocg, ssim
 from formats.scenes import read_scene
-from rlfc import Encoder, RlfcDecoder, RlfcParams
+from rlfc import RlfcParams, get_profile
+from rlfc.keytree import KeyTreeEncoder
 from rlfc.ratecontrol import depth_scale, params_for_quant
-from tools.bench_bise import _median_time as _median
-from tools.bench_bise import machine
+from tools.common import log, machine, open_encoded
+from tools.common import median_time as _median
 from tools.peers import all_peers, serpentine
-
-
-def log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def random_access_times(d, rng, n_single: int, n_batch: int, repeats: int) -> tuple[float, float]:
@@ -68,16 +62,16 @@ def bench_rlfc(lf, points, repeats, n_single, n_batch, block_size=8, profile="bi
         base = RlfcParams(block_size=block_size, profile=profile, top_psnr=top_psnr)
         t0 = time.perf_counter()
         if top_psnr not in encoders:
-            encoders[top_psnr] = (Encoder(lf, base, disparity=disp), time.perf_counter() - t0)
-            disp = encoders[top_psnr][0].disp if profile == "dcp" else None
+            enc = KeyTreeEncoder(lf, base, get_profile(profile).strategy(lf), side=disp)
+            encoders[top_psnr] = (enc, time.perf_counter() - t0)
+            disp = getattr(enc, "disp", None)
         enc, t_prep = encoders[top_psnr]
         p = params_for_quant(base, q * depth_scale(lf.views.dtype))   # q in 8-bit units
         t0 = time.perf_counter()
         res = enc.closed_loop(p)
         cfg, secs = enc.pack(p, res)
-        blob = b"".join(bytes(x) for x in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), secs))
         t_enc = t_prep + time.perf_counter() - t0
-        d = RlfcDecoder(open_lfc(blob))
+        d, blob = open_encoded(lf, (cfg, secs))
         full = d.decode_all()
         t_full = _median(lambda: d.decode_all(), repeats)
         nv = d.rows * d.cols

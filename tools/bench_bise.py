@@ -8,36 +8,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import platform
-import statistics
-import time
 
 import numpy as np
 
 from rlfc import bise
-
-
-def _median_time(fn, repeats: int) -> float:
-    fn()                                  # warm-up
-    ts = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts)
-
-
-def machine() -> str:
-    cpu = "unknown CPU"
-    try:
-        for line in open("/proc/cpuinfo"):
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
+from tools.common import machine
+from tools.common import median_time as _median_time
 
 
 def run(n_blocks: int = 100_000, count: int = 48, ranges=(3, 5, 8, 12, 20, 32, 48, 96, 160, 256), repeats: int = 5):

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
@@ -22,6 +21,7 @@ import torch
 
 from formats.lfcfile import open_lfc, write_lfc
 from formats.lightfield import LightField
+from tools.common import log
 from lfn_stream import CODEC_ID, CODEC_VERSION, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
 from lfn_stream.evaluate import evaluate, prefix_bytes
 from lfn_stream.pack import step_name
@@ -42,10 +42,6 @@ def load(scene: str, resolution: int, split: str = "train") -> LightField:
 
 def export(lf: LightField, path: str) -> None:
     np.savez(path, views=lf.views, geometry=json.dumps(lf.geometry()))
-
-
-def log(m):
-    print(m, file=sys.stderr, flush=True)
 
 
 def main(argv=None) -> int:
@@ -75,7 +71,7 @@ def main(argv=None) -> int:
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     test_lf = load(a.test_scene, a.resolution, split="test") if a.test_scene else None
-    cfg = LfnConfig(depth=a.depth, min_width=a.min_width, max_width=a.max_width)
+    cfg = LfnConfig(depth=a.depth, min_neurons=a.min_neurons, max_neurons=a.max_neurons)
     results = {"scene": a.scene, "resolution": [lf.height, lf.width], "config": cfg.to_dict(), "device": a.device,
                "torch": torch.__version__}
     holdout = 0 if test_lf is not None else a.holdout
@@ -107,22 +103,22 @@ def main(argv=None) -> int:
     write_lfc(path, CODEC_ID, CODEC_VERSION, config, (geom_lf or lf).geometry(), sections)
     f = open_lfc(path)
     r = LfnRenderer(f, device=a.device)
-    levels = sorted({float(cfg.min_width), float(cfg.width_of(0.25)), float(cfg.width_of(0.5)), float(cfg.max_width),
-                     round(float(cfg.width_of(0.35)), 2)})
+    levels = sorted({float(cfg.min_neurons), float(cfg.neurons_of(0.25)), float(cfg.neurons_of(0.5)), float(cfg.max_neurons),
+                     round(float(cfg.neurons_of(0.35)), 2)})
     results["train_s"] = info["train_s"]
     results["steps"] = info["steps"]
     results["file_bytes"] = path.stat().st_size
     results["params"] = model.n_params()
-    results["delta_bytes_at_max_width"] = f.container.info(step_name(cfg.max_width - cfg.min_width - 1)).length
+    results["delta_bytes_at_max_neurons"] = f.container.info(step_name(cfg.max_neurons - cfg.min_neurons - 1)).length
     results["lod"] = evaluate(r, ev_lf, test_v, train_v, levels)
     # checks: stream == trained model (fp16), prefix == full file at that level
     x = torch.from_numpy(view_rays(ev_lf, int(test_v[0]), 0.5, info["norm"]["centre"], info["norm"]["radius"]).reshape(-1, 6))
     with torch.no_grad():
         ref = model.to("cpu")(x).numpy()
     rc = LfnRenderer(open_lfc(path), device="cpu")
-    got = rc.render_rays(x.numpy(), float(cfg.max_width), use_occupancy=False)
+    got = rc.render_rays(x.numpy(), float(cfg.max_neurons), use_occupancy=False)
     results["stream_vs_trained_max_abs"] = float(np.abs(got - ref).max())
-    mid = int(cfg.width_of(0.25))
+    mid = int(cfg.neurons_of(0.25))
     cut = prefix_bytes(rc, mid)
     blob = path.read_bytes()[:cut]
     rp = LfnRenderer(open_lfc(blob, partial=True), device="cpu")
@@ -138,7 +134,7 @@ def main(argv=None) -> int:
         rows = []
         for lv in levels:   # the full single-scale network rendered at each level's scale
             scale = cfg.scale_of(lv)
-            rr = evaluate(_AtScale(r1, scale), ev_lf, test_v, train_v, [float(cfg.max_width)], baselines=False)[0]
+            rr = evaluate(_AtScale(r1, scale), ev_lf, test_v, train_v, [float(cfg.max_neurons)], baselines=False)[0]
             rows.append({"scale": scale, "psnr": rr["psnr"], "ssim": rr["ssim"]})
         results["single_scale"] = rows
     (out / "lfn_results.json").write_text(json.dumps(results, indent=1))
@@ -161,7 +157,7 @@ class _AtScale:
 class _CfgAt:
     def __init__(self, cfg, scale):
         self._s = scale
-        self.min_width = cfg.min_width
+        self.min_neurons = cfg.min_neurons
 
     def scale_of(self, _):
         return self._s
@@ -169,9 +165,9 @@ class _CfgAt:
 
 def table(res: dict) -> str:
     lines = [f"LFN on {res['scene']} at {res['resolution'][1]}x{res['resolution'][0]}, depth {res['config']['depth']}, "
-             f"widths {res['config']['min_width']}..{res['config']['max_width']}, {res['steps']} steps in "
+             f"widths {res['config']['min_neurons']}..{res['config']['max_neurons']}, {res['steps']} steps in "
              f"{res['train_s']:.0f} s on {res['device']}; file {res['file_bytes']} bytes; delta at max width "
-             f"{res['delta_bytes_at_max_width']} bytes; stream vs trained max |diff| {res['stream_vs_trained_max_abs']:.2e}; "
+             f"{res['delta_bytes_at_max_neurons']} bytes; stream vs trained max |diff| {res['stream_vs_trained_max_abs']:.2e}; "
              f"prefix ({res['prefix_check']['bytes']} bytes, width {res['prefix_check']['width']}) vs full file "
              f"max |diff| {res['prefix_check']['max_abs_diff']:.1e}", "",
              "| level (width) | scale | bytes needed | PSNR | SSIM | ms / 256² view | nearest view PSNR | mean view PSNR |"

@@ -53,7 +53,7 @@ def digest(a: np.ndarray) -> str:
 def decoded_hashes(path: Path) -> dict:
     """sha256 of every level's full decode and of all blocks, batched (the same bytes every
     decoder must produce)."""
-    from formats.codecs import open_decoder
+    from formats.registry import open_decoder
 
     with open_lfc(path) as f:
         d = open_decoder(f)
@@ -66,28 +66,25 @@ def decoded_hashes(path: Path) -> dict:
 
 
 def rlfc_fixtures() -> dict:
-    from rlfc import RlfcParams, encode_lightfield
+    """name → (Encoded, LightField) of every RLFC fixture."""
+    from rlfc import encode
 
     v = variants()
     specs = {
-        "rlfc_bise_lossless_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=1)),
-        "rlfc_bise_lossy_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=8, threshold=4, energy=16)),
-        "rlfc_bise_lossy_rgba8": (v["rgba8"], RlfcParams(block_size=4, quant=6, threshold=3, energy=9, top_psnr=36)),
-        "rlfc_dcp_lossless_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=1, profile="dcp")),
-        "rlfc_dcp_lossy_rgb8": (v["rgb8"], RlfcParams(block_size=8, quant=6, threshold=3, energy=9, profile="dcp",
-                                                      top_psnr=38)),
-        "rlfc_dcp_lossy_ga16": (v["ga16"], RlfcParams(block_size=4, quant=6 * 257, threshold=3 * 257,
-                                                      energy=9 * 257 ** 2, profile="dcp", top_psnr=40)),
+        "rlfc_bise_lossless_rgb8": (v["rgb8"], dict(profile="bise", block_size=8, quant=1)),
+        "rlfc_bise_lossy_rgb8": (v["rgb8"], dict(profile="bise", block_size=8, quant=8, threshold=4, energy=16)),
+        "rlfc_bise_lossy_rgba8": (v["rgba8"], dict(profile="bise", block_size=4, quant=6, threshold=3, energy=9,
+                                                   top_psnr=36)),
+        "rlfc_dcp_lossless_rgb8": (v["rgb8"], dict(profile="dcp", block_size=8, quant=1)),
+        "rlfc_dcp_lossy_rgb8": (v["rgb8"], dict(profile="dcp", block_size=8, quant=6, threshold=3, energy=9,
+                                                top_psnr=38)),
+        "rlfc_dcp_lossy_ga16": (v["ga16"], dict(profile="dcp", block_size=4, quant=6 * 257, threshold=3 * 257,
+                                                energy=9 * 257 ** 2, top_psnr=40)),
     }
-    out = {}
-    for name, (views, params) in specs.items():
-        lf = lf_of(views)
-        cfg, sections, _ = encode_lightfield(lf, params)
-        out[name] = (cfg, sections, lf)
-    return out
+    return {name: (encode(lf_of(views), **kw), lf_of(views)) for name, (views, kw) in specs.items()}
 
 
-def lfn_fixture(index: dict) -> None:
+def lfn_fixture(index: dict, out: Path) -> None:
     """A tiny nested-width LFN (depth 2, widths 4..8) trained briefly on the RGBA crop; the
     expected renders are stored as .npy (float networks match within 1 LSB, not bit for bit)."""
     import torch
@@ -96,17 +93,17 @@ def lfn_fixture(index: dict) -> None:
 
     torch.manual_seed(0)
     lf = lf_of(variants()["rgba8"])
-    cfg = LfnConfig(depth=2, min_width=4, max_width=8, occupancy_width=4)
+    cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=8, occupancy_neurons=4)
     model, occ, info = train(lf, cfg, TrainOptions(steps=30, batch=256, holdout=0, seed=0))
     config, sections = to_sections(model, occ, info, "fp16")
-    path = OUT / "lfn_tiny_rgba8.lfc"
-    write_lfc(path, "lfn", 1, config, lf.geometry(), sections)
+    path = out / "lfn_tiny_rgba8.lfc"
+    write_lfc(path, "lfn", 2, config, lf.geometry(), sections)
     with open_lfc(path) as f:
         r = LfnRenderer(f, device="cpu")
-        renders = np.stack([r.decode_view(1, 2, level) for level in (4.0, 6.5, 8.0)])
-    np.save(OUT / "lfn_tiny_rgba8.expected.npy", renders, allow_pickle=False)
+        renders = np.stack([r.decode_view(1, 2, r.neurons - n) for n in (4.0, 6.5, 8.0)])
+    np.save(out / "lfn_tiny_rgba8.expected.npy", renders, allow_pickle=False)
     index["lfn_tiny_rgba8"] = {"file": path.name, "bytes": path.stat().st_size, "view": [1, 2],
-                               "levels": [4.0, 6.5, 8.0], "expected": "lfn_tiny_rgba8.expected.npy",
+                               "neurons": [4.0, 6.5, 8.0], "expected": "lfn_tiny_rgba8.expected.npy",
                                "shape": list(renders.shape)}
     print("lfn_tiny_rgba8", path.stat().st_size, "bytes")
 
@@ -114,19 +111,22 @@ def lfn_fixture(index: dict) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--only", nargs="*", help="write only these fixtures (names without .lfc)")
+    ap.add_argument("--out", default=str(OUT), help="folder (default tests/data/golden; another folder to "
+                                                     "check that today's encoder still writes the same bytes)")
     a = ap.parse_args(argv)
-    OUT.mkdir(parents=True, exist_ok=True)
-    index_path = OUT / "golden.json"
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    index_path = out / "golden.json"
     index = json.loads(index_path.read_text()) if index_path.exists() else {}
-    for name, (cfg, sections, lf) in rlfc_fixtures().items():
+    for name, (enc, lf) in rlfc_fixtures().items():
         if a.only and name not in a.only:
             continue
-        path = OUT / f"{name}.lfc"
-        write_lfc(path, "rlfc", 1, cfg, lf.geometry(), sections)
+        path = out / f"{name}.lfc"
+        write_lfc(path, "rlfc", 1, enc.config, lf.geometry(), enc.sections)
         index[name] = {"file": path.name, "bytes": path.stat().st_size, **decoded_hashes(path)}
         print(name, index[name]["bytes"], "bytes")
     if not a.only or "lfn_tiny_rgba8" in a.only:
-        lfn_fixture(index)
+        lfn_fixture(index, out)
     index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
     return 0
 

@@ -8,7 +8,6 @@ access: the unit is the whole sequence).
 from __future__ import annotations
 
 import shutil
-import statistics
 import subprocess
 import tempfile
 import time
@@ -16,14 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-
-def _median(fn, repeats=3):
-    ts, out = [], None
-    for _ in range(repeats):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return statistics.median(ts), out
+from tools.common import median_time_result as _median
 
 
 class PerViewImageCodec:

@@ -19,26 +19,21 @@ from __future__ import annotations
 
 import argparse
 import json
-import sys
 import time
 from pathlib import Path
 
 import cv2
 import numpy as np
 
-from formats.container import build_container
-from formats.lfcfile import encode_meta
 from formats.lightfield import LightField, grid_positions
 from formats.metrics import bpp, psnr_rgb
 from formats.scenes import read_scene, write_views
-from rlfc import RlfcParams
-from rlfc.ratecontrol import search_dcp
+from formats.codec_api import EncodeOptions
+from rlfc import encode
 from tools.bench import bpp_at
+from tools.common import lfc_bytes
+from tools.common import log as _log
 from tools.peers import j2k
-
-
-def _log(msg: str) -> None:
-    print(msg, file=sys.stderr, flush=True)
 
 
 def _grid(views: np.ndarray, name: str) -> LightField:
@@ -100,14 +95,12 @@ def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
 
 def dcp_at(lf: LightField, target: float) -> dict:
     t = time.perf_counter()
-    enc, p, res, _ = search_dcp(lf, RlfcParams(profile="dcp"), target_psnr=target)
-    cfg, secs = enc.pack(p, res)
-    blob = b"".join(bytes(x) for x in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), secs))
-    from rlfc.color import from_planes
-    dec = from_planes(res.dec0[:, :lf.height, :lf.width], lf.views.dtype)
+    e = encode(lf, EncodeOptions(target_psnr=target, profile="dcp"))
+    blob = lfc_bytes("rlfc", 1, e.config, lf.geometry(), e.sections)
+    p = e.summary["params"]
     return {"bpp": bpp(len(blob), lf.rows * lf.cols, lf.height, lf.width),
-            "psnr_rgb": psnr_rgb(lf.views.reshape(dec.shape), dec), "top_psnr": p.top_psnr, "quant": p.quant,
-            "blocks": cfg["n_blocks"], "encode_s": time.perf_counter() - t}
+            "psnr_rgb": psnr_rgb(lf.views, e.decoded), "top_psnr": p["top_psnr"], "quant": p["quant"],
+            "blocks": e.config["n_blocks"], "encode_s": time.perf_counter() - t}
 
 
 def main(argv=None) -> int:

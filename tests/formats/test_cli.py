@@ -68,7 +68,7 @@ def test_info(encoded, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert rep["codec"] == "rlfc" and rep["scene"]["rows"] == 9 and rep["verified"]
     # a grid encodes with the dcp profile by default (--profile auto)
-    assert rep["profile"] == "dcp"
+    assert rep["decoder"]["profile"] == "dcp" and rep["decoder"]["levels"] == 1
     assert [s["name"] for s in rep["sections"]] == ["meta", "rlfc.top", "rlfc.disp", "rlfc.index", "rlfc.blocks"]
     assert main(["info", str(encoded)]) == 0
     assert "rlfc.blocks" in capsys.readouterr().out
@@ -181,7 +181,7 @@ def test_16bit_grey_works_like_rgb(grey16_scene, tmp_path, capsys):
     blk = np.load(tmp_path / "b.npy")
     assert blk.dtype == np.uint16 and (blk == img[120:128, 152:160]).all()
     assert main(["encode", str(grey16_scene), str(out), "--lossless", "--quiet"]) == 0
-    from formats.codecs import open_decoder
+    from formats.registry import open_decoder
     from formats.lfcfile import open_lfc
     with open_lfc(out) as f:
         assert (open_decoder(f).decode_all() == read_scene(grey16_scene).views).all()
@@ -196,7 +196,7 @@ def test_dcp_profile_from_the_cli(tmp_path, capsys):
     assert rep["bpp"] < 0.15                               # bise needs 1.73 bpp for 40 dB on the sample
     assert main(["info", str(out), "--json"]) == 0
     info = json.loads(capsys.readouterr().out)
-    assert info["profile"] == "dcp" and "rlfc.disp" in [s["name"] for s in info["sections"]]
+    assert info["decoder"]["profile"] == "dcp" and "rlfc.disp" in [s["name"] for s in info["sections"]]
     assert main(["decode", str(out), "--block", "4,4,2,3", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
     assert main(["decode", str(out), str(tmp_path / "v"), "--view", "4,4", "--quiet"]) == 0
     assert (np.load(tmp_path / "b.npy") == read_image(tmp_path / "v" / "r04_c04.png")[16:24, 24:32]).all()

@@ -16,7 +16,7 @@ from lfn_stream.sat import box_mean, box_mean_torch, summed_area_table
 from tests.conftest import ROOT
 from tests.rlfc.helpers import smooth_lf
 
-CFG = LfnConfig(depth=3, min_width=4, max_width=12, occupancy_width=8)
+CFG = LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=8)
 
 
 def _model(seed=0, cfg=CFG):
@@ -31,11 +31,11 @@ def _model(seed=0, cfg=CFG):
 def test_integer_levels_are_exactly_the_smaller_networks():
     m = _model()
     secs = dict(pack_network(m, None, "fp32"))
-    steps = [secs[step_name(j)] for j in range(CFG.max_width - CFG.min_width)]
+    steps = [secs[step_name(j)] for j in range(CFG.max_neurons - CFG.min_neurons)]
     x = torch.randn(200, 6)
-    for w in range(CFG.min_width, CFG.max_width + 1):
-        sub, _ = unpack_network(CFG, secs["lfn.base"], steps[:w - CFG.min_width], None, "fp32")
-        assert sub.cfg.max_width == w
+    for w in range(CFG.min_neurons, CFG.max_neurons + 1):
+        sub, _ = unpack_network(CFG, secs["lfn.base"], steps[:w - CFG.min_neurons], None, "fp32")
+        assert sub.cfg.max_neurons == w
         assert torch.equal(m(x, float(w)), sub(x))
 
 
@@ -57,9 +57,9 @@ def test_width_out_of_range():
 
 
 def test_scale_mapping():
-    c = LfnConfig(min_width=32, max_width=256)
+    c = LfnConfig(min_neurons=32, max_neurons=256)
     assert c.scale_of(32) == pytest.approx(1 / 8) and c.scale_of(256) == pytest.approx(1)
-    assert c.scale_of(c.width_of(0.25)) == pytest.approx(0.25)
+    assert c.scale_of(c.neurons_of(0.25)) == pytest.approx(0.25)
 
 
 def test_pack_sizes_and_fp16_roundtrip():
@@ -68,9 +68,9 @@ def test_pack_sizes_and_fp16_roundtrip():
     secs = pack_network(m, occ, "fp16")
     d = dict(secs)
     assert [n for n, _ in secs][:2] == ["lfn.base", "lfn.occ"]
-    for j in range(CFG.min_width, CFG.max_width):
-        assert len(d[step_name(j - CFG.min_width)]) == step_bytes(CFG, j)
-    steps = [d[step_name(j)] for j in range(CFG.max_width - CFG.min_width)]
+    for j in range(CFG.min_neurons, CFG.max_neurons):
+        assert len(d[step_name(j - CFG.min_neurons)]) == step_bytes(CFG, j)
+    steps = [d[step_name(j)] for j in range(CFG.max_neurons - CFG.min_neurons)]
     full, occ2 = unpack_network(CFG, d["lfn.base"], steps, d["lfn.occ"])
     x = torch.randn(100, 6)
     with torch.no_grad():
@@ -80,7 +80,7 @@ def test_pack_sizes_and_fp16_roundtrip():
 
 def test_delta_size_goal_at_width_512():
     """Goal of the issue: <= 16 KiB per step at width 512 in fp16 (depth 8)."""
-    cfg = LfnConfig(depth=8, min_width=64, max_width=512)
+    cfg = LfnConfig(depth=8, min_neurons=64, max_neurons=512)
     assert step_bytes(cfg, 511) <= 16 * 1024
 
 
@@ -98,9 +98,9 @@ def test_prefix_is_a_complete_smaller_network():
     c = full.file.container
     rays = full.view_rays(0, 1).reshape(-1, 6)
     for w in (4, 7, 12):
-        end = c.info("lfn.base") if w == CFG.min_width else c.info(step_name(w - CFG.min_width - 1))
+        end = c.info("lfn.base") if w == CFG.min_neurons else c.info(step_name(w - CFG.min_neurons - 1))
         pre = LfnRenderer(open_lfc(blob[:end.offset + end.length], partial=True), device="cpu")
-        assert pre.width == w
+        assert pre.neurons == w
         assert np.array_equal(pre.render_rays(rays, float(w)), full.render_rays(rays, float(w)))
         with pytest.raises(Exception):
             pre.render_rays(rays, float(w) + 0.5)   # beyond what the prefix holds
@@ -171,7 +171,7 @@ def test_occupancy_really_skips_rays_and_lod_maps():
 
 def test_train_checkpoint_resume_and_cli(tmp_path, capsys):
     lf = smooth_lf(rows=2, cols=3, h=12, w=12)
-    cfg = LfnConfig(depth=2, min_width=4, max_width=8, occupancy_width=0)
+    cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=8, occupancy_neurons=0)
     ck = tmp_path / "ck.npz"
     m, o, info = train(lf, cfg, TrainOptions(steps=20, batch=256, checkpoint=str(ck), checkpoint_every=10, holdout=0))
     assert ck.exists() and info["steps"] == 20
@@ -180,17 +180,18 @@ def test_train_checkpoint_resume_and_cli(tmp_path, capsys):
     assert info2["steps"] == 40 and opts.history[0][0] >= 20    # resumed, not restarted
     # the CLI: train on the bundled sample at tiny size, then decode a view at a fractional level
     out = tmp_path / "s.lfc"
-    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(out), "--depth", "2", "--min-width", "4",
-                 "--max-width", "8", "--steps", "30", "--batch", "256", "--resolution", "32", "--json",
+    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(out), "--depth", "2", "--min-neurons", "4",
+                 "--max-neurons", "8", "--steps", "30", "--batch", "256", "--resolution", "32", "--json",
                  "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert rep["bytes"] == out.stat().st_size
     assert main(["info", str(out), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["codec"] == "lfn"
-    assert main(["decode", str(out), str(tmp_path / "v"), "--view", "1,2", "--level", "6.5", "--quiet"]) == 0
+    # level 1.5 = 6.5 neurons of 8; trained at 32 px, rendered at the scene's own 128x160
+    assert main(["decode", str(out), str(tmp_path / "v"), "--view", "1,2", "--level", "1.5", "--quiet"]) == 0
     from formats.imageio import read_image
     img = read_image(tmp_path / "v" / "r01_c02.png")
-    assert img.shape == (26, 32, 3) and img.dtype == np.uint8
+    assert img.shape == (128, 160, 3) and img.dtype == np.uint8
     assert main(["decode", str(out), "--block", "0,0,0,0", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 2
 
 
@@ -203,7 +204,7 @@ def test_training_learns_the_sample_scene():
     from lfn_stream.evaluate import evaluate
 
     lf = resize_lightfield(read_scene(ROOT / "samples" / "dino_crop"), 32)
-    cfg = LfnConfig(depth=4, min_width=8, max_width=32, occupancy_width=0)
+    cfg = LfnConfig(depth=4, min_neurons=8, max_neurons=32, occupancy_neurons=0)
     psnr = []
     for steps in (1, 400):
         m, o, info = train(lf, cfg, TrainOptions(steps=steps, batch=1024, holdout=4))

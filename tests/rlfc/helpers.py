@@ -3,7 +3,7 @@ import numpy as np
 from formats.container import build_container
 from formats.lfcfile import encode_meta, open_lfc
 from formats.lightfield import LightField, grid_positions
-from rlfc import RlfcDecoder, RlfcParams, encode_lightfield
+from rlfc import RlfcDecoder, RlfcParams, encode_with_params
 
 
 def make_lf(views, layout="grid"):
@@ -14,7 +14,7 @@ def make_lf(views, layout="grid"):
 def roundtrip(lf, params=None):
     """Encode in memory, reopen, return (decoder, nbytes, loop result)."""
     params = params or RlfcParams()
-    cfg, sections, loop = encode_lightfield(lf, params)
+    cfg, sections, loop = encode_with_params(lf, params)
     blob = b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), sections))
     return RlfcDecoder(open_lfc(blob)), len(blob), loop
 

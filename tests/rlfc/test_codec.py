@@ -5,7 +5,7 @@ import pytest
 from formats.errors import LfcError, ParameterError, UnsupportedError
 from formats.metrics import psnr_rgb
 from rlfc import RlfcParams
-from rlfc.color import from_planes, to_planes
+from formats.pixels import from_planes, to_planes
 from tests.rlfc.helpers import check_agreement, make_lf, roundtrip, smooth_lf
 
 
@@ -102,7 +102,7 @@ def test_irregular_cameras_cluster_by_distance(rng):
     lf.positions = rng.random((1, 9, 3))
     d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=1, tree_height=2))
     assert (d.decode_all() == lf.views).all()
-    assert d.tree.sizes[1] == 3
+    assert d.core.tree.sizes[1] == 3
 
 
 def test_float_views_are_unsupported():
@@ -167,10 +167,10 @@ def test_torch_decoder_handles_raw_and_wide_blocks(rng):
 def test_byte_range_source_fetches_only_what_a_block_needs():
     from formats.container import ByteRangeSource, build_container
     from formats.lfcfile import encode_meta, open_lfc
-    from rlfc import RlfcDecoder, encode_lightfield
+    from rlfc import RlfcDecoder, encode_with_params
 
     lf = smooth_lf(rows=5, cols=5, h=64, w=64)
-    cfg, sections, _ = encode_lightfield(lf, RlfcParams(block_size=4, quant=2))
+    cfg, sections, _ = encode_with_params(lf, RlfcParams(block_size=4, quant=2))
     blob = b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), sections, 1024))
     local = RlfcDecoder(open_lfc(blob))
     src = ByteRangeSource(lambda a, b: blob[a:b], len(blob))

@@ -29,7 +29,7 @@ def test_lossy_agreement_torch_and_bits(top_psnr, rng):
     v, by, bx = rng.integers(0, 30, 300), rng.integers(0, d.nby, 300), rng.integers(0, d.nbx, 300)
     for level in (0, 1):
         assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level) == d.decode_blocks(v, by, bx, level)).all()
-    assert (d.disp == 1 << d.frac_bits).mean() > 0.5          # the synthetic parallax is 1 px per view
+    assert (d.core.strategy.disp == 1 << d.core.strategy.F).mean() > 0.5          # the synthetic parallax is 1 px per view
     db, nb, _ = roundtrip(lf, RlfcParams(block_size=4, quant=6, threshold=3, energy=9))
     assert n < nb and psnr_rgb(lf.views, d.decode_all()) >= psnr_rgb(lf.views, db.decode_all()) - 0.5
 
@@ -40,8 +40,8 @@ def test_single_block_touches_one_residual_block():
     lf = smooth_lf(rows=6, cols=6)
     d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=2, profile="dcp"))
     calls = []
-    orig = d.store.fetch_one
-    d.store.fetch_one = lambda loc, nodes: calls.append(len(nodes)) or orig(loc, nodes)
+    orig = d.core.store.fetch_one
+    d.core.store.fetch_one = lambda loc, nodes: calls.append(len(nodes)) or orig(loc, nodes)
     d.decode_block(5, 5, 2, 3)
     assert calls == [1]
 
@@ -89,30 +89,22 @@ def test_lossy_alpha_stays_exact(c):
     check_agreement(d, lf.views.shape)
 
 
-def test_first_version_dcp_files_still_decode():
-    """Files of the first dcp version (whole-pixel int8 disparity map stored raw, raw u32 block
-    index, no frac_bits / coding keys) decode to the same pixels as today's encoding."""
+def test_pre_release_dcp_layout_is_refused_clearly():
+    """The first dcp layout (raw int8 map, raw u32 index, no frac_bits) was pre-release and is no
+    longer read: such a file gives a FormatError naming the missing field, never pixels."""
     from formats.container import build_container
+    from formats.errors import FormatError
     from formats.lfcfile import encode_meta, open_lfc
-    from rlfc import RlfcDecoder, encode_lightfield
-    from rlfc.blocks import unpack_index
+    from rlfc import RlfcDecoder, encode_with_params
 
     lf = smooth_lf(rows=4, cols=5)
-    cfg, sections, _ = encode_lightfield(lf, RlfcParams(block_size=4, quant=4, threshold=2, energy=4, profile="dcp",
-                                                        disp_frac_bits=0))
-    new = RlfcDecoder(open_lfc(b"".join(bytes(p) for p in build_container(
-        encode_meta("rlfc", 1, cfg, lf.geometry()), sections))))
+    cfg, sections, _ = encode_with_params(lf, RlfcParams(block_size=4, quant=4, threshold=2, energy=4, profile="dcp",
+                                                         disp_frac_bits=0))
     old_cfg = {k: v for k, v in cfg.items() if k != "index_coding"}
     old_cfg["dcp"] = {k: v for k, v in cfg["dcp"].items() if k in ("offsets", "max_disparity")}
-    sec = dict(sections)
-    nloc = cfg["blocks"][0] * cfg["blocks"][1]
-    sec["rlfc.disp"] = new.disp.astype(np.int8).tobytes()
-    sec["rlfc.index"] = unpack_index(sec["rlfc.index"], nloc, "x").astype("<u4").tobytes()
-    old = RlfcDecoder(open_lfc(b"".join(bytes(p) for p in build_container(
-        encode_meta("rlfc", 1, old_cfg, lf.geometry()), list(sec.items())))))
-    assert old.frac_bits == 0 and (old.disp == new.disp).all()
-    assert (old.decode_all() == new.decode_all()).all()
-    check_agreement(old, lf.views.shape)
+    blob = b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, old_cfg, lf.geometry()), sections))
+    with pytest.raises(FormatError, match="frac_bits"):
+        RlfcDecoder(open_lfc(blob))
 
 
 def test_posed_captures_are_refused():
@@ -169,11 +161,11 @@ def test_subpixel_disparity_predicts_half_pixel_parallax(rng):
     for fb in (0, 3):
         d, _, _ = roundtrip(lf, RlfcParams(block_size=4, quant=256, threshold=128, energy=1e9, profile="dcp",
                                            disp_frac_bits=fb))
-        assert d.frac_bits == fb
+        assert d.core.strategy.F == fb
         errs[fb] = psnr_rgb(lf.views, d.decode_all())
         if fb == 3:
             check_agreement(d, lf.views.shape)
-            assert (np.abs(d.disp) == 4).mean() > 0.5          # 0.5 px = 4/8 per view step
+            assert (np.abs(d.core.strategy.disp) == 4).mean() > 0.5          # 0.5 px = 4/8 per view step
             v, by, bx = rng.integers(0, 9, 500), rng.integers(0, d.nby, 500), rng.integers(0, d.nbx, 500)
             assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
     assert errs[3] > errs[0] + 3, errs

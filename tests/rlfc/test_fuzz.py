@@ -6,7 +6,7 @@ import pytest
 from formats.container import build_container
 from formats.errors import LfcError
 from formats.lfcfile import encode_meta, open_lfc
-from rlfc import RlfcDecoder, RlfcParams, encode_lightfield
+from rlfc import RlfcDecoder, RlfcParams, encode_with_params
 from rlfc.torch_decode import TorchBlockDecoder
 from tests.rlfc.helpers import smooth_lf
 
@@ -14,7 +14,7 @@ from tests.rlfc.helpers import smooth_lf
 @pytest.fixture(scope="module")
 def encoded():
     lf = smooth_lf(rows=3, cols=3, h=16, w=16)
-    cfg, secs, _ = encode_lightfield(lf, RlfcParams(block_size=4, quant=3))
+    cfg, secs, _ = encode_with_params(lf, RlfcParams(block_size=4, quant=3))
     return lf, cfg, dict(secs)
 
 

@@ -1,15 +1,29 @@
-"""Lossless YCoCg-R (Malvar & Sullivan) on integer planes, with grey and alpha layouts.
+"""Pixel conventions shared by every codec: sample peaks and lossless YCoCg-R planes.
 
 Channel layouts (last axis): 1 = Y (grey), 2 = Y + A, 3 = RGB → Y Co Cg, 4 = RGBA → Y Co Cg A.
 Y keeps the input's bit depth; Co and Cg need one extra bit (signed). All planes are int32.
+The integer transforms are written once for numpy and torch arrays (same operators).
 """
 from __future__ import annotations
 
 import numpy as np
 
 
+def peak_of(dtype) -> float:
+    """Peak sample value for PSNR: 255 (uint8), 65535 (uint16), 1.0 (float)."""
+    return {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(np.dtype(dtype), 1.0)
+
+
+def _stack(parts, like):
+    if isinstance(like, np.ndarray):
+        return np.stack(parts, axis=-1)
+    import torch
+
+    return torch.stack(parts, -1)
+
+
 def forward_int(x):
-    """YCoCg-R forward on integer arrays of numpy or torch (same code for both): (…, C) → (…, C)."""
+    """YCoCg-R forward on integer arrays of numpy or torch: (…, C) → (…, C) planes."""
     c = x.shape[-1]
     if c < 3:
         return x
@@ -18,8 +32,7 @@ def forward_int(x):
     t = b + (co >> 1)
     cg = g - t
     y = t + (cg >> 1)
-    parts = [y, co, cg] + ([x[..., 3]] if c == 4 else [])
-    return np.stack(parts, axis=-1) if isinstance(x, np.ndarray) else _torch_stack(parts)
+    return _stack([y, co, cg] + ([x[..., 3]] if c == 4 else []), x)
 
 
 def inverse_int(p):
@@ -31,14 +44,7 @@ def inverse_int(p):
     g = cg + t
     b = t - (co >> 1)
     r = b + co
-    parts = [r, g, b] + ([p[..., 3]] if p.shape[-1] == 4 else [])
-    return np.stack(parts, axis=-1) if isinstance(p, np.ndarray) else _torch_stack(parts)
-
-
-def _torch_stack(parts):
-    import torch
-
-    return torch.stack(parts, -1)
+    return _stack([r, g, b] + ([p[..., 3]] if p.shape[-1] == 4 else []), p)
 
 
 def to_planes(x: np.ndarray) -> np.ndarray:
@@ -56,3 +62,11 @@ def plane_weights(channels: int) -> np.ndarray:
     """Weights of the planes in PSNR_YCoCg / block energy: (6·Y + Co + Cg)/8; alpha like Y."""
     return {1: np.array([1.0]), 2: np.array([1.0, 1.0]), 3: np.array([6, 1, 1]) / 8.0,
             4: np.array([6, 1, 1, 8]) / 8.0}[channels]
+
+
+def rgb_mse_weights(channels: int) -> np.ndarray:
+    """How much an error of 1 in each plane adds to the mean squared error over the colour
+    channels (per pixel): YCoCg-R gives MSE_RGB = eY² + eCo²/6 + eCg²/4; alpha is not colour
+    (weight 0); grey is Y alone."""
+    return {1: np.array([1.0]), 2: np.array([1.0, 0.0]), 3: np.array([1.0, 1 / 6, 1 / 4]),
+            4: np.array([1.0, 1 / 6, 1 / 4, 0.0])}[channels]

@@ -1,9 +1,14 @@
-"""RLFC encoder: key-view tree, closed-loop sparse residuals, BISE-packed blocks.
+"""The BISE-family encoder shared by the ``bise`` and ``dcp`` profiles: a key-view tree, a
+top-down closed loop of sparse quantized residuals, BISE-packed blocks behind an offset table.
 
-Data path: views (R, C, H, W, Ch) → padded to multiples of B → RKVs per level (Gaussian
-filter, in the input's RGB domain) → top RKVs coded as images → top-down, per level:
-residual = YCoCg-R(RKV) − decoded parent, thresholded and quantized; the decoded node is
-rebuilt from the quantized residual (closed loop) → blocks packed per location.
+What differs between the profiles (how the key views are made, how a level is predicted from
+the level above, the side sections) is a :class:`KeyStrategy`; this module holds no profile
+branches.
+
+Data path: views (R, C, H, W, Ch) → padded to multiples of B → key views per level (the
+strategy) → top key views coded as images → top-down, per level: residual = YCoCg-R(node) −
+prediction, thresholded and quantized; the decoded node is rebuilt from the quantized residual
+(closed loop) → blocks packed per location.
 """
 from __future__ import annotations
 
@@ -13,18 +18,14 @@ import numpy as np
 
 from formats.errors import UnsupportedError
 from formats.lightfield import LightField
+from formats.pixels import plane_weights, to_planes
 
 from . import blocks as blk
-from .color import plane_weights, to_planes
+from .kernels import MODE_CONST  # noqa: F401  (re-exported for profile modules)
 from .params import RlfcParams
 from .residual import block_energy, from_blocks, quantize_dequantize, to_blocks
 from .topcodec import decode_image, encode_image
-from .disparity import dcp_clusters, estimate, pack_disparity, predict_views
-from .tree import Tree, build_tree, filter_level
-
-CODEC_ID = "rlfc"
-CODEC_VERSION = 1
-PRED_CACHE_BYTES = 1 << 30    # dcp: cache the (Q-independent) prediction of all views up to this size
+from .tree import Tree
 
 
 @dataclass
@@ -38,7 +39,31 @@ class LoopResult:
     top_dec: np.ndarray         # (N_H, Hp, Wp, P) int32
 
 
-def _pad(x: np.ndarray, b: int) -> np.ndarray:
+class KeyStrategy:
+    """How a BISE-family profile makes key views and predicts each level from the one above."""
+
+    profile = ""
+    index_coding = "raw-u32"
+
+    def build(self, enc: "KeyTreeEncoder", lf: LightField, views: np.ndarray, params: RlfcParams):
+        """(tree, key images per level above the views: list of (N_l, Hp, Wp, C) arrays)."""
+        raise NotImplementedError
+
+    def prepare(self, enc: "KeyTreeEncoder", params: RlfcParams, side=None) -> None:
+        """Estimate side information once the decoded top key views are known (``side``: a
+        previous estimate to reuse)."""
+
+    def predict(self, enc: "KeyTreeEncoder", level: int, nodes: np.ndarray, dec_above: np.ndarray) -> np.ndarray:
+        """(n, Hp, Wp, P) int32 prediction of level-``level`` nodes from the decoded level above."""
+        raise NotImplementedError
+
+    def side(self, enc: "KeyTreeEncoder", params: RlfcParams) -> tuple[dict, list]:
+        """(config entries, sections) of the side information."""
+        return {}, []
+
+
+def pad_to(x: np.ndarray, b: int) -> np.ndarray:
+    """Pad (…, H, W, C) to multiples of b by repeating the last row/column."""
     h, w = x.shape[-3:-1]
     ph, pw = -h % b, -w % b
     if ph == 0 and pw == 0:
@@ -47,56 +72,31 @@ def _pad(x: np.ndarray, b: int) -> np.ndarray:
     return np.pad(x, pad, mode="edge")
 
 
-class Encoder:
-    """Holds the parameter-independent work (RKVs, top images) so rate control can re-run
-    the closed loop for many quantizer settings cheaply."""
+class KeyTreeEncoder:
+    """Holds the parameter-independent work (key views, top images, side information) so rate
+    control can re-run the closed loop for many quantizer settings cheaply."""
 
-    def __init__(self, lf: LightField, params: RlfcParams, disparity: np.ndarray | None = None):
-        """``disparity``: dcp only, a (n_clusters, n_blocks) map to use instead of estimating one
-        (rate control re-uses one map across key-view qualities)."""
+    def __init__(self, lf: LightField, params: RlfcParams, strategy: KeyStrategy, side=None):
         if lf.views.dtype not in (np.uint8, np.uint16):
             raise UnsupportedError(f"RLFC codes 8- or 16-bit integer views; this light field is {lf.views.dtype} "
                                    "(convert float/EXR views to 16-bit first)")
-        self.lf = lf
+        self.lf, self.strategy = lf, strategy
         self.B = params.block_size
         r, c, h, w, ch = lf.views.shape
         self.dtype = lf.views.dtype
         self.bps = lf.views.dtype.itemsize
         self.P = ch
-        self.profile = params.profile
-        self.frac_bits = int(params.disp_frac_bits)
-        views = _pad(lf.views.reshape(r * c, h, w, ch), self.B)
-        self.Hp, self.Wp = views.shape[1:3]
-        self.rkv = [views]
-        if self.profile == "dcp":
-            if lf.layout != "grid":
-                raise UnsupportedError("the dcp profile needs a grid of parallel cameras; use --profile bise "
-                                       "for posed captures")
-            par, key, self.offsets = dcp_clusters(r, c, lf.positions)
-            pos = lf.positions.reshape(-1, 3)
-            self.tree = Tree((par,), (r * c, len(key)), (pos, pos[key]))
-            self.key_of = par
-            self.rkv.append(views[key])                       # key views are views, not averages
-        else:
-            self.tree = build_tree(r, c, lf.positions, params.tree_height, lf.layout)
-            for lev in range(self.tree.height):
-                self.rkv.append(filter_level(self.rkv[-1], self.tree, lev, params.sigma))
+        self.views = pad_to(lf.views.reshape(r * c, h, w, ch), self.B)
+        self.Hp, self.Wp = self.views.shape[1:3]
+        self.nby, self.nbx = self.Hp // self.B, self.Wp // self.B
+        self.tree, keys = strategy.build(self, lf, self.views, params)
+        self.rkv = [self.views] + keys
         self.top = [encode_image(im, params.top_codec, params.top_psnr) for im in self.rkv[-1]]
         top_px = np.stack([decode_image(cd, data, im.shape, im.dtype) for (cd, data), im in zip(self.top, self.rkv[-1])])
         self.top_dec = to_planes(top_px)
-        self.nby, self.nbx = self.Hp // self.B, self.Wp // self.B
-        if self.profile == "dcp":
-            self.disp = disparity if disparity is not None else estimate(
-                to_planes(views), self.top_dec, self.key_of, self.offsets, self.B, int(params.max_disparity),
-                self.frac_bits, smooth_tol=float(params.disp_smooth), smooth_iters=3 if params.disp_smooth > 0 else 0)
-            # the prediction does not depend on the quantizer: keep it for rate control when it fits
-            self._pred = None
-            if views.size * 4 <= PRED_CACHE_BYTES:
-                self._pred = predict_views(self.top_dec, self.key_of, self.offsets, self.disp,
-                                           np.arange(len(views)), self.B, self.frac_bits)
+        strategy.prepare(self, params, side)
         H = self.tree.height
-        # BFS numbering of residual nodes: level H-1 first, level 0 last
-        self.level_offset = {}
+        self.level_offset = {}        # BFS numbering of residual nodes: level H-1 first, level 0 last
         off = 0
         for lev in range(H - 1, -1, -1):
             self.level_offset[lev] = off
@@ -114,18 +114,11 @@ class Encoder:
         dec = self.top_dec
         levels = []
         for lev in range(self.tree.height - 1, -1, -1):
-            par = self.tree.parents[lev]
-            n_l = len(par)
+            n_l = self.tree.sizes[lev]
             nxt = np.empty((n_l, self.Hp, self.Wp, P), dtype=np.int32)
             for a in range(0, n_l, 16):   # chunks of nodes bound the memory of one level
                 s = slice(a, min(a + 16, n_l))
-                if self.profile == "dcp" and self._pred is not None:
-                    pred = self._pred[s]
-                elif self.profile == "dcp":
-                    pred = predict_views(self.top_dec, self.key_of, self.offsets, self.disp,
-                                         np.arange(s.start, s.stop), B, self.frac_bits)
-                else:
-                    pred = dec[par[s]]
+                pred = self.strategy.predict(self, lev, np.arange(s.start, s.stop), dec)
                 target = to_planes(self.rkv[lev][s])
                 q, deq = quantize_dequantize(target - pred, q16, thr)
                 qb = to_blocks(q, B)                                      # (n, nby, nbx, B, B, P)
@@ -152,7 +145,8 @@ class Encoder:
                     rec = from_blocks(rb)
                 nxt[s] = rec
                 if keep_blocks:
-                    rawpx = to_blocks(self.rkv[lev][s], B)[kn[raw], ky[raw], kx[raw]].reshape(int(raw.sum()), B * B * self.lf.channels)
+                    rawpx = to_blocks(self.rkv[lev][s], B)[kn[raw], ky[raw], kx[raw]].reshape(
+                        int(raw.sum()), B * B * self.lf.channels)
                     raw_full = np.zeros((len(kn), B * B * self.lf.channels), dtype=np.int64)
                     raw_full[raw] = rawpx
                     g = self.level_offset[lev] + a + kn
@@ -205,13 +199,12 @@ class Encoder:
         """Pack a closed-loop result into (config, sections)."""
         P, B = self.P, self.B
         levels = self.prune(res)
-        res = LoopResult(res.tree, res.dec0, levels, res.top, res.top_dec)
-        if res.levels:
-            g = np.concatenate([x[0] for x in res.levels])
-            loc = np.concatenate([x[1] for x in res.levels])
-            q = np.concatenate([x[2] for x in res.levels])
-            raw = np.concatenate([x[3] for x in res.levels])
-            raw_px = np.concatenate([x[4] for x in res.levels])
+        if levels:
+            g = np.concatenate([x[0] for x in levels])
+            loc = np.concatenate([x[1] for x in levels])
+            q = np.concatenate([x[2] for x in levels])
+            raw = np.concatenate([x[3] for x in levels])
+            raw_px = np.concatenate([x[4] for x in levels])
         else:
             g = loc = np.zeros(0, np.int64)
             q = np.zeros((0, P, B * B), np.int32)
@@ -227,20 +220,17 @@ class Encoder:
         if P in (2, 4):
             q16[-1] = 16
         cfg = {
-            "profile": params.profile, "params": params.to_dict(), "block_size": B, "planes": P,
+            "profile": self.strategy.profile, "params": params.to_dict(), "block_size": B, "planes": P,
             "channels": self.lf.channels, "dtype": str(self.dtype), "height": self.lf.height, "width": self.lf.width,
             "padded": [self.Hp, self.Wp], "blocks": [self.nby, self.nbx], "q16": q16,
             "tree": self.tree.to_config(), "n_res_nodes": self.n_res_nodes,
             "level_offset": [self.level_offset[lev] for lev in range(self.tree.height)],
             "top": top_cfg, "layout": layout, "n_blocks": int(len(g)), "n_raw_blocks": int(raw.sum()),
         }
-        sections = [("rlfc.top", b"".join(top_bytes))]
-        if self.profile == "dcp":
-            data, dt = pack_disparity(self.disp)
-            cfg["dcp"] = {"offsets": self.offsets.tolist(), "max_disparity": int(params.max_disparity),
-                          "frac_bits": self.frac_bits, "disp_coding": "zlib-delta", "disp_dtype": dt}
-            sections.append(("rlfc.disp", data))
-        if self.profile == "dcp":
+        side_cfg, side_sections = self.strategy.side(self, params)
+        cfg.update(side_cfg)
+        sections = [("rlfc.top", b"".join(top_bytes))] + side_sections
+        if self.strategy.index_coding == "zlib-runlen":
             cfg["index_coding"] = "zlib-runlen"
             sections.append(("rlfc.index", blk.pack_index(index)))
         else:
@@ -248,15 +238,10 @@ class Encoder:
         sections.append(("rlfc.blocks", blocks.tobytes()))
         return cfg, sections
 
+    def decoded_views(self, res: LoopResult) -> np.ndarray:
+        """(R, C, H, W, Ch) pixels the file of ``res`` decodes to."""
+        from formats.pixels import from_planes
 
-def encode(lf: LightField, params: RlfcParams | None = None) -> tuple[dict, list, LoopResult]:
-    """Encode a light field with fixed parameters.
-
-    Returns:
-        (config, sections, loop result); ``loop.dec0`` holds the decoded view planes.
-    """
-    params = params or RlfcParams()
-    enc = Encoder(lf, params)
-    res = enc.closed_loop(params)
-    cfg, sections = enc.pack(params, res)
-    return cfg, sections, res
+        lf = self.lf
+        px = from_planes(res.dec0[:, :lf.height, :lf.width], lf.views.dtype)
+        return px.reshape(lf.views.shape)

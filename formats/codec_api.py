@@ -1,0 +1,131 @@
+"""The one interface every codec implements, and the vocabulary it speaks.
+
+A codec turns a :class:`~formats.lightfield.LightField` into a JSON-able config plus named
+byte sections (``encode``), and opens a written file into a :class:`Decoder` (``open``). It
+never opens files itself and never imports another codec; the container never imports a
+codec. Codecs are found by their on-wire id through :mod:`formats.registry`.
+
+Vocabulary (the same in every codec, the CLI and the docs):
+    rows, cols: the view grid (unordered captures are 1 × N); view index = row·cols + col.
+    height, width: a view's size in pixels (H × W everywhere, never W × H).
+    channels: 1 grey, 2 grey + alpha, 3 RGB, 4 RGBA; dtype: uint8 or uint16 samples.
+    level: 0 = full quality; larger = coarser, up to ``levels`` (the coarsest). Fractional
+        levels where a codec supports them (networks).
+    block: a B × B pixel tile of one view, the random-access unit (codecs that have one).
+"""
+from __future__ import annotations
+
+import abc
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .errors import UnsupportedError
+
+
+@dataclass(frozen=True)
+class EncodeOptions:
+    """What a user asks of an encode, in codec-independent words.
+
+    Attributes:
+        target_psnr: colour PSNR floor in dB (pooled over all views), or None.
+        target_bpp: whole-file bits-per-pixel ceiling, or None.
+        min_view_psnr: per-view colour PSNR floor in dB, or None.
+        lossless: bit-exact decode.
+        profile: a codec's variant ("auto" lets the codec pick).
+        params: codec-specific options (the codec validates them).
+    """
+
+    target_psnr: float | None = None
+    target_bpp: float | None = None
+    min_view_psnr: float | None = None
+    lossless: bool = False
+    profile: str = "auto"
+    params: dict = field(default_factory=dict)
+
+
+@dataclass
+class Encoded:
+    """An encoded light field, ready for :func:`formats.lfcfile.write_lfc`.
+
+    Attributes:
+        config: the codec's JSON-able config (stored in the file's metadata).
+        sections: (name, bytes) in file order.
+        decoded: (R, C, H, W, Ch) the pixels a decoder of the file returns at level 0 (the
+            encoder's closed loop), or None when the codec cannot say without decoding.
+        trace: the rate search's steps (JSON-able dicts), if any.
+        notes: one-line warnings for the user (e.g. a target that was not met and why).
+        target_met: whether every requested target was reached (None: no target).
+        summary: JSON-able facts for reports (profile, chosen parameters, ...).
+    """
+
+    config: dict
+    sections: list
+    decoded: np.ndarray | None = None
+    trace: list = field(default_factory=list)
+    notes: list = field(default_factory=list)
+    target_met: bool | None = None
+    summary: dict = field(default_factory=dict)
+
+
+Progress = Callable[[str, int, int | None], None]
+"""progress(stage, done, total): a stage name and a counter (total None when unknown)."""
+
+
+class Decoder(abc.ABC):
+    """An opened file of one codec. Geometry attributes: rows, cols, height, width, channels,
+    dtype (numpy), levels (int: valid levels are 0..levels)."""
+
+    rows: int
+    cols: int
+    height: int
+    width: int
+    channels: int
+    dtype: np.dtype
+    levels: int
+
+    @abc.abstractmethod
+    def decode_view(self, row: int, col: int, level: float = 0) -> np.ndarray:
+        """One view: (H, W, C) pixels."""
+
+    def decode_all(self, level: float = 0) -> np.ndarray:
+        """The whole light field: (rows, cols, H, W, C) pixels."""
+        return np.stack([np.stack([self.decode_view(r, c, level) for c in range(self.cols)])
+                         for r in range(self.rows)])
+
+    def decode_block(self, row: int, col: int, by: int, bx: int, level: float = 0) -> np.ndarray:
+        """One block of one view: (b, b, C) pixels, cropped at the image edge."""
+        raise UnsupportedError(f"{type(self).__name__} has no block random access (decode views instead)")
+
+    def decode_blocks(self, views, by, bx, level: float = 0) -> np.ndarray:
+        """Many blocks: (M, B, B, C) pixels for flat view indices and block rows/columns."""
+        raise UnsupportedError(f"{type(self).__name__} has no block random access (decode views instead)")
+
+    @abc.abstractmethod
+    def info(self) -> dict:
+        """JSON-able description of what this file holds (the CLI prints it without knowing the
+        codec): at least ``levels`` and a one-line ``summary``."""
+
+
+class Codec(abc.ABC):
+    """A codec plug-in: registered under ``codec_id`` in the ``lfcodec.codecs`` entry-point group."""
+
+    codec_id: str = ""
+    version: int = 1
+    description: str = ""
+
+    @abc.abstractmethod
+    def encode(self, lf, options: EncodeOptions, progress: Progress | None = None) -> Encoded:
+        """Encode a LightField (the codec validates ``options``; bad values raise ParameterError)."""
+
+    @abc.abstractmethod
+    def open(self, f, **kw) -> Decoder:
+        """A decoder over an opened :class:`~formats.lfcfile.LfcFile` of this codec."""
+
+    def add_arguments(self, parser) -> None:
+        """Add this codec's own command-line options (an argparse parser or group)."""
+
+    def params_from_args(self, args) -> dict:
+        """This codec's params dict from parsed command-line options."""
+        return {}

@@ -1,0 +1,55 @@
+"""Codec registry: on-wire codec id → codec plug-in.
+
+Codecs join through the ``lfcodec.codecs`` entry-point group (pyproject.toml: ``[project.
+entry-points."lfcodec.codecs"]``, ``id = "package.module:CodecClass"``), as numcodecs does, or
+at run time with :func:`register_codec`. Nothing here imports a codec until it is asked for.
+"""
+from __future__ import annotations
+
+from importlib import metadata
+
+from .codec_api import Codec
+from .errors import UnsupportedError
+
+GROUP = "lfcodec.codecs"
+_registered: dict[str, type] = {}
+_instances: dict[str, Codec] = {}
+
+
+def register_codec(cls: type, codec_id: str | None = None) -> type:
+    """Register a :class:`~formats.codec_api.Codec` subclass under its id (usable as a decorator)."""
+    _registered[codec_id or cls.codec_id] = cls
+    _instances.pop(codec_id or cls.codec_id, None)
+    return cls
+
+
+def _entry_points() -> dict:
+    return {ep.name: ep for ep in metadata.entry_points(group=GROUP)}
+
+
+def available_codecs() -> list[str]:
+    """Ids of every codec that can be loaded."""
+    return sorted(set(_registered) | set(_entry_points()))
+
+
+def get_codec(codec_id: str) -> Codec:
+    """The codec registered under ``codec_id`` (one shared instance)."""
+    if codec_id in _instances:
+        return _instances[codec_id]
+    cls = _registered.get(codec_id)
+    if cls is None:
+        ep = _entry_points().get(codec_id)
+        if ep is None:
+            raise UnsupportedError(f"codec {codec_id!r} is not supported by this lfcodec "
+                                   f"(known: {', '.join(available_codecs()) or 'none'})")
+        cls = ep.load()
+    inst = cls()
+    if not isinstance(inst, Codec):
+        raise UnsupportedError(f"codec {codec_id!r} does not implement formats.codec_api.Codec")
+    _instances[codec_id] = inst
+    return inst
+
+
+def open_decoder(f, **kw):
+    """A decoder for an opened :class:`~formats.lfcfile.LfcFile`, chosen by its codec id."""
+    return get_codec(f.codec).open(f, **kw)

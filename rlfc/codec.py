@@ -1,0 +1,77 @@
+"""RLFC as an lfcodec codec plug-in (entry point ``rlfc`` in the ``lfcodec.codecs`` group)."""
+from __future__ import annotations
+
+from formats.codec_api import Codec, EncodeOptions, Encoded
+from formats.errors import ParameterError
+
+from .decoder import RlfcDecoder
+from .header import CODEC_ID, CODEC_VERSION
+from .profiles import available_profiles, get_profile
+
+#: ``--profile auto`` tries these in order and takes the first that accepts the light field.
+AUTO_ORDER = ("dcp", "bise")
+
+
+def choose_profile(lf, requested: str) -> str:
+    """The profile ``auto`` resolves to for ``lf``, or ``requested`` after checking it exists."""
+    if requested != "auto":
+        get_profile(requested)
+        return requested
+    for pid in AUTO_ORDER:
+        if get_profile(pid).accepts(lf) is None:
+            return pid
+    return "bise"
+
+
+class RlfcCodec(Codec):
+    codec_id = CODEC_ID
+    version = CODEC_VERSION
+    description = "random-access key-view light-field codec (after Pratapa & Manocha, I3D 2019)"
+
+    def encode(self, lf, options: EncodeOptions, progress=None) -> Encoded:
+        pid = choose_profile(lf, options.profile)
+        enc = get_profile(pid).encode(lf, options, progress)
+        enc.config["profile"] = pid
+        enc.summary.setdefault("profile", pid)
+        return enc
+
+    def open(self, f, **kw) -> RlfcDecoder:
+        return RlfcDecoder(f, **kw)
+
+    # -- command line -----------------------------------------------------------------------
+    def add_arguments(self, g) -> None:
+        g.add_argument("--profile", default=None, choices=["auto"] + available_profiles(),
+                       help="RLFC profile: dcp (disparity-compensated prediction from 3x3-cluster key views; "
+                            "grids), bise (the paper's key-view tree), or auto (default: dcp for grids, bise "
+                            "for posed captures)")
+        g.add_argument("--quant", type=float, default=None,
+                       help="quantizer step Q in pixel units, 1 = lossless (default 8 for 8-bit input, "
+                            "8*257 for 16-bit)")
+        g.add_argument("--block-size", type=int, default=None, help="block edge in pixels (default 8)")
+        g.add_argument("--threshold", type=float, default=None, help="bise/dcp: pixel threshold T (default Q/2)")
+        g.add_argument("--energy", type=float, default=None, help="bise/dcp: block-energy threshold E (default (Q/2)^2)")
+        g.add_argument("--tree-height", type=int, default=None, help="bise: key-view tree height (default 3)")
+        g.add_argument("--sigma", type=float, default=None, help="bise: Gaussian filter width (view spacings)")
+        g.add_argument("--top-codec", default=None, choices=["auto", "j2k", "jxl"],
+                       help="bise/dcp: top key-view image codec")
+        g.add_argument("--top-psnr", type=float, default=None,
+                       help="bise/dcp: lossy top level, JPEG 2000 at this PSNR (dcp default: searched with a "
+                            "target, else 44)")
+        g.add_argument("--max-disparity", type=int, default=None,
+                       help="dcp: largest disparity searched, px per view step (default 32; the search starts "
+                            "at 4 and widens where blocks need it)")
+        g.add_argument("--disparity-bits", type=int, default=None,
+                       help="dcp: fractional bits of the disparity (3 = 1/8 px per view step; 0 = whole pixels)")
+
+    def params_from_args(self, a) -> dict:
+        names = {"quant": "quant", "block_size": "block_size", "threshold": "threshold", "energy": "energy",
+                 "tree_height": "tree_height", "sigma": "sigma", "top_codec": "top_codec", "top_psnr": "top_psnr",
+                 "max_disparity": "max_disparity", "disparity_bits": "disp_frac_bits"}
+        return {k: getattr(a, arg) for arg, k in names.items() if getattr(a, arg, None) is not None}
+
+
+def encode(lf, options: EncodeOptions | None = None, **params) -> Encoded:
+    """Encode a light field with RLFC (``params``: profile options, e.g. ``quant=4``)."""
+    if options is not None and params:
+        raise ParameterError("give either options or keyword params")
+    return RlfcCodec().encode(lf, options or EncodeOptions(profile=params.pop("profile", "auto"), params=params))

@@ -1,0 +1,68 @@
+"""Helpers every benchmark tool shares (written once here): logging, timing, the machine's
+description, and building .lfc files in memory."""
+from __future__ import annotations
+
+import os
+import platform
+import statistics
+import sys
+import time
+
+import numpy as np
+
+from formats.container import build_container
+from formats.lfcfile import encode_meta, open_lfc
+
+
+def log(msg: str) -> None:
+    """A progress line on stderr (results go to stdout and files)."""
+    print(msg, file=sys.stderr, flush=True)
+
+
+def median_time(fn, repeats: int, warmup: bool = True) -> float:
+    """Median seconds of ``fn()`` over ``repeats`` calls (after one warm-up call)."""
+    if warmup:
+        fn()
+    ts = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts)
+
+
+def median_time_result(fn, repeats: int = 3):
+    """(median seconds, last result) of ``fn()`` over ``repeats`` calls, no warm-up."""
+    ts, out = [], None
+    for _ in range(repeats):
+        t = time.perf_counter()
+        out = fn()
+        ts.append(time.perf_counter() - t)
+    return statistics.median(ts), out
+
+
+def machine() -> str:
+    """CPU model, cores and library versions, for the header of every table."""
+    cpu = "unknown CPU"
+    try:
+        for line in open("/proc/cpuinfo"):
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
+
+
+def lfc_bytes(codec: str, version: int, config: dict, geometry: dict, sections) -> bytes:
+    """A whole .lfc file in memory."""
+    return b"".join(bytes(p) for p in build_container(encode_meta(codec, version, config, geometry), sections))
+
+
+def open_encoded(lf, encoded, codec: str = "rlfc", version: int = 1):
+    """(decoder, file bytes) of an :class:`formats.codec_api.Encoded` (or (config, sections)) in memory."""
+    from formats.registry import open_decoder
+
+    cfg, secs = (encoded.config, encoded.sections) if hasattr(encoded, "config") else encoded
+    blob = lfc_bytes(codec, version, cfg, lf.geometry(), secs)
+    return open_decoder(open_lfc(blob)), blob
