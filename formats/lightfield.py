@@ -76,14 +76,20 @@ class LightField:
         return {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(self.views.dtype, 1.0)
 
     def geometry(self) -> dict:
-        """JSON-able scene geometry for a file's metadata."""
+        """JSON-able scene geometry for a file's metadata. A regular planar grid is written as
+        its ``baseline`` [bx, by] (positions = :func:`grid_positions`), anything else as the
+        list of ``positions``."""
         g = {
             "rows": self.rows, "cols": self.cols, "height": self.height, "width": self.width,
             "channels": self.channels, "dtype": str(self.views.dtype), "layout": self.layout,
             "focal": [float(self.focal[0]), float(self.focal[1])],
             "principal": [float(self.principal[0]), float(self.principal[1])],
-            "positions": np.round(self.positions, 9).tolist(),
         }
+        base = _grid_baseline(self.positions)
+        if base is not None and self.c2w is None:
+            g["baseline"] = base
+        else:
+            g["positions"] = np.round(self.positions, 9).tolist()
         if self.c2w is not None:
             g["c2w"] = np.round(self.c2w, 9).tolist()
         return g
@@ -92,9 +98,23 @@ class LightField:
     def from_geometry(views: np.ndarray, g: dict, meta: dict | None = None) -> "LightField":
         """Rebuild a light field from decoded views and :meth:`geometry` output."""
         c2w = np.asarray(g["c2w"], dtype=np.float64) if "c2w" in g else None
-        return LightField(views=views, positions=np.asarray(g["positions"]), c2w=c2w,
+        if "positions" in g:
+            pos = np.asarray(g["positions"], dtype=np.float64)
+        else:
+            pos = grid_positions(views.shape[0], views.shape[1], tuple(g["baseline"]))
+        return LightField(views=views, positions=pos, c2w=c2w,
                           focal=tuple(g["focal"]), principal=tuple(g["principal"]),
                           layout=g.get("layout", "grid"), meta=meta or {})
+
+
+def _grid_baseline(positions: np.ndarray) -> list[float] | None:
+    """[bx, by] when ``positions`` are exactly grid_positions(rows, cols, (bx, by)), else None."""
+    r, c = positions.shape[:2]
+    bx = float(positions[0, 1, 0] - positions[0, 0, 0]) if c > 1 else 1.0
+    by = float(positions[0, 0, 1] - positions[1, 0, 1]) if r > 1 else 1.0
+    if not (np.isfinite(bx) and np.isfinite(by)):
+        return None
+    return [bx, by] if np.array_equal(grid_positions(r, c, (bx, by)), positions) else None
 
 
 def grid_positions(rows: int, cols: int, baseline: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:

@@ -9,7 +9,7 @@ from .header import CODEC_ID, CODEC_VERSION
 from .profiles import available_profiles, get_profile
 
 #: ``--profile auto`` tries these in order and takes the first that accepts the light field.
-AUTO_ORDER = ("dcp", "bise")
+AUTO_ORDER = ("tx", "bise")
 
 
 def choose_profile(lf, requested: str) -> str:
@@ -41,13 +41,15 @@ class RlfcCodec(Codec):
     # -- command line -----------------------------------------------------------------------
     def add_arguments(self, g) -> None:
         g.add_argument("--profile", default=None, choices=["auto"] + available_profiles(),
-                       help="RLFC profile: dcp (disparity-compensated prediction from 3x3-cluster key views; "
-                            "grids), bise (the paper's key-view tree), or auto (default: dcp for grids, bise "
-                            "for posed captures)")
+                       help="RLFC profile: tx (multi-key disparity prediction, transform + rANS residuals; "
+                            "grids), dcp (disparity prediction from 3x3-cluster key views, BISE residuals; grids), "
+                            "bise (the paper's key-view tree), or auto (default: tx for grids, bise for posed "
+                            "captures)")
         g.add_argument("--quant", type=float, default=None,
                        help="quantizer step Q in pixel units, 1 = lossless (default 8 for 8-bit input, "
-                            "8*257 for 16-bit)")
-        g.add_argument("--block-size", type=int, default=None, help="block edge in pixels (default 8)")
+                            "8*257 for 16-bit); tx: the luma step of the views that are not key views")
+        g.add_argument("--block-size", type=int, default=None,
+                       help="random-access block edge in pixels (default 16 for tx, 8 for bise/dcp)")
         g.add_argument("--threshold", type=float, default=None, help="bise/dcp: pixel threshold T (default Q/2)")
         g.add_argument("--energy", type=float, default=None, help="bise/dcp: block-energy threshold E (default (Q/2)^2)")
         g.add_argument("--tree-height", type=int, default=None, help="bise: key-view tree height (default 3)")
@@ -62,11 +64,20 @@ class RlfcCodec(Codec):
                             "at 4 and widens where blocks need it)")
         g.add_argument("--disparity-bits", type=int, default=None,
                        help="dcp: fractional bits of the disparity (3 = 1/8 px per view step; 0 = whole pixels)")
+        g.add_argument("--key-spacing", type=int, default=None,
+                       help="tx: views between key views along rows and columns (default: 2 for grids up to 5x5, "
+                            "else 4)")
+        g.add_argument("--key-ratio", type=float, default=None,
+                       help="tx: key views' quantizer step is the others' divided by this (default 1.6)")
+        g.add_argument("--intra-codec", default=None, choices=["auto", "tx", "j2k"],
+                       help="tx: the intra key view as JPEG 2000 where that is smaller (auto, default) or always "
+                            "with the transform coder")
 
     def params_from_args(self, a) -> dict:
         names = {"quant": "quant", "block_size": "block_size", "threshold": "threshold", "energy": "energy",
                  "tree_height": "tree_height", "sigma": "sigma", "top_codec": "top_codec", "top_psnr": "top_psnr",
-                 "max_disparity": "max_disparity", "disparity_bits": "disp_frac_bits"}
+                 "max_disparity": "max_disparity", "disparity_bits": "disp_frac_bits", "key_spacing": "key_spacing",
+                 "key_ratio": "key_ratio", "intra_codec": "intra_codec"}
         return {k: getattr(a, arg) for arg, k in names.items() if getattr(a, arg, None) is not None}
 
 

@@ -27,9 +27,31 @@ def encode_image(img: np.ndarray, codec: str = "auto", psnr: float | None = None
     return name, bytes(out[name])
 
 
+def j2k_size(data: bytes) -> tuple[int, int, int]:
+    """(height, width, components) from a JPEG 2000 codestream's SIZ marker, read before
+    decoding (so a crafted stream cannot drive a huge allocation).
+
+    Raises:
+        ChecksumError: not a codestream starting SOC, SIZ.
+    """
+    b = bytes(data[:96])
+    if b[:4] == b"\xff\x4f\xff\x51" and len(b) >= 42:          # codestream: SOC then SIZ
+        xsiz, ysiz, xo, yo = (int.from_bytes(b[8 + 4 * i:12 + 4 * i], "big") for i in range(4))
+        return ysiz - yo, xsiz - xo, int.from_bytes(b[40:42], "big")
+    i = b.find(b"ihdr")
+    if b[4:8] == b"jP  " and i >= 0 and len(b) >= i + 14:          # JP2 file: the ihdr box
+        h, w = int.from_bytes(b[i + 4:i + 8], "big"), int.from_bytes(b[i + 8:i + 12], "big")
+        return h, w, int.from_bytes(b[i + 12:i + 14], "big")
+    raise ChecksumError("image is not a JPEG 2000 codestream or JP2 file")
+
+
 def decode_image(codec: str, data: bytes, shape: tuple, dtype) -> np.ndarray:
-    """Decode one top-level image and check it has the expected (H, W, C) shape and dtype."""
+    """Decode one top-level image and check it has the expected (H, W, C) shape and dtype
+    (for JPEG 2000 the declared size is checked before decoding)."""
     import imagecodecs
+
+    if codec == "j2k" and j2k_size(data) != tuple(shape):
+        raise ChecksumError(f"top-level j2k image declares {j2k_size(data)} (H, W, C), expected {tuple(shape)}")
 
     try:
         if codec == "j2k":

@@ -81,6 +81,12 @@ def rlfc_fixtures() -> dict:
         "rlfc_dcp_lossy_ga16": (v["ga16"], dict(profile="dcp", block_size=4, quant=6 * 257, threshold=3 * 257,
                                                 energy=9 * 257 ** 2, top_psnr=40)),
     }
+    specs.update({
+        "rlfc_tx_lossless_rgb8": (v["rgb8"], dict(profile="tx", block_size=16, quant=1)),
+        "rlfc_tx_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=16, step=5.0, key_spacing=2)),
+        "rlfc_tx_lossy_ga16": (v["ga16"], dict(profile="tx", block_size=8, step=6.0 * 257, key_spacing=2)),
+        "rlfc_tx_lossy_rgba8": (v["rgba8"], dict(profile="tx", block_size=16, step=4.0, key_spacing=3)),
+    })
     return {name: (encode(lf_of(views), **kw), lf_of(views)) for name, (views, kw) in specs.items()}
 
 

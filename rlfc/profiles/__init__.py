@@ -15,6 +15,7 @@ from .base import Profile, ProfileDecoder
 BUILTIN = {
     "bise": "rlfc.profiles.bise:PROFILE",      # the paper's: Gaussian key-view tree, BISE blocks
     "dcp": "rlfc.profiles.dcp:PROFILE",        # disparity-compensated prediction, BISE blocks
+    "tx": "rlfc.profiles.tx:PROFILE",          # multi-key prediction, transform + rANS residuals
 }
 GROUP = "lfcodec.rlfc_profiles"
 _cache: dict[str, Profile] = {}

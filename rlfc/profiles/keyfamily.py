@@ -2,8 +2,6 @@
 rate control (the profile's own search, or the quantizer search), pack."""
 from __future__ import annotations
 
-from dataclasses import fields
-
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
 
@@ -17,12 +15,11 @@ COMMON = {"block_size", "threshold", "quant", "energy", "top_codec", "top_psnr"}
 
 def base_params(lf, options: EncodeOptions, profile: str, allowed: set, defaults: dict | None = None) -> RlfcParams:
     """RlfcParams from ``options.params`` (only keys in ``allowed``; others are errors)."""
-    known = {f.name for f in fields(RlfcParams)}
     extra = set(options.params) - allowed
     if extra:
         bad = sorted(extra)
-        why = "unknown" if extra - known else f"not used by profile {profile!r}"
-        raise ParameterError(f"option(s) {', '.join('--' + k.replace('_', '-') for k in bad)} {why}")
+        raise ParameterError(f"option(s) {', '.join('--' + k.replace('_', '-') for k in bad)} not used by profile "
+                             f"{profile!r}")
     kw = {**(defaults or {}), **{k: v for k, v in options.params.items() if v is not None}}
     kw.pop("quant", None), kw.pop("threshold", None), kw.pop("energy", None)
     return RlfcParams(profile=profile, **kw)

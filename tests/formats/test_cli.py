@@ -67,11 +67,12 @@ def test_info(encoded, capsys):
     assert main(["info", str(encoded), "--json", "--verify"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["codec"] == "rlfc" and rep["scene"]["rows"] == 9 and rep["verified"]
-    # a grid encodes with the dcp profile by default (--profile auto)
-    assert rep["decoder"]["profile"] == "dcp" and rep["decoder"]["levels"] == 1
-    assert [s["name"] for s in rep["sections"]] == ["meta", "rlfc.top", "rlfc.disp", "rlfc.index", "rlfc.blocks"]
+    # a grid encodes with the tx profile by default (--profile auto)
+    assert rep["decoder"]["profile"] == "tx" and rep["decoder"]["levels"] == 1
+    assert [s["name"] for s in rep["sections"]] == ["meta", "tx.layout", "tx.tables", "tx.maps", "tx.thumbs",
+                                                     "tx.keyimg", "tx.index", "tx.blocks"]
     assert main(["info", str(encoded)]) == 0
-    assert "rlfc.blocks" in capsys.readouterr().out
+    assert "tx.blocks" in capsys.readouterr().out
 
 
 def test_decode_views_view_and_block(encoded, tmp_path):
@@ -81,24 +82,25 @@ def test_decode_views_view_and_block(encoded, tmp_path):
     assert main(["decode", str(encoded), str(tmp_path / "one"), "--view", "3,5", "--quiet"]) == 0
     one = read_image(tmp_path / "one" / "r03_c05.png")
     assert (one == read_image(tmp_path / "all" / "r03_c05.png")).all()
-    # --block ROW,COL,BY,BX: view (3,5), block row 2, block column 4 → pixels [16,24) x [32,40)
+    # --block ROW,COL,BY,BX: view (3,5), block row 2, block column 4 → pixels [32,48) x [64,80) (16-px blocks)
     assert main(["decode", str(encoded), "--block", "3,5,2,4", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
     blk = np.load(tmp_path / "b.npy")
-    assert blk.shape == (8, 8, 3) and blk.dtype == np.uint8
-    assert (blk == one[16:24, 32:40]).all()
-    # edge block is cropped: 160 px wide = 20 blocks, 128 high = 16 blocks (exact), so use level too
-    assert main(["decode", str(encoded), "--block", "3,5,15,19", "--out", str(tmp_path / "e.npy"), "--level", "1",
+    assert blk.shape == (16, 16, 3) and blk.dtype == np.uint8
+    assert (blk == one[32:48, 64:80]).all()
+    # the last block: 160 px wide = 10 blocks, 128 high = 8 blocks (exact), at level 1 too
+    assert main(["decode", str(encoded), "--block", "3,5,7,9", "--out", str(tmp_path / "e.npy"), "--level", "1",
                  "--quiet"]) == 0
-    assert np.load(tmp_path / "e.npy").shape == (8, 8, 3)
+    assert np.load(tmp_path / "e.npy").shape == (16, 16, 3)
 
 
-@pytest.mark.parametrize("profile,top", [("auto", 1), ("bise", 3)])
-def test_progressive_decode_levels(profile, top, tmp_path):
+@pytest.mark.parametrize("profile,top,view", [("auto", 1, "1,1"), ("bise", 3, "0,0"), ("dcp", 1, "0,0")])
+def test_progressive_decode_levels(profile, top, view, tmp_path):
     enc = tmp_path / "p.lfc"
     assert main(["encode", str(SAMPLE), str(enc), "--profile", profile, "--quant", "3", "--quiet"]) == 0
     for L in (0, top):
-        assert main(["decode", str(enc), str(tmp_path / f"L{L}"), "--view", "0,0", "--level", str(L), "--quiet"]) == 0
-    a, b = read_image(tmp_path / "L0" / "r00_c00.png"), read_image(tmp_path / f"L{top}" / "r00_c00.png")
+        assert main(["decode", str(enc), str(tmp_path / f"L{L}"), "--view", view, "--level", str(L), "--quiet"]) == 0
+    name = "r%02d_c%02d.png" % tuple(map(int, view.split(",")))
+    a, b = read_image(tmp_path / "L0" / name), read_image(tmp_path / f"L{top}" / name)
     assert a.shape == b.shape and not (a == b).all()
     assert main(["decode", str(enc), str(tmp_path / "bad"), "--level", str(top + 1), "--quiet"]) == 2
 
@@ -133,16 +135,17 @@ def test_bad_block_and_level_requests(encoded):
 def test_corrupt_and_truncated_files(encoded, tmp_path):
     blob = bytearray(encoded.read_bytes())
     (tmp_path / "trunc.lfc").write_bytes(bytes(blob[:-1000]))
-    code, _, err = _run("info", str(tmp_path / "trunc.lfc"))
-    assert code == 2 and "truncated" in err and "rlfc.blocks" in err
     from formats.container import Container
-    info = Container(bytes(blob)).info("rlfc.blocks")
+    last = list(Container(bytes(blob)).sections)[-1]
+    code, _, err = _run("info", str(tmp_path / "trunc.lfc"))
+    assert code == 2 and "truncated" in err and last in err
+    info = Container(bytes(blob)).info(last)
     blob[info.offset + 100] ^= 0xFF
     (tmp_path / "flip.lfc").write_bytes(bytes(blob))
     code, _, err = _run("info", str(tmp_path / "flip.lfc"), "--verify")
-    assert code == 2 and "rlfc.blocks" in err and "checksum" in err
+    assert code == 2 and last in err and "checksum" in err
     code, _, err = _run("decode", str(tmp_path / "flip.lfc"), str(tmp_path / "o"), "--quiet")
-    assert code == 2 and "rlfc.blocks" in err
+    assert code == 2 and last in err
 
 
 def test_help_for_each_command():
@@ -177,9 +180,9 @@ def test_16bit_grey_works_like_rgb(grey16_scene, tmp_path, capsys):
     assert main(["decode", str(out), str(tmp_path / "v"), "--view", "8,8", "--quiet"]) == 0
     img = read_image(tmp_path / "v" / "r08_c08.png")
     assert img.shape == (128, 160, 1) and img.dtype == np.uint16
-    assert main(["decode", str(out), "--block", "8,8,15,19", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
+    assert main(["decode", str(out), "--block", "8,8,7,9", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
     blk = np.load(tmp_path / "b.npy")
-    assert blk.dtype == np.uint16 and (blk == img[120:128, 152:160]).all()
+    assert blk.dtype == np.uint16 and (blk == img[112:128, 144:160]).all()
     assert main(["encode", str(grey16_scene), str(out), "--lossless", "--quiet"]) == 0
     from formats.registry import open_decoder
     from formats.lfcfile import open_lfc
@@ -203,8 +206,8 @@ def test_dcp_profile_from_the_cli(tmp_path, capsys):
 
 
 def test_auto_profile_is_bise_for_posed_captures(tmp_path, capsys):
-    """--profile auto (the default) picks dcp for grids (test_info) and bise for posed captures,
-    which dcp refuses."""
+    """--profile auto (the default) picks tx for grids (test_info) and bise for posed captures,
+    which tx and dcp refuse."""
     from formats.imageio import write_image
 
     scene = tmp_path / "posed"
@@ -220,10 +223,13 @@ def test_auto_profile_is_bise_for_posed_captures(tmp_path, capsys):
     assert main(["encode", str(scene), str(tmp_path / "p.lfc"), "--json", "--quiet"]) == 0
     assert json.loads(capsys.readouterr().out)["profile"] == "bise"
     assert main(["encode", str(scene), str(tmp_path / "q.lfc"), "--profile", "dcp", "--quiet"]) == 2
+    assert main(["encode", str(scene), str(tmp_path / "q.lfc"), "--profile", "tx", "--quiet"]) == 2
 
 
-def test_dcp_target_bpp(tmp_path, capsys):
+@pytest.mark.parametrize("profile", ["dcp", "tx"])
+def test_target_bpp_per_profile(profile, tmp_path, capsys):
     out = tmp_path / "b.lfc"
-    assert main(["encode", str(SAMPLE), str(out), "--target-bpp", "0.1", "--json", "--quiet"]) == 0
+    assert main(["encode", str(SAMPLE), str(out), "--profile", profile, "--target-bpp", "0.1", "--json",
+                 "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out)
-    assert rep["profile"] == "dcp" and 0.05 < rep["bpp"] <= 0.1 and rep["psnr_rgb"] > 38
+    assert rep["profile"] == profile and 0.05 < rep["bpp"] <= 0.1 and rep["psnr_rgb"] > 38 and rep["target_met"]

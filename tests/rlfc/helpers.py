@@ -59,3 +59,9 @@ def check_agreement(d, lf_views_shape):
         img = blocks.reshape(rows * cols, d.nby, d.nbx, B, B, -1).transpose(0, 1, 3, 2, 4, 5)
         img = img.reshape(rows, cols, d.nby * B, d.nbx * B, -1)[:, :, :H, :W]
         assert (img == full).all()
+
+
+def open_encoded(lf, enc):
+    """(decoder, file bytes) of an Encoded (any RLFC profile), built in memory."""
+    blob = b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, enc.config, lf.geometry()), enc.sections))
+    return RlfcDecoder(open_lfc(blob)), blob

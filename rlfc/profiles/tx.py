@@ -1,0 +1,382 @@
+"""Profile ``tx``: multi-reference disparity prediction from key views, transform-coded and
+entropy-coded residuals with rate-distortion decisions (grids).
+
+Key views lie on a coarser sub-grid; they are coded view by view (an intra view from its
+thumbnail, the others predicted from key views coded before them) and decoded when the file
+is opened. Every other view is predicted block by block from the key views around it (one
+disparity and one prediction mode per 8×8 block and cell of views), plus, where the encoder
+found it worth its bits, one stored stream per B×B block: 8×8 integer-DCT coefficients
+(HEVC's matrix), rANS-coded with static per-file tables (:mod:`rlfc.txsyntax`). One block
+request = the in-memory key views + at most one stored stream.
+
+Levels: 0 = full quality; 1 = prediction only (key views stay full).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.errors import FormatError, UnsupportedError
+
+from ..kernels import dequantize
+from ..transform import COEF_MAX, UNZIG, inverse
+from ..txlayout import MAX_REFS, TxLayout
+from ..txpredict import TB, planar, predict_tbs, upsample_thumb
+from ..txmaps import unpack_maps
+from ..txsections import stream_order, unpack_index, unpack_thumbs
+from ..txsyntax import MODE_INTRA, Parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
+from ..xp import NUMPY
+from .base import Profile, ProfileDecoder
+
+PAD = 8
+SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
+
+
+def plane_limits(planes: int, peak: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(lo, hi, flat) per plane: the value range of YCoCg-R planes and the flat (intra)
+    prediction: Y/grey/alpha in [0, peak] (flat = (peak + 1)/2), Co/Cg in [−peak, peak] (flat 0)."""
+    pc = plane_classes(planes)
+    lo = np.where(pc == 1, -peak, 0)
+    hi = np.full(planes, peak)
+    flat = np.where(pc == 1, 0, (peak + 1) // 2)
+    return lo.astype(np.int64), hi.astype(np.int64), flat.astype(np.int64)
+
+
+class TxDecoder(ProfileDecoder):
+    """Planes decoder of a ``tx`` file (see :class:`rlfc.profiles.base.ProfileDecoder`)."""
+
+    levels = 1
+
+    def __init__(self, container, header, cfg, limits=None):
+        from formats.limits import DEFAULT
+
+        limits = limits or DEFAULT
+        c, name = container, container.name
+        self.container, self.hdr = c, header
+        B = self.block_size = header.block_size
+        if B % TB:
+            raise FormatError(f"{name}: tx blocks must be multiples of {TB} pixels, got {B}")
+        self.Hp, self.Wp = header.padded
+        self.nby, self.nbx = header.blocks
+        self.P, self.dtype = header.planes, header.dtype
+        self.n_views = N0 = header.n_views
+        self.tpb = B // TB
+        self.nt = self.tpb ** 2
+        self.nby8, self.nbx8 = self.Hp // TB, self.Wp // TB
+        lay = self.lay = TxLayout.read(cfg.sub("tx"), c.read("tx.layout"), N0, self.P, name)
+        keys = np.asarray(lay.keys, np.int64)
+        if keys.size * self.Hp * self.Wp > limits.max_open_pixels:
+            raise FormatError(f"{name}: {keys.size} key views of {self.Hp}x{self.Wp} exceed the open-time limit of "
+                              f"{limits.max_open_pixels} pixels")
+        for s in SECTIONS:
+            c.info(s)
+        self.pcs = plane_classes(self.P)
+        peak = int(np.iinfo(self.dtype).max)
+        self.lo, self.hi, self.flat = plane_limits(self.P, peak)
+        self.tables = tables_from_quantized(tables_from_bytes(c.read("tx.tables"), f"{name}: tx.tables"))
+        self.disp, self.modes = unpack_maps(c.read("tx.maps"), lay.n_maps, (self.nby8, self.nbx8), 1 + MAX_REFS,
+                                            f"{name}: tx.maps")
+        nrefs = (lay.refs >= 0).sum(axis=1)
+        users = np.flatnonzero(lay.cell >= 0)
+        if users.size and (self.modes.max(axis=1, initial=0)[lay.cell[users]] > nrefs[users]).any():
+            raise FormatError(f"{name}: tx.maps selects a reference a view does not have")
+        intra = [int(k) for k in lay.coded_keys if lay.intra[k]]
+        self.thumbs = unpack_thumbs(c.read("tx.thumbs"), (len(intra), self.nby8, self.nbx8, self.P),
+                                    f"{name}: tx.thumbs")
+        self.thumb_of = {k: i for i, k in enumerate(intra)}
+        nloc = self.nby * self.nbx
+        is_key = np.zeros(N0, bool)
+        is_key[keys] = True
+        ck = lay.coded_keys
+        key_len, coded, lengths = unpack_index(c.read("tx.index"), len(ck), self.nby, N0, nloc, is_key,
+                                               f"{name}: tx.index")
+        off = np.concatenate([[0], np.cumsum(np.concatenate([key_len.reshape(-1), lengths]))])
+        nk = key_len.size
+        self.row_of = {k: i for i, k in enumerate(ck)}
+        self.key_start = off[:nk].reshape(len(ck), self.nby)
+        self.key_end = off[1:nk + 1].reshape(len(ck), self.nby)
+        img_off = np.concatenate([[0], np.cumsum(lay.key_images)]).astype(np.int64)
+        if c.info("tx.keyimg").length != img_off[-1]:
+            raise FormatError(f"{name}: section 'tx.keyimg' has {c.info('tx.keyimg').length} bytes, the header "
+                              f"says {img_off[-1]}")
+        self.img_of = {k: (int(img_off[i]), int(img_off[i + 1]))
+                       for i, k in enumerate(k for k in lay.keys if k not in self.row_of)}
+        sv, sl = stream_order(coded)
+        self.start = np.full((N0, nloc), -1, np.int64)
+        self.end = np.full((N0, nloc), -1, np.int64)
+        self.start[sv, sl], self.end[sv, sl] = off[nk:-1], off[nk + 1:]
+        self.coded = coded
+        if c.info("tx.blocks").length != off[-1] + PAD:
+            raise FormatError(f"{name}: section 'tx.blocks' has {c.info('tx.blocks').length} bytes, the index "
+                              f"says {off[-1] + PAD}")
+        self._remote = c.is_remote
+        self.buf = None if self._remote else c.array("tx.blocks", verify=False)
+        self.key_slot = np.full(N0, -1, np.int64)
+        self.key_slot[keys] = np.arange(keys.size)
+        self.is_key = self.key_slot >= 0
+        self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
+        self.kp = planar(self.keyplanes)
+        for k in keys.tolist():                               # key views: decoded once, in order
+            self._decode_key(k)
+
+    # -- streams ----------------------------------------------------------------------------
+    def _streams(self, starts: np.ndarray, ends: np.ndarray):
+        """(buffer, starts, ends) holding the given streams of ``tx.blocks``, checksums verified
+        for the bytes read (a byte-range source fetches only these ranges, merged)."""
+        c = self.container
+        if not self._remote:
+            if starts.size:
+                c.verify_ranges("tx.blocks", starts, ends)
+            return self.buf, starts, ends
+        order = np.argsort(starts)
+        parts, new_start = [], np.empty_like(starts)
+        pos = 0
+        a = b = None
+        runs = []
+        for i in order.tolist():                              # merge touching ranges
+            s, e = int(starts[i]), int(ends[i])
+            if a is not None and s <= b:
+                b = max(b, e)
+            else:
+                if a is not None:
+                    runs.append((a, b))
+                a, b = s, e
+        if a is not None:
+            runs.append((a, b))
+        run_pos = {}
+        for a, b in runs:
+            parts.append(np.frombuffer(c.read("tx.blocks", a, b), np.uint8))
+            run_pos[a] = pos
+            pos += b - a
+        ra = np.array([r[0] for r in runs], np.int64)
+        for i in range(starts.size):
+            j = int(np.searchsorted(ra, starts[i], side="right")) - 1
+            new_start[i] = run_pos[int(ra[j])] + starts[i] - ra[j]
+        buf = np.concatenate(parts + [np.zeros(PAD, np.uint8)]) if parts else np.zeros(PAD, np.uint8)
+        return buf, new_start, new_start + (ends - starts)
+
+    # -- prediction ---------------------------------------------------------------------------
+    def _pred(self, views, ty, tx, xp=NUMPY, kp=None):
+        """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
+        lay = self.lay
+        cell = lay.cell[views]
+        loc8 = ty * self.nbx8 + tx
+        d = self.disp[cell, loc8]
+        mode = self.modes[cell, loc8]
+        refs = lay.refs[views]
+        w = np.where(mode[:, None] == 0, lay.weights[views], 64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
+        r0 = refs.clip(0)
+        dpos = lay.positions[views][:, None, :] - lay.positions[r0]          # (M, 4, 2)
+        A = xp.asarray
+        return predict_tbs(xp, self.kp if kp is None else kp, (self.Hp, self.Wp), A(self.key_slot[r0].clip(0)),
+                           A(w), A(d[:, None] * dpos[..., 0]), A(d[:, None] * dpos[..., 1]), A(ty * TB), A(tx * TB))
+
+    def _tb_coords(self, views, locs):
+        by, bx = np.divmod(locs, self.nbx)
+        t = np.arange(self.nt)
+        ty = (by[:, None] * self.tpb + t // self.tpb).reshape(-1)
+        tx = (bx[:, None] * self.tpb + t % self.tpb).reshape(-1)
+        return np.repeat(views, self.nt), ty, tx
+
+    def _residual(self, views, parsed):
+        """(S, nt, 8, 8, P) int64 residuals of parsed streams of ``views``; intra tbs flagged."""
+        lay = self.lay
+        S = views.size
+        step = lay.step16[np.where(self.is_key[views], 0, 1)]                # (S, P)
+        lv = parsed.levels                                                     # (S, nt, P, 64) scan order
+        raster = np.where(lay.bypass[None, None, :, None], lv, lv[..., UNZIG])
+        deq = dequantize(NUMPY, raster, step[:, None, :, None]).clip(-COEF_MAX, COEF_MAX)
+        blocks = deq.reshape(S, self.nt, self.P, TB, TB)
+        tr = ~lay.bypass
+        if tr.any():
+            blocks[:, :, tr] = inverse(blocks[:, :, tr])
+        return np.moveaxis(blocks, 2, -1)                                      # (S, nt, 8, 8, P)
+
+    def _parse(self, views, locs):
+        """Parse the streams of (view, location) pairs that have one."""
+        s, e = self.start[views, locs], self.end[views, locs]
+        buf, s2, e2 = self._streams(s, e)
+        kind = self.lay.intra[views].astype(np.int64)
+        key = self.is_key[views].astype(np.int64)
+        name = self.container.name
+        if views.size == 1:
+            return parse_one(bytes(buf[s2[0]:e2[0]]), self.tables, self.nt, self.pcs, int(kind[0]), int(key[0]))
+        return parse_lanes(buf, s2, e2, self.tables, self.nt, self.pcs, kind, key, name)
+
+    def _reconstruct(self, views, locs, level, pred=None, parsed=None):
+        """(M, B, B, P) int32 planes of block requests (views with references, or ``pred`` given
+        as (M, nt, 8, 8, P)); ``parsed``: the syntax of every request (key rows), else the
+        requests' own streams are parsed."""
+        M, B, nt = views.size, self.block_size, self.nt
+        if pred is None:
+            pred = self._pred(*self._tb_coords(views, locs)).reshape(M, nt, TB, TB, self.P)
+        out = pred.astype(np.int64)
+        if level == 0:
+            have = np.arange(M) if parsed is not None else np.flatnonzero(self.coded[views, locs])
+            if have.size:
+                if parsed is None:
+                    parsed = self._parse(views[have], locs[have])
+                res = self._residual(views[have], parsed)
+                intra = parsed.modes == MODE_INTRA                             # (S, nt)
+                base = np.where(intra[:, :, None, None, None], self.flat, out[have])
+                out[have] = base + res
+        out = out.clip(self.lo, self.hi).astype(np.int32)
+        # tbs → blocks: (M, tpb, tpb, 8, 8, P) → (M, B, B, P)
+        return out.reshape(M, self.tpb, self.tpb, TB, TB, self.P).transpose(0, 1, 3, 2, 4, 5).reshape(M, B, B, self.P)
+
+    def _decode_key(self, k: int) -> None:
+        slot = int(self.key_slot[k])
+        if k in self.img_of:                                  # a JPEG 2000 intra key view
+            from formats.pixels import to_planes
+
+            from ..topcodec import decode_image
+
+            a, b = self.img_of[k]
+            img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)),
+                               (self.Hp, self.Wp, self.P), self.dtype)
+            self.keyplanes[slot] = to_planes(img)
+            self.kp = planar(self.keyplanes)
+            return
+        nloc = self.nby * self.nbx
+        locs = np.arange(nloc)
+        views = np.full(nloc, k)
+        pred = None
+        if self.lay.intra[k]:
+            th = self.thumbs[self.thumb_of[k]] * self.lay.thumb_step16
+            th = (th + 8) >> 4
+            up = upsample_thumb(th, self.Hp, self.Wp)
+            pred = up.reshape(self.nby, self.tpb, TB, self.nbx, self.tpb, TB, self.P).transpose(
+                0, 3, 1, 4, 2, 5, 6).reshape(nloc, self.nt, TB, TB, self.P)
+        s0, e0 = self.key_start[self.row_of[k]], self.key_end[self.row_of[k]]
+        buf, s2, e2 = self._streams(s0, e0)
+        n = np.full(self.nby, 1 if self.lay.intra[k] else 0)
+        rows = parse_lanes(buf, s2, e2, self.tables, self.nt * self.nbx, self.pcs, n, np.ones(self.nby, np.int64),
+                           self.container.name)
+        parsed = Parsed(rows.modes.reshape(nloc, self.nt), rows.levels.reshape(nloc, self.nt, self.P, 64))
+        blocks = self._reconstruct(views, locs, 0, pred, parsed)
+        img = blocks.reshape(self.nby, self.nbx, self.block_size, self.block_size, self.P).transpose(0, 2, 1, 3, 4)
+        self.keyplanes[slot] = img.reshape(self.Hp, self.Wp, self.P)
+        self.kp = planar(self.keyplanes)
+
+    # -- ProfileDecoder ---------------------------------------------------------------------
+    def _key_blocks(self, views, by, bx):
+        B = self.block_size
+        img = self.keyplanes[self.key_slot[views]]
+        ys = by[:, None] * B + np.arange(B)
+        xs = bx[:, None] * B + np.arange(B)
+        return img[np.arange(views.size)[:, None, None], ys[:, :, None], xs[:, None, :]]
+
+    def blocks(self, views, by, bx, level):
+        out = np.empty((views.size, self.block_size, self.block_size, self.P), np.int32)
+        key = self.is_key[views]
+        if key.any():
+            out[key] = self._key_blocks(views[key], by[key], bx[key])
+        nk = np.flatnonzero(~key)
+        if nk.size:
+            out[nk] = self._reconstruct(views[nk], by[nk] * self.nbx + bx[nk], level)
+        B = self.block_size
+        return out.reshape(views.size, B * B, self.P)
+
+    def views(self, views, level):
+        nloc = self.nby * self.nbx
+        out = np.empty((views.size, self.Hp, self.Wp, self.P), np.int32)
+        B = self.block_size
+        for i, v in enumerate(views.tolist()):
+            if self.is_key[v]:
+                out[i] = self.keyplanes[self.key_slot[v]]
+                continue
+            blk = self._reconstruct(np.full(nloc, v), np.arange(nloc), level)
+            out[i] = blk.reshape(self.nby, self.nbx, B, B, self.P).transpose(0, 2, 1, 3, 4).reshape(
+                self.Hp, self.Wp, self.P)
+        return out
+
+    def torch(self, device):
+        return TorchTx(self, device)
+
+    def info(self) -> dict:
+        lay = self.lay
+        return {"key_views": len(lay.keys), "maps": lay.n_maps, "coded_blocks": int(self.coded.sum()),
+                "blocks_per_view": self.nby * self.nbx}
+
+
+class TorchTx:
+    """The same planes on a torch device: key views, maps and tables copied once; streams are
+    parsed on the CPU (rANS lanes), prediction, dequantization and the inverse transform run
+    on the device (the kernels of :mod:`rlfc.txpredict` and :mod:`rlfc.transform`)."""
+
+    def __init__(self, dec: TxDecoder, device):
+        from ..xp import torch_backend
+
+        self.d = dec
+        self.xp = torch_backend(device)
+        self.kp = self.xp.asarray(dec.kp)
+        self.keyplanes = self.xp.asarray(dec.keyplanes)
+        self.flat = self.xp.asarray(dec.flat)
+        self.lo, self.hi = self.xp.asarray(dec.lo), self.xp.asarray(dec.hi)
+
+    def blocks(self, views, by, bx, level):
+        """(M,) validated numpy requests → (M, B·B, P) int32 tensor."""
+        import torch
+
+        d, xp = self.d, self.xp
+        M, B, nt, P = views.size, d.block_size, d.nt, d.P
+        out = torch.empty((M, B, B, P), dtype=torch.int32, device=xp.device)
+        key = d.is_key[views]
+        if key.any():
+            kk = np.flatnonzero(key)
+            ys = xp.asarray(by[kk][:, None] * B + np.arange(B))
+            xs = xp.asarray(bx[kk][:, None] * B + np.arange(B))
+            img = self.keyplanes[xp.asarray(d.key_slot[views[kk]])]
+            out[xp.asarray(kk)] = img[torch.arange(kk.size, device=xp.device)[:, None, None], ys[:, :, None],
+                                      xs[:, None, :]]
+        nk = np.flatnonzero(~key)
+        if nk.size:
+            v, locs = views[nk], by[nk] * d.nbx + bx[nk]
+            tv, ty, tx = d._tb_coords(v, locs)
+            pred = d._pred(tv, ty, tx, xp, self.kp).reshape(nk.size, nt, TB, TB, P).to(torch.int64)
+            if level == 0:
+                have = np.flatnonzero(d.coded[v, locs])
+                if have.size:
+                    parsed = d._parse(v[have], locs[have])
+                    lay = d.lay
+                    step = xp.asarray(lay.step16[np.where(d.is_key[v[have]], 0, 1)])[:, None, :, None]
+                    lv = xp.asarray(parsed.levels)
+                    raster = torch.where(xp.asarray(lay.bypass)[None, None, :, None], lv, lv[..., xp.asarray(UNZIG)])
+                    deq = dequantize(xp, raster, step).clamp(-COEF_MAX, COEF_MAX)
+                    blk = deq.reshape(have.size, nt, P, TB, TB)
+                    tr = ~lay.bypass
+                    if tr.any():
+                        trt = xp.asarray(np.flatnonzero(tr))
+                        blk[:, :, trt] = inverse(blk[:, :, trt])
+                    res = blk.permute(0, 1, 3, 4, 2)
+                    intra = xp.asarray(parsed.modes == MODE_INTRA)[:, :, None, None, None]
+                    hv = xp.asarray(have)
+                    pred[hv] = torch.where(intra, self.flat.to(torch.int64), pred[hv]) + res
+            rec = torch.maximum(torch.minimum(pred, self.hi), self.lo).to(torch.int32)
+            out[xp.asarray(nk)] = rec.reshape(nk.size, d.tpb, d.tpb, TB, TB, P).permute(0, 1, 3, 2, 4, 5).reshape(
+                nk.size, B, B, P)
+        return out.reshape(M, B * B, P)
+
+
+class TxProfile(Profile):
+    id = "tx"
+    description = ("multi-reference disparity prediction from key views, transform-coded rANS residuals with "
+                   "rate-distortion decisions (grids)")
+
+    def accepts(self, lf):
+        if lf.layout != "grid":
+            return "the tx profile needs a grid of parallel cameras (this capture is posed)"
+        return None
+
+    def encode(self, lf, options, progress=None):
+        why = self.accepts(lf)
+        if why:
+            raise UnsupportedError(f"{why}; use --profile bise")
+        from ..txencode import encode_tx
+
+        return encode_tx(lf, options, progress)
+
+    def open(self, container, header, cfg, limits=None):
+        return TxDecoder(container, header, cfg, limits)
+
+
+PROFILE = TxProfile()

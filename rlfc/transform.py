@@ -1,0 +1,68 @@
+"""The 8×8 integer transform of the ``tx`` profile (H.265/HEVC's DCT approximation) and its
+scan order.
+
+Decoders reconstruct exactly in integers (int64, numpy or torch): for a block X of dequantized
+coefficients (orthonormal-DCT units), residual = ((T^T · X + 64) >> 7 · T + 128) >> 8, i.e.
+Y = (T^T X + 64) >> 7 (columns), R = (Y T + 128) >> 8 (rows), arithmetic shifts. T ≈ 64·√8·C
+(C the orthonormal DCT-II), so T^T X T / 2^15 ≈ C^T X C. Encoders analyse with the exact
+float inverse of that synthesis (:func:`forward`) and reconstruct with the integer inverse
+(closed loop), so every decoder agrees bit for bit.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: HEVC's 8-point DCT matrix (rows = basis functions); on-wire constants, do not change.
+T8 = np.array([
+    [64, 64, 64, 64, 64, 64, 64, 64],
+    [89, 75, 50, 18, -18, -50, -75, -89],
+    [83, 36, -36, -83, -83, -36, 36, 83],
+    [75, -18, -89, -50, 50, 89, 18, -75],
+    [64, -64, -64, 64, 64, -64, -64, 64],
+    [50, -89, 18, 75, -75, -18, 89, -50],
+    [36, -83, 83, -36, -36, 83, -83, 36],
+    [18, -50, 75, -89, 89, -75, 50, -18],
+], dtype=np.int64)
+
+#: zig-zag scan of an 8×8 block: ZIGZAG[i] = raster index (row·8 + col) of scan position i.
+ZIGZAG = np.array(sorted(range(64), key=lambda k: (k // 8 + k % 8, (k % 8) if (k // 8 + k % 8) % 2 == 0 else k // 8)),
+                  dtype=np.int64)
+#: inverse: scan position of each raster index.
+UNZIG = np.argsort(ZIGZAG)
+
+#: coefficient magnitude bound the decoder clips to (orthonormal units; 16-bit residuals need 2^20)
+COEF_MAX = (1 << 21) - 1
+
+# the encoder's analysis: the exact inverse of the synthesis R = T^T X T / 2^15, i.e.
+# X = 2^15 · (T^T)^-1 R T^-1 (T is only nearly orthogonal, so the float DCT would miss by a few
+# grey levels on large residuals)
+_F = np.linalg.inv(T8.T.astype(np.float64)) * np.sqrt(2.0 ** 15)
+
+
+def forward(r: np.ndarray) -> np.ndarray:
+    """Float analysis of (..., 8, 8) residuals: the coefficients whose exact synthesis is r
+    (≈ the orthonormal DCT); round them (or quantize) and :func:`inverse` gives r back within
+    about ±1."""
+    return np.matmul(np.matmul(_F, r.astype(np.float64)), _F.T)
+
+
+def inverse(X, xp=None):
+    """Exact integer inverse of (..., 8, 8) int64 coefficient blocks (numpy or torch), (..., 8, 8) int64."""
+    if isinstance(X, np.ndarray):
+        Y = (np.matmul(T8.T, X) + 64) >> 7
+        return (np.matmul(Y, T8) + 128) >> 8
+    t = _torch_t8(X.device)           # broadcast sums: integer matmul is not available on every device
+    Y = ((t[:, :, None] * X[..., :, None, :]).sum(-3) + 64) >> 7                # (..., i, j) = Σ_k T[k,i] X[k,j]
+    return ((Y[..., :, :, None] * t[None, :, :]).sum(-2) + 128) >> 8            # Σ_k Y[i,k] T[k,j]
+
+
+_T8_TORCH: dict = {}
+
+
+def _torch_t8(device):
+    import torch
+
+    key = str(device)
+    if key not in _T8_TORCH:
+        _T8_TORCH[key] = torch.as_tensor(T8, device=device)
+    return _T8_TORCH[key]

@@ -1,0 +1,704 @@
+"""Encoder of the ``tx`` profile: structure, open-loop maps, closed-loop rate-distortion coding,
+packing and rate control.
+
+Distortion is measured where PSNR is: YCoCg-R plane errors weighted by their share of the
+RGB mean squared error (Y 1, Co 1/6, Cg 1/4; :func:`formats.pixels.rgb_mse_weights`), so each
+plane's quantizer step is Δ/√w (equal slopes). Decisions minimise D + λ·R with λ = lam·Δ²
+and R from the entropy model of the previous pass (ideal code lengths of the context tables):
+per coefficient (round, round − 1 or 0), per plane the last position, per 8×8 block skip /
+residual / intra, per random-access block whether a stream (with its 4-byte rANS flush) pays.
+Key views use a finer step (Δ / key_ratio): every other view is predicted from them.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from formats.codec_api import EncodeOptions, Encoded
+from formats.errors import ParameterError
+from formats.metrics import psnr_rgb
+from formats.pixels import from_planes, rgb_mse_weights, to_planes
+
+from .header import RlfcHeader
+from .kernels import dequantize
+from .transform import COEF_MAX, UNZIG, ZIGZAG, forward, inverse
+from .txestimate import estimate_maps
+from .txlayout import MAX_REFS, TxLayout
+from .txpredict import TB, planar, predict_tbs, upsample_thumb
+from .txmaps import pack_maps
+from .txsections import pack_index, pack_thumbs, stream_order
+from .txstructure import build
+from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
+                       ctx_esc, ctx_last, ctx_mag, ctx_mode, pack_streams, plane_classes, quantize_counts,
+                       tables_from_quantized, tables_to_bytes)
+from .xp import NUMPY
+
+FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
+PAD = 8
+
+
+@dataclass(frozen=True)
+class TxParams:
+    """Encoder parameters of the ``tx`` profile (stored in the file for information).
+
+    Attributes:
+        block_size: random-access block edge in pixels (a multiple of 8).
+        key_spacing: views between key views along rows and columns (0 = chosen by grid size).
+        key_ratio: key views' quantizer step is the others' divided by this.
+        lam: λ = lam·Δ² (Δ the luma step of the views coded).
+        max_disparity: largest |disparity| searched, pixels per view step.
+        step: luma quantizer step Δ in pixel units (None: rate control or the default).
+        lossless: every plane coded exactly (no transform).
+        intra_codec: intra key views as "j2k" (JPEG 2000 at the quality the transform path
+            reaches), "tx" (thumbnail + transform), or "auto" (j2k without alpha, lossy).
+    """
+
+    block_size: int = 16
+    key_spacing: int = 0
+    key_ratio: float = 1.6
+    lam: float = 0.12
+    max_disparity: float = 64.0
+    step: float | None = None
+    lossless: bool = False
+    intra_codec: str = "auto"
+
+    def __post_init__(self):
+        if self.intra_codec not in ("auto", "tx", "j2k"):
+            raise ParameterError(f"intra codec must be auto, tx or j2k, got {self.intra_codec!r}")
+        if self.block_size not in (8, 16, 32):
+            raise ParameterError(f"tx block size must be 8, 16 or 32, got {self.block_size}")
+        if not 0 <= self.key_spacing <= 64:
+            raise ParameterError(f"key spacing must be 0 (auto) .. 64, got {self.key_spacing}")
+        if not 1.0 <= self.key_ratio <= 8.0:
+            raise ParameterError(f"key ratio must be within 1..8, got {self.key_ratio}")
+        if not 0 < self.lam <= 10:
+            raise ParameterError(f"lam must be within (0, 10], got {self.lam}")
+        if not 0 <= self.max_disparity <= 256:
+            raise ParameterError(f"max disparity must be within 0..256, got {self.max_disparity}")
+        if self.step is not None and not 1 <= self.step <= 1 << 16:
+            raise ParameterError(f"step must be within 1..65536, got {self.step}")
+
+
+def auto_spacing(rows: int, cols: int) -> int:
+    """Key spacing by grid size (measured on the shared dense grids; BENCHMARKS.md)."""
+    return 2 if max(rows, cols) <= 5 else 4
+
+
+# -- the entropy model used for decisions ----------------------------------------------------
+def default_counts() -> np.ndarray:
+    """A plausible first model (before any statistics): mostly skips, small magnitudes."""
+    c = np.ones((N_CTX, ALPHABET))
+    for kind in range(2):
+        for prev in range(4):
+            c[ctx_mode(kind, prev), :3] = [60, 30, 3]
+    for pc in range(3):
+        for mode in (MODE_RES, MODE_INTRA):
+            for key in range(2):
+                c[ctx_last(pc, mode, key), :65] = np.r_[80, 60 * np.exp(-np.arange(64) / 8)] + 0.1
+        for band in range(6):
+            for key in range(2):
+                for nb in range(4):
+                    c[ctx_mag(pc, band, key, nb), :16] = 1000 * np.exp(-np.arange(16) * (1.0 + 0.2 * band)) + 0.1
+        c[ctx_esc(pc), :24] = 2.0 ** -np.arange(24) * 1000 + 0.01
+    return c
+
+
+class Model:
+    """Code lengths (bits) for decisions, from (N_CTX, ALPHABET) counts (add-one smoothed)."""
+
+    def __init__(self, counts: np.ndarray):
+        c = counts + 0.5
+        bits = -np.log2(c / c.sum(axis=1, keepdims=True))
+        self.mode = np.zeros((2, 3))
+        for kind in range(2):
+            rows = [ctx_mode(kind, p) for p in range(4)]
+            m = c[rows, :3].sum(0)
+            self.mode[kind] = -np.log2(m / m.sum())
+        self.last = np.zeros((3, 2, 2, 65))
+        self.mag = np.zeros((3, 6, 2, 16))
+        self.first = np.zeros((3, 6, 2, 16))
+        self.esc = np.zeros((3, 24))
+        for pc in range(3):
+            for mi, mode in enumerate((MODE_RES, MODE_INTRA)):
+                for key in range(2):
+                    self.last[pc, mi, key] = bits[ctx_last(pc, mode, key), :65]
+            for band in range(6):
+                for key in range(2):
+                    rows = [ctx_mag(pc, band, key, nb) for nb in (1, 2, 3)]
+                    m = c[rows, :16].sum(0)
+                    self.mag[pc, band, key] = -np.log2(m / m.sum())
+                    self.first[pc, band, key] = bits[ctx_mag(pc, band, key, 0), :16]
+            self.esc[pc] = bits[ctx_esc(pc), :24]
+
+
+def _level_bits(model: Model, l: np.ndarray, pc: np.ndarray, band: np.ndarray, key: int) -> np.ndarray:
+    """Bits of coding magnitude l (>= 0) at positions (band), not the last one: symbol, sign,
+    escape bucket and suffix."""
+    sym = np.minimum(l, ESC)
+    b = model.mag[pc, band, key, sym] + (l > 0)
+    r = np.maximum(l - ESC, 0)
+    k = np.floor(np.log2(r + 1.0)).astype(np.int64)
+    return b + np.where(l >= ESC, model.esc[pc, np.minimum(k, 23)] + k, 0.0)
+
+
+# -- one view ----------------------------------------------------------------------------------
+@dataclass
+class ViewCode:
+    """Coded form of one view, kept small: tb modes (nloc8,) int8; the levels of the tbs that
+    are not skipped only (``tbs`` their indices, ``lv`` (n, P, 64) int32, scan order); coded
+    random-access blocks (nloc,) bool; the decoded view as pixels (H, W, C) of the input dtype;
+    and, for key views (references of others), its planes (Hp, Wp, P) int32."""
+
+    modes: np.ndarray
+    tbs: np.ndarray
+    lv: np.ndarray
+    coded: np.ndarray
+    px: np.ndarray
+    planes: np.ndarray | None = None
+    bits: float = 0.0          # the model's estimate of the view's stream bits
+
+    def levels(self, idx: np.ndarray) -> np.ndarray:
+        """(len(idx), P, 64) levels of tbs ``idx`` (zero where skipped)."""
+        out = np.zeros((idx.size,) + self.lv.shape[1:], np.int64)
+        pos = np.searchsorted(self.tbs, idx)
+        hit = (pos < self.tbs.size) & (self.tbs[pos.clip(0, max(self.tbs.size - 1, 0))] == idx) if self.tbs.size \
+            else np.zeros(idx.size, bool)
+        out[hit] = self.lv[pos[hit]]
+        return out
+
+
+class TxEncoder:
+    """Everything independent of the quantizer (planes, structure, maps), and the closed loop."""
+
+    def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0):
+        """``side_lambda``: luma squared error worth one bit of side information at the quality
+        expected (:func:`side_lambda`)."""
+        from .profiles.tx import plane_limits
+
+        if lf.views.dtype not in (np.uint8, np.uint16):
+            raise ParameterError(f"tx codes 8- or 16-bit views; this light field is {lf.views.dtype}")
+        self.lf, self.p = lf, params
+        B = params.block_size
+        r, c, h, w, ch = lf.views.shape
+        self.hdr = RlfcHeader.for_views("tx", r, c, (h, w, ch), lf.views.dtype, B)
+        self.Hp, self.Wp = self.hdr.padded
+        self.nby, self.nbx = self.hdr.blocks
+        self.nby8, self.nbx8 = self.Hp // TB, self.Wp // TB
+        self.tpb, self.nt = B // TB, (B // TB) ** 2
+        pad = ((0, 0), (0, self.Hp - h), (0, self.Wp - w), (0, 0))
+        self.orig = to_planes(np.pad(lf.views.reshape(r * c, h, w, ch), pad, mode="edge"))   # (N0, Hp, Wp, P)
+        self.P = ch
+        self.pcs = plane_classes(ch)
+        self.peak = int(np.iinfo(lf.views.dtype).max)
+        self.lo, self.hi, self.flat = plane_limits(ch, self.peak)
+        self.w = rgb_mse_weights(ch)
+        self.bypass = np.full(ch, params.lossless) | (self.pcs == 2)       # alpha is always exact
+        spacing = params.key_spacing or auto_spacing(r, c)
+        self.s = build(r, c, spacing)
+        self.is_key = np.zeros(r * c, bool)
+        self.is_key[self.s.keys] = True
+        self.intra = (self.s.refs < 0).all(axis=1)
+        self.key_slot = np.full(r * c, -1, np.int64)
+        self.key_slot[self.s.keys] = np.arange(len(self.s.keys))
+        ic = params.intra_codec
+        if ic == "auto":
+            ic = "j2k" if ch in (1, 3) and not params.lossless else "tx"
+        if ic == "j2k" and ch not in (1, 3):
+            raise ParameterError("JPEG 2000 intra key views need grey or RGB views (alpha must stay exact)")
+        self.intra_codec = ic
+        if progress:
+            progress("disparity", 0, None)
+        n_maps = len(self.s.cell_views)
+        nloc8 = self.nby8 * self.nbx8
+        if params.max_disparity > 0 and n_maps:
+            self.base, self.disp, self.modes = estimate_maps(
+                self.orig[..., 0].astype(np.float32), self.s, max_disparity=params.max_disparity,
+                side_lambda=side_lambda, progress=progress)
+        else:
+            self.base = np.zeros(nloc8, np.int64)
+            self.disp = np.zeros((n_maps, nloc8), np.int64)
+            self.modes = np.zeros((n_maps, nloc8), np.int64)
+
+    # -- steps -----------------------------------------------------------------------------
+    def steps16(self, step: float) -> np.ndarray:
+        """(2, P) steps in 1/16 units: key views, other views."""
+        if self.p.lossless:
+            return np.full((2, self.P), 16, np.int64)
+        wp = np.where(self.w > 0, self.w, 1.0)
+        base = step / np.sqrt(wp)
+        out = np.stack([base / self.p.key_ratio, base])
+        out = np.maximum(16, np.rint(out * 16)).astype(np.int64)
+        out[:, self.bypass] = 16
+        return out
+
+    # -- prediction ------------------------------------------------------------------------
+    def predict_view(self, v: int, kp: np.ndarray) -> np.ndarray:
+        """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``."""
+        s = self.s
+        nloc8 = self.nby8 * self.nbx8
+        ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
+        m = s.cell[v]
+        d, mode = self.disp[m], self.modes[m]
+        w = np.where(mode[:, None] == 0, s.weights[v][None, :],
+                     64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
+        r0 = s.refs[v].clip(0)
+        dpos = s.positions[v] - s.positions[r0]
+        slots = np.broadcast_to(self.key_slot[r0], (nloc8, MAX_REFS))
+        p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
+                        d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
+        return p.reshape(self.nby8, self.nbx8, TB, TB, self.P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, self.P)
+
+    def thumb_levels(self, v: int, thumb16: int) -> np.ndarray:
+        """(nby8, nbx8, P) thumbnail levels of an intra view: block means / step, rounded."""
+        o = self.orig[v].astype(np.float64).reshape(self.nby8, TB, self.nbx8, TB, self.P).mean(axis=(1, 3))
+        return np.rint(o * 16 / thumb16).astype(np.int64)
+
+    def thumb_pred(self, levels: np.ndarray, thumb16: int) -> np.ndarray:
+        return upsample_thumb((levels * thumb16 + 8) >> 4, self.Hp, self.Wp)
+
+    # -- coding one view ---------------------------------------------------------------------
+    def _tbs(self, img: np.ndarray) -> np.ndarray:
+        """(Hp, Wp, P) → (nloc8, 8, 8, P) in raster tb order."""
+        return img.reshape(self.nby8, TB, self.nbx8, TB, -1).transpose(0, 2, 1, 3, 4).reshape(-1, TB, TB, img.shape[-1])
+
+    def _untbs(self, t: np.ndarray) -> np.ndarray:
+        return t.reshape(self.nby8, self.nbx8, TB, TB, -1).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, -1)
+
+    def _quantize(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
+        """RDO quantization of tbs' residuals r (T, 8, 8, P) → (levels (T, P, 64) scan order,
+        cost J (T,), distortion-if-skipped D0 (T,), must_code (T,) bool, model bits R (T,))."""
+        T = r.shape[0]
+        P = self.P
+        levels = np.zeros((T, P, 64), np.int64)
+        J = np.zeros(T)
+        D0 = np.zeros(T)
+        must = np.zeros(T, bool)
+        Rb = np.zeros(T)
+        band = BAND[None, :]
+        for p in range(P):
+            pc = int(self.pcs[p])
+            rp = r[..., p].astype(np.float64)
+            if self.bypass[p]:                                   # exact: levels are the residual samples
+                lv = np.rint(rp.reshape(T, 64) * 16 / step16[p]).astype(np.int64)
+                levels[:, p] = lv
+                nz = lv != 0
+                must |= nz.any(axis=1)
+                last = np.where(nz.any(1), 64 - np.argmax(nz[:, ::-1], axis=1), 0)
+                bits = _level_bits(model, np.abs(lv), np.full((T, 64), pc), np.broadcast_to(band, (T, 64)), key)
+                inside = np.arange(64)[None, :] < last[:, None]
+                rb = (bits * inside).sum(1) + model.last[pc, mode_cls, key, last]
+                J += lam * rb
+                Rb += rb
+                continue
+            wgt = self.w[p]
+            X = forward(rp).reshape(T, 64)[:, ZIGZAG]            # scan order
+            D0 += wgt * (X ** 2).sum(1)
+            if wgt == 0:
+                continue
+            d = step16[p] / 16.0
+            a = np.abs(X) / d
+            ln = np.floor(a + 0.5).astype(np.int64)
+            lo = np.maximum(ln - 1, 0)
+            pcs = np.full((T, 64), pc)
+            bands = np.broadcast_to(band, (T, 64))
+            cands = [ln, lo, np.zeros_like(ln)]
+            costs = [wgt * (np.abs(X) - c * d) ** 2 + lam * _level_bits(model, c, pcs, bands, key) for c in cands]
+            cs = np.stack(costs)
+            pick = cs.argmin(0)
+            lv = np.choose(pick, cands)
+            jc = cs.min(0)                                        # cost of each coefficient as chosen
+            jz = wgt * X ** 2 + lam * model.mag[pc, BAND, key, 0][None, :]   # cost as a coded zero
+            dz = wgt * X ** 2                                     # cost past the last position (not coded)
+            # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} jc' + Σ_{i>=L} dz + λ·bits(L)
+            jkeep = np.where(lv > 0, jc, jz)
+            c1 = np.concatenate([np.zeros((T, 1)), np.cumsum(jkeep, axis=1)], axis=1)          # (T, 65)
+            c0 = np.concatenate([np.cumsum(dz[:, ::-1], axis=1)[:, ::-1], np.zeros((T, 1))], axis=1)
+            JL = c1 + c0 + lam * model.last[pc, mode_cls, key][None, :]
+            valid = np.concatenate([np.ones((T, 1), bool), lv > 0], axis=1)                      # L-1 nonzero
+            JL = np.where(valid, JL, np.inf)
+            L = JL.argmin(1)
+            lv = np.where(np.arange(64)[None, :] < L[:, None], lv, 0)
+            levels[:, p] = np.where(X < 0, -lv, lv)
+            J += JL[np.arange(T), L]
+            kept = np.arange(64)[None, :] < L[:, None]
+            Rb += (np.where(lv > 0, _level_bits(model, lv, pcs, bands, key), model.mag[pc, BAND, key, 0][None, :])
+                   * kept).sum(1) + model.last[pc, mode_cls, key, L]
+        return levels, J, D0, must, Rb
+
+    def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
+        """(T, 8, 8, P) clipped reconstruction of tbs from base predictions and levels (exact
+        decoder integers)."""
+        raster = np.where(self.bypass[None, :, None], levels, levels[..., UNZIG])
+        deq = dequantize(NUMPY, raster, step16[None, :, None]).clip(-COEF_MAX, COEF_MAX)
+        blocks = deq.reshape(-1, self.P, TB, TB)
+        tr = ~self.bypass
+        if tr.any():
+            blocks[:, tr] = inverse(blocks[:, tr])
+        res = np.moveaxis(blocks, 1, -1)
+        return (base.astype(np.int64) + res).clip(self.lo, self.hi).astype(np.int32)
+
+    def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model) -> ViewCode:
+        """Rate-distortion coding of one view against its prediction (Hp, Wp, P)."""
+        key = int(self.is_key[v])
+        kind = int(self.intra[v])
+        orig = self._tbs(self.orig[v])
+        pt = self._tbs(pred)
+        lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
+        flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
+        lv_i, J_i, _, _, R_i = self._quantize(orig - flat, step16, lam, model, key, 1)
+        mb = model.mode[kind]
+        J_skip = np.where(must_r, np.inf, D0_r + lam * mb[MODE_SKIP])
+        J_res = J_r + lam * mb[MODE_RES]
+        J_int = J_i + lam * mb[MODE_INTRA]
+        Jm = np.stack([J_skip, J_res, J_int])
+        mode = Jm.argmin(0)
+        nb = self.nby * self.nbx
+        tbi = self._ra_tbs()                                            # (nb, nt) tb indices
+        if key:                       # key views: one stream per row of blocks, every block in it
+            coded = np.ones(nb, bool)
+        else:                         # a block gets a stream only where that pays for its flush and modes
+            J_coded = Jm.min(0)[tbi].sum(1) + lam * (FLUSH_BITS + mb[mode[tbi]].sum(1))
+            coded = J_coded < J_skip[tbi].sum(1)
+            mode[tbi[~coded]] = MODE_SKIP
+        levels = np.where((mode == MODE_RES)[:, None, None], lv_r, np.where((mode == MODE_INTRA)[:, None, None], lv_i, 0))
+        base = np.where((mode == MODE_INTRA)[:, None, None, None], flat, pt)
+        rec = np.where((mode == MODE_SKIP)[:, None, None, None], pt.clip(self.lo, self.hi),
+                       self._reconstruct(base, levels, step16))
+        coded = np.zeros(nb, bool) | coded
+        bits = float(np.choose(mode, [np.zeros_like(R_r), R_r, R_i]).sum() + mb[mode].sum()
+                     + (FLUSH_BITS * coded.sum() if not key else FLUSH_BITS * self.nby))
+        planes = self._untbs(rec)
+        live = np.flatnonzero(mode != MODE_SKIP)
+        return ViewCode(mode.astype(np.int8), live, levels[live].astype(np.int32), coded, self._pixels(planes),
+                        planes if key else None, bits)
+
+    def _pixels(self, planes: np.ndarray) -> np.ndarray:
+        lf = self.lf
+        return from_planes(planes[:lf.height, :lf.width], lf.views.dtype)
+
+    def _ra_tbs(self) -> np.ndarray:
+        """(nloc, nt) raster tb indices of each random-access block's tbs (tb raster order)."""
+        by, bx = np.divmod(np.arange(self.nby * self.nbx), self.nbx)
+        t = np.arange(self.nt)
+        ty = by[:, None] * self.tpb + t[None, :] // self.tpb
+        tx = bx[:, None] * self.tpb + t[None, :] % self.tpb
+        return ty * self.nbx8 + tx
+
+    # -- the closed loop -------------------------------------------------------------------------
+    def run(self, step: float, model: Model, progress=None) -> dict:
+        """Code every view at luma step Δ = ``step``: key views in order, then the others.
+
+        Returns:
+            dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), rec
+            (N0, Hp, Wp, P) int32 decoded planes.
+        """
+        s16 = self.steps16(step)
+        thumb16 = 16             # exact block means: flat regions of intra views need no residual
+        lam_k = self.p.lam * (s16[0, 0] / 16.0) ** 2
+        lam_n = self.p.lam * (s16[1, 0] / 16.0) ** 2
+        n0 = self.orig.shape[0]
+        keyplanes = np.zeros((len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
+        kp = planar(keyplanes)
+        codes: list = [None] * n0
+        thumbs = {}
+        keyimg = {}
+        for i, k in enumerate(self.s.keys):
+            if self.intra[k]:
+                thumbs[k] = self.thumb_levels(k, thumb16)
+                pred = self.thumb_pred(thumbs[k], thumb16)
+            else:
+                pred = self.predict_view(k, kp)
+            codes[k] = self.code_view(k, pred, s16[0], lam_k, model)
+            if self.intra[k] and self.intra_codec == "j2k":
+                img, codes[k] = self._j2k_key(k, codes[k], len(pack_thumbs(thumbs[k][None])))
+                if img is not None:
+                    keyimg[k] = img
+            keyplanes[i] = codes[k].planes
+            kp = planar(keyplanes)
+            if progress:
+                progress("code views", i + 1, n0)
+        done = len(self.s.keys)
+        for v in range(n0):
+            if self.is_key[v]:
+                continue
+            codes[v] = self.code_view(v, self.predict_view(v, kp), s16[1], lam_n, model)
+            done += 1
+            if progress:
+                progress("code views", done, n0)
+        return {"steps16": s16, "thumb16": thumb16, "thumbs": thumbs, "codes": codes, "step": step, "keyimg": keyimg}
+
+    def _j2k_key(self, k: int, tx_code: ViewCode, thumb_bytes: int) -> tuple[bytes | None, ViewCode]:
+        """An intra key view as JPEG 2000 at the colour PSNR its transform coding reached, where
+        that is smaller than the transform path (thumbnail + the model's estimate of its stream)
+        and at least as close to the original; else (None, the transform coding)."""
+        import imagecodecs
+
+        from .topcodec import decode_image
+
+        dt = self.lf.views.dtype
+        px = from_planes(self.orig[k], dt)
+        target = psnr_rgb(px, from_planes(tx_code.planes, dt))
+        a = px[..., 0] if self.P == 1 else px
+        data = bytes(imagecodecs.jpeg2k_encode(a, level=float(min(target, 99.0)), codecformat="J2K"))
+        dec = decode_image("j2k", data, px.shape, dt)
+        if len(data) * 8 >= tx_code.bits + 8 * thumb_bytes or psnr_rgb(px, dec) < target:
+            return None, tx_code
+        z = np.zeros_like(tx_code.modes)
+        rec = to_planes(dec)
+        return data, ViewCode(z, np.zeros(0, np.int64), np.zeros((0,) + tx_code.lv.shape[1:], np.int32),
+                              np.zeros_like(tx_code.coded), self._pixels(rec), rec, 0.0)
+
+    def decoded(self, res: dict) -> np.ndarray:
+        """(R, C, H, W, Ch) pixels of a run."""
+        return np.stack([c.px for c in res["codes"]]).reshape(self.lf.views.shape)
+
+    def psnr(self, res: dict) -> float:
+        return psnr_rgb(self.lf.views, self.decoded(res))
+
+    # -- symbols and packing -----------------------------------------------------------------
+    def symbols(self, res: dict):
+        """Every stream's symbols, in ``tx.blocks`` order: the key views' rows, then the other
+        views' coded blocks (location-major).
+
+        Returns:
+            (key row lengths shape (n_keys, nby), non-key (views, locations), symbols of
+            :func:`rlfc.txsyntax.block_symbols` with lanes numbered in stream order).
+        """
+        tbi = self._ra_tbs()
+        nrow = self.nbx * self.nt
+        parts = []
+        for k in self.coded_keys(res):                   # key rows: lanes of nbx·nt tbs
+            c = res["codes"][k]
+            modes = c.modes[tbi].astype(np.int64).reshape(self.nby, nrow)
+            levels = c.levels(tbi.reshape(-1)).reshape(self.nby, nrow, self.P, 64)
+            parts.append(block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])),
+                                       np.ones(self.nby, np.int64), self.pcs))
+        n0 = self.orig.shape[0]
+        coded = np.zeros((n0, self.nby * self.nbx), bool)
+        for v, c in enumerate(res["codes"]):
+            if not self.is_key[v]:
+                coded[v] = c.coded
+        sv, sl = stream_order(coded)
+        if sv.size:
+            vs, ms, ls, lo = [], [], [], []
+            for v in np.unique(sv).tolist():                 # gather per view, then into stream order
+                loc = np.flatnonzero(coded[v])
+                c = res["codes"][v]
+                ms.append(c.modes[tbi[loc]].astype(np.int64))
+                ls.append(c.levels(tbi[loc].reshape(-1)).reshape(loc.size, self.nt, self.P, 64))
+                vs.append(np.full(loc.size, v))
+                lo.append(loc)
+            order = np.lexsort((np.concatenate(vs), np.concatenate(lo)))   # location-major, views ascending
+            modes, levels = np.concatenate(ms)[order], np.concatenate(ls)[order]
+            parts.append(block_symbols(modes, levels, self.intra[sv].astype(np.int64), np.zeros(sv.size, np.int64),
+                                       self.pcs))
+        base = 0
+        out = [[], [], [], [], []]
+        nck = len(self.coded_keys(res))
+        for i, p in enumerate(parts):
+            n = self.nby if i < nck else sv.size
+            out[0].append(p[0] + base)
+            out[3].append(p[3] + base)
+            for j in (1, 2, 4):
+                out[j].append(p[j])
+            base += n
+        syms = tuple(np.concatenate(x) if x else np.zeros(0, np.int64) for x in out)
+        return base, coded, syms
+
+    def coded_keys(self, res: dict) -> list:
+        """Key views coded as row streams (not JPEG 2000), in key order."""
+        return [k for k in self.s.keys if k not in res["keyimg"]]
+
+    def model_of(self, res: dict) -> Model:
+        _, _, (lane, ctx, sym, _, _) = self.symbols(res)
+        return Model(count_symbols(ctx, sym) + default_counts() * 1e-3)
+
+    def pack(self, res: dict) -> tuple[dict, list]:
+        """(config, sections) of a run."""
+        n_streams, coded, (lane, ctx, sym, rl, rb) = self.symbols(res)
+        q = quantize_counts(count_symbols(ctx, sym))
+        tables = tables_from_quantized(q)
+        streams = pack_streams(n_streams, lane, ctx, sym, rl, rb, tables)
+        ck = self.coded_keys(res)
+        nk = len(ck) * self.nby
+        key_lengths = np.array([len(b) for b in streams[:nk]], np.int64).reshape(len(ck), self.nby)
+        lengths = np.array([len(b) for b in streams[nk:]], np.int64)
+        ordered = streams
+        intra_keys = [k for k in ck if self.intra[k]]
+        imgs = [res["keyimg"][k] for k in self.s.keys if k in res["keyimg"]]
+        thumbs = np.stack([res["thumbs"][k] for k in intra_keys]) if intra_keys else \
+            np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
+        lay = TxLayout(self.s.positions, tuple(self.s.keys), self.s.refs, self.s.weights, self.s.cell,
+                       len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
+                       "j2k" if imgs else "tx", tuple(len(b) for b in imgs))
+        lay.check("tx encoder")
+        cfg = {**self.hdr.to_config(), "tx": lay.to_config(),
+               "params": {**asdict(self.p), "step": res["step"]},
+               "n_blocks": int(coded.sum()), "n_key_views": len(self.s.keys)}
+        sections = [("tx.layout", lay.to_bytes()), ("tx.tables", tables_to_bytes(q)), ("tx.maps", pack_maps(self.base, self.disp, self.modes, (self.nby8, self.nbx8))),
+                    ("tx.thumbs", pack_thumbs(thumbs)), ("tx.keyimg", b"".join(imgs)), ("tx.index", pack_index(key_lengths, coded, lengths)),
+                    ("tx.blocks", b"".join(ordered) + bytes(PAD))]
+        return cfg, sections
+
+
+# -- rate control and the profile's encode ---------------------------------------------------------
+def _params_from(options: EncodeOptions) -> TxParams:
+    p = dict(options.params)
+    known = {f for f in TxParams.__dataclass_fields__} | {"quant"}
+    bad = sorted(set(p) - known)
+    if bad:
+        raise ParameterError(f"option(s) {', '.join('--' + k.replace('_', '-') for k in bad)} not used by profile "
+                             "'tx'")
+    q = p.pop("quant", None)
+    if q is not None:
+        if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
+            raise ParameterError("--quant cannot be combined with a target or --lossless")
+        if not q >= 1:
+            raise ParameterError(f"--quant must be >= 1 (1 = lossless), got {q}")
+        if q == 1:
+            p["lossless"] = True
+        else:
+            p["step"] = float(q)
+    if options.lossless:
+        if options.target_psnr is not None or options.target_bpp is not None:
+            raise ParameterError("--lossless cannot be combined with a target")
+        p["lossless"] = True
+    return TxParams(**p)
+
+
+SIDE_SCALE = 6.0   # side information is judged open loop on the original key views, which flatters it:
+                   # measured best at 6..10 × the coding λ on the dense grids (BENCHMARKS.md)
+
+
+def side_lambda(lf, options: EncodeOptions, params: TxParams) -> float:
+    """λ for side-information decisions (luma squared error per bit) at the expected quality:
+    SIDE_SCALE·lam·Δ² with Δ² ≈ 12·D, D the mean squared error the target allows (or the
+    default step's)."""
+    from .ratecontrol import depth_scale
+
+    peak = float(np.iinfo(lf.views.dtype).max)
+    if params.lossless:
+        d = 1 / 12
+    elif options.target_psnr is not None:
+        d = peak ** 2 * 10 ** (-options.target_psnr / 10)
+    elif params.step is not None:
+        d = params.step ** 2 / 12
+    else:
+        d = (8.0 * depth_scale(lf.views.dtype)) ** 2 / 12
+    return SIDE_SCALE * params.lam * 12 * d
+
+
+def file_bytes(lf, cfg: dict, sections: list) -> int:
+    """Size of the .lfc file these sections make (container, metadata with the scene and a
+    provenance allowance of 1 KiB, as the CLI writes it)."""
+    from formats.container import DEFAULT_CHUNK, ENTRY_SIZE, HEADER_SIZE
+    from formats.lfcfile import encode_meta
+
+    meta = len(encode_meta("rlfc", 1, cfg, lf.geometry())) + 1024
+    data = [meta] + [len(x) for _, x in sections]
+    return HEADER_SIZE + ENTRY_SIZE * len(data) + 4 * sum(-(-n // DEFAULT_CHUNK) for n in data) + sum(data)
+
+
+def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
+    """Encode with the ``tx`` profile (rate control for a PSNR or bpp target)."""
+    from formats.metrics import bpp as bpp_of
+
+    from .ratecontrol import check_targets, depth_scale
+
+    check_targets(options.target_psnr, options.target_bpp)
+    params = _params_from(options)
+    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params))
+    scale = depth_scale(lf.views.dtype)
+    nv = lf.rows * lf.cols
+    model = Model(default_counts())
+    trace, notes, found = [], [], None
+
+    def run(step):
+        return enc.run(step, model, progress)
+
+    if params.lossless:
+        res = run(1.0)
+        res = enc.run(1.0, enc.model_of(res), progress)
+    elif options.target_psnr is None and options.target_bpp is None:
+        step = params.step if params.step is not None else 8.0 * scale
+        res = run(step)
+        res = enc.run(step, enc.model_of(res), progress)
+    else:
+        models: dict = {}                     # step → the entropy model measured there
+
+        def evaluate(logq):
+            step = 2.0 ** logq
+            near = min(models, key=lambda k: abs(math.log2(k) - logq)) if models else None
+            r = enc.run(step, models[near] if near is not None else model, progress)
+            if near is None or abs(math.log2(near) - logq) > 0.25:
+                r = enc.run(step, enc.model_of(r), progress)       # far from any model: measure first
+            models[step] = enc.model_of(r)
+            ps = enc.psnr(r)
+            b = None
+            if options.target_bpp is not None:
+                cfg, secs = enc.pack(r)
+                b = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
+            trace.append({"step": step, "psnr_rgb": ps, "bpp": b})
+            ok = ps >= options.target_psnr if options.target_psnr is not None else b <= options.target_bpp
+            return ok, r
+
+        lo_q, hi_q = 0.0, math.log2(512.0 * scale)
+        peak = float(np.iinfo(lf.views.dtype).max)
+        if options.target_psnr is not None:       # start where the target's MSE puts the step (Δ² ≈ 12·D)
+            q0 = math.log2(math.sqrt(12 * peak ** 2 * 10 ** (-options.target_psnr / 10)))
+        else:
+            q0 = math.log2(8.0 * scale)
+        q0 = min(max(q0, lo_q), hi_q)
+        # bracket (feasible at small steps for a PSNR target, at large steps for a bpp target),
+        # moving from q0 by half-octaves (×1.5), then bisect to 1/64 octave
+        small_ok = options.target_psnr is not None
+        better = (lambda new, old: True) if small_ok else (lambda new, old: enc.psnr(new) >= enc.psnr(old))
+        ok0, r0 = evaluate(q0)
+        direction = 1 if ok0 == small_ok else -1
+        good, bad, res = (q0, None, r0) if ok0 else (None, q0, None)
+        q = q0
+        while (good is None or bad is None) and (lo_q < q < hi_q if q != q0 else True):
+            q = min(max(q + direction * math.log2(1.5), lo_q), hi_q)
+            ok, r = evaluate(q)
+            if ok:
+                good, res = q, r
+            else:
+                bad = q
+            if q in (lo_q, hi_q):
+                break
+        found = good is not None
+        if not found:
+            res = r0
+            notes.append("even the finest quantizer misses the target; the closest setting is written")
+        while good is not None and bad is not None and abs(good - bad) > 1 / 64:
+            mid = (good + bad) / 2
+            ok, r = evaluate(mid)
+            if ok:
+                good = mid
+                if better(r, res):
+                    res = r
+            else:
+                bad = mid
+        # one more pass with the model of the chosen point, kept where it meets the target and,
+        # for a bpp target, gives better quality
+        again = enc.run(res["step"], enc.model_of(res), progress)
+        ps = enc.psnr(again)
+        if options.target_psnr is not None:
+            keep = ps >= options.target_psnr
+            b = None
+        else:
+            cfg, secs = enc.pack(again)
+            b = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
+            keep = b <= options.target_bpp and ps >= enc.psnr(res)
+        trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
+        if keep:
+            res = again
+    cfg, sections = enc.pack(res)
+    return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
+                   summary={"profile": "tx", "params": {**asdict(params), "step": res["step"]},
+                            "key_views": len(enc.s.keys)})
+
+
+__all__ = ["TxParams", "TxEncoder", "encode_tx", "Model", "default_counts"]

@@ -1,0 +1,189 @@
+"""Open-loop estimation of the ``tx`` maps: per cell of views and 8×8 block, the disparity
+(1/16 px per view step) and the prediction mode (0 = blend, 1 + j = reference j) that
+minimise the cell's luma error against the original key views.
+
+Coarse to fine: whole-pixel disparities by shifting whole views (OpenCV, fast), widened from
+±4 up to ``max_disparity`` while many blocks sit at the edge of the range and widening pays;
+then ±1/2, ±1/4, ±1/8, ±1/16 px around each block's best with the exact integer predictor;
+then the map is regularized (its 3×3 median where that costs little more).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .txlayout import MAX_REFS
+from .txpredict import TB, planar, predict_tbs
+from .xp import NUMPY
+
+
+def _block_sums(e: np.ndarray, nby8: int, nbx8: int) -> np.ndarray:
+    """(..., Hp, Wp) → (..., nby8·nbx8) sums over 8×8 blocks."""
+    s = e.reshape(*e.shape[:-2], nby8, TB, nbx8, TB).sum(axis=(-3, -1))
+    return s.reshape(*e.shape[:-2], nby8 * nbx8)
+
+
+class Estimator:
+    """Costs of candidate disparities for every cell.
+
+    Args:
+        luma: (N0, Hp, Wp) float32 luma (Y plane) of the original views.
+        struct: :class:`rlfc.txstructure.Structure`.
+    """
+
+    def __init__(self, luma: np.ndarray, struct, keys_order: list):
+        self.luma, self.s = luma, struct
+        self.n0, self.hp, self.wp = luma.shape
+        self.nby8, self.nbx8 = self.hp // TB, self.wp // TB
+        self.cells = [np.asarray(v) for v in struct.cell_views]
+        self.key_slot = np.full(self.n0, -1, np.int64)
+        self.key_slot[keys_order] = np.arange(len(keys_order))
+        kp = luma[keys_order][..., None].astype(np.int32)
+        self.kp = planar(np.rint(kp).astype(np.int32))
+
+    def _nrefs(self, m: int) -> int:
+        return int((self.s.refs[self.cells[m][0]] >= 0).sum())
+
+    def costs_global(self, d: float) -> np.ndarray:
+        """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode at one global disparity d (px/step)
+        (inf for modes a cell does not have)."""
+        import cv2
+
+        s = self.s
+        out = np.full((len(self.cells), 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
+        for m, views in enumerate(self.cells):
+            acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
+            nr = self._nrefs(m)
+            for v in views.tolist():
+                y = self.luma[v]
+                blend = np.zeros_like(y)
+                for j in range(nr):
+                    k = s.refs[v, j]
+                    dy, dx = d * (s.positions[v] - s.positions[k])
+                    mat = np.float32([[1, 0, dx], [0, 1, dy]])
+                    p = cv2.warpAffine(self.luma[k], mat, (self.wp, self.hp),
+                                       flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+                    acc[1 + j] += _block_sums((y - p) ** 2, self.nby8, self.nbx8)
+                    blend += p * (s.weights[v, j] / 64.0)
+                acc[0] += _block_sums((y - blend) ** 2, self.nby8, self.nbx8)
+            out[m, :1 + nr] = acc[:1 + nr]
+        return out
+
+    def costs_maps(self, d16: np.ndarray) -> np.ndarray:
+        """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode for per-block disparities
+        ``d16`` (n_maps, nloc8) in 1/16 px per view step, with the exact integer predictor."""
+        s = self.s
+        nloc8 = self.nby8 * self.nbx8
+        ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
+        out = np.full((len(self.cells), 1 + MAX_REFS, nloc8), np.inf)
+        for m, views in enumerate(self.cells):
+            nr = self._nrefs(m)
+            acc = np.zeros((1 + nr, nloc8))
+            for v in views.tolist():
+                r = s.refs[v, :nr]
+                tgt = self.luma[v].reshape(self.nby8, TB, self.nbx8, TB).transpose(0, 2, 1, 3).reshape(nloc8, TB, TB)
+                dpos = s.positions[v] - s.positions[r]                              # (nr, 2)
+                dy, dx = d16[m][:, None] * dpos[None, :, 0], d16[m][:, None] * dpos[None, :, 1]
+                one = np.full((nloc8, 1), 64, np.int64)
+                preds = []
+                for j in range(nr):               # each reference alone (R = 1): the blend is built from them
+                    slots = np.full((nloc8, 1), self.key_slot[r[j]], np.int64)
+                    p = predict_tbs(NUMPY, self.kp, (self.hp, self.wp), slots, one, dy[:, j:j + 1], dx[:, j:j + 1],
+                                    ty * TB, tx * TB)[..., 0]
+                    preds.append(p.astype(np.float32))
+                    acc[1 + j] += ((tgt - preds[-1]) ** 2).sum(axis=(1, 2))
+                wb = s.weights[v, :nr].astype(np.int64)
+                blend = (sum(int(wb[j]) * preds[j].astype(np.int64) for j in range(nr)) + 32) >> 6
+                acc[0] += ((tgt - blend) ** 2).sum(axis=(1, 2))
+            out[m, :1 + nr] = acc
+        return out
+
+
+def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, start: float = 4.0,
+                  side_lambda: float = 10.0, progress=None):
+    """One shared disparity map plus per-cell corrections and prediction modes.
+
+    Returns:
+        base (nloc8,) and per-map disparities (n_maps, nloc8), int64 in 1/16 px per view step
+        (map m's disparity = base + its correction), and modes (n_maps, nloc8) int64.
+
+    ``side_lambda``: luma squared error worth one bit of side information (the encoder's λ at
+    the expected quality). A cell leaves the shared disparity, or a block leaves the blend, only
+    where its error drops by more than the bits that costs (about 6 each); the shared map takes
+    its neighbours' median where that costs less than about 2 bits.
+    """
+    est = Estimator(luma, struct, list(struct.keys))
+    n_maps = len(est.cells)
+    nloc8 = est.nby8 * est.nbx8
+    if n_maps == 0:
+        z = np.zeros((0, nloc8), np.int64)
+        return np.zeros(nloc8, np.int64), z, z
+    pen_mode = pen_delta = 6.0 * side_lambda
+    pen = np.zeros((1, 1 + MAX_REFS, 1))
+    pen[0, 1:] = pen_mode
+
+    def best_mode(c):                       # (n_maps, modes, nloc8) → (n_maps, nloc8) cost with the best mode
+        return (c + pen).min(axis=1)
+
+    D = min(start, max_disparity)
+    cands = list(np.arange(-D, D + 1))
+    costs = [best_mode(est.costs_global(float(d))) for d in cands]
+    if progress:
+        progress("disparity", len(costs), None)
+    while D < max_disparity:               # widen where blocks sit at the range's edge and it pays
+        c = np.stack(costs)                                   # (nd, n_maps, nloc8)
+        g = c.sum(1)
+        at_edge = np.abs(np.asarray(cands)[g.argmin(0)]) == D
+        if at_edge.mean() <= 0.02:
+            break
+        D2 = min(2 * D, max_disparity)
+        more = list(np.arange(-D2, -D)) + list(np.arange(D + 1, D2 + 1))
+        mc = [best_mode(est.costs_global(float(d))) for d in more]
+        if progress:
+            progress("disparity", len(costs) + len(mc), None)
+        if np.minimum(np.stack(mc).sum(1).min(0), g.min(0)).sum() >= 0.995 * g.min(0).sum():
+            break
+        cands, costs, D = cands + more, costs + mc, D2
+    c = np.stack(costs)                                        # (nd, n_maps, nloc8)
+    cand16 = (np.asarray(cands) * 16).astype(np.int64)
+    base = cand16[c.sum(1).argmin(0)]                          # the shared map: best over all cells
+    own = cand16[c.argmin(0)]                                   # each cell's own best
+    take = c.min(0) + pen_delta < np.take_along_axis(c, c.sum(1).argmin(0)[None, None, :].repeat(n_maps, 1), 0)[0]
+    disp = np.where(take, own, base[None, :])
+    lim = int(D * 16)
+
+    def total(dmaps):
+        return best_mode(est.costs_maps(dmaps))               # (n_maps, nloc8)
+
+    cur = total(disp)
+    for step in (8, 4, 2, 1):              # refine the shared map, then each cell's own values
+        for sgn in (-1, 1):
+            nb = np.clip(base + sgn * step, -lim, lim)
+            follow = disp == base[None, :]
+            cand = np.where(follow, nb[None, :], disp)
+            cc = total(cand)
+            gain = np.where(follow, cur - cc, 0).sum(0) > 0
+            base = np.where(gain, nb, base)
+            upd = follow & gain[None, :]
+            disp, cur = np.where(upd, cand, disp), np.where(upd, cc, cur)
+            dc = np.clip(disp + sgn * step, -lim, lim)
+            cc = total(dc)
+            better = (cc + pen_delta * (dc != base[None, :]) < cur + pen_delta * (disp != base[None, :]))
+            disp, cur = np.where(better, dc, disp), np.where(better, cc, cur)
+        if progress:
+            progress("disparity", len(costs) + 2 * (5 - step.bit_length()), None)
+    # regularize the shared map: the 3×3 median where it costs less than ~2 bits more overall
+    nby8, nbx8 = est.nby8, est.nbx8
+    for _ in range(2):
+        g = np.pad(base.reshape(nby8, nbx8), 1, mode="edge")
+        med = np.sort(np.stack([g[1 + dy:1 + dy + nby8, 1 + dx:1 + dx + nbx8] for dy in (-1, 0, 1)
+                                for dx in (-1, 0, 1)]), axis=0)[4].reshape(-1)
+        follow = disp == base[None, :]
+        cand = np.where(follow, med[None, :], disp)
+        cc = total(cand)
+        ok = (np.where(follow, cc - cur, 0).sum(0) <= 2.0 * side_lambda) & (med != base)
+        base = np.where(ok, med, base)
+        upd = follow & ok[None, :]
+        disp, cur = np.where(upd, cand, disp), np.where(upd, cc, cur)
+    c = est.costs_maps(disp) + pen
+    modes = c.argmin(axis=1)
+    return base, disp, modes

@@ -1,0 +1,157 @@
+"""The ``tx`` profile's header (``config.tx``): one typed schema for encoder and decoder.
+
+Views (flat index v = row·cols + col) have integer grid positions, up to 4 reference views
+(always key views) with blend weights summing to 64, and a map (disparity + prediction mode
+per 8×8 block) shared by the views of one cell. Key views are decoded when a file is opened,
+in ``keys`` order, each from references earlier in that order (or, with none, from its
+thumbnail: an intra view); every other view is decoded block by block on demand from key
+views alone, so a block request needs the in-memory key views and at most one stored stream.
+"""
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from formats.errors import FormatError
+from formats.schema import Fields
+
+MAX_REFS = 4
+VERSION = 1
+
+
+@dataclass(frozen=True)
+class TxLayout:
+    """Attributes:
+        positions: (N0, 2) int grid (row, col) of each view.
+        keys: key views in decode order.
+        refs: (N0, 4) reference views (−1 = none); weights: (N0, 4) ints (sum 64 with refs).
+        cell: (N0,) map of each view (−1 for intra views).
+        n_maps: maps in ``tx.maps``.
+        step16: (2, P) quantizer steps in 1/16 units, row 0 for key views, row 1 for the others.
+        bypass: (P,) planes coded without transform (alpha; every plane when lossless).
+        thumb_step16: quantizer step of intra views' thumbnails, 1/16 units.
+        intra_codec: how intra key views are coded: "tx" (thumbnail + transform) or "j2k"
+            (a JPEG 2000 codestream in ``tx.keyimg``, lengths in ``key_images``).
+        key_images: byte lengths of the JPEG 2000 intra key views, in key order.
+    """
+
+    positions: np.ndarray
+    keys: tuple
+    refs: np.ndarray
+    weights: np.ndarray
+    cell: np.ndarray
+    n_maps: int
+    step16: np.ndarray
+    bypass: np.ndarray
+    thumb_step16: int
+    intra_codec: str = "tx"
+    key_images: tuple = ()
+
+    @property
+    def n_views(self) -> int:
+        return len(self.cell)
+
+    @property
+    def is_key(self) -> np.ndarray:
+        k = np.zeros(self.n_views, bool)
+        k[list(self.keys)] = True
+        return k
+
+    @property
+    def intra(self) -> np.ndarray:
+        """(N0,) views with no references."""
+        return (self.refs < 0).all(axis=1)
+
+    def to_config(self) -> dict:
+        """The JSON part (``config.tx``); the per-view tables go to :meth:`to_bytes`."""
+        return {"version": VERSION, "keys": list(map(int, self.keys)), "n_maps": int(self.n_maps),
+                "step16": self.step16.tolist(), "bypass": [bool(b) for b in self.bypass],
+                "thumb_step16": int(self.thumb_step16), "intra_codec": self.intra_codec,
+                "key_images": list(map(int, self.key_images))}
+
+    def to_bytes(self) -> bytes:
+        """Section ``tx.layout``: zlib of zig-zag varints: positions (N0×2), refs (N0×4),
+        weights (N0×4), cell (N0), view-major."""
+        from .txsections import varints
+
+        return zlib.compress(varints(np.concatenate([self.positions.reshape(-1), self.refs.reshape(-1),
+                                                     self.weights.reshape(-1), self.cell])), 9)
+
+    @staticmethod
+    def read(f: Fields, data, n_views: int, planes: int, name: str = "") -> "TxLayout":
+        """Validate ``config.tx`` and section ``tx.layout`` for a light field of ``n_views`` views
+        and ``planes`` planes."""
+        from .txsections import MAX_VARINT_BYTES, inflate, unvarints
+
+        where = f.where
+        f.int("version", choices=(VERSION,))
+        count = n_views * (2 + 2 * MAX_REFS + 1)
+        what = f"{name}: section 'tx.layout'"
+        v = unvarints(inflate(data, count * MAX_VARINT_BYTES, what), count, what)
+        positions = v[:2 * n_views].reshape(n_views, 2)
+        refs = v[2 * n_views:(2 + MAX_REFS) * n_views].reshape(n_views, MAX_REFS)
+        weights = v[(2 + MAX_REFS) * n_views:(2 + 2 * MAX_REFS) * n_views].reshape(n_views, MAX_REFS)
+        cell = v[(2 + 2 * MAX_REFS) * n_views:]
+        for arr, lo, hi, what_ in ((positions, -(1 << 16), 1 << 16, "positions"), (refs, -1, n_views - 1, "refs"),
+                                   (weights, 0, 64, "weights"), (cell, -1, n_views, "cell")):
+            if arr.size and (arr.min() < lo or arr.max() > hi):
+                raise FormatError(f"{where}: {what_} out of range [{lo}, {hi}]")
+        n_maps = f.int("n_maps", 0, n_views)
+        keys = f.int_list("keys", min_len=1, max_len=n_views, lo=0, hi=n_views - 1)
+        srows = f.list("step16", max_len=2)
+        if len(srows) != 2:
+            raise FormatError(f"{where}: step16 must hold 2 rows (key views, other views)")
+        step16 = np.asarray([Fields({"r": r}, f"{where}.step16").int_list("r", length=planes, lo=16, hi=1 << 24)
+                             for r in srows], dtype=np.int64)
+        bp = f.list("bypass", max_len=planes)
+        if len(bp) != planes or not all(isinstance(b, bool) for b in bp):
+            raise FormatError(f"{where}: bypass must be {planes} booleans")
+        thumb = f.int("thumb_step16", 16, 1 << 24)
+        intra_codec = f.str("intra_codec", choices=("tx", "j2k"))
+        key_images = f.int_list("key_images", max_len=n_views, lo=1, hi=1 << 30)
+        lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
+                       intra_codec, tuple(key_images))
+        lay.check(where)
+        return lay
+
+    @property
+    def coded_keys(self) -> list:
+        """Key views coded as row streams (all but JPEG 2000 intra views), in key order."""
+        return [k for k in self.keys if not (self.intra_codec == "j2k" and self.intra[k])]
+
+    def check(self, where: str) -> None:
+        """Structural rules: references are key views decoded earlier (for keys) or key views
+        (for the others); weights sum to 64 over present references; intra views are keys;
+        one JPEG 2000 length per intra key when they are JPEG 2000."""
+        n = self.n_views
+        want = int(self.intra[list(self.keys)].sum()) if self.intra_codec == "j2k" else 0
+        if len(self.key_images) != want:
+            raise FormatError(f"{where}: key_images lists {len(self.key_images)} images, expected {want}")
+        if len(set(self.keys)) != len(self.keys):
+            raise FormatError(f"{where}: a key view is listed twice")
+        order = np.full(n, -1)
+        order[list(self.keys)] = np.arange(len(self.keys))
+        has = self.refs >= 0
+        if ((self.weights > 0) & ~has).any():
+            raise FormatError(f"{where}: a weight is given to a missing reference")
+        wsum = self.weights.sum(axis=1)
+        if ((wsum != 64) & has.any(axis=1)).any():
+            raise FormatError(f"{where}: blend weights must sum to 64")
+        for v in range(n):
+            r = self.refs[v][has[v]]
+            if len(set(r.tolist())) != r.size:
+                raise FormatError(f"{where}: view {v} lists a reference twice")
+            if r.size == 0:
+                if order[v] < 0:
+                    raise FormatError(f"{where}: view {v} has no references but is not a key view")
+                if self.cell[v] != -1:
+                    raise FormatError(f"{where}: intra view {v} must have cell -1")
+                continue
+            if (order[r] < 0).any():
+                raise FormatError(f"{where}: view {v} references a view that is not a key view")
+            if order[v] >= 0 and (order[r] >= order[v]).any():
+                raise FormatError(f"{where}: key view {v} references a key decoded after it")
+            if not 0 <= self.cell[v] < self.n_maps:
+                raise FormatError(f"{where}: view {v} has map {self.cell[v]} of {self.n_maps}")

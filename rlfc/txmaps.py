@@ -1,0 +1,204 @@
+"""The ``tx.maps`` section: the shared disparity map, per-map corrections and prediction modes,
+entropy-coded with rANS (:mod:`rlfc.rans`) and decoded once when a file is opened.
+
+Layout: u8 version (1); varint byte lengths of the tables and of each stream; the tables
+(:func:`rlfc.txsyntax.tables_to_bytes` layout over this module's contexts); the shared map's
+stream; one stream per map.
+
+Shared map (nby8 × nbx8 raster, 1/16 px per view step): each value v is coded as
+e = v − MED(a, b, c) (a left, b above, c above-left; missing neighbours repeat the nearest
+present one, the first value is predicted by 0; MED = median(a, b, a + b − c)), symbol
+clamp(e, −31, 31) + 31, context by the activity |a − c| + |b − c| (0, 1..16, > 16).
+Per map, one stream: for each block in raster order the correction (disparity − shared),
+symbol clamp(c, −31, 31) + 31, context (left ≠ 0) + 2·(above ≠ 0); then for each block the
+mode (0 blend, 1 + j reference j), context 5·left + above (missing: 0).
+An escape (symbol 0 for e or c <= −31, 62 for >= 31) is followed by three 6-bit digits
+(contexts ESC_DIGIT) of the zig-zag value of the excess (|e| − 31), most significant first.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.errors import FormatError
+
+from .rans import LaneDecoder, ScalarDecoder, encode_lanes
+from .txsections import MAX_VARINT_BYTES, unvarints, varints
+from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
+
+VERSION = 1
+R = 31
+CTX_BASE = 0                 # 3 activity classes
+CTX_CORR = 3                 # 4: left nonzero + 2 · above nonzero
+CTX_MODE = 7                 # 25: 5·left + above
+CTX_DIGIT = 32               # escape digits
+N_CTX = 33
+ALPHABET = 64
+
+
+def _med(a, b, c):
+    return np.median(np.stack([a, b, a + b - c]), axis=0).astype(np.int64) if isinstance(a, np.ndarray) \
+        else sorted((a, b, a + b - c))[1]
+
+
+def _escape(e):
+    """Symbol and escape digits of values e (arrays): digits = zig-zag(|e| − R) in 3×6 bits."""
+    sym = np.clip(e, -R, R) + R
+    esc = np.abs(e) >= R
+    x = np.abs(e) - R
+    return sym, esc, np.stack([(x >> 12) & 63, (x >> 6) & 63, x & 63], -1)
+
+
+def _activity(a, b, c):
+    act = np.abs(a - c) + np.abs(b - c)
+    return np.where(act == 0, 0, np.where(act <= 16, 1, 2))
+
+
+def _neighbours(v: np.ndarray):
+    """(a, b, c) left, above, above-left of a (ny, nx) grid, repeating the nearest present one."""
+    ny, nx = v.shape
+    a = np.empty_like(v)
+    a[:, 1:] = v[:, :-1]
+    a[:, 0] = np.concatenate([[0], v[:-1, 0]])
+    b = np.empty_like(v)
+    b[1:] = v[:-1]
+    b[0] = a[0]
+    c = np.empty_like(v)
+    c[1:, 1:] = v[:-1, :-1]
+    c[1:, 0] = b[1:, 0]
+    c[0] = a[0]
+    return a, b, c
+
+
+def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tuple[int, int]) -> bytes:
+    """Section bytes of the shared map (nloc,), per-map disparities and modes (n_maps, nloc)."""
+    ny, nx = shape
+    lanes = []                                           # per stream: list of (ctx, sym)
+    b = base.reshape(ny, nx).astype(np.int64)
+    a_, b_, c_ = _neighbours(b)
+    pred = _med(a_, b_, c_)
+    pred[0, 0] = 0
+    e = (b - pred).reshape(-1)
+    ctx0 = _activity(a_, b_, c_).reshape(-1) + CTX_BASE
+    lanes.append(_with_escapes(ctx0, e))
+    corr = (disp - base[None, :]).astype(np.int64)
+    for m in range(disp.shape[0]):
+        cm = corr[m].reshape(ny, nx)
+        left = np.concatenate([np.zeros((ny, 1), np.int64), cm[:, :-1]], 1) != 0
+        up = np.concatenate([np.zeros((1, nx), np.int64), cm[:-1]], 0) != 0
+        cc, cs = _with_escapes((CTX_CORR + left + 2 * up).reshape(-1), cm.reshape(-1))
+        mo = modes[m].reshape(ny, nx).astype(np.int64)
+        ml = np.concatenate([np.zeros((ny, 1), np.int64), mo[:, :-1]], 1)
+        mu = np.concatenate([np.zeros((1, nx), np.int64), mo[:-1]], 0)
+        lanes.append((np.concatenate([cc, (CTX_MODE + 5 * ml + mu).reshape(-1)]), np.concatenate([cs, mo.reshape(-1)])))
+    counts = np.zeros((N_CTX, ALPHABET), np.int64)
+    for c, s in lanes:
+        np.add.at(counts, (c, s), 1)
+    q = quantize_counts(counts)
+    tables = tables_from_quantized(q)
+    K = max(len(c) for c, _ in lanes)
+    C = np.zeros((len(lanes), K), np.int64)
+    S = np.zeros((len(lanes), K), np.int64)
+    for i, (c, s) in enumerate(lanes):
+        C[i, :len(c)], S[i, :len(s)] = c, s
+    streams = encode_lanes(C, S, np.array([len(c) for c, _ in lanes]), tables)
+    tb = tables_to_bytes(q)
+    return bytes([VERSION]) + varints(np.array([len(tb)] + [len(x) for x in streams])) + tb + b"".join(streams)
+
+
+def _with_escapes(ctx: np.ndarray, v: np.ndarray):
+    """(ctx, sym) in order, each escape followed by its three digits."""
+    sym, esc, dig = _escape(v)
+    n = 1 + 3 * esc
+    pos = np.cumsum(n) - n
+    out_c = np.full(int(n.sum()), CTX_DIGIT, np.int64)
+    out_s = np.zeros(int(n.sum()), np.int64)
+    out_c[pos], out_s[pos] = ctx, sym
+    ei = pos[esc]
+    for k in range(3):
+        out_s[ei + 1 + k] = dig[esc, k]
+    return out_c, out_s
+
+
+def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: str):
+    """→ (per-map disparities (n_maps, nloc), modes (n_maps, nloc)), int64."""
+    ny, nx = shape
+    nloc = ny * nx
+    raw = bytes(data)
+    if not raw or raw[0] != VERSION:
+        raise FormatError(f"{what}: unknown maps version")
+    b = np.frombuffer(raw, np.uint8)
+    ends = np.flatnonzero(b[1:] < 128)
+    if ends.size < n_maps + 2:
+        raise FormatError(f"{what}: truncated stream lengths")
+    head = 1 + int(ends[n_maps + 1]) + 1
+    lens = unvarints(raw[1:head], n_maps + 2, what)
+    if (lens < 0).any() or head + int(lens.sum()) != len(raw):
+        raise FormatError(f"{what}: stream lengths do not add up to the section")
+    pos = head + int(lens[0])
+    tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], N_CTX, ALPHABET, what))
+    # the shared map: one stream, sequential (MED needs the decoded neighbours)
+    d = ScalarDecoder(raw[pos:pos + int(lens[1])], tables)
+    base = np.zeros((ny, nx), np.int64)
+    vals = base.reshape(-1)
+    for i in range(nloc):
+        y, x = divmod(i, nx)
+        a = vals[i - 1] if x else (vals[i - nx] if y else 0)
+        bb = vals[i - nx] if y else a
+        c = vals[i - nx - 1] if (x and y) else bb if y else a
+        s = d.get(CTX_BASE + (0 if a == c and bb == c else (1 if abs(a - c) + abs(bb - c) <= 16 else 2)))
+        e = _unescape_scalar(d, s, what)
+        vals[i] = (0 if i == 0 else _med(int(a), int(bb), int(c))) + e
+    if not d.done(int(lens[1])):
+        raise FormatError(f"{what}: the shared map's stream is malformed")
+    pos += int(lens[1])
+    # per map: one lane each (contexts from the same lane's left and above values)
+    starts = pos + np.concatenate([[0], np.cumsum(lens[2:])[:-1]]).astype(np.int64)
+    buf = np.frombuffer(raw + bytes(8), np.uint8)
+    disp = np.zeros((n_maps, nloc), np.int64)
+    modes = np.zeros((n_maps, nloc), np.int64)
+    if n_maps:
+        from .xp import NUMPY
+
+        dec = LaneDecoder(NUMPY, buf, starts, tables)
+        lanes = np.arange(n_maps)
+        corr = np.zeros((n_maps, nloc), np.int64)
+        for i in range(nloc):
+            y, x = divmod(i, nx)
+            left = (corr[:, i - 1] != 0) if x else np.zeros(n_maps, bool)
+            up = (corr[:, i - nx] != 0) if y else np.zeros(n_maps, bool)
+            s = dec.step(lanes, CTX_CORR + left + 2 * up)
+            corr[:, i] = s - R
+            esc = (s == 0) | (s == 2 * R)
+            if esc.any():
+                el = np.flatnonzero(esc)
+                x_ = np.zeros(el.size, np.int64)
+                for _ in range(3):
+                    x_ = (x_ << 6) | dec.step(el, np.full(el.size, CTX_DIGIT))
+                corr[el, i] = np.sign(s[el] - R) * (R + x_)
+        for i in range(nloc):
+            y, x = divmod(i, nx)
+            ml = modes[:, i - 1] if x else np.zeros(n_maps, np.int64)
+            mu = modes[:, i - nx] if y else np.zeros(n_maps, np.int64)
+            modes[:, i] = dec.step(lanes, CTX_MODE + 5 * ml.clip(0, 4) + mu.clip(0, 4))
+            if (modes[:, i] >= n_modes).any():
+                raise FormatError(f"{what}: a prediction mode is out of range")
+        if not dec.check(starts + lens[2:]).all():
+            raise FormatError(f"{what}: a map stream is malformed")
+        disp = base.reshape(1, -1) + corr
+    if nloc and np.abs(disp).max(initial=0) > (1 << 20):
+        raise FormatError(f"{what}: a disparity is out of range")
+    return disp, modes
+
+
+def _unescape_scalar(d: ScalarDecoder, s: int, what: str) -> int:
+    if s > 2 * R:
+        raise FormatError(f"{what}: undefined map symbol {s}")
+    if s not in (0, 2 * R):
+        return s - R
+    x = 0
+    for _ in range(3):
+        x = (x << 6) | d.get(CTX_DIGIT)
+    return (R + x) * (1 if s == 2 * R else -1)
+
+
+__all__ = ["pack_maps", "unpack_maps", "MAX_VARINT_BYTES"]

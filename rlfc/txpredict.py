@@ -1,0 +1,79 @@
+"""Prediction of the ``tx`` profile, in integers (numpy or torch via :mod:`rlfc.xp`).
+
+Multi-reference disparity compensation: an 8×8 block at pixel (y0, x0) of view v, with
+disparity d (units 1/16 pixel per view step) and reference key views k_j at grid positions
+pos_j, samples key k_j at (y0 + y, x0 + x)·16 + d·(pos_v − pos_j) in 1/16 pixel, bilinearly
+(:func:`rlfc.kernels.bilinear`, F = 4, one (9×9) window per reference), giving p_j. With
+weights w_j (integers summing to 64) the prediction is (Σ_j w_j·p_j + 32) >> 6; a block in
+"single reference j" mode uses w = 64 on reference j (so the prediction is p_j exactly).
+
+Intra views (no references) are predicted by the bilinear upsampling of a thumbnail (one
+value per 8×8 block and plane): pixel y samples thumbnail row (2y − 7)/16 (likewise x),
+clamped at the edges, bilinear with F = 4.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .kernels import bilinear
+from .xp import NUMPY
+
+TB = 8            # transform / prediction block edge
+DISP_BITS = 4     # disparities and sample positions in 1/16 pixel
+W_BITS = 6        # blend weights sum to 64
+
+
+def planar(planes: np.ndarray) -> np.ndarray:
+    """(n, Hp, Wp, P) planes → (P, n·Hp·Wp) contiguous (fast gathers)."""
+    return np.ascontiguousarray(np.moveaxis(planes, -1, 0)).reshape(planes.shape[-1], -1)
+
+
+def predict_tbs(xp, kp, hw, slots, weights, disp_y, disp_x, y0, x0):
+    """Prediction of M 8×8 blocks from up to R references each.
+
+    Args:
+        kp: (P, n_keys·Hp·Wp) int32 planar decoded key views; hw: (Hp, Wp).
+        slots: (M, R) key index of each reference (any valid index where the weight is 0).
+        weights: (M, R) int weights summing to 64 per block.
+        disp_y, disp_x: (M, R) displacements of each reference in 1/16 pixel.
+        y0, x0: (M,) block origins in pixels.
+
+    Returns:
+        (M, 8, 8, P) int32.
+    """
+    hp, wp = hw
+    M, R = slots.shape
+    F = DISP_BITS
+    Y = (y0[:, None] << F) + disp_y                                              # (M, R)
+    X = (x0[:, None] << F) + disp_x
+    ext = xp.arange(TB + 1)
+    rows = ((Y >> F)[:, :, None] + ext).clip(0, hp - 1)                          # (M, R, 9)
+    cols = ((X >> F)[:, :, None] + ext).clip(0, wp - 1)
+    idx = ((slots * hp)[:, :, None, None] + rows[:, :, :, None]) * wp + cols[:, :, None, :]
+    win = xp.moveaxis(xp.take_cols(kp, idx.reshape(M * R, TB + 1, TB + 1)), 0, -1)   # (M·R, 9, 9, P)
+    fy = xp.cast(Y & ((1 << F) - 1), xp.int32).reshape(M * R, 1, 1, 1)
+    fx = xp.cast(X & ((1 << F) - 1), xp.int32).reshape(M * R, 1, 1, 1)
+    p = bilinear(win, fy, fx, F).reshape(M, R, TB, TB, -1)                      # (M, R, 8, 8, P)
+    w = xp.cast(weights, xp.int32)[:, :, None, None, None]
+    return ((p * w).sum(1) + (1 << (W_BITS - 1))) >> W_BITS
+
+
+def upsample_thumb(thumb: np.ndarray, hp: int, wp: int, xp=NUMPY):
+    """(ty, tx, P) thumbnail values → (hp, wp, P) int32 bilinear prediction (see module doc)."""
+    ty, tx = thumb.shape[:2]
+    F = DISP_BITS
+
+    def axis(n, m):
+        q = 2 * np.arange(n, dtype=np.int64) - 7
+        i0 = q >> F
+        return np.clip(i0, 0, m - 1), np.clip(i0 + 1, 0, m - 1), q & ((1 << F) - 1)
+
+    ya, yb, fy = axis(hp, ty)
+    xa, xb, fx = axis(wp, tx)
+    t = thumb.astype(np.int32)
+    s = 1 << F
+    fxv = fx.astype(np.int32)[None, :, None]
+    top = t[ya][:, xa] * (s - fxv) + t[ya][:, xb] * fxv
+    bot = t[yb][:, xa] * (s - fxv) + t[yb][:, xb] * fxv
+    fyv = fy.astype(np.int32)[:, None, None]
+    return (top * (s - fyv) + bot * fyv + (1 << (2 * F - 1))) >> (2 * F)

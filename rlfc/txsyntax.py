@@ -1,0 +1,443 @@
+"""Syntax of one coded random-access block of the ``tx`` profile: symbols, contexts, raw bits.
+
+A block of B×B pixels holds nt = (B/8)² transform blocks ("tbs", raster order) of P planes.
+Its stream (see :mod:`rlfc.rans`) holds, in decode order:
+
+1. ``mode`` of each tb: 0 skip (prediction only), 1 residual (prediction + coefficients),
+   2 intra (flat prediction + coefficients). Context: view kind (0 predicted from references,
+   1 intra view) × 4 + previous tb's mode in this block (3 for the first tb).
+2. ``last`` of each coded tb and plane, in (tb, plane) order: 1 + the scan position of the
+   last nonzero coefficient, 0 = none. Context: plane class × tb mode class × key.
+3. Magnitudes of each (tb, plane) with last > 0, scan positions last−1 down to 0: symbol
+   min(|c|, 15) — min(|c| − 1, 15) at position last−1, which is nonzero. Context: plane
+   class × band of the scan position × key × (first | 0, 1, 2 nonzeros among the two
+   previous magnitudes of the same tb and plane).
+4. Escapes: for each magnitude symbol 15, in order, a bucket k with r = |c| − 15 (−16 at
+   position last−1) in [2^k − 1, 2^(k+1) − 1). Context: plane class.
+
+Raw bits: a sign bit (1 = negative) per nonzero coefficient in magnitude order, then the k
+low bits of r − (2^k − 1) of each escape, in order; nbits in all. The first b = min(nbits, 15)
+ride in the rANS start state (R = bits 0..b−1, LSB first; :mod:`rlfc.rans`), the rest are
+stored LSB-first from byte ``end − ceil((nbits − b)/8)`` to the end of the stream. The rANS
+part ends exactly where the stored raw bits start.
+
+Plane classes: 0 = Y (or grey), 1 = Co/Cg, 2 = alpha. Scan: zig-zag (``rlfc.transform.ZIGZAG``)
+for transformed planes, raster for transform-bypassed planes (alpha, lossless).
+On-wire constants; do not reorder.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.errors import FormatError
+
+from .rans import BACK_BITS, L as RANS_L, LaneDecoder, ScalarDecoder, Tables, encode_lanes
+
+N_MODES = 3
+MODE_SKIP, MODE_RES, MODE_INTRA = 0, 1, 2
+ESC = 15
+N_BUCKETS = 24
+#: band of each scan position 0..63
+BAND = np.array([0] + [1] * 2 + [2] * 3 + [3] * 4 + [4] * 11 + [5] * 43, dtype=np.int64)
+N_BANDS = 6
+N_PC = 3          # plane classes
+
+# context layout: one table set, contexts numbered by kind of symbol
+CTX_MODE = 0                                    # 2 kinds × 4 previous modes
+CTX_LAST = CTX_MODE + 8                         # 3 plane classes × 2 mode classes × 2 key
+CTX_MAG = CTX_LAST + N_PC * 2 * 2               # 3 pc × 6 bands × 2 key × 4 (first, nbr 0..2)
+CTX_ESC = CTX_MAG + N_PC * N_BANDS * 2 * 4      # 3 pc
+N_CTX = CTX_ESC + N_PC
+ALPHABET = 65
+
+
+def plane_classes(planes: int) -> np.ndarray:
+    """(P,) plane class of each plane: grey / grey+alpha / YCoCg / YCoCg+alpha."""
+    return {1: np.array([0]), 2: np.array([0, 2]), 3: np.array([0, 1, 1]), 4: np.array([0, 1, 1, 2])}[planes]
+
+
+def ctx_mode(kind, prev):
+    return CTX_MODE + kind * 4 + prev
+
+
+def ctx_last(pc, mode, key):
+    return CTX_LAST + (pc * 2 + (mode == MODE_INTRA)) * 2 + key
+
+
+def ctx_mag(pc, band, key, nb):
+    """nb: 0 = first (position last−1), 1..3 = 0..2 nonzeros among the two previous."""
+    return CTX_MAG + ((pc * N_BANDS + band) * 2 + key) * 4 + nb
+
+
+def ctx_esc(pc):
+    return CTX_ESC + pc
+
+
+def bucket_of(r: np.ndarray) -> np.ndarray:
+    """Escape bucket k of remainders r >= 0: r + 1 in [2^k, 2^(k+1))."""
+    return np.floor(np.log2(r.astype(np.float64) + 1)).astype(np.int64)
+
+
+# -- encoder ---------------------------------------------------------------------------------
+def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: np.ndarray, pcs: np.ndarray):
+    """The symbols and raw bits of S blocks.
+
+    Args:
+        modes: (S, nt) tb modes. levels: (S, nt, P, 64) signed levels in scan order (ignored
+            where the tb's mode is skip). kind, key: (S,) view kind (0/1) and key flag (0/1).
+        pcs: (P,) plane classes.
+
+    Returns:
+        (lane, ctx, sym) flat int64 arrays in decode order per lane (lanes ascending), and
+        (rlane, bits) flat arrays of raw bits (0/1) in order per lane.
+    """
+    S, nt, P, _ = levels.shape
+    levels = np.where((modes != MODE_SKIP)[:, :, None, None], levels, 0)
+    mag = np.abs(levels)
+    nzmask = mag > 0
+    last = np.where(nzmask.any(-1), 63 - np.argmax(nzmask[..., ::-1], axis=-1) + 1, 0)       # (S, nt, P)
+    parts = []                                 # (lane, order, ctx, sym)
+    lane_t = np.repeat(np.arange(S), nt)
+    prev = np.concatenate([np.full((S, 1), 3), modes[:, :-1]], axis=1)
+    parts.append((lane_t, np.tile(np.arange(nt), S), ctx_mode(kind[:, None], prev).reshape(-1), modes.reshape(-1)))
+    s_, t_, p_ = np.nonzero(np.broadcast_to((modes != MODE_SKIP)[:, :, None], (S, nt, P)))
+    parts.append((s_, 1000 + t_ * P + p_, ctx_last(pcs[p_], modes[s_, t_], key[s_]), last[s_, t_, p_]))
+    # magnitudes: group g = (s, t, p) with last > 0; j = 0..last-1 at scan position last-1-j
+    gs, gt, gp = np.nonzero(last > 0)
+    gl = last[gs, gt, gp]
+    n = int(gl.sum())
+    grp = np.repeat(np.arange(gs.size), gl)
+    j = np.arange(n) - np.repeat(np.cumsum(gl) - gl, gl)
+    pos = gl[grp] - 1 - j
+    m = mag[gs[grp], gt[grp], gp[grp], pos]
+    first = j == 0
+    sym = np.minimum(np.where(first, m - 1, m), ESC)
+    nz = m > 0
+    prev1 = np.concatenate([[False], nz])[:n] & (j >= 1)
+    prev2 = np.concatenate([[False, False], nz])[:n] & (j >= 2)
+    nb = np.where(first, 0, 1 + prev1.astype(np.int64) + prev2)
+    pc = pcs[gp[grp]]
+    order = 10_000 + ((gt[grp] * P + gp[grp]) * 64 + j)
+    parts.append((gs[grp], order, ctx_mag(pc, BAND[pos], key[gs[grp]], nb), sym))
+    esc = sym == ESC
+    r = m[esc] - ESC - np.where(first[esc], 1, 0)
+    k = bucket_of(r)
+    parts.append((gs[grp][esc], 1_000_000 + order[esc], ctx_esc(pc[esc]), k))
+    lane = np.concatenate([x[0] for x in parts])
+    order_all = np.concatenate([x[1] for x in parts])
+    ctx = np.concatenate([x[2] for x in parts])
+    syms = np.concatenate([x[3] for x in parts])
+    o = np.lexsort((order_all, lane))
+    # raw bits: signs in magnitude order, then escape suffixes (k bits each, LSB first)
+    sign_lane, sign_ord = gs[grp][nz], order[nz]
+    sign_bits = (levels[gs[grp], gt[grp], gp[grp], pos] < 0)[nz].astype(np.int64)
+    kk = k
+    suffix = r - ((1 << kk) - 1)
+    el = np.repeat(gs[grp][esc], kk)
+    eb = np.arange(int(kk.sum())) - np.repeat(np.cumsum(kk) - kk, kk)
+    ebits = (np.repeat(suffix, kk) >> eb) & 1
+    eord = np.repeat(1_000_000 + order[esc], kk) * 64 + eb
+    rl = np.concatenate([sign_lane, el])
+    rord = np.concatenate([sign_ord * 64, eord])
+    rbits = np.concatenate([sign_bits, ebits])
+    ro = np.lexsort((rord, rl))
+    return lane[o], ctx[o], syms[o], rl[ro], rbits[ro]
+
+
+def pack_streams(S: int, lane, ctx, sym, rlane, rbits, tables: Tables) -> list[bytes]:
+    """rANS-encode the symbols of S lanes and append each lane's raw bits."""
+    counts = np.bincount(lane, minlength=S)
+    K = int(counts.max(initial=0))
+    starts = np.cumsum(counts) - counts
+    col = np.arange(lane.size) - starts[lane]
+    C = np.zeros((S, max(K, 1)), np.int64)
+    Y = np.zeros((S, max(K, 1)), np.int64)
+    C[lane, col], Y[lane, col] = ctx, sym
+    rc = np.bincount(rlane, minlength=S)
+    rs = np.cumsum(rc) - rc
+    k = np.minimum(rc, BACK_BITS)                         # raw bits carried by the start state
+    col = np.arange(rlane.size) - rs[rlane]
+    inback = col < k[rlane]
+    back = np.zeros(S, np.int64)
+    np.add.at(back, rlane[inback], rbits[inback].astype(np.int64) << col[inback])
+    rans = encode_lanes(C, Y, counts, tables, back=back)
+    out = []
+    for i in range(S):
+        bits = rbits[rs[i] + k[i]:rs[i] + rc[i]].astype(np.uint8)
+        out.append(rans[i] + np.packbits(bits, bitorder="little").tobytes())
+    return out
+
+
+def count_symbols(ctx, sym) -> np.ndarray:
+    """(N_CTX, ALPHABET) counts of (context, symbol) pairs."""
+    c = np.zeros((N_CTX, ALPHABET), np.int64)
+    np.add.at(c, (ctx, sym), 1)
+    return c
+
+
+# -- tables on the wire ----------------------------------------------------------------------
+def quantize_counts(counts: np.ndarray) -> np.ndarray:
+    """(N_CTX, A) counts → one byte per count: 0 = unused, else 1 + round(8·log2(count)) capped
+    at 255 (the table both sides build from :func:`dequantize_counts`)."""
+    c = np.asarray(counts, np.float64)
+    q = np.where(c > 0, 1 + np.rint(8 * np.log2(np.maximum(c, 1))), 0)
+    return np.minimum(q, 255).astype(np.uint8)
+
+
+def dequantize_counts(q: np.ndarray) -> np.ndarray:
+    return np.where(q > 0, np.exp2((q.astype(np.float64) - 1) / 8), 0.0)
+
+
+def tables_from_quantized(q: np.ndarray) -> Tables:
+    """rANS tables from quantized counts; unused contexts get a flat table over the whole
+    alphabet (never used by a valid stream)."""
+    return Tables.from_counts(dequantize_counts(q))
+
+
+def tables_to_bytes(q: np.ndarray) -> bytes:
+    """Used contexts only: a context bitmap, then per used context a symbol bitmap and one
+    byte per used symbol; zlib-compressed."""
+    import zlib
+
+    used_ctx = (q > 0).any(axis=1)
+    parts = [np.packbits(used_ctx, bitorder="little").tobytes()]
+    for c in np.flatnonzero(used_ctx):
+        row = q[c]
+        parts.append(np.packbits(row > 0, bitorder="little").tobytes())
+        parts.append(row[row > 0].tobytes())
+    return zlib.compress(b"".join(parts), 9)
+
+
+def tables_from_bytes(data: bytes, name: str) -> np.ndarray:
+    """Inverse of :func:`tables_to_bytes` → (N_CTX, ALPHABET) quantized counts."""
+    return tables_from_bytes_n(data, N_CTX, ALPHABET, name)
+
+
+def tables_from_bytes_n(data: bytes, n_ctx: int, alphabet: int, name: str) -> np.ndarray:
+    """Inverse of :func:`tables_to_bytes` for (n_ctx, alphabet) tables."""
+    import zlib
+
+    limit = (n_ctx + 7) // 8 + n_ctx * ((alphabet + 7) // 8 + alphabet)
+    try:
+        d = zlib.decompressobj()
+        raw = d.decompress(bytes(data), limit + 1)
+    except zlib.error as e:
+        raise FormatError(f"{name}: rANS tables are not a valid stream ({e})") from None
+    if not d.eof or d.unused_data or len(raw) > limit:
+        raise FormatError(f"{name}: rANS tables stream is malformed")
+    b = np.frombuffer(raw, np.uint8)
+    q = np.zeros((n_ctx, alphabet), np.uint8)
+    nb = (n_ctx + 7) // 8
+    if b.size < nb:
+        raise FormatError(f"{name}: rANS tables are truncated")
+    used = np.unpackbits(b[:nb], bitorder="little")[:n_ctx].astype(bool)
+    pos, ab = nb, (alphabet + 7) // 8
+    for c in np.flatnonzero(used):
+        if pos + ab > b.size:
+            raise FormatError(f"{name}: rANS tables are truncated")
+        sm = np.unpackbits(b[pos:pos + ab], bitorder="little")[:alphabet].astype(bool)
+        pos += ab
+        k = int(sm.sum())
+        if k == 0 or pos + k > b.size:
+            raise FormatError(f"{name}: rANS tables are truncated or empty")
+        vals = b[pos:pos + k]
+        if (vals == 0).any():
+            raise FormatError(f"{name}: rANS tables hold a zero count")
+        q[c, sm] = vals
+        pos += k
+    if pos != b.size:
+        raise FormatError(f"{name}: rANS tables have {b.size - pos} trailing bytes")
+    return q
+
+
+# -- decoders --------------------------------------------------------------------------------
+class Parsed:
+    """Decoded syntax of S blocks: modes (S, nt) int64; levels (S, nt, P, 64) int64 signed, in
+    scan order."""
+
+    def __init__(self, modes, levels):
+        self.modes, self.levels = modes, levels
+
+
+def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: Tables, nt: int, pcs: np.ndarray,
+                kind: np.ndarray, key: np.ndarray, name: str = "") -> Parsed:
+    """Parse S streams at once (numpy lanes). ``buf`` holds the streams (8 bytes of slack after
+    the last); stream i is ``buf[starts[i]:ends[i]]``.
+
+    Raises:
+        FormatError: a stream that is malformed (bad symbol, overrun, wrong end state).
+    """
+    from .xp import NUMPY as xp
+
+    S, P = starts.size, pcs.size
+    modes = np.zeros((S, nt), np.int64)
+    levels = np.zeros((S, nt, P, 64), np.int64)
+    if S == 0:
+        return Parsed(modes, levels)
+    dec = LaneDecoder(xp, buf, starts.astype(np.int64), tables)
+    lanes = np.arange(S)
+    prev = np.full(S, 3, np.int64)
+    for t in range(nt):
+        s = dec.step(lanes, ctx_mode(kind, prev))
+        modes[:, t] = s
+        prev = s
+    if (modes >= N_MODES).any():
+        raise FormatError(f"{name}: tx block has an undefined tb mode")
+    last = np.zeros((S, nt, P), np.int64)
+    for t in range(nt):
+        for p in range(P):
+            act = np.flatnonzero(modes[:, t] != MODE_SKIP)
+            if act.size:
+                last[act, t, p] = dec.step(act, ctx_last(pcs[p], modes[act, t], key[act]))
+    if (last > 64).any():
+        raise FormatError(f"{name}: tx block has a last position past 64")
+    # magnitudes: per lane, groups (t, p) in order, each of length last
+    gl = last.reshape(S, nt * P)
+    per_lane = gl.sum(axis=1)
+    tot = int(per_lane.sum())
+    lane_start = np.cumsum(per_lane) - per_lane
+    flat_len = gl.reshape(-1)
+    gidx = np.repeat(np.arange(S * nt * P), flat_len)                   # group of each symbol
+    j = np.arange(tot) - np.repeat(np.cumsum(flat_len) - flat_len, flat_len)
+    pos = np.repeat(flat_len, flat_len) - 1 - j
+    g_lane, g_tp = np.divmod(gidx, nt * P)
+    pc = pcs[g_tp % P]
+    band = BAND[pos]
+    mags = np.zeros(tot, np.int64)
+    base = ctx_mag(pc, band, key[g_lane], 0)
+    order = np.argsort(-per_lane, kind="stable")
+    lens = per_lane[order]
+    for k in range(int(lens[0]) if S else 0):
+        m = int(np.searchsorted(-lens, -k, side="left"))
+        ln = order[:m]
+        i = lane_start[ln] + k
+        jj = j[i]
+        nb = np.where(jj == 0, 0, 1 + ((jj >= 1) & (mags[i - 1] > 0)) + ((jj >= 2) & (mags[i - 2 * (jj >= 2)] > 0)))
+        s = dec.step(ln, base[i] + nb)
+        if (s > ESC).any():
+            raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
+        mags[i] = s + (jj == 0)
+    # escapes
+    esc = np.flatnonzero(mags >= ESC + (j == 0))
+    if esc.size:
+        e_lane = g_lane[esc]
+        ec = np.bincount(e_lane, minlength=S)
+        es = np.cumsum(ec) - ec
+        col = np.arange(esc.size) - es[e_lane]
+        buckets = np.zeros(esc.size, np.int64)
+        for k in range(int(ec.max())):
+            sel = np.flatnonzero(col == k)
+            buckets[sel] = dec.step(e_lane[sel], ctx_esc(pc[esc[sel]]))
+        if (buckets >= N_BUCKETS).any() or (buckets > 40).any():
+            raise FormatError(f"{name}: tx block has an undefined escape bucket")
+    else:
+        buckets = np.zeros(0, np.int64)
+    # raw bits: signs then escape suffixes, per lane
+    nz = mags > 0
+    nsign = np.bincount(g_lane[nz], minlength=S)
+    nsuf = np.bincount(g_lane[esc], weights=buckets, minlength=S).astype(np.int64) if esc.size else np.zeros(S, np.int64)
+    nbits = nsign + nsuf
+    kb = np.minimum(nbits, BACK_BITS)
+    raw_start = ends - (nbits - kb + 7) // 8
+    from .rans import STATE_BYTES
+
+    ok = dec.check(raw_start, kb) & (raw_start >= starts + STATE_BYTES)
+    if not ok.all():
+        raise FormatError(f"{name}: tx block stream is malformed (its symbols do not end where its raw bits start)")
+    back = dec.back()
+    sidx = np.flatnonzero(nz)
+    scount = np.cumsum(nz) - 1                                           # index among nonzeros overall
+    soff = scount[sidx] - (np.cumsum(nsign) - nsign)[g_lane[sidx]]      # bit offset within the lane
+    sbit = _raw_bits(buf, raw_start[g_lane[sidx]], back[g_lane[sidx]], kb[g_lane[sidx]], soff)
+    vals = mags.copy()
+    if esc.size:
+        first = (j[esc] == 0).astype(np.int64)
+        eoff = nsign[e_lane] + (np.cumsum(buckets) - buckets) - (np.cumsum(nsuf) - nsuf)[e_lane]
+        suffix = np.zeros(esc.size, np.int64)
+        for b in range(int(buckets.max(initial=0))):
+            m = buckets > b
+            suffix[m] |= _raw_bits(buf, raw_start[e_lane[m]], back[e_lane[m]], kb[e_lane[m]], eoff[m] + b) << b
+        vals[esc] = ESC + first + ((1 << buckets) - 1) + suffix
+    vals[sidx] = np.where(sbit == 1, -vals[sidx], vals[sidx])
+    lv = levels.reshape(S, nt * P, 64)
+    lv[g_lane, g_tp, pos] = vals
+    return Parsed(modes, levels)
+
+
+def _raw_bits(buf, start, back, kb, off):
+    """Raw bit ``off`` of each lane (arrays): bits below ``kb`` from the start state's R
+    (``back``), the others from the stored bits at byte ``start`` (LSB-first)."""
+    stored = off - kb
+    byte = buf[(start + np.maximum(stored, 0) // 8).clip(0, buf.size - 1)].astype(np.int64)
+    return np.where(off < kb, (back >> off.clip(0, 62)) & 1, (byte >> (np.maximum(stored, 0) & 7)) & 1)
+
+
+def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, key: int) -> Parsed:
+    """The reference parser: one stream in plain Python (same results as :func:`parse_lanes`)."""
+    P = len(pcs)
+    d = ScalarDecoder(data, tables)
+    modes, prev = [], 3
+    for _ in range(nt):
+        s = d.get(int(ctx_mode(kind, prev)))
+        if s >= N_MODES:
+            raise FormatError("tx block has an undefined tb mode")
+        modes.append(s)
+        prev = s
+    last = [[0] * P for _ in range(nt)]
+    for t in range(nt):
+        if modes[t] != MODE_SKIP:
+            for p in range(P):
+                v = d.get(int(ctx_last(int(pcs[p]), modes[t], key)))
+                if v > 64:
+                    raise FormatError("tx block has a last position past 64")
+                last[t][p] = v
+    coefs = []                                          # (t, p, pos, magnitude, escaped, first)
+    for t in range(nt):
+        for p in range(P):
+            hist = []
+            for j in range(last[t][p]):
+                pos = last[t][p] - 1 - j
+                if j == 0:
+                    nb = 0
+                else:
+                    nb = 1 + (hist[-1] > 0) + (j >= 2 and hist[-2] > 0)
+                s = d.get(int(ctx_mag(int(pcs[p]), int(BAND[pos]), key, nb)))
+                if s > ESC:
+                    raise FormatError("tx block has an undefined magnitude symbol")
+                mag = s + (j == 0)
+                hist.append(mag)
+                coefs.append([t, p, pos, mag, s == ESC, j == 0])
+    for c in coefs:
+        if c[4]:
+            k = d.get(int(ctx_esc(int(pcs[c[1]]))))
+            if k >= N_BUCKETS:
+                raise FormatError("tx block has an undefined escape bucket")
+            c.append(k)
+    nsign = sum(1 for c in coefs if c[3] > 0)
+    nbits = nsign + sum(c[6] for c in coefs if c[4])
+    kb = min(nbits, BACK_BITS)
+    raw_start = len(data) - (nbits - kb + 7) // 8
+    if not d.done(raw_start, kb):
+        raise FormatError("tx block stream is malformed (its symbols do not end where its raw bits start)")
+    raw = (d.x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
+    bit = 0
+    signs = []
+    for c in coefs:
+        if c[3] > 0:
+            signs.append((raw >> bit) & 1)
+            bit += 1
+    for c in coefs:
+        if c[4]:
+            k = c[6]
+            c[3] = ESC + c[5] + ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
+            bit += k
+    levels = np.zeros((1, nt, P, 64), np.int64)
+    si = 0
+    for c in coefs:
+        v = c[3]
+        if v > 0:
+            if signs[si]:
+                v = -v
+            si += 1
+        levels[0, c[0], c[1], c[2]] = v
+    return Parsed(np.array([modes], np.int64), levels)

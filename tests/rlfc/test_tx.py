@@ -1,0 +1,157 @@
+"""The tx profile: exact lossless, decode == the encoder's closed loop, every decoder path
+agrees (full, view, block, batched, torch, byte range), hard cases, random-access bound, and
+bits on real data."""
+import numpy as np
+import pytest
+
+from formats.codec_api import EncodeOptions
+from formats.container import ByteRangeSource
+from formats.errors import LfcError, UnsupportedError
+from formats.lfcfile import open_lfc
+from formats.metrics import bpp, psnr_rgb
+from rlfc import RlfcDecoder, encode
+from rlfc.torch_decode import TorchBlockDecoder
+from tests.conftest import ROOT
+from tests.rlfc.helpers import check_agreement, make_lf, open_encoded, smooth_lf
+
+LAYOUTS = [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=2), dict(c=4), dict(h=13, w=19), dict(rows=1, cols=7),
+           dict(rows=5, cols=5)]
+
+
+def tx(lf, **kw):
+    lossless = kw.pop("lossless", False)
+    return encode(lf, EncodeOptions(profile="tx", lossless=lossless, params=kw))
+
+
+@pytest.mark.parametrize("kw", LAYOUTS)
+def test_lossless_exact_and_decoders_agree(kw):
+    lf = smooth_lf(**kw)
+    e = tx(lf, lossless=True)
+    d, _ = open_encoded(lf, e)
+    assert d.profile == "tx" and (d.decode_all() == lf.views).all()
+    check_agreement(d, lf.views.shape)
+
+
+@pytest.mark.parametrize("kw", LAYOUTS)
+def test_lossy_decode_is_the_closed_loop_and_torch_agrees(kw, rng):
+    lf = smooth_lf(**kw)
+    step = 6.0 * (257 if kw.get("dtype") == np.uint16 else 1)
+    e = tx(lf, step=step, block_size=8 if kw.get("rows") == 1 else 16)
+    d, _ = open_encoded(lf, e)
+    full = d.decode_all()
+    assert (full == e.decoded).all()
+    assert psnr_rgb(lf.views, full) > 35
+    if lf.channels in (2, 4):                              # alpha is always exact
+        assert (full[..., -1] == lf.views[..., -1]).all()
+    check_agreement(d, lf.views.shape)
+    n = lf.rows * lf.cols
+    v, by, bx = rng.integers(0, n, 300), rng.integers(0, d.nby, 300), rng.integers(0, d.nbx, 300)
+    for level in (0, 1):
+        assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level) == d.decode_blocks(v, by, bx, level)).all()
+
+
+def test_byte_range_source_equals_memory_and_fetches_one_stream():
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48)
+    e = tx(lf, step=3.0)
+    local, blob = open_encoded(lf, e)
+    calls = []
+
+    def fetch(a, b):
+        calls.append((a, b))
+        return blob[a:b]
+
+    remote = RlfcDecoder(open_lfc(ByteRangeSource(fetch, len(blob))))
+    assert (remote.decode_all() == local.decode_all()).all()
+    core = local.core
+    nonkey = np.flatnonzero(~core.is_key & core.coded.any(axis=1))
+    v = int(nonkey[0])
+    loc = int(np.flatnonzero(core.coded[v])[0])
+    by, bx = divmod(loc, core.nbx)
+    calls.clear()
+    one = remote.decode_block(v // lf.cols, v % lf.cols, by, bx)
+    assert (one == local.decode_block(v // lf.cols, v % lf.cols, by, bx)).all()
+    blocks = remote.file.container.info("tx.blocks")
+    assert len(calls) == 1 and calls[0][1] - calls[0][0] <= core.end[v, loc] - core.start[v, loc] + 2 * 65536
+    assert blocks.offset <= calls[0][0]
+
+
+def test_flat_scene_is_exact_and_small():
+    const = np.full((3, 3, 32, 48, 3), 137, np.uint8)
+    for kw in (dict(lossless=True), dict(step=8.0), dict(step=30.0)):
+        e = tx(make_lf(const), **kw)
+        d, blob = open_encoded(make_lf(const), e)
+        assert (d.decode_all() == const).all(), kw
+        assert len(blob) < 2500, (kw, len(blob))
+
+
+def test_noise_costs_about_raw(rng):
+    noise = rng.integers(0, 256, (3, 3, 32, 32, 3)).astype(np.uint8)
+    e = tx(make_lf(noise), lossless=True)
+    d, blob = open_encoded(make_lf(noise), e)
+    assert (d.decode_all() == noise).all() and len(blob) <= noise.nbytes * 1.15 + 4096
+
+
+def test_posed_captures_are_refused():
+    lf = smooth_lf(rows=1, cols=4)
+    lf.layout = "posed"
+    with pytest.raises(UnsupportedError, match="grid"):
+        tx(lf)
+
+
+def test_single_block_reads_at_most_one_stream():
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48)
+    d, _ = open_encoded(lf, tx(lf, step=2.0))
+    core = d.core
+    seen = []
+    orig = core._parse
+    core._parse = lambda v, l: seen.append(len(v)) or orig(v, l)
+    for v in range(25):
+        for loc in range(core.nby * core.nbx):
+            seen.clear()
+            d.decode_block(v // 5, v % 5, *divmod(loc, core.nbx))
+            assert seen in ([], [1])
+            assert (len(seen) == 1) == bool(core.coded[v, loc])
+
+
+def test_mutated_streams_give_typed_errors_or_exact_decodes(rng):
+    """Valid checksums, corrupt tx sections: an LfcError or a decode, never another exception."""
+    from formats.container import build_container
+    from formats.lfcfile import encode_meta
+
+    lf = smooth_lf(rows=3, cols=3, h=24, w=24)
+    e = tx(lf, step=3.0)
+    secs = dict(e.sections)
+    out = {"ok": 0, "err": 0}
+    for name in [n for n in secs if secs[n]]:
+        for _ in range(25):
+            s = {k: bytearray(v) for k, v in secs.items()}
+            for _ in range(int(rng.integers(1, 4))):
+                s[name][int(rng.integers(0, len(s[name])))] = int(rng.integers(0, 256))
+            blob = b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, e.config, lf.geometry()),
+                                                               list(s.items())))
+            try:
+                d = RlfcDecoder(open_lfc(blob))
+                d.decode_all()
+                d.decode_blocks(np.arange(9), np.zeros(9, int), np.zeros(9, int))
+                out["ok"] += 1
+            except LfcError:
+                out["err"] += 1
+    assert out["err"] > 0
+
+
+def test_target_psnr_on_the_real_sample():
+    from formats.scenes import read_scene
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=40))
+    d, blob = open_encoded(lf, e)
+    full = d.decode_all()
+    assert (full == e.decoded).all() and e.target_met
+    q = psnr_rgb(lf.views, full)
+    rate = bpp(len(blob), 81, lf.height, lf.width)
+    assert 40 <= q < 40.3 and rate < 0.03, (q, rate)
+    assert psnr_rgb(lf.views, d.decode_all(1)) <= q          # level 1 = prediction only
+    # where residual blocks exist, the prediction-only level is coarser
+    e = encode(lf, EncodeOptions(profile="tx", params={"step": 3.0}))
+    d, _ = open_encoded(lf, e)
+    assert psnr_rgb(lf.views, d.decode_all(1)) < psnr_rgb(lf.views, d.decode_all(0)) - 1

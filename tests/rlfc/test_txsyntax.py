@@ -1,0 +1,69 @@
+"""tx block syntax: symbols → streams → lanes parser == reference parser == the input, and
+the compact tables round-trip; malformed streams raise FormatError."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from formats.errors import FormatError
+from rlfc import txsyntax as tx
+
+
+def _random_blocks(rng, S, nt, P, density, big):
+    modes = rng.integers(0, 3, (S, nt))
+    levels = np.zeros((S, nt, P, 64), np.int64)
+    for s in range(S):
+        for t in range(nt):
+            for p in range(P):
+                n = int(rng.integers(0, 65)) if rng.random() < density else 0
+                pos = rng.choice(64, n, replace=False)
+                mag = rng.geometric(0.4, n) if not big else rng.integers(1, 2 ** 21, n)
+                levels[s, t, p, pos] = mag * rng.choice([-1, 1], n)
+    levels[modes == 0] = 0
+    return modes, levels
+
+
+def _encode(modes, levels, kind, key, pcs):
+    lane, ctx, sym, rl, rb = tx.block_symbols(modes, levels, kind, key, pcs)
+    q = tx.quantize_counts(tx.count_symbols(ctx, sym))
+    q2 = tx.tables_from_bytes(tx.tables_to_bytes(q), "x")
+    assert (q2 == q).all()
+    tables = tx.tables_from_quantized(q2)
+    return tx.pack_streams(len(modes), lane, ctx, sym, rl, rb, tables), tables
+
+
+@settings(max_examples=30)
+@given(st.integers(0, 2 ** 31), st.integers(1, 25), st.sampled_from([1, 4]), st.sampled_from([1, 2, 3, 4]),
+       st.floats(0, 1), st.booleans())
+def test_streams_parse_back_exactly(seed, S, nt, P, density, big):
+    rng = np.random.default_rng(seed)
+    modes, levels = _random_blocks(rng, S, nt, P, density, big)
+    kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
+    buf = np.frombuffer(b"".join(streams) + bytes(8), np.uint8)
+    got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+    assert (got.modes == modes).all() and (got.levels == levels).all()
+    for i in range(S):
+        one = tx.parse_one(streams[i], tables, nt, pcs, int(kind[i]), int(key[i]))
+        assert (one.modes[0] == modes[i]).all() and (one.levels[0] == levels[i]).all()
+
+
+def test_malformed_streams_raise():
+    rng = np.random.default_rng(1)
+    modes, levels = _random_blocks(rng, 20, 4, 3, 0.5, False)
+    modes[:, 0] = 1
+    levels[:, 0, 0, 0] = 3                                  # every stream has symbols and raw bits
+    kind, key, pcs = np.zeros(20, int), np.zeros(20, int), tx.plane_classes(3)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    for cut in (lambda b: b[:-1], lambda b: b + b"\x00", lambda b: bytes([b[0] ^ 0x55]) + b[1:]):
+        bad = [cut(b) for b in streams]
+        starts = np.concatenate([[0], np.cumsum([len(b) for b in bad])]).astype(np.int64)
+        buf = np.frombuffer(b"".join(bad) + bytes(8), np.uint8)
+        with pytest.raises(FormatError):
+            tx.parse_lanes(buf, starts[:-1], starts[1:], tables, 4, pcs, kind, key)
+        with pytest.raises(FormatError):
+            for b in bad:
+                tx.parse_one(b, tables, 4, pcs, 0, 0)
+    with pytest.raises(FormatError):
+        tx.tables_from_bytes(b"\x78\x9c\x03\x00\x00\x00\x00\x01", "x")
