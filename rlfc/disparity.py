@@ -72,11 +72,12 @@ def predict_blocks(xp, tp, hw: tuple[int, int], key_of, offsets, disp, views, by
     rows = ((Y >> F)[:, None] + ext[None, :]).clip(0, hp - 1)                       # (M, B+1)
     cols = ((X >> F)[:, None] + ext[None, :]).clip(0, wp - 1)
     idx = ((k * hp)[:, None, None] + rows[:, :, None]) * wp + cols[:, None, :]      # (M, B+1, B+1)
-    win = xp.moveaxis(xp.take_cols(tp, idx), 0, -1)                                # (M, B+1, B+1, P)
+    win = xp.take_cols(tp, idx)                                                     # (P, M, B+1, B+1)
     s = 1 << F
-    fy = xp.cast(Y & (s - 1), xp.int32)[:, None, None, None]
-    fx = xp.cast(X & (s - 1), xp.int32)[:, None, None, None]
-    return bilinear(win, fy, fx, F).reshape(views.shape[0], B * B, tp.shape[0])
+    fy = xp.cast(Y & (s - 1), xp.int32)[None, :, None, None]
+    fx = xp.cast(X & (s - 1), xp.int32)[None, :, None, None]
+    out = bilinear(win, fy, fx, F)                                                  # (P, M, B, B)
+    return xp.moveaxis(out, 0, -1).reshape(views.shape[0], B * B, tp.shape[0])
 
 
 def predict_views(top: np.ndarray, key_of: np.ndarray, offsets: np.ndarray, disp: np.ndarray,

@@ -67,18 +67,19 @@ def dequantize(xp, q, q16):
 
 
 def bilinear(win, fy, fx, frac_bits: int):
-    """Integer bilinear sampling of (M, B+1, B+1, P) windows at one sub-pixel phase per window.
+    """Integer bilinear sampling of windows whose last two axes are (B+1, B+1), at one
+    sub-pixel phase per window.
 
-    ``fy``, ``fx``: (M, 1, 1, 1) phases in 1/2^F pixel. Returns (M, B, B, P):
-    ``((a·(s−fx) + b·fx)·(s−fy) + (c·(s−fx) + e·fx)·fy + s²/2) >> 2F`` with s = 2^F, as a
-    horizontal then a vertical pass (one rounding). F = 0: the plain window.
+    ``fy``, ``fx``: phases in 1/2^F pixel, broadcastable to ``win[..., :1, :1]``. Returns the
+    (..., B, B) samples ``((a·(s−fx) + b·fx)·(s−fy) + (c·(s−fx) + e·fx)·fy + s²/2) >> 2F``,
+    s = 2^F, as a horizontal then a vertical pass (one rounding). F = 0: the plain window.
     """
-    B = win.shape[1] - 1
+    B = win.shape[-1] - 1
     if frac_bits == 0:
-        return win[:, :B, :B]
+        return win[..., :B, :B]
     s = 1 << frac_bits
-    h = win[:, :, :B] * (s - fx) + win[:, :, 1:] * fx                      # (M, B+1, B, P)
-    return (h[:, :B] * (s - fy) + h[:, 1:] * fy + (1 << (2 * frac_bits - 1))) >> (2 * frac_bits)
+    h = win[..., :, :B] * (s - fx) + win[..., :, 1:] * fx                  # (..., B+1, B)
+    return (h[..., :B, :] * (s - fy) + h[..., 1:, :] * fy + (1 << (2 * frac_bits - 1))) >> (2 * frac_bits)
 
 
 def _np(a):

@@ -35,6 +35,7 @@ from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_C
                        tables_from_quantized, tables_to_bytes)
 from .xp import NUMPY
 
+INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be beaten by intra coding
 FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
 PAD = 8
 
@@ -131,16 +132,27 @@ class Model:
                     self.mag[pc, band, key] = -np.log2(m / m.sum())
                     self.first[pc, band, key] = bits[ctx_mag(pc, band, key, 0), :16]
             self.esc[pc] = bits[ctx_esc(pc), :24]
+        self._pos = {}
+
+    def pos_bits(self, pc: int, key: int) -> np.ndarray:
+        """(64·16,) magnitude-symbol bits by scan position and symbol (flat), cached."""
+        k = (pc, key)
+        if k not in self._pos:
+            self._pos[k] = np.ascontiguousarray(self.mag[pc, BAND, key]).reshape(-1)
+        return self._pos[k]
 
 
-def _level_bits(model: Model, l: np.ndarray, pc: np.ndarray, band: np.ndarray, key: int) -> np.ndarray:
-    """Bits of coding magnitude l (>= 0) at positions (band), not the last one: symbol, sign,
-    escape bucket and suffix."""
-    sym = np.minimum(l, ESC)
-    b = model.mag[pc, band, key, sym] + (l > 0)
-    r = np.maximum(l - ESC, 0)
-    k = np.floor(np.log2(r + 1.0)).astype(np.int64)
-    return b + np.where(l >= ESC, model.esc[pc, np.minimum(k, 23)] + k, 0.0)
+def _level_bits(model: Model, l: np.ndarray, pc: int, key: int) -> np.ndarray:
+    """Bits of coding magnitudes l (>= 0, (T, 64) in scan order), not the last one: symbol,
+    sign, escape bucket and suffix."""
+    tab = model.pos_bits(pc, key)                           # (64·16,) flat: position·16 + symbol
+    b = tab.take(np.arange(64)[None, :] * 16 + np.minimum(l, ESC)) + (l > 0)
+    big = l >= ESC
+    if big.any():
+        r = l[big] - ESC
+        k = np.floor(np.log2(r + 1.0)).astype(np.int64)
+        b[big] += model.esc[pc, np.minimum(k, 23)] + k
+    return b
 
 
 # -- one view ----------------------------------------------------------------------------------
@@ -276,7 +288,6 @@ class TxEncoder:
         D0 = np.zeros(T)
         must = np.zeros(T, bool)
         Rb = np.zeros(T)
-        band = BAND[None, :]
         for p in range(P):
             pc = int(self.pcs[p])
             rp = r[..., p].astype(np.float64)
@@ -286,7 +297,7 @@ class TxEncoder:
                 nz = lv != 0
                 must |= nz.any(axis=1)
                 last = np.where(nz.any(1), 64 - np.argmax(nz[:, ::-1], axis=1), 0)
-                bits = _level_bits(model, np.abs(lv), np.full((T, 64), pc), np.broadcast_to(band, (T, 64)), key)
+                bits = _level_bits(model, np.abs(lv), pc, key)
                 inside = np.arange(64)[None, :] < last[:, None]
                 rb = (bits * inside).sum(1) + model.last[pc, mode_cls, key, last]
                 J += lam * rb
@@ -301,15 +312,18 @@ class TxEncoder:
             a = np.abs(X) / d
             ln = np.floor(a + 0.5).astype(np.int64)
             lo = np.maximum(ln - 1, 0)
-            pcs = np.full((T, 64), pc)
-            bands = np.broadcast_to(band, (T, 64))
-            cands = [ln, lo, np.zeros_like(ln)]
-            costs = [wgt * (np.abs(X) - c * d) ** 2 + lam * _level_bits(model, c, pcs, bands, key) for c in cands]
-            cs = np.stack(costs)
-            pick = cs.argmin(0)
-            lv = np.choose(pick, cands)
-            jc = cs.min(0)                                        # cost of each coefficient as chosen
-            jz = wgt * X ** 2 + lam * model.mag[pc, BAND, key, 0][None, :]   # cost as a coded zero
+            ax = np.abs(X)
+            zero_bits = model.pos_bits(pc, key)[np.arange(64) * 16]
+            j_ln = wgt * (ax - ln * d) ** 2 + lam * _level_bits(model, ln, pc, key)
+            j_lo = wgt * (ax - lo * d) ** 2 + lam * _level_bits(model, lo, pc, key)
+            j_0 = wgt * ax ** 2 + lam * zero_bits[None, :]
+            use_lo = j_lo < j_ln
+            lv = np.where(use_lo, lo, ln)
+            jc = np.where(use_lo, j_lo, j_ln)
+            z = j_0 <= jc
+            lv = np.where(z, 0, lv)
+            jc = np.where(z, j_0, jc)                             # cost of each coefficient as chosen
+            jz = j_0                                              # cost as a coded zero
             dz = wgt * X ** 2                                     # cost past the last position (not coded)
             # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} jc' + Σ_{i>=L} dz + λ·bits(L)
             jkeep = np.where(lv > 0, jc, jz)
@@ -323,8 +337,7 @@ class TxEncoder:
             levels[:, p] = np.where(X < 0, -lv, lv)
             J += JL[np.arange(T), L]
             kept = np.arange(64)[None, :] < L[:, None]
-            Rb += (np.where(lv > 0, _level_bits(model, lv, pcs, bands, key), model.mag[pc, BAND, key, 0][None, :])
-                   * kept).sum(1) + model.last[pc, mode_cls, key, L]
+            Rb += (_level_bits(model, lv, pc, key) * kept).sum(1) + model.last[pc, mode_cls, key, L]
         return levels, J, D0, must, Rb
 
     def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
@@ -345,13 +358,19 @@ class TxEncoder:
         kind = int(self.intra[v])
         orig = self._tbs(self.orig[v])
         pt = self._tbs(pred)
+        T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
-        lv_i, J_i, _, _, R_i = self._quantize(orig - flat, step16, lam, model, key, 1)
         mb = model.mode[kind]
         J_skip = np.where(must_r, np.inf, D0_r + lam * mb[MODE_SKIP])
         J_res = J_r + lam * mb[MODE_RES]
-        J_int = J_i + lam * mb[MODE_INTRA]
+        # intra only where prediction is expensive: coding even a DC costs more than INTRA_MIN_BITS
+        cand = np.flatnonzero(np.minimum(J_skip, J_res) > lam * INTRA_MIN_BITS)
+        lv_i = np.zeros_like(lv_r)
+        J_int, R_i = np.full(T, np.inf), np.zeros(T)
+        if cand.size:
+            lv_i[cand], J_c, _, _, R_i[cand] = self._quantize(orig[cand] - flat[cand], step16, lam, model, key, 1)
+            J_int[cand] = J_c + lam * mb[MODE_INTRA]
         Jm = np.stack([J_skip, J_res, J_int])
         mode = Jm.argmin(0)
         nb = self.nby * self.nbx
@@ -367,7 +386,7 @@ class TxEncoder:
         rec = np.where((mode == MODE_SKIP)[:, None, None, None], pt.clip(self.lo, self.hi),
                        self._reconstruct(base, levels, step16))
         coded = np.zeros(nb, bool) | coded
-        bits = float(np.choose(mode, [np.zeros_like(R_r), R_r, R_i]).sum() + mb[mode].sum()
+        bits = float(np.where(mode == MODE_RES, R_r, np.where(mode == MODE_INTRA, R_i, 0.0)).sum() + mb[mode].sum()
                      + (FLUSH_BITS * coded.sum() if not key else FLUSH_BITS * self.nby))
         planes = self._untbs(rec)
         live = np.flatnonzero(mode != MODE_SKIP)
@@ -395,7 +414,6 @@ class TxEncoder:
             (N0, Hp, Wp, P) int32 decoded planes.
         """
         s16 = self.steps16(step)
-        thumb16 = 16             # exact block means: flat regions of intra views need no residual
         lam_k = self.p.lam * (s16[0, 0] / 16.0) ** 2
         lam_n = self.p.lam * (s16[1, 0] / 16.0) ** 2
         n0 = self.orig.shape[0]
@@ -404,13 +422,21 @@ class TxEncoder:
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
+        thumb16 = 16
         for i, k in enumerate(self.s.keys):
             if self.intra[k]:
-                thumbs[k] = self.thumb_levels(k, thumb16)
-                pred = self.thumb_pred(thumbs[k], thumb16)
+                # the thumbnail's step: exact block means (flat regions need no residual at all) or
+                # the key step (textured views), whichever costs fewer bits in all
+                best = None
+                for t16 in sorted({16, int(s16[0, 0])}):
+                    lv = self.thumb_levels(k, t16)
+                    c = self.code_view(k, self.thumb_pred(lv, t16), s16[0], lam_k, model)
+                    cost = c.bits + 8 * len(pack_thumbs(lv[None]))
+                    if best is None or cost < best[0]:
+                        best = (cost, t16, lv, c)
+                _, thumb16, thumbs[k], codes[k] = best
             else:
-                pred = self.predict_view(k, kp)
-            codes[k] = self.code_view(k, pred, s16[0], lam_k, model)
+                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model)
             if self.intra[k] and self.intra_codec == "j2k":
                 img, codes[k] = self._j2k_key(k, codes[k], len(pack_thumbs(thumbs[k][None])))
                 if img is not None:

@@ -44,18 +44,35 @@ def predict_tbs(xp, kp, hw, slots, weights, disp_y, disp_x, y0, x0):
     hp, wp = hw
     M, R = slots.shape
     F = DISP_BITS
-    Y = (y0[:, None] << F) + disp_y                                              # (M, R)
-    X = (x0[:, None] << F) + disp_x
+    groups = None
+    if isinstance(weights, np.ndarray):                 # numpy: gather only the references that count,
+        nz = weights > 0                                # blocks grouped by how many (reshape + sum, no scatter)
+        cnt = nz.sum(1)
+        order = np.argsort(cnt, kind="stable")
+        groups = [(c, order[cnt[order] == c]) for c in np.unique(cnt).tolist()]
+        m = np.concatenate([np.repeat(g, c) for c, g in groups]) if groups else np.zeros(0, np.int64)
+        r = np.concatenate([np.nonzero(nz[g])[1] for c, g in groups]) if groups else np.zeros(0, np.int64)
+    else:
+        m, r = xp.arange(M).repeat_interleave(R), xp.arange(R).repeat(M)
+    Y = (y0[m] << F) + disp_y[m, r]                                               # (N,)
+    X = (x0[m] << F) + disp_x[m, r]
     ext = xp.arange(TB + 1)
-    rows = ((Y >> F)[:, :, None] + ext).clip(0, hp - 1)                          # (M, R, 9)
-    cols = ((X >> F)[:, :, None] + ext).clip(0, wp - 1)
-    idx = ((slots * hp)[:, :, None, None] + rows[:, :, :, None]) * wp + cols[:, :, None, :]
-    win = xp.moveaxis(xp.take_cols(kp, idx.reshape(M * R, TB + 1, TB + 1)), 0, -1)   # (M·R, 9, 9, P)
-    fy = xp.cast(Y & ((1 << F) - 1), xp.int32).reshape(M * R, 1, 1, 1)
-    fx = xp.cast(X & ((1 << F) - 1), xp.int32).reshape(M * R, 1, 1, 1)
-    p = bilinear(win, fy, fx, F).reshape(M, R, TB, TB, -1)                      # (M, R, 8, 8, P)
-    w = xp.cast(weights, xp.int32)[:, :, None, None, None]
-    return ((p * w).sum(1) + (1 << (W_BITS - 1))) >> W_BITS
+    rows = ((Y >> F)[:, None] + ext).clip(0, hp - 1)                              # (N, 9)
+    cols = ((X >> F)[:, None] + ext).clip(0, wp - 1)
+    idx = ((slots[m, r] * hp)[:, None, None] + rows[:, :, None]) * wp + cols[:, None, :]
+    win = xp.take_cols(kp, idx)                                                   # (P, N, 9, 9)
+    fy = xp.cast(Y & ((1 << F) - 1), xp.int32)[None, :, None, None]
+    fx = xp.cast(X & ((1 << F) - 1), xp.int32)[None, :, None, None]
+    p = bilinear(win, fy, fx, F) * xp.cast(weights[m, r], xp.int32)[None, :, None, None]   # (P, N, 8, 8)
+    if groups is not None:
+        acc = np.empty((p.shape[0], M, TB, TB), np.int32)
+        a = 0
+        for c, g in groups:
+            acc[:, g] = p[:, a:a + c * g.size].reshape(p.shape[0], g.size, c, TB, TB).sum(2)
+            a += c * g.size
+    else:
+        acc = p.reshape(p.shape[0], M, R, TB, TB).sum(2)
+    return xp.moveaxis((acc + (1 << (W_BITS - 1))) >> W_BITS, 0, -1)
 
 
 def upsample_thumb(thumb: np.ndarray, hp: int, wp: int, xp=NUMPY):

@@ -1,15 +1,18 @@
-"""Benchmark runner: lfcodec RLFC against per-view JPEG 2000 / JPEG XL and an HEVC
+"""Benchmark runner: lfcodec RLFC profiles against per-view JPEG 2000 / JPEG XL and an HEVC
 pseudo-sequence, on the same views, in one run.
 
 Usage:
-    python -m tools.bench SCENE [SCENE ...] --out DIR [--quick] [--quants 4,8,16]
+    python -m tools.bench SCENE [SCENE ...] --out DIR [--quick] [--profiles tx,dcp]
+        [--targets 36,40,45,48]
 
-For each scene it records, per RLFC setting: bpp, PSNR_RGB, PSNR_YCoCg, SSIM, encode time,
-full-decode time, random-access block decode time (single and batched, µs per block) and the
-per-level progressive PSNR and time; per peer setting: bpp, PSNR, SSIM, decode time of one
-view and of all views, and the random-access unit. Speeds are medians over repeats after a
-warm-up. Writes DIR/results.json, DIR/results.csv, DIR/summary.md and PNG plots (when
-matplotlib is installed): rd_<scene>.png, speed.png, random_access.png.
+For each scene it encodes with every profile at every target PSNR (the profile's own rate
+control, as ``lfcodec encode --target-psnr`` does) and records: bpp (whole file), PSNR_RGB,
+PSNR_YCoCg, SSIM, encode time, the bytes of each section (the bit budget), full-decode time,
+random-access block decode time (single and batched, µs per block and Mpix/s) and the
+per-level progressive PSNR; per peer setting: bpp, PSNR, SSIM, decode time of one view and
+of all views, and the random-access unit. Speeds are medians over repeats after a warm-up.
+Writes DIR/results.json, DIR/results.csv, DIR/summary.md and PNG plots (when matplotlib is
+installed): rd_<scene>.png, speed.png, random_access.png.
 """
 from __future__ import annotations
 
@@ -26,9 +29,8 @@ import numpy as np
 
 from formats.metrics import bpp, psnr_rgb, psnr_ycocg, ssim
 from formats.scenes import read_scene
-from rlfc import RlfcParams, get_profile
-from rlfc.keytree import KeyTreeEncoder
-from rlfc.ratecontrol import depth_scale, params_for_quant
+from formats.codec_api import EncodeOptions
+from rlfc import encode
 from tools.common import log, machine, open_encoded
 from tools.common import median_time as _median
 from tools.peers import all_peers, serpentine
@@ -49,51 +51,41 @@ def random_access_times(d, rng, n_single: int, n_batch: int, repeats: int) -> tu
     return statistics.median(ts[5:]), _median(lambda: d.decode_blocks(bv, bby, bbx), repeats) / n_batch
 
 
-def bench_rlfc(lf, points, repeats, n_single, n_batch, block_size=8, profile="bise"):
-    """RLFC rows for ``points``: a list of (key-view PSNR dB or None = lossless, Q in 8-bit units).
-
-    Points sharing a key-view quality share one encoder; the dcp disparity map is estimated
-    once (on the first point's key views) and re-used, as the rate control does."""
+def bench_profile(lf, profile: str, targets, repeats, n_single, n_batch):
+    """RLFC rows of one profile: one file per target PSNR (the profile's rate control)."""
     rows = []
     views = lf.views.reshape(-1, *lf.views.shape[2:])
     rng = np.random.default_rng(0)
-    encoders, disp = {}, None
-    for top_psnr, q in points:
-        base = RlfcParams(block_size=block_size, profile=profile, top_psnr=top_psnr)
+    for target in targets:
         t0 = time.perf_counter()
-        if top_psnr not in encoders:
-            enc = KeyTreeEncoder(lf, base, get_profile(profile).strategy(lf), side=disp)
-            encoders[top_psnr] = (enc, time.perf_counter() - t0)
-            disp = getattr(enc, "disp", None)
-        enc, t_prep = encoders[top_psnr]
-        p = params_for_quant(base, q * depth_scale(lf.views.dtype))   # q in 8-bit units
-        t0 = time.perf_counter()
-        res = enc.closed_loop(p)
-        cfg, secs = enc.pack(p, res)
-        t_enc = t_prep + time.perf_counter() - t0
-        d, blob = open_encoded(lf, (cfg, secs))
+        try:
+            enc = encode(lf, EncodeOptions(profile=profile, target_psnr=target))
+        except Exception as e:        # a profile that cannot code this scene (e.g. posed) is reported
+            rows.append({"codec": f"lfcodec RLFC ({profile})", "setting": f"target {target:g} dB", "skipped": str(e)})
+            log(f"  RLFC {profile} {target:g} dB: skipped ({e})")
+            continue
+        t_enc = time.perf_counter() - t0
+        d, blob = open_encoded(lf, enc)
+        nv = d.rows * d.cols
         full = d.decode_all()
         t_full = _median(lambda: d.decode_all(), repeats)
-        nv = d.rows * d.cols
         t_single, t_batch = random_access_times(d, rng, n_single, n_batch, repeats)
-        prog = []
-        for L in range(d.levels + 1):
-            t = time.perf_counter()
-            out = d.decode_all(L)
-            prog.append({"level": L, "psnr_rgb": psnr_rgb(lf.views, out), "decode_s": time.perf_counter() - t})
+        prog = [{"level": L, "psnr_rgb": psnr_rgb(lf.views, d.decode_all(L))} for L in range(d.levels + 1)]
         dec = full.reshape(views.shape)
-        setting = f"Q={q:g}" if top_psnr is None else f"K={top_psnr:g} Q={q:g}"
-        row = {"codec": f"lfcodec RLFC ({profile})", "setting": setting, "bytes": len(blob),
+        B = d.block_size
+        row = {"codec": f"lfcodec RLFC ({profile})", "setting": f"target {target:g} dB", "bytes": len(blob),
                "bpp": bpp(len(blob), nv, lf.height, lf.width), "psnr_rgb": psnr_rgb(views, dec),
                "psnr_ycocg": psnr_ycocg(views, dec), "ssim": ssim(views, dec), "encode_s": t_enc,
-               "decode_all_s": t_full, "decode_view_s": None, "block_us": t_single * 1e6, "batch_block_us": t_batch * 1e6,
-               "ra_unit": f"{d.block_size}x{d.block_size} block", "ra_latency_s": t_single, "progressive": prog}
+               "decode_all_s": t_full, "decode_view_s": None, "block_us": t_single * 1e6,
+               "batch_block_us": t_batch * 1e6, "batch_mpix_s": B * B / t_batch / 1e6,
+               "ra_unit": f"{B}x{B} block", "ra_latency_s": t_single, "progressive": prog,
+               "sections": {n: len(x) for n, x in enc.sections}}
         t = time.perf_counter()
-        d.decode_view(d.rows // 2, d.cols // 2)
+        d.decode_view(d.rows // 2, d.cols // 3)
         row["decode_view_s"] = time.perf_counter() - t
         rows.append(row)
-        log(f"  RLFC {profile} {setting}: {row['bpp']:.3f} bpp, {row['psnr_rgb']:.2f} dB, block {row['block_us']:.0f} µs, "
-            f"batched {row['batch_block_us']:.2f} µs/block, full decode {t_full:.2f} s")
+        log(f"  RLFC {profile} {target:g} dB: {row['bpp']:.4f} bpp, {row['psnr_rgb']:.2f} dB, {t_enc:.0f} s, block "
+            f"{row['block_us']:.0f} µs, batched {row['batch_block_us']:.2f} µs/block, full decode {t_full:.2f} s")
     return rows
 
 
@@ -138,53 +130,68 @@ def bpp_at(rows, codec, psnr_target=40.0):
     return None
 
 
-def summary(scene_rows: dict) -> str:
+def _ours(rows) -> list[str]:
+    return sorted({r["codec"] for r in rows if r["codec"].startswith("lfcodec") and "bpp" in r})
+
+
+def _peers(rows) -> list[str]:
+    return sorted({r["codec"] for r in rows if not r["codec"].startswith("lfcodec") and "bpp" in r})
+
+
+def ratio_table(rows, targets) -> list[str]:
+    """bpp of every codec at each target PSNR, and the best lfcodec profile over each peer."""
+    codecs = _ours(rows) + _peers(rows)
+    lines = ["| codec | " + " | ".join(f"bpp @ {t:g} dB" for t in targets) + " |",
+             "|---|" + "---|" * len(targets)]
+    at = {c: [bpp_at(rows, c, t) for t in targets] for c in codecs}
+    for c in codecs:
+        lines.append(f"| {c} | " + " | ".join("–" if b is None else f"{b:.4f}" for b in at[c]) + " |")
+    best = [min((at[c][i] for c in _ours(rows) if at[c][i]), default=None) for i in range(len(targets))]
+    for p in _peers(rows):
+        lines.append(f"| lfcodec (best profile) / {p} | " + " | ".join(
+            "–" if not (b and at[p][i]) else f"{b / at[p][i]:.2f}×" for i, b in enumerate(best)) + " |")
+    return lines
+
+
+def budget_table(rows) -> list[str]:
+    """Share of each section in the lfcodec files (the bit budget)."""
+    ours = [r for r in rows if r["codec"].startswith("lfcodec") and r.get("sections")]
+    if not ours:
+        return []
+    names = list(dict.fromkeys(n for r in ours for n in r["sections"]))
+    lines = ["| file | bpp | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    for r in ours:
+        tot = sum(r["sections"].values())
+        lines.append(f"| {r['codec']} {r['setting']} | {r['bpp']:.4f} | " +
+                     " | ".join(f"{100 * r['sections'].get(n, 0) / tot:.0f}%" for n in names) + " |")
+    return lines
+
+
+def summary(scene_rows: dict, targets=(36.0, 40.0, 45.0, 48.0)) -> str:
     lines = []
     for scene, rows in scene_rows.items():
         lines.append(f"### {scene}\n")
-        lines.append("| codec | setting | bpp | PSNR_RGB | PSNR_YCoCg | SSIM | encode s | decode all s | decode 1 view ms | block µs | batched µs/block | RA unit |")
-        lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+        lines.append("| codec | setting | bpp | PSNR_RGB | PSNR_YCoCg | SSIM | encode s | decode all s | decode 1 view ms | "
+                     "block µs | batched µs/block | batched Mpix/s | RA unit |")
+        lines.append("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
         for r in rows:
             if "skipped" in r:
-                lines.append(f"| {r['codec']} | {r.get('setting', '')} | skipped: {r['skipped']} |||||||||")
+                lines.append(f"| {r['codec']} | {r.get('setting', '')} | skipped: {r['skipped']} ||||||||||")
                 continue
             f = lambda k, fmt: (fmt % r[k]) if r.get(k) is not None else "–"  # noqa: E731
-            lines.append(f"| {r['codec']} | {r['setting']} | {r['bpp']:.3f} | {r['psnr_rgb']:.2f} | {f('psnr_ycocg', '%.2f')} | "
-                         f"{r['ssim']:.4f} | {f('encode_s', '%.1f')} | {r['decode_all_s']:.2f} | {1e3 * r['decode_view_s']:.1f} | "
-                         f"{f('block_us', '%.0f')} | {f('batch_block_us', '%.2f')} | {r['ra_unit']} |")
-        ours_name = min((c for c in {r["codec"] for r in rows} if c.startswith("lfcodec") and bpp_at(rows, c)),
-                        key=lambda c: bpp_at(rows, c), default="lfcodec RLFC (bise)")
-        ours = bpp_at(rows, ours_name)
-        lines.append("")
-        for c in sorted(c for c in {r["codec"] for r in rows} if c.startswith("lfcodec")):
-            b = bpp_at(rows, c)
-            lines.append(f"bpp at 40 dB PSNR_RGB: {c} {b:.3f}" if b else f"bpp at 40 dB: {c} — (40 dB not bracketed)")
-        lines.append(f"Ratios below use the better profile, {ours_name}:")
-        for peer in sorted({r["codec"] for r in rows if not r["codec"].startswith("lfcodec") and "bpp" in r}):
-            b = bpp_at(rows, peer)
-            if b and ours:
-                lines.append(f"- {peer}: {b:.3f} bpp → lfcodec / peer = {ours / b:.2f}×")
-            elif b:
-                lines.append(f"- {peer}: {b:.3f} bpp")
-        ours_rows = [r for r in rows if r["codec"] == ours_name and "bpp" in r]
-        if ours_rows:
-            near = min(ours_rows, key=lambda r: abs(r["psnr_rgb"] - 40))
-            lines.append(f"Decode speed, lfcodec ({near['setting']}, {near['psnr_rgb']:.1f} dB) over each peer's point "
-                         "nearest 40 dB (ratio > 1: lfcodec faster):")
-            for peer in sorted({r["codec"] for r in rows if not r["codec"].startswith("lfcodec") and "bpp" in r}):
-                pr = [r for r in rows if r["codec"] == peer and "bpp" in r and math.isfinite(r["psnr_rgb"])]
-                if not pr:
-                    continue
-                p = min(pr, key=lambda r: abs(r["psnr_rgb"] - 40))
-                ra = (f"{p['ra_latency_s'] / near['ra_latency_s']:.1f}×" if p.get("ra_latency_s") else
-                      "not comparable on a CPU")
-                lines.append(f"- vs {peer} ({p['setting']}): full light field {p['decode_all_s'] / near['decode_all_s']:.2f}×, "
-                             f"one view {p['decode_view_s'] / near['decode_view_s']:.2f}×, random access "
-                             f"(one {near['ra_unit']} vs one {p['ra_unit']}) {ra}")
+            lines.append(f"| {r['codec']} | {r['setting']} | {r['bpp']:.4f} | {r['psnr_rgb']:.2f} | "
+                         f"{f('psnr_ycocg', '%.2f')} | {r['ssim']:.4f} | {f('encode_s', '%.1f')} | "
+                         f"{r['decode_all_s']:.2f} | {1e3 * r['decode_view_s']:.1f} | {f('block_us', '%.0f')} | "
+                         f"{f('batch_block_us', '%.2f')} | {f('batch_mpix_s', '%.1f')} | {r['ra_unit']} |")
+        lines += ["", "Rate at each PSNR (log-bpp interpolation on each RD curve):", ""]
+        lines += ratio_table(rows, targets)
+        bt = budget_table(rows)
+        if bt:
+            lines += ["", "Bit budget of the lfcodec files (share of the bytes of all sections):", ""] + bt
         for r in rows:
             if r["codec"].startswith("lfcodec") and r.get("progressive"):
-                lines.append(f"- progressive ({r['setting']}): " + ", ".join(
-                    f"level {p['level']}: {p['psnr_rgb']:.2f} dB / {p['decode_s']:.2f} s" for p in r["progressive"]))
+                lines.append(f"- progressive {r['codec']} ({r['setting']}): " + ", ".join(
+                    f"level {p['level']}: {p['psnr_rgb']:.2f} dB" for p in r["progressive"]))
         lines.append("")
     return "\n".join(lines)
 
@@ -242,13 +249,12 @@ def main(argv=None) -> int:
     ap.add_argument("scenes", nargs="+")
     ap.add_argument("--out", required=True)
     ap.add_argument("--quick", action="store_true", help="a smoke run: one RLFC point, three per peer, few repeats")
-    ap.add_argument("--quants", default="4,8,16", help="RLFC quantizer steps to sweep (bise profile)")
-    ap.add_argument("--dcp-points", default="48:4,48:8,44:256,42:256,40:256,38:256",
-                    help="dcp profile (grids only): KEY_PSNR:Q pairs; Q=256 is prediction only (no residual blocks)")
+    ap.add_argument("--profiles", default="tx,dcp", help="RLFC profiles to run (grids; posed captures: bise)")
+    ap.add_argument("--targets", default="36,40,45,48", help="target PSNRs in dB")
     a = ap.parse_args(argv)
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    quants = [8.0] if a.quick else [float(x) for x in a.quants.split(",")]
+    targets = [40.0] if a.quick else [float(x) for x in a.targets.split(",")]
     scene_rows = {}
     t_start = time.perf_counter()
     for s in a.scenes:
@@ -258,24 +264,24 @@ def main(argv=None) -> int:
         if a.quick and lf.height * lf.width > 256 * 256:
             lf.views = np.ascontiguousarray(lf.views[:, :, :128, :128])
         kw = dict(repeats=1 if a.quick else 3, n_single=50 if a.quick else 300, n_batch=2000 if a.quick else 20000)
-        rows = bench_rlfc(lf, [(None, q) for q in quants], **kw)
-        if lf.layout == "grid":
-            pts = [(42.0, 256.0)] if a.quick else [tuple(float(v) for v in x.split(":")) for x in a.dcp_points.split(",")]
-            rows += bench_rlfc(lf, pts, profile="dcp", **kw)
+        profiles = a.profiles.split(",") if lf.layout == "grid" else ["bise"]
+        rows = []
+        for prof in profiles:
+            rows += bench_profile(lf, prof, targets, **kw)
         rows += bench_peers(lf, a.quick)
         scene_rows[name] = rows
     meta = {"machine": machine(), "date": date.today().isoformat(), "quick": a.quick,
             "elapsed_s": time.perf_counter() - t_start}
     (out / "results.json").write_text(json.dumps({"meta": meta, "scenes": scene_rows}, indent=1, default=float))
     keys = ["scene", "codec", "setting", "bytes", "bpp", "psnr_rgb", "psnr_ycocg", "ssim", "encode_s", "decode_all_s",
-            "decode_view_s", "block_us", "batch_block_us", "ra_unit", "skipped"]
+            "decode_view_s", "block_us", "batch_block_us", "batch_mpix_s", "ra_unit", "skipped"]
     with open(out / "results.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=keys, extrasaction="ignore")
         w.writeheader()
         for scene, rows in scene_rows.items():
             for r in rows:
                 w.writerow({"scene": scene, **r})
-    text = f"Machine: {meta['machine']}; date {meta['date']}; {meta['elapsed_s']:.0f} s\n\n" + summary(scene_rows)
+    text = f"Machine: {meta['machine']}; date {meta['date']}; {meta['elapsed_s']:.0f} s\n\n" + summary(scene_rows, targets)
     (out / "summary.md").write_text(text)
     made = plots(scene_rows, out)
     print(text)

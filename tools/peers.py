@@ -44,7 +44,8 @@ def j2k():
     def enc(v, s):
         a = v[..., 0] if v.shape[-1] == 1 else v
         return imagecodecs.jpeg2k_encode(a, level=0, reversible=True) if s == "lossless" else imagecodecs.jpeg2k_encode(a, level=float(s))
-    return PerViewImageCodec("JPEG 2000 (per view)", enc, imagecodecs.jpeg2k_decode, [32, 35, 38, 40, 42, 45, "lossless"])
+    return PerViewImageCodec("JPEG 2000 (per view)", enc, imagecodecs.jpeg2k_decode,
+                             [32, 35, 38, 40, 42, 45, 48, 50, "lossless"])
 
 
 def jxl():
@@ -55,7 +56,7 @@ def jxl():
         if s == "lossless":
             return imagecodecs.jpegxl_encode(a, lossless=True, effort=3)
         return imagecodecs.jpegxl_encode(a, distance=float(s), effort=5)
-    return PerViewImageCodec("JPEG XL (per view)", enc, imagecodecs.jpegxl_decode, [6.0, 3.0, 1.5, 0.8, 0.4, "lossless"])
+    return PerViewImageCodec("JPEG XL (per view)", enc, imagecodecs.jpegxl_decode, [6.0, 3.0, 1.5, 0.8, 0.4, 0.2, 0.1, "lossless"])
 
 
 def serpentine(rows: int, cols: int) -> list[int]:
@@ -67,7 +68,7 @@ class Hevc:
 
     name = "HEVC x265 (pseudo-sequence)"
     unit = "whole sequence (no random access)"
-    settings = [40, 34, 28, 22, 16]   # CRF
+    settings = [40, 34, 28, 22, 16, 10, 4]   # CRF
 
     def __init__(self, preset: str = "medium"):
         self.preset = preset

@@ -112,7 +112,7 @@ class DisparityPrediction(DecodeStrategy):
             ys = np.clip(np.arange(y0, y0 + B + 1), 0, hp - 1)
             xs = np.clip(np.arange(x0, x0 + B + 1), 0, wp - 1)
             win = img[ys[:, None], xs[None, :]]
-        return bilinear(win[None], Y & m, X & m, F)[0].reshape(B * B, dec.P)
+        return np.moveaxis(bilinear(np.moveaxis(win, -1, 0), Y & m, X & m, F), 0, -1).reshape(B * B, dec.P)
 
     def predict_nodes(self, dec, level, ids, above, above_ids):
         # the level above is always every key view, decoded at open

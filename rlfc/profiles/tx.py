@@ -260,10 +260,9 @@ class TxDecoder(ProfileDecoder):
     # -- ProfileDecoder ---------------------------------------------------------------------
     def _key_blocks(self, views, by, bx):
         B = self.block_size
-        img = self.keyplanes[self.key_slot[views]]
         ys = by[:, None] * B + np.arange(B)
         xs = bx[:, None] * B + np.arange(B)
-        return img[np.arange(views.size)[:, None, None], ys[:, :, None], xs[:, None, :]]
+        return self.keyplanes[self.key_slot[views][:, None, None], ys[:, :, None], xs[:, None, :]]
 
     def blocks(self, views, by, bx, level):
         out = np.empty((views.size, self.block_size, self.block_size, self.P), np.int32)

@@ -18,4 +18,5 @@ def test_quick_bench_writes_everything(tmp_path, monkeypatch, capsys):
     assert {"codec": "HEVC x265 (pseudo-sequence)", "skipped": "ffmpeg not on PATH"} in rows
     for f in ("results.csv", "summary.md"):
         assert (tmp_path / f).stat().st_size > 0
-    assert "bpp at 40 dB" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "bpp @ 40 dB" in out and "Bit budget" in out
