@@ -8,6 +8,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import re
 import sys
 import time
 from pathlib import Path
@@ -136,7 +137,10 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     if not out.parent.exists():
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
     t0 = time.perf_counter()
-    lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split)
+    lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split, allow_outside=a.allow_outside_paths,
+                    grid=_grid(a.grid) if a.grid else None)
+    if str(out.resolve()) in set(lf.meta.get("input_paths", ())):
+        raise ParameterError(f"{out}: refusing to write over one of the input files of the scene")
     opts = EncodeOptions(target_psnr=a.target_psnr, target_bpp=a.target_bpp, min_view_psnr=a.min_view_psnr,
                          lossless=bool(a.lossless), profile=getattr(a, "profile", None) or "auto",
                          params=codec.params_from_args(a))
@@ -197,10 +201,35 @@ def _save_npy(path: Path, arr: np.ndarray) -> None:
             tmp.unlink()
 
 
+def cmd_serve(a) -> int:
+    from .serve import FileServer
+
+    folder = Path(a.folder)
+    if not folder.is_dir():
+        raise ParameterError(f"{folder}: not a folder")
+    if not 0 <= a.port <= 65535 or not 0 <= a.latency_ms <= 60000:
+        raise ParameterError("--port must be 0..65535 and --latency-ms 0..60000")
+    srv = FileServer(folder, a.host, a.port, a.latency_ms / 1000.0)
+    print(f"serving {folder.resolve()} at http://{srv.host}:{srv.port}/ (byte ranges, ETags); Ctrl-C stops",
+          flush=True)
+    try:
+        srv.serve_forever()
+    finally:
+        srv.httpd.server_close()
+    return 0
+
+
+def _grid(text: str) -> tuple[int, int]:
+    m = re.fullmatch(r"\s*(\d{1,5})\s*[xX]\s*(\d{1,5})\s*", text)
+    if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
+        raise ParameterError(f"--grid must be ROWSxCOLS with positive integers, e.g. 9x9; got {text!r}")
+    return int(m.group(1)), int(m.group(2))
+
+
 def cmd_decode(a) -> int:
     from .lfcfile import open_lfc
     from .registry import open_decoder
-    from .scenes import write_views
+    from .scenes import view_filename, write_layout, write_views
 
     if a.block is not None and a.out is None:
         raise ParameterError("--block needs --out FILE.npy")
@@ -226,6 +255,7 @@ def cmd_decode(a) -> int:
         outdir = Path(a.outdir)
         if outdir.exists() and not outdir.is_dir():
             raise ParameterError(f"{outdir}: exists and is not a folder")
+        layout = None
         if a.view is not None:
             r, c = _ints(a.view, 2, "--view")
             img = d.decode_view(r, c, level=level)
@@ -238,8 +268,11 @@ def cmd_decode(a) -> int:
                 paths += write_views(outdir, views[r:r + 1], rows=[r])
                 prog("write views", r + 1, d.rows)
             prog.close()
+            # the layout file, so that the folder encodes again as the same scene
+            layout = write_layout(outdir, f.meta["scene"], view_filename)
         if not a.quiet:
-            print(f"wrote {len(paths)} view(s) to {outdir} (level {a.level:g}) in {time.perf_counter() - t0:.2f} s")
+            print(f"wrote {len(paths)} view(s){f' and {layout.name}' if layout else ''} to {outdir} (level "
+                  f"{a.level:g}) in {time.perf_counter() - t0:.2f} s")
     return 0
 
 
@@ -264,6 +297,10 @@ def _add_scene_options(e) -> None:
     e.add_argument("--baseline", type=float, default=None, help="grid baseline when the scene has none")
     e.add_argument("--focal", type=float, default=None, help="focal length in pixels when the scene has none")
     e.add_argument("--split", default="train", help="transforms_<split>.json to read (default train)")
+    e.add_argument("--grid", metavar="ROWSxCOLS", default=None,
+                   help="read a plain folder of images as this grid (natural name order, row-major)")
+    e.add_argument("--allow-outside-paths", action="store_true",
+                   help="read view files that lie outside the scene folder (refused by default)")
     e.add_argument("--json", action="store_true", help="print one JSON object (bytes, bpp, PSNRs, SSIM, times)")
     e.add_argument("--quiet", action="store_true", help="no progress bars or messages")
 
@@ -310,6 +347,16 @@ def build_parser() -> argparse.ArgumentParser:
                    help="0 = full quality (default); larger = coarser, up to the file's levels (lfcodec info)")
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_decode)
+
+    v = sub.add_parser("serve", help="serve a folder over HTTP with byte ranges (for remote reading)",
+                       description="Serve the files of a folder over HTTP with byte ranges and ETags, so that "
+                                   "lfcodec (or a browser) can read .lfc files remotely: lfcodec info "
+                                   "http://HOST:PORT/file.lfc. Local use and tests; not a production server.")
+    v.add_argument("folder")
+    v.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    v.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free port)")
+    v.add_argument("--latency-ms", type=float, default=0.0, help="delay every answer, to stand for a network")
+    v.set_defaults(func=cmd_serve)
 
     t = sub.add_parser("train", help="train a light field network (same as encode --codec lfn)",
                        description="Train a nested-width light field network with continuous levels of detail and "

@@ -37,8 +37,8 @@ HEADER_SIZE = 32
 ENTRY_SIZE = 48
 MAX_SECTIONS = 4096
 DEFAULT_CHUNK = 1 << 16
-_HDR = struct.Struct("<8sHHIII8x")
-_ENTRY = struct.Struct("<16sQQIII4x")
+_HDR = struct.Struct("<8sHHIII8s")
+_ENTRY = struct.Struct("<16sQQIII4s")
 
 
 @dataclass(frozen=True)
@@ -124,12 +124,36 @@ def build_container(meta_json: bytes, sections: Iterable[tuple[str, bytes]], chu
     for (name, _), v in zip(items, views):
         first = len(crcs)
         crcs.extend(crc32(v[i:i + chunk_size]) for i in range(0, len(v), chunk_size))
-        entries.append(_ENTRY.pack(name.encode("ascii"), offset, len(v), chunk_size, first, 0))
+        entries.append(_ENTRY.pack(name.encode("ascii"), offset, len(v), chunk_size, first, 0, bytes(4)))
         offset += len(v)
     table = b"".join(entries) + np.asarray(crcs, dtype="<u4").tobytes()
     head = struct.pack("<8sHHII", MAGIC, MAJOR, MINOR, len(items), len(crcs))
     hcrc = crc32(head + table)
     return [head + struct.pack("<I", hcrc) + bytes(8) + table] + views
+
+
+def remove_stale_temps(path: Path) -> None:
+    """Delete ``.NAME.tmpPID*`` files beside ``path`` left by writers that no longer run (a
+    killed encode); files of live processes are left alone."""
+    for t in path.parent.glob(f".{glob_escape(path.name)}.tmp*"):
+        digits = t.name[len(path.name) + 5:].split(".")[0]
+        if not digits.isdigit():
+            continue
+        try:
+            os.kill(int(digits), 0)
+        except ProcessLookupError:
+            try:
+                t.unlink()
+            except OSError:
+                pass
+        except (PermissionError, OverflowError):
+            pass
+
+
+def glob_escape(name: str) -> str:
+    import glob
+
+    return glob.escape(name)
 
 
 def write_container(path: str | os.PathLike, meta_json: bytes, sections: Iterable[tuple[str, bytes]],
@@ -141,6 +165,7 @@ def write_container(path: str | os.PathLike, meta_json: bytes, sections: Iterabl
     """
     path = Path(path)
     pieces = build_container(meta_json, sections, chunk_size)
+    remove_stale_temps(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
         with open(tmp, "wb") as f:
@@ -188,7 +213,7 @@ class Container:
             self.name = name or "<buffer>"
             self._src = _BufferSource(source)
         self.size = self._src.size
-        self._verified: set[tuple[int, int]] = set()
+        self._verified: set[tuple[str, int]] = set()     # (section, chunk) verified once each
         self._parse_header()
 
     # -- opening ---------------------------------------------------------------------------
@@ -198,7 +223,7 @@ class Container:
                 raise FormatError(f"{self.name}: not an .lfc file (wrong magic)")
             raise TruncatedError(f"{self.name}: truncated: {self.size} bytes, shorter than the {HEADER_SIZE}-byte header")
         head = bytes(self._src.read(0, HEADER_SIZE))
-        magic, major, minor, n_sec, n_crc, hcrc = _HDR.unpack(head)
+        magic, major, minor, n_sec, n_crc, hcrc, reserved = _HDR.unpack(head)
         if magic != MAGIC:
             raise FormatError(f"{self.name}: not an .lfc file (wrong magic {magic[:8]!r})")
         if major > MAJOR:
@@ -214,22 +239,35 @@ class Container:
         table = bytes(self._src.read(HEADER_SIZE, HEADER_SIZE + table_len))
         if crc32(head[:20] + table) != hcrc:
             raise ChecksumError(f"{self.name}: header/section table checksum mismatch (corrupt header)")
+        if reserved != bytes(8):
+            raise FormatError(f"{self.name}: header reserved bytes are not zero")
         self.version = (major, minor)
         self._crcs = np.frombuffer(table, dtype="<u4", offset=ENTRY_SIZE * n_sec).copy()
         self.sections: dict[str, SectionInfo] = {}
         expect = HEADER_SIZE + table_len
+        next_crc = 0
         for i in range(n_sec):
-            raw, off, ln, chunk, first, flags = _ENTRY.unpack_from(table, ENTRY_SIZE * i)
+            raw, off, ln, chunk, first, flags, res = _ENTRY.unpack_from(table, ENTRY_SIZE * i)
             try:
                 nm = raw.rstrip(b"\0").decode("ascii")
             except UnicodeDecodeError:
                 raise FormatError(f"{self.name}: section {i} has a non-ASCII name") from None
+            if not nm or b"\0" in raw.rstrip(b"\0") or not nm.isprintable():
+                raise FormatError(f"{self.name}: section {i} has an invalid name {raw!r}")
             info = SectionInfo(nm, off, ln, chunk, first, flags)
-            if chunk == 0 or off != expect or info.n_chunks + first > n_crc or nm in self.sections:
+            # sections tile the file, and their CRC slots tile the CRC array (no slot shared)
+            if chunk == 0 or off != expect or first != next_crc or nm in self.sections:
                 raise FormatError(f"{self.name}: section table entry {i} ({nm!r}) is inconsistent "
-                                  f"(offset {off}, expected {expect}; chunk {chunk}; duplicate={nm in self.sections})")
+                                  f"(offset {off}, expected {expect}; first CRC {first}, expected {next_crc}; "
+                                  f"chunk {chunk}; duplicate={nm in self.sections})")
+            if flags != 0 or res != bytes(4):
+                raise FormatError(f"{self.name}: section {nm!r} has nonzero flags/reserved bytes (not defined in "
+                                  f"format {MAJOR}.{MINOR})")
             expect = off + ln
+            next_crc = first + info.n_chunks
             self.sections[nm] = info
+        if next_crc != n_crc:
+            raise FormatError(f"{self.name}: the CRC array has {n_crc} slots, the sections use {next_crc}")
         if expect > self.size and self.partial:
             pass
         elif expect > self.size:
@@ -259,7 +297,7 @@ class Container:
     def _verify(self, info: SectionInfo, c0: int, c1: int, data, base: int) -> None:
         """Check chunks [c0, c1) of a section; ``data`` holds bytes from section offset ``base``."""
         for c in range(c0, c1):
-            key = (info.first_crc, c)
+            key = (info.name, c)
             if key in self._verified:
                 continue
             a = c * info.chunk_size - base
@@ -284,7 +322,8 @@ class Container:
             raise TruncatedError(f"{self.name}: section {name!r} is not in the available prefix of the file "
                                  f"({self.size} bytes; it ends at {info.offset + info.length})")
         c0, c1 = start // info.chunk_size, -(-stop // info.chunk_size)
-        if verify and any((info.first_crc, c) not in self._verified for c in range(c0, c1)):
+        self.check_unchanged()
+        if verify and any((info.name, c) not in self._verified for c in range(c0, c1)):
             a = c0 * info.chunk_size
             b = min(c1 * info.chunk_size, info.length)
             data = self._src.read(info.offset + a, info.offset + b)
@@ -299,8 +338,9 @@ class Container:
     def verify_span(self, name: str, start: int, stop: int) -> None:
         """Verify the chunks of one byte range [start, stop) of a section (scalar fast path)."""
         info = self.sections[name]
+        self.check_unchanged()
         for c in range(start // info.chunk_size, max(start, stop - 1) // info.chunk_size + 1):
-            if (info.first_crc, c) not in self._verified:
+            if (info.name, c) not in self._verified:
                 self.read(name, c * info.chunk_size, min((c + 1) * info.chunk_size, info.length))
 
     def verify_ranges(self, name: str, starts: np.ndarray, stops: np.ndarray) -> None:
@@ -308,6 +348,10 @@ class Container:
         info = self.info(name)
         starts = np.asarray(starts, dtype=np.int64)
         stops = np.asarray(stops, dtype=np.int64)
+        if starts.size == 1:                                   # one range: the scalar path
+            if stops[0] > starts[0]:
+                self.verify_span(name, int(starts[0]), int(stops[0]))
+            return
         keep = stops > starts
         if not keep.any():
             return
@@ -315,8 +359,9 @@ class Container:
         n = (stops[keep] - 1) // info.chunk_size - c0 + 1
         first = np.repeat(np.cumsum(n) - n, n)
         chunks = np.unique(np.repeat(c0, n) + np.arange(int(n.sum())) - first)
+        self.check_unchanged()
         for c in chunks.tolist():
-            if (info.first_crc, c) not in self._verified:
+            if (info.name, c) not in self._verified:
                 self.read(name, c * info.chunk_size, min((c + 1) * info.chunk_size, info.length))
 
     def verify_all(self) -> None:
@@ -324,6 +369,17 @@ class Container:
         for info in self.sections.values():
             if info.length:
                 self.read(info.name)
+
+    def check_unchanged(self) -> None:
+        """A memory-mapped file must still have the size it had when opened (a file truncated
+        under a map would kill the process with SIGBUS on the next read of a lost page)."""
+        if self._file is not None:
+            try:
+                size = os.fstat(self._file.fileno()).st_size
+            except OSError as e:
+                raise FormatError(f"{self.name}: cannot stat the open file ({e.strerror})") from None
+            if size != self.size:
+                raise FormatError(f"{self.name}: the file changed size while open ({self.size} -> {size} bytes)")
 
     @property
     def is_remote(self) -> bool:

@@ -21,17 +21,45 @@ def _oiio():
     return oiio
 
 
-def read_image(path: str | os.PathLike) -> np.ndarray:
+def _one_line(msg: str) -> str:
+    """An image library's message as one short line (libpng and friends print several)."""
+    lines = [x.strip() for x in (msg or "").splitlines() if x.strip()]
+    return (lines[-1] if lines else "unknown format")[:200]
+
+
+def image_size(path: str | os.PathLike) -> tuple[int, int, int, str]:
+    """(height, width, channels, sample type name) from an image file's header alone.
+
+    Raises:
+        SceneError: the file is missing or not a readable image.
+    """
+    oiio = _oiio()
+    path = str(path)
+    if not os.path.isfile(path):
+        raise SceneError(f"{path}: no such image file")
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise SceneError(f"{path}: not a readable image ({_one_line(oiio.geterror())})")
+    try:
+        spec = inp.spec()
+        return int(spec.height), int(spec.width), int(spec.nchannels), str(spec.format)
+    finally:
+        inp.close()
+
+
+def read_image(path: str | os.PathLike, max_pixels: int | None = None) -> np.ndarray:
     """Read one image file.
 
     Args:
         path: image file (PNG, JPEG, TIFF, EXR, ...).
+        max_pixels: refuse images with more pixels than this (checked from the header, before
+            any pixel is read).
 
     Returns:
         (H, W, C) array: uint8 or uint16 for integer files, float32 for float files.
 
     Raises:
-        SceneError: the file is missing or not a readable image.
+        SceneError: the file is missing, not a readable image, or larger than ``max_pixels``.
     """
     oiio = _oiio()
     path = str(path)
@@ -41,9 +69,13 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
     cfg.attribute("oiio:UnassociatedAlpha", 1)   # keep straight alpha as stored (no premultiply)
     inp = oiio.ImageInput.open(path, cfg)
     if inp is None:
-        raise SceneError(f"{path}: not a readable image ({oiio.geterror().strip() or 'unknown format'})")
+        raise SceneError(f"{path}: not a readable image ({_one_line(oiio.geterror())})")
     try:
         spec = inp.spec()
+        if max_pixels is not None and spec.width * spec.height > max_pixels:
+            raise SceneError(f"{path}: {spec.height}x{spec.width} pixels exceed the limit of {max_pixels} per view")
+        if not 1 <= spec.nchannels <= 4:
+            raise SceneError(f"{path}: {spec.nchannels} channels (views have 1-4)")
         fmt = spec.format.basetype
         if fmt in (oiio.UINT8, oiio.INT8):
             want = oiio.UINT8
@@ -53,7 +85,7 @@ def read_image(path: str | os.PathLike) -> np.ndarray:
             want = oiio.FLOAT
         pixels = inp.read_image(0, 0, 0, spec.nchannels, want)
         if pixels is None or not hasattr(pixels, "shape"):
-            raise SceneError(f"{path}: could not decode pixels ({inp.geterror().strip()})")
+            raise SceneError(f"{path}: could not decode pixels ({_one_line(inp.geterror())})")
     finally:
         inp.close()
     arr = np.asarray(pixels)

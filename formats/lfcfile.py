@@ -91,12 +91,21 @@ def parse_meta(data, name: str, limits: Limits = DEFAULT) -> dict:
     return meta
 
 
-def open_lfc(source, *, name: str | None = None, partial: bool = False, limits: Limits = DEFAULT) -> LfcFile:
-    """Open an .lfc file (path, bytes or ByteRangeSource) and parse its metadata.
+def open_lfc(source, *, name: str | None = None, partial: bool = False, limits: Limits = DEFAULT,
+             cache_bytes: int | None = None) -> LfcFile:
+    """Open an .lfc file (path, URL, bytes or ByteRangeSource) and parse its metadata.
 
-    ``partial=True`` accepts a byte prefix of a file (progressive streams): sections past the
-    prefix are reported unavailable instead of the file being rejected as truncated.
+    A URL (``http(s)://``, or any scheme fsspec serves: ``file://``, ``s3://``, ``gs://``) is
+    read by byte ranges through a page cache of at most ``cache_bytes`` bytes (default 64 MiB;
+    :mod:`formats.remote`). ``partial=True`` accepts a byte prefix of a file (progressive
+    streams): sections past the prefix are reported unavailable instead of the file being
+    rejected as truncated.
     """
+    from .remote import DEFAULT_CACHE, is_url, open_remote
+
+    if is_url(source):
+        name = name or source
+        source = open_remote(source, cache_bytes=cache_bytes or DEFAULT_CACHE)
     c = Container(source, name=name, partial=partial)
     try:
         if c.info("meta").length > limits.max_meta_bytes:

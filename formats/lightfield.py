@@ -5,7 +5,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import FormatError, SceneError
+from .limits import DEFAULT, Limits
+from .schema import Fields
 
 
 @dataclass
@@ -96,14 +98,16 @@ class LightField:
 
     @staticmethod
     def from_geometry(views: np.ndarray, g: dict, meta: dict | None = None) -> "LightField":
-        """Rebuild a light field from decoded views and :meth:`geometry` output."""
-        c2w = np.asarray(g["c2w"], dtype=np.float64) if "c2w" in g else None
+        """Rebuild a light field from decoded views and :meth:`geometry` output (checked by
+        :func:`read_geometry`)."""
+        g = read_geometry(g, "scene", rows=views.shape[0], cols=views.shape[1])
+        c2w = g.get("c2w")
         if "positions" in g:
-            pos = np.asarray(g["positions"], dtype=np.float64)
+            pos = g["positions"]
         else:
             pos = grid_positions(views.shape[0], views.shape[1], tuple(g["baseline"]))
         return LightField(views=views, positions=pos, c2w=c2w,
-                          focal=tuple(g["focal"]), principal=tuple(g["principal"]),
+                          focal=tuple(g["focal"]), principal=tuple(g["principal"]) if "principal" in g else None,
                           layout=g.get("layout", "grid"), meta=meta or {})
 
 
@@ -121,3 +125,60 @@ def grid_positions(rows: int, cols: int, baseline: tuple[float, float] = (1.0, 1
     """(rows, cols, 3) camera centres of a planar grid: x grows with col, y down with row."""
     r, c = np.meshgrid(np.arange(rows), np.arange(cols), indexing="ij")
     return np.stack([c * baseline[0], -r * baseline[1], np.zeros_like(r, dtype=float)], axis=-1).astype(np.float64)
+
+
+def _finite_array(v, shape: tuple, where: str, key: str) -> np.ndarray:
+    """A JSON list → float64 array of exactly ``shape`` with finite entries, else FormatError."""
+    try:
+        a = np.asarray(v, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise FormatError(f"{where}: field {key!r} must be a {'x'.join(map(str, shape))} array of numbers") from None
+    if a.shape != shape or not np.isfinite(a).all():
+        raise FormatError(f"{where}: field {key!r} must be a {'x'.join(map(str, shape))} array of finite numbers, "
+                          f"got shape {a.shape}")
+    return a
+
+
+def read_geometry(g: dict, where: str, limits: Limits = DEFAULT, rows: int | None = None,
+                  cols: int | None = None) -> dict:
+    """Validate a file's scene geometry (what :meth:`LightField.geometry` writes).
+
+    Checks types, ranges and shapes — rows × cols against ``limits.max_views``, height ×
+    width against ``limits.max_view_pixels``, finite focal/principal/baseline, positions
+    (rows, cols, 3) and c2w (rows, cols, 4, 4) — before anything is built from it.
+
+    Returns:
+        a dict with rows, cols, height, width, channels, dtype, layout, focal, principal and
+        either baseline (list) or positions ((rows, cols, 3) array), plus c2w when present.
+
+    Raises:
+        FormatError naming ``where`` and the field.
+    """
+    f = Fields(g, where)
+    out = {}
+    out["rows"] = f.int("rows", 1, limits.max_views) if rows is None else rows
+    out["cols"] = f.int("cols", 1, limits.max_views) if cols is None else cols
+    if out["rows"] * out["cols"] > limits.max_views:
+        raise FormatError(f"{where}: {out['rows']}x{out['cols']} views exceed the limit of {limits.max_views}")
+    for k in ("height", "width"):
+        if f.has(k) or rows is None:
+            out[k] = f.int(k, 1, limits.max_view_pixels)
+    if rows is None and out["height"] * out["width"] > limits.max_view_pixels:
+        raise FormatError(f"{where}: views of {out['height']}x{out['width']} exceed the limit of "
+                          f"{limits.max_view_pixels} pixels")
+    if f.has("channels") or rows is None:
+        out["channels"] = f.int("channels", 1, 4)
+    if f.has("dtype") or rows is None:
+        out["dtype"] = f.str("dtype", choices=("uint8", "uint16", "float32"))
+    out["layout"] = f.str("layout", choices=("grid", "posed"), default="grid")
+    out["focal"] = _finite_array(f._get("focal", [1.0, 1.0]), (2,), where, "focal").tolist()
+    if f.has("principal"):
+        out["principal"] = _finite_array(f.obj["principal"], (2,), where, "principal").tolist()
+    shape = (out["rows"], out["cols"])
+    if f.has("positions"):
+        out["positions"] = _finite_array(f.obj["positions"], shape + (3,), where, "positions")
+    else:
+        out["baseline"] = _finite_array(f._get("baseline", [1.0, 1.0]), (2,), where, "baseline").tolist()
+    if f.has("c2w"):
+        out["c2w"] = _finite_array(f.obj["c2w"], shape + (4, 4), where, "c2w")
+    return out

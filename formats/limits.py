@@ -17,6 +17,7 @@ class Limits:
         max_open_pixels: pixels a decoder may decode when a file is opened (key views,
             summed over all of them).
         max_tree_height: levels of a key-view hierarchy.
+        max_scene_pixels: pixels of all views of a scene read from files (views × H × W).
         max_meta_bytes: size of the metadata JSON section.
         max_json_depth: nesting depth of the metadata JSON.
     """
@@ -25,6 +26,7 @@ class Limits:
     max_view_pixels: int = 1 << 26
     max_open_pixels: int = 1 << 28
     max_tree_height: int = 16
+    max_scene_pixels: int = 1 << 32
     max_meta_bytes: int = 1 << 26
     max_json_depth: int = 32
 

@@ -115,3 +115,11 @@ def check_int(v, lo=None, hi=None, choices=None, fail=None) -> int:
     if (lo is not None and v < lo) or (hi is not None and v > hi):
         _fail(f"within [{lo}, {hi}]")
     return v
+
+
+def read_vector(v, n: int, where: str) -> list:
+    """``v`` if it is a JSON list of ``n`` finite numbers (as floats), else FormatError."""
+    if not isinstance(v, list) or len(v) != n or any(
+            isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x) for x in v):
+        raise FormatError(f"{where}: must be a list of {n} finite numbers, got {repr(v)[:60]}")
+    return [float(x) for x in v]

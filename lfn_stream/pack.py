@@ -61,6 +61,20 @@ def step_bytes(cfg: LfnConfig, j: int, dtype: str = "fp16") -> int:
     return n * np.dtype(DTYPES[dtype]).itemsize
 
 
+def base_values(cfg: LfnConfig) -> int:
+    """Values in ``lfn.base``: the min_neurons network (weights, biases, LayerNorm gains and
+    offsets of every layer, then the output layer)."""
+    m = cfg.min_neurons
+    return (m * cfg.in_features + 3 * m + (cfg.depth - 1) * (m * m + 3 * m)
+            + cfg.out_features * m + cfg.out_features)
+
+
+def occ_values(cfg: LfnConfig) -> int:
+    """Values in ``lfn.occ``: the occupancy MLP (in → n → n → 1, with biases)."""
+    n = cfg.occupancy_neurons
+    return cfg.in_features * n + n + n * n + n + n + 1
+
+
 def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes | None = None,
                    dtype: str = "fp16") -> tuple[NestedLFN, OccupancyNet | None]:
     """Rebuild the network of width min_neurons + len(steps) (a smaller cfg) from sections."""
@@ -103,6 +117,8 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
         ow[:, j] = take(cfg.out_features)
         if pos != vals.size:
             raise FormatError(f"{step_name(s)} has {vals.size} values, expected {pos}")
+    if not all(np.isfinite(a).all() for a in (*W, b, g, be, ow, ob)):
+        raise FormatError("lfn network weights hold NaN or infinite values")
     with torch.no_grad():
         for i in range(cfg.depth):
             model.weights[i].copy_(torch.from_numpy(W[i]).float())
@@ -119,4 +135,6 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
         with torch.no_grad():
             for p in occ_net.parameters():
                 p.copy_(torch.from_numpy(take(p.numel()).reshape(p.shape)).float())
+        if pos != vals.size or not np.isfinite(vals).all():
+            raise FormatError("lfn.occ has trailing data or NaN/infinite weights")
     return model, occ_net

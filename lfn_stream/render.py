@@ -11,10 +11,12 @@ import torch
 from formats.codec_api import Decoder
 from formats.errors import FormatError, ParameterError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
-from formats.lightfield import LightField
+from formats.lightfield import LightField, read_geometry
+from formats.limits import DEFAULT
+from formats.schema import Fields, read_vector
 
 from .config import LfnConfig
-from .pack import step_name, unpack_network
+from .pack import base_values, occ_values, step_bytes, step_name, unpack_network
 from .rays import view_rays
 
 CODEC_ID = "lfn"
@@ -38,31 +40,47 @@ class LfnRenderer(Decoder):
         check_codec_version(f, CODEC_ID, CODEC_VERSION)
         self.file = f
         c = f.container
+        lim = limits or DEFAULT
         try:
-            conf = f.meta["config"]
-            self.cfg = LfnConfig.from_dict(conf["network"], int(f.meta.get("codec_version", 1)))
-            self.norm = conf["norm"]
-            self.dtype_w = conf.get("weights", "fp16")
-            scene = f.meta["scene"]
-            if self.dtype_w not in ("fp16", "fp32"):
-                raise ValueError(f"weights {self.dtype_w!r}")
-        except (KeyError, TypeError, ValueError) as e:
-            raise FormatError(f"{c.name}: lfn metadata is incomplete or invalid ({e})") from None
+            conf = Fields(f.meta, f"{c.name}: metadata").sub("config")
+            self.cfg = LfnConfig.from_dict(conf.obj.get("network"), int(f.meta.get("codec_version", 1)))
+            norm = conf.sub("norm")
+            self.norm = {"centre": read_vector(norm.obj.get("centre"), 3, f"{c.name}: config.norm.centre"),
+                         "radius": norm.float("radius", 1e-12, 1e12)}
+            self.dtype_w = conf.str("weights", choices=("fp16", "fp32"), default="fp16")
+        except ParameterError as e:
+            raise FormatError(f"{c.name}: lfn network config is invalid ({e})") from None
+        scene = read_geometry(f.meta.get("scene"), f"{c.name}: scene", lim)
         if not c.available("lfn.base"):
             raise FormatError(f"{c.name}: the stream prefix does not hold the base network")
         shape = (scene["rows"], scene["cols"], scene["height"], scene["width"], 1)
         # geometry only: a zero-stride placeholder of the views' shape (no pixel memory)
-        self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene)
+        self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), f.meta["scene"])
         self.rows, self.cols = scene["rows"], scene["cols"]
         self.height, self.width, self.channels = scene["height"], scene["width"], scene["channels"]
+        if scene["dtype"] not in ("uint8", "uint16"):
+            raise FormatError(f"{c.name}: scene dtype must be uint8 or uint16 for an LFN, got {scene['dtype']}")
         self.dtype = np.dtype(scene["dtype"])
+        # section sizes are checked against the config before any network is allocated
+        itemsize = 2 if self.dtype_w == "fp16" else 4
+        if c.info("lfn.base").length != base_values(self.cfg) * itemsize:
+            raise FormatError(f"{c.name}: section 'lfn.base' has {c.info('lfn.base').length} bytes, the network "
+                              f"config needs {base_values(self.cfg) * itemsize}")
         steps = []
         limit = self.cfg.max_neurons if max_neurons is None else int(np.ceil(max_neurons))
         for j in range(self.cfg.max_neurons - self.cfg.min_neurons):
             if self.cfg.min_neurons + j >= limit or not c.available(step_name(j)):
                 break
+            if c.info(step_name(j)).length != step_bytes(self.cfg, self.cfg.min_neurons + j, self.dtype_w):
+                raise FormatError(f"{c.name}: section {step_name(j)!r} has {c.info(step_name(j)).length} bytes, the "
+                                  f"network config needs {step_bytes(self.cfg, self.cfg.min_neurons + j, self.dtype_w)}")
             steps.append(bytes(c.read(step_name(j))))
-        occ = bytes(c.read("lfn.occ")) if c.available("lfn.occ") else None
+        occ = None
+        if c.available("lfn.occ") and self.cfg.occupancy_neurons:
+            if c.info("lfn.occ").length != occ_values(self.cfg) * itemsize:
+                raise FormatError(f"{c.name}: section 'lfn.occ' has {c.info('lfn.occ').length} bytes, the network "
+                                  f"config needs {occ_values(self.cfg) * itemsize}")
+            occ = bytes(c.read("lfn.occ"))
         self.model, self.occ = unpack_network(self.cfg, bytes(c.read("lfn.base")), steps, occ, self.dtype_w)
         self.neurons = self.model.cfg.max_neurons
         self.levels = float(self.neurons - self.cfg.min_neurons)

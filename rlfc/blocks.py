@@ -187,6 +187,21 @@ def pack_runs(g: np.ndarray, loc: np.ndarray, q: np.ndarray, raw: np.ndarray, ra
     return index.astype(np.uint32), blocks, {"off_bytes": off_bytes, "min_bytes": min_bytes, "bitmap_bytes": nbm}
 
 
+_VALID_MODE = np.zeros(256, bool)
+_VALID_MODE[:MODE_CONST + 1] = True
+_VALID_MODE[MODE_PLAIN + 1:MODE_PLAIN + 32] = True
+
+
+def check_modes(modes: np.ndarray) -> None:
+    """(S, P) uint8 plane modes of present blocks: every mode defined, raw only in plane 0
+    (and then the other planes "constant"); else FormatError."""
+    raw = modes[:, 0] == MODE_RAW
+    ok = _VALID_MODE[modes]
+    ok[:, 0] |= raw
+    if not ok.all() or (raw[:, None] & (modes[:, 1:] != MODE_CONST)).any():
+        raise FormatError("rlfc block has an undefined plane mode (corrupt file)")
+
+
 class BlockStore:
     """Random access to residual blocks.
 
@@ -238,23 +253,30 @@ class BlockStore:
         if S == 0:
             z = np.zeros((0, self.P), np.int64)
             return sel, np.zeros(0, bool), np.zeros(0, np.int64), z.astype(np.uint8), z, z
-        s0, sg = o0[sel], g[sel]
+        s0, s1, sg = o0[sel], o1[sel], g[sel]
+        if (s1 - s0 < self.nbm).any():
+            raise FormatError("rlfc block run is shorter than its bitmap (corrupt file)")
         bm = buf[s0[:, None] + np.arange(self.nbm)]                     # (S, nbm)
         pc = _POPCOUNT[bm]
+        total = pc.sum(axis=1)
         pc[np.arange(self.nbm)[None, :] >= (sg >> 3)[:, None]] = 0
         part = _POPCOUNT[bm[np.arange(S), sg >> 3] & ((1 << (sg & 7)) - 1).astype(np.uint8)]
         rank = pc.sum(axis=1) + part
+        heads_end = s0 + self.nbm + total * self.hs                     # payloads start here
+        if (heads_end > s1).any():
+            raise FormatError("rlfc block run is shorter than its block headers (corrupt file)")
         hdr = buf[(s0 + self.nbm + rank * self.hs)[:, None] + np.arange(self.hs)]   # (S, hs)
         pay = s0 + _from_le(hdr[:, :self.off_bytes], False)
         modes = hdr[:, self.off_bytes:self.off_bytes + self.P]
         mins = _from_le(hdr[:, self.off_bytes + self.P:].reshape(-1, self.min_bytes), True).reshape(-1, self.P)
         is_raw = modes[:, 0] == MODE_RAW
+        check_modes(modes)
         psize = self.table[modes]
         psize[is_raw] = 0
         pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)
         end = np.where(is_raw, pay + self.B * self.B * self.C * self.bps, (pstart + psize).max(axis=1))
-        if end.max(initial=0) > self.index[-1]:
-            raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+        if (pay < heads_end).any() or (end > s1).any():
+            raise FormatError("rlfc block payload lies outside its run (corrupt file)")
         return sel, is_raw, pay, modes, mins, pstart
 
     def fetch_one(self, loc: int, nodes: list[int]):
@@ -271,7 +293,12 @@ class BlockStore:
             self.verify_span(a, b)
         buf = self.buf
         n, P = self.B * self.B, self.P
+        if b - a < self.nbm:
+            raise FormatError("rlfc block run is shorter than its bitmap (corrupt file)")
         bitmap = int.from_bytes(buf[a:a + self.nbm].tobytes(), "little")
+        heads_end = a + self.nbm + bin(bitmap).count("1") * self.hs
+        if heads_end > b:
+            raise FormatError("rlfc block run is shorter than its block headers (corrupt file)")
         jobs = {}
         for i, g in enumerate(nodes):
             if not (bitmap >> g) & 1:
@@ -280,10 +307,13 @@ class BlockStore:
             hb = buf[h:h + self.hs].tobytes()
             pos = a + int.from_bytes(hb[:self.off_bytes], "little")
             modes = hb[self.off_bytes:self.off_bytes + P]
+            check_modes(np.frombuffer(modes, np.uint8)[None])
+            if pos < heads_end:
+                raise FormatError("rlfc block payload lies outside its run (corrupt file)")
             if modes[0] == MODE_RAW:
                 nbytes = n * self.C * self.bps
-                if pos + nbytes > self.index[-1]:
-                    raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+                if pos + nbytes > b:
+                    raise FormatError("rlfc block payload lies outside its run (corrupt file)")
                 dt = "<u2" if self.bps == 2 else np.uint8
                 out[i] = ("raw", np.frombuffer(buf[pos:pos + nbytes].tobytes(), dtype=dt).astype(np.int64).reshape(n, self.C))
                 continue
@@ -299,8 +329,8 @@ class BlockStore:
                 else:
                     jobs.setdefault(m, []).append((pos, i, c, mins[c]))
                 pos += int(self.table[m])
-            if pos > self.index[-1]:
-                raise ChecksumError("rlfc block header points past the blocks section (corrupt file)")
+            if pos > b:
+                raise FormatError("rlfc block payload lies outside its run (corrupt file)")
         for m, js in jobs.items():                       # one vectorized decode per distinct mode
             starts = np.fromiter((j[0] for j in js), dtype=np.int64, count=len(js))
             if m < MODE_CONST:

@@ -88,6 +88,7 @@ class RlfcDecoder(Decoder):
         """
         level = self.check_level(level)
         views, by, bx = self.requests(views, by, bx)
+        self.file.container.check_unchanged()
         B = self.block_size
         acc = self.core.blocks(views, by, bx, level).reshape(views.size, B, B, self.P)
         return acc if planes else from_planes(acc, self.dtype)
@@ -102,6 +103,7 @@ class RlfcDecoder(Decoder):
             raise ParameterError(f"block ({by},{bx}) is outside the {self.nby}x{self.nbx} block grid "
                                  f"({self.height}x{self.width} px, B={self.block_size})")
         level = self.check_level(level)
+        self.file.container.check_unchanged()
         B = self.block_size
         out = from_planes(self.core.block(v, int(by), int(bx), level).reshape(B, B, self.P), self.dtype)
         return out[:min(B, self.height - by * B), :min(B, self.width - bx * B)]
@@ -117,6 +119,7 @@ class RlfcDecoder(Decoder):
             views = np.arange(self.rows * self.cols)
         else:
             views = self.requests(views, np.zeros(np.size(views), np.int64), np.zeros(np.size(views), np.int64))[0]
+        self.file.container.check_unchanged()
         out = self.core.views(views, level)[:, :self.height, :self.width]
         return out if planes else from_planes(out, self.dtype)
 

@@ -13,6 +13,7 @@ import numpy as np
 
 from formats.errors import FormatError
 from formats.limits import DEFAULT, Limits
+from formats.lightfield import read_geometry
 from formats.schema import Fields
 
 CODEC_ID = "rlfc"
@@ -70,10 +71,8 @@ class RlfcHeader:
         m = Fields(meta, f"{name}: metadata")
         cfg = m.sub("config")
         scene = m.sub("scene")
-        rows = scene.int("rows", 1, limits.max_views)
-        cols = scene.int("cols", 1, limits.max_views)
-        if rows * cols > limits.max_views:
-            raise FormatError(f"{name}: {rows}x{cols} views exceed the limit of {limits.max_views}")
+        geo = read_geometry(scene.obj, f"{name}: scene", limits)
+        rows, cols = geo["rows"], geo["cols"]
         profile = cfg.str("profile", max_len=32, default="bise")
         B = cfg.int("block_size", choices=BLOCK_SIZES)
         h = cfg.int("height", 1, limits.max_view_pixels)

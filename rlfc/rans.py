@@ -62,6 +62,42 @@ def normalize(counts: np.ndarray) -> np.ndarray:
     return f
 
 
+def normalize_int(weights: np.ndarray) -> np.ndarray:
+    """(A,) non-negative integer weights → (A,) frequencies summing to M, in integers only
+    (the rule of format versions ≥ 2; a decoder in any language gets the same table).
+
+    With T = Σw: f = max(1, ⌊w·M/T⌋) for w > 0, else 0. If Σf < M, the M − Σf extra units go
+    one each to the used symbols in order of decreasing remainder (w·M mod T), ties to the
+    lower symbol, cycling if needed. If Σf > M, the first largest f gives back units (never
+    below 1) until Σf = M. All-zero weights count as all ones.
+    """
+    w = np.asarray(weights, dtype=np.int64)
+    if (w < 0).any() or (w > 1 << 40).any():
+        raise ValueError("weights must be within [0, 2^40]")
+    A = w.size
+    if w.sum() <= 0:
+        w = np.ones(A, np.int64)
+    used = w > 0
+    n_used = int(used.sum())
+    if n_used > M:
+        raise ValueError(f"{n_used} symbols do not fit a table of {M}")
+    T = int(w.sum())
+    num = w * M
+    f = np.where(used, np.maximum(1, num // T), 0).astype(np.int64)
+    diff = M - int(f.sum())
+    if diff > 0:
+        rem = np.where(used, num % T, -1)
+        order = np.lexsort((np.arange(A), -rem))
+        for i in range(diff):
+            f[order[i % n_used]] += 1
+    while diff < 0:
+        j = int(np.argmax(f))
+        take = min(-diff, int(f[j]) - 1)
+        f[j] -= take
+        diff += take
+    return f
+
+
 class Tables:
     """Frequency tables of C contexts over an alphabet of A symbols.
 
@@ -86,7 +122,13 @@ class Tables:
 
     @staticmethod
     def from_counts(counts: np.ndarray) -> "Tables":
+        """Tables by :func:`normalize` (float arithmetic; format version 1 files)."""
         return Tables(np.stack([normalize(row) for row in np.asarray(counts)]))
+
+    @staticmethod
+    def from_weights(weights: np.ndarray) -> "Tables":
+        """Tables by :func:`normalize_int` (integers; format versions ≥ 2)."""
+        return Tables(np.stack([normalize_int(row) for row in np.asarray(weights)]))
 
     def bits(self, ctx: np.ndarray, sym: np.ndarray) -> np.ndarray:
         """Ideal code length in bits of each (context, symbol) (inf where the frequency is 0)."""
@@ -243,7 +285,9 @@ class ScalarDecoder:
         self.data, self.t = data, tables
         self.x = int.from_bytes(data[:STATE_BYTES], "little")
         self.ptr = STATE_BYTES
-        self.freq, self.cum = tables.freq.tolist(), tables.cum.tolist()
+        if getattr(tables, "_lists", None) is None:         # Python lists once per table set
+            tables._lists = (tables.freq.tolist(), tables.cum.tolist())
+        self.freq, self.cum = tables._lists
         self.slot = slot_bytes(tables)
 
     def get(self, ctx: int) -> int:

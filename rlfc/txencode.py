@@ -29,7 +29,7 @@ from .txlayout import MAX_REFS, TxLayout
 from .txpredict import TB, planar, predict_tbs, upsample_thumb
 from .txmaps import pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
-from .txstructure import build
+from .txstructure import build, build_intra
 from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
                        ctx_esc, ctx_last, ctx_mag, ctx_mode, pack_streams, plane_classes, quantize_counts,
                        tables_from_quantized, tables_to_bytes)
@@ -47,7 +47,8 @@ class TxParams:
     Attributes:
         block_size: random-access block edge in pixels (a multiple of 8).
         key_spacing: views between key views along rows and columns (0 = chosen by grid size).
-        key_ratio: key views' quantizer step is the others' divided by this.
+        key_ratio: key views' quantizer step is the others' divided by this (0 = chosen from
+            how much the other views inherit from the keys: :meth:`TxEncoder.auto_key_ratio`).
         lam: λ = lam·Δ² (Δ the luma step of the views coded).
         max_disparity: largest |disparity| searched, pixels per view step.
         step: luma quantizer step Δ in pixel units (None: rate control or the default).
@@ -58,7 +59,7 @@ class TxParams:
 
     block_size: int = 16
     key_spacing: int = 0
-    key_ratio: float = 1.6
+    key_ratio: float = 0.0
     lam: float = 0.12
     max_disparity: float = 64.0
     step: float | None = None
@@ -72,8 +73,8 @@ class TxParams:
             raise ParameterError(f"tx block size must be 8, 16 or 32, got {self.block_size}")
         if not 0 <= self.key_spacing <= 64:
             raise ParameterError(f"key spacing must be 0 (auto) .. 64, got {self.key_spacing}")
-        if not 1.0 <= self.key_ratio <= 8.0:
-            raise ParameterError(f"key ratio must be within 1..8, got {self.key_ratio}")
+        if not (self.key_ratio == 0 or 1.0 <= self.key_ratio <= 8.0):
+            raise ParameterError(f"key ratio must be 0 (auto) or within 1..8, got {self.key_ratio}")
         if not 0 < self.lam <= 10:
             raise ParameterError(f"lam must be within (0, 10], got {self.lam}")
         if not 0 <= self.max_disparity <= 256:
@@ -208,7 +209,9 @@ class TxEncoder:
         self.w = rgb_mse_weights(ch)
         self.bypass = np.full(ch, params.lossless) | (self.pcs == 2)       # alpha is always exact
         spacing = params.key_spacing or auto_spacing(r, c)
-        self.s = build(r, c, spacing)
+        # posed captures: no grid to predict along, so every view is coded on its own (the
+        # transform path or JPEG 2000, whichever is smaller per view)
+        self.s = build(r, c, spacing) if lf.layout == "grid" else build_intra(r * c)
         self.is_key = np.zeros(r * c, bool)
         self.is_key[self.s.keys] = True
         self.intra = (self.s.refs < 0).all(axis=1)
@@ -220,6 +223,7 @@ class TxEncoder:
         if ic == "j2k" and ch not in (1, 3):
             raise ParameterError("JPEG 2000 intra key views need grey or RGB views (alpha must stay exact)")
         self.intra_codec = ic
+        self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         if progress:
             progress("disparity", 0, None)
         n_maps = len(self.s.cell_views)
@@ -234,13 +238,35 @@ class TxEncoder:
             self.modes = np.zeros((n_maps, nloc8), np.int64)
 
     # -- steps -----------------------------------------------------------------------------
+    DEFAULT_KEY_RATIO = 1.6
+
+    def auto_key_ratio(self, res: dict) -> float:
+        """The key views' step ratio from a coded run (high-rate theory): a key's error reaches
+        every view that keeps its prediction, scaled by the square of the blend weight, so a
+        key's distortion counts π = 1 + Σ_views Σ_refs (w/64)²·κ times (κ the view's fraction of
+        skipped 8×8 blocks); with rates ∝ −½·log D the best key step is the others' / √π,
+        clipped to [1.2, 2.5] (measured on the six dense grids: BENCHMARKS.md)."""
+        s = self.s
+        nk = len(s.keys)
+        acc = 0.0
+        for v in range(len(res["codes"])):
+            if self.is_key[v] or res["codes"][v] is None:
+                continue
+            kappa = float((res["codes"][v].modes == 0).mean())
+            w = s.weights[v][s.refs[v] >= 0] / 64.0
+            acc += kappa * float((w ** 2).sum())
+        return float(np.clip(np.sqrt(1.0 + acc / max(nk, 1)), 1.2, 2.5))
+
+    def key_ratio(self) -> float:
+        return self.p.key_ratio or self.kr
+
     def steps16(self, step: float) -> np.ndarray:
         """(2, P) steps in 1/16 units: key views, other views."""
         if self.p.lossless:
             return np.full((2, self.P), 16, np.int64)
         wp = np.where(self.w > 0, self.w, 1.0)
         base = step / np.sqrt(wp)
-        out = np.stack([base / self.p.key_ratio, base])
+        out = np.stack([base / self.key_ratio(), base])
         out = np.maximum(16, np.rint(out * 16)).astype(np.int64)
         out[:, self.bypass] = 16
         return out
@@ -422,13 +448,14 @@ class TxEncoder:
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
-        thumb16 = 16
+        thumb16 = None
         for i, k in enumerate(self.s.keys):
             if self.intra[k]:
-                # the thumbnail's step: exact block means (flat regions need no residual at all) or
-                # the key step (textured views), whichever costs fewer bits in all
+                # the thumbnail's step (one per file): exact block means (flat regions need no
+                # residual at all) or the key step (textured views), whichever costs fewer bits
+                # for the first intra view; the others use the same
                 best = None
-                for t16 in sorted({16, int(s16[0, 0])}):
+                for t16 in ([thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})):
                     lv = self.thumb_levels(k, t16)
                     c = self.code_view(k, self.thumb_pred(lv, t16), s16[0], lam_k, model)
                     cost = c.bits + 8 * len(pack_thumbs(lv[None]))
@@ -453,7 +480,7 @@ class TxEncoder:
             done += 1
             if progress:
                 progress("code views", done, n0)
-        return {"steps16": s16, "thumb16": thumb16, "thumbs": thumbs, "codes": codes, "step": step, "keyimg": keyimg}
+        return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step, "keyimg": keyimg}
 
     def _j2k_key(self, k: int, tx_code: ViewCode, thumb_bytes: int) -> tuple[bytes | None, ViewCode]:
         """An intra key view as JPEG 2000 at the colour PSNR its transform coding reached, where
@@ -467,9 +494,14 @@ class TxEncoder:
         px = from_planes(self.orig[k], dt)
         target = psnr_rgb(px, from_planes(tx_code.planes, dt))
         a = px[..., 0] if self.P == 1 else px
-        data = bytes(imagecodecs.jpeg2k_encode(a, level=float(min(target, 99.0)), codecformat="J2K"))
-        dec = decode_image("j2k", data, px.shape, dt)
-        if len(data) * 8 >= tx_code.bits + 8 * thumb_bytes or psnr_rgb(px, dec) < target:
+        # OpenJPEG's PSNR "level" lands a little below the level asked: ask a little more, and
+        # accept ±0.05 dB (the rate control measures the decoded views, whichever codec made them)
+        for ask in (target + 0.1, target + 0.4):
+            data = bytes(imagecodecs.jpeg2k_encode(a, level=float(min(ask, 99.0)), codecformat="J2K"))
+            dec = decode_image("j2k", data, px.shape, dt)
+            if psnr_rgb(px, dec) >= target - 0.05:
+                break
+        if len(data) * 8 >= tx_code.bits + 8 * thumb_bytes or psnr_rgb(px, dec) < target - 0.05:
             return None, tx_code
         z = np.zeros_like(tx_code.modes)
         rec = to_planes(dec)
@@ -644,6 +676,16 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
     def run(step):
         return enc.run(step, model, progress)
 
+    peak = float(np.iinfo(lf.views.dtype).max)
+    if params.step is not None or (options.target_psnr is None and options.target_bpp is None):
+        step0 = params.step if params.step is not None else 8.0 * scale
+    elif options.target_psnr is not None:       # where the target's MSE puts the step (Δ² ≈ 12·D)
+        step0 = math.sqrt(12 * peak ** 2 * 10 ** (-options.target_psnr / 10))
+    else:
+        step0 = 8.0 * scale
+    if params.key_ratio == 0 and not params.lossless and (~enc.is_key).any():
+        enc.kr = enc.auto_key_ratio(run(step0))  # one probe run measures how much views inherit
+
     if params.lossless:
         res = run(1.0)
         res = enc.run(1.0, enc.model_of(res), progress)
@@ -671,12 +713,7 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
             return ok, r
 
         lo_q, hi_q = 0.0, math.log2(512.0 * scale)
-        peak = float(np.iinfo(lf.views.dtype).max)
-        if options.target_psnr is not None:       # start where the target's MSE puts the step (Δ² ≈ 12·D)
-            q0 = math.log2(math.sqrt(12 * peak ** 2 * 10 ** (-options.target_psnr / 10)))
-        else:
-            q0 = math.log2(8.0 * scale)
-        q0 = min(max(q0, lo_q), hi_q)
+        q0 = min(max(math.log2(step0), lo_q), hi_q)
         # bracket (feasible at small steps for a PSNR target, at large steps for a bpp target),
         # moving from q0 by half-octaves (×1.5), then bisect to 1/64 octave
         small_ok = options.target_psnr is not None
@@ -722,8 +759,12 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
         if keep:
             res = again
     cfg, sections = enc.pack(res)
+    if lf.layout != "grid":
+        notes.append("posed capture: every view is coded on its own (no inter-view prediction), so this file is "
+                     "no smaller than per-view coding (JPEG 2000 or the transform path, whichever is smaller per view)")
     return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
-                   summary={"profile": "tx", "params": {**asdict(params), "step": res["step"]},
+                   summary={"profile": "tx", "params": {**asdict(params), "step": res["step"],
+                                                        "key_ratio": enc.key_ratio()},
                             "key_views": len(enc.s.keys)})
 
 

@@ -18,7 +18,7 @@ from formats.errors import FormatError
 from formats.schema import Fields
 
 MAX_REFS = 4
-VERSION = 1
+VERSION = 2          # 2: rANS tables built in integers (1: float arithmetic)
 
 
 @dataclass(frozen=True)
@@ -35,6 +35,7 @@ class TxLayout:
         intra_codec: how intra key views are coded: "tx" (thumbnail + transform) or "j2k"
             (a JPEG 2000 codestream in ``tx.keyimg``, lengths in ``key_images``).
         key_images: byte lengths of the JPEG 2000 intra key views, in key order.
+        version: 2 (1: the first files, whose rANS tables were built in float arithmetic).
     """
 
     positions: np.ndarray
@@ -48,6 +49,7 @@ class TxLayout:
     thumb_step16: int
     intra_codec: str = "tx"
     key_images: tuple = ()
+    version: int = VERSION
 
     @property
     def n_views(self) -> int:
@@ -66,7 +68,7 @@ class TxLayout:
 
     def to_config(self) -> dict:
         """The JSON part (``config.tx``); the per-view tables go to :meth:`to_bytes`."""
-        return {"version": VERSION, "keys": list(map(int, self.keys)), "n_maps": int(self.n_maps),
+        return {"version": int(self.version), "keys": list(map(int, self.keys)), "n_maps": int(self.n_maps),
                 "step16": self.step16.tolist(), "bypass": [bool(b) for b in self.bypass],
                 "thumb_step16": int(self.thumb_step16), "intra_codec": self.intra_codec,
                 "key_images": list(map(int, self.key_images))}
@@ -86,7 +88,7 @@ class TxLayout:
         from .txsections import MAX_VARINT_BYTES, inflate, unvarints
 
         where = f.where
-        f.int("version", choices=(VERSION,))
+        version = f.int("version", choices=(1, VERSION))
         count = n_views * (2 + 2 * MAX_REFS + 1)
         what = f"{name}: section 'tx.layout'"
         v = unvarints(inflate(data, count * MAX_VARINT_BYTES, what), count, what)
@@ -112,7 +114,7 @@ class TxLayout:
         intra_codec = f.str("intra_codec", choices=("tx", "j2k"))
         key_images = f.int_list("key_images", max_len=n_views, lo=1, hi=1 << 30)
         lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
-                       intra_codec, tuple(key_images))
+                       intra_codec, tuple(key_images), version)
         lay.check(where)
         return lay
 

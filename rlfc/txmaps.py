@@ -1,7 +1,7 @@
 """The ``tx.maps`` section: the shared disparity map, per-map corrections and prediction modes,
 entropy-coded with rANS (:mod:`rlfc.rans`) and decoded once when a file is opened.
 
-Layout: u8 version (1); varint byte lengths of the tables and of each stream; the tables
+Layout: u8 version (2; 1 = the first files, whose tables were built in float arithmetic); varint byte lengths of the tables and of each stream; the tables
 (:func:`rlfc.txsyntax.tables_to_bytes` layout over this module's contexts); the shared map's
 stream; one stream per map.
 
@@ -25,7 +25,7 @@ from .rans import LaneDecoder, ScalarDecoder, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
 from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
-VERSION = 1
+VERSION = 2
 R = 31
 CTX_BASE = 0                 # 3 activity classes
 CTX_CORR = 3                 # 4: left nonzero + 2 · above nonzero
@@ -124,7 +124,7 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     ny, nx = shape
     nloc = ny * nx
     raw = bytes(data)
-    if not raw or raw[0] != VERSION:
+    if not raw or raw[0] not in (1, VERSION):
         raise FormatError(f"{what}: unknown maps version")
     b = np.frombuffer(raw, np.uint8)
     ends = np.flatnonzero(b[1:] < 128)
@@ -135,7 +135,7 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     if (lens < 0).any() or head + int(lens.sum()) != len(raw):
         raise FormatError(f"{what}: stream lengths do not add up to the section")
     pos = head + int(lens[0])
-    tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], N_CTX, ALPHABET, what))
+    tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], N_CTX, ALPHABET, what), raw[0])
     # the shared map: one stream, sequential (MED needs the decoded neighbours)
     d = ScalarDecoder(raw[pos:pos + int(lens[1])], tables)
     base = np.zeros((ny, nx), np.int64)

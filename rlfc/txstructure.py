@@ -105,3 +105,11 @@ def build(rows: int, cols: int, spacing: int) -> Structure:
             cell[v] = brackets[key]
             cell_views[brackets[key]].append(v)
     return Structure(pos, keys, refs, weights, cell, cell_views)
+
+
+def build_intra(n: int) -> Structure:
+    """Every view a key view coded on its own (captures whose cameras do not form a grid of
+    parallel views: posed, 360°): no references, no maps; views keep their order (1 × n)."""
+    pos = np.stack([np.zeros(n, np.int64), np.arange(n)], -1)
+    return Structure(pos, list(range(n)), np.full((n, MAX_REFS), -1, np.int64), np.zeros((n, MAX_REFS), np.int64),
+                     np.full(n, -1, np.int64), [])

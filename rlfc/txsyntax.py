@@ -40,6 +40,7 @@ N_BUCKETS = 24
 #: band of each scan position 0..63
 BAND = np.array([0] + [1] * 2 + [2] * 3 + [3] * 4 + [4] * 11 + [5] * 43, dtype=np.int64)
 N_BANDS = 6
+_BAND8 = [8 * int(b) for b in BAND]      # band·8: the band's offset among magnitude contexts
 N_PC = 3          # plane classes
 
 # context layout: one table set, contexts numbered by kind of symbol
@@ -188,9 +189,18 @@ def dequantize_counts(q: np.ndarray) -> np.ndarray:
     return np.where(q > 0, np.exp2((q.astype(np.float64) - 1) / 8), 0.0)
 
 
-def tables_from_quantized(q: np.ndarray) -> Tables:
+#: integer weight of each quantized count (format version ≥ 2): 0 for 0, else round(2^((q−1)/8))
+#: (never a tie: 2^(k/8) is an integer or irrational).
+COUNT_WEIGHT = np.array([0] + [int(round(2.0 ** ((q - 1) / 8))) for q in range(1, 256)], dtype=np.int64)
+
+
+def tables_from_quantized(q: np.ndarray, version: int = 2) -> Tables:
     """rANS tables from quantized counts; unused contexts get a flat table over the whole
-    alphabet (never used by a valid stream)."""
+    alphabet (never used by a valid stream). Version 2: integer weights
+    (:data:`COUNT_WEIGHT`, :func:`rlfc.rans.normalize_int`); version 1 (first tx files):
+    float weights and :func:`rlfc.rans.normalize`."""
+    if version >= 2:
+        return Tables.from_weights(COUNT_WEIGHT[np.asarray(q, np.int64)])
     return Tables.from_counts(dequantize_counts(q))
 
 
@@ -375,10 +385,12 @@ def _raw_bits(buf, start, back, kb, off):
 def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, key: int) -> Parsed:
     """The reference parser: one stream in plain Python (same results as :func:`parse_lanes`)."""
     P = len(pcs)
+    pcl = [int(x) for x in pcs]
     d = ScalarDecoder(data, tables)
+    get = d.get
     modes, prev = [], 3
     for _ in range(nt):
-        s = d.get(int(ctx_mode(kind, prev)))
+        s = get(CTX_MODE + kind * 4 + prev)
         if s >= N_MODES:
             raise FormatError("tx block has an undefined tb mode")
         modes.append(s)
@@ -386,30 +398,34 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
     last = [[0] * P for _ in range(nt)]
     for t in range(nt):
         if modes[t] != MODE_SKIP:
+            ci = modes[t] == MODE_INTRA
             for p in range(P):
-                v = d.get(int(ctx_last(int(pcs[p]), modes[t], key)))
+                v = get(CTX_LAST + (pcl[p] * 2 + ci) * 2 + key)
                 if v > 64:
                     raise FormatError("tx block has a last position past 64")
                 last[t][p] = v
     coefs = []                                          # (t, p, pos, magnitude, escaped, first)
     for t in range(nt):
         for p in range(P):
-            hist = []
-            for j in range(last[t][p]):
-                pos = last[t][p] - 1 - j
-                if j == 0:
-                    nb = 0
-                else:
-                    nb = 1 + (hist[-1] > 0) + (j >= 2 and hist[-2] > 0)
-                s = d.get(int(ctx_mag(int(pcs[p]), int(BAND[pos]), key, nb)))
+            n = last[t][p]
+            if not n:
+                continue
+            base = CTX_MAG + pcl[p] * N_BANDS * 8 + key * 4       # + band·8 + nb
+            pos = n - 1
+            s = get(base + _BAND8[pos])
+            if s > ESC:
+                raise FormatError("tx block has an undefined magnitude symbol")
+            h1, h2 = s + 1, 0
+            coefs.append([t, p, pos, s + 1, s == ESC, True])
+            for pos in range(n - 2, -1, -1):
+                s = get(base + _BAND8[pos] + 1 + (h1 > 0) + (h2 > 0))
                 if s > ESC:
                     raise FormatError("tx block has an undefined magnitude symbol")
-                mag = s + (j == 0)
-                hist.append(mag)
-                coefs.append([t, p, pos, mag, s == ESC, j == 0])
+                h2, h1 = h1, s
+                coefs.append([t, p, pos, s, s == ESC, False])
     for c in coefs:
         if c[4]:
-            k = d.get(int(ctx_esc(int(pcs[c[1]]))))
+            k = get(CTX_ESC + pcl[c[1]])
             if k >= N_BUCKETS:
                 raise FormatError("tx block has an undefined escape bucket")
             c.append(k)

@@ -86,6 +86,10 @@ def rlfc_fixtures() -> dict:
         "rlfc_tx_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=16, step=5.0, key_spacing=2)),
         "rlfc_tx_lossy_ga16": (v["ga16"], dict(profile="tx", block_size=8, step=6.0 * 257, key_spacing=2)),
         "rlfc_tx_lossy_rgba8": (v["rgba8"], dict(profile="tx", block_size=16, step=4.0, key_spacing=3)),
+        # tx layout version 2 (rANS tables built in integers); the rlfc_tx_* files above are version 1
+        "rlfc_tx2_lossless_ga16": (v["ga16"], dict(profile="tx", block_size=16, quant=1)),
+        "rlfc_tx2_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=16, step=5.0, key_spacing=2)),
+        "rlfc_tx2_lossy_rgba8": (v["rgba8"], dict(profile="tx", block_size=8, step=4.0, key_spacing=3)),
     })
     return {name: (encode(lf_of(views), **kw), lf_of(views)) for name, (views, kw) in specs.items()}
 

@@ -18,52 +18,68 @@ import numpy as np
 from ..errors import SceneError
 from ..imageio import write_image
 from ..lightfield import LightField
-from .common import is_image
-from .grid import read_grid
+from ..limits import DEFAULT, Limits
+from .common import ReadOptions, is_image
+from .grid import read_grid, read_image_folder
+from .layout import write_layout
 from .named import HCI_RE, STANFORD_RE, read_hci, read_stanford
 from .posed import plucker_rays, read_llff, read_transforms
 
-__all__ = ["read_scene", "write_views", "read_grid", "read_hci", "read_stanford", "read_llff",
+__all__ = ["read_scene", "write_views", "write_layout", "read_grid", "read_hci", "read_stanford", "read_llff",
            "read_transforms", "plucker_rays", "view_filename"]
 
 
 def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float | None = None,
-               focal: float | None = None) -> LightField:
+               focal: float | None = None, allow_outside: bool = False, limits: Limits = DEFAULT,
+               grid: tuple[int, int] | None = None) -> LightField:
     """Read a light field from a folder (or a transforms JSON file), detecting its layout.
 
     Args:
         path: scene folder or ``transforms*.json`` file.
         split: for NeRF-synthetic folders with ``transforms_<split>.json``.
         baseline, focal: override unknown grid geometry (scene units, pixels).
+        allow_outside: read view files that lie outside the scene folder (off by default).
+        limits: caps on the number of views and pixels, checked before pixels are read.
+        grid: (rows, cols) for a plain folder of images (natural name order, row-major); a
+            folder with its own layout file ignores it.
+
+    Returns:
+        the light field; ``meta["input_paths"]`` lists every file read (resolved).
 
     Raises:
-        SceneError: not a folder, empty, no recognizable layout, or unreadable/mismatched views.
+        SceneError: not a folder, empty, no recognizable layout, unreadable/mismatched views,
+            paths outside the scene, or sizes over the limits.
     """
+    opts = ReadOptions(limits, allow_outside)
+    if split not in ("train", "val", "test") and not (isinstance(split, str) and split.isidentifier()):
+        raise SceneError(f"split must be a plain name like train or test, got {split!r}")
     p = Path(path)
     if p.is_file() and p.suffix.lower() == ".json":
-        return read_transforms(p)
+        return read_transforms(p, opts)
     if not p.exists():
         raise SceneError(f"{p}: no such scene folder")
     if not p.is_dir():
         raise SceneError(f"{p}: a scene is a folder of views (or a transforms.json), not a single file")
     if (p / "scene.json").is_file():
-        return read_grid(p, baseline=baseline, focal=focal)
+        return read_grid(p, baseline=baseline, focal=focal, opts=opts)
     if (p / "poses_bounds.npy").is_file():
-        return read_llff(p)
+        return read_llff(p, opts)
     for name in ("transforms.json", f"transforms_{split}.json"):
         if (p / name).is_file():
-            return read_transforms(p / name)
+            return read_transforms(p / name, opts)
     entries = [e for e in p.iterdir() if not e.name.startswith(".")]
     if not entries:
         raise SceneError(f"{p}: empty folder")
     if any(HCI_RE.match(e.name) for e in entries):
-        return read_hci(p, baseline=baseline, focal=focal)
+        return read_hci(p, baseline=baseline, focal=focal, opts=opts)
     if any(STANFORD_RE.match(e.name) for e in entries):
-        return read_stanford(p, baseline=baseline, focal=focal)
+        return read_stanford(p, baseline=baseline, focal=focal, opts=opts)
     images = [e for e in entries if is_image(e)]
+    if grid is not None:
+        return read_image_folder(p, grid, baseline=baseline, focal=focal, opts=opts)
     raise SceneError(f"{p}: no recognizable light-field layout (expected scene.json, poses_bounds.npy, "
                      f"transforms.json, input_CamNNN.png or out_RR_CC_*.png; found {len(images)} image files "
-                     f"among {len(entries)} entries)")
+                     f"among {len(entries)} entries; a plain folder of images needs --grid ROWSxCOLS)")
 
 
 def view_filename(row: int, col: int, ext: str = ".png") -> str:

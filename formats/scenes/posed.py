@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -12,10 +13,10 @@ import numpy as np
 from ..errors import SceneError
 from ..imageio import IMAGE_EXTENSIONS
 from ..lightfield import LightField
-from .common import is_image, load_views
+from .common import ReadOptions, check_count, confine, is_image, load_views, number
 
 
-def read_llff(folder: Path) -> LightField:
+def read_llff(folder: Path, opts: ReadOptions = ReadOptions()) -> LightField:
     """Read an LLFF capture.
 
     ``poses_bounds.npy`` is (N, 17): a row-major 3×5 ``[R | t | hwf]`` per view (LLFF axes:
@@ -27,15 +28,21 @@ def read_llff(folder: Path) -> LightField:
         pb = np.load(pb_path, allow_pickle=False)
     except (OSError, ValueError) as e:
         raise SceneError(f"{pb_path}: not a readable .npy array ({e})") from None
-    if pb.ndim != 2 or pb.shape[1] != 17:
-        raise SceneError(f"{pb_path}: expected an N x 17 array, got shape {pb.shape}")
+    if pb.ndim != 2 or pb.shape[1] != 17 or pb.dtype.kind not in "fiu":
+        raise SceneError(f"{pb_path}: expected an N x 17 numeric array, got shape {pb.shape} {pb.dtype}")
+    check_count(pb.shape[0], str(pb_path), opts)
+    if not np.isfinite(pb).all():
+        raise SceneError(f"{pb_path}: holds NaN or infinite values")
     img_dir = folder / "images"
     files = sorted(p for p in img_dir.iterdir() if is_image(p)) if img_dir.is_dir() else []
     if len(files) != pb.shape[0]:
         raise SceneError(f"{folder}: poses_bounds.npy has {pb.shape[0]} poses but images/ has {len(files)} images")
-    views = load_views(files, str(folder))
+    files = [confine(p, folder, opts, str(folder)) for p in files]
+    views = load_views(files, str(folder), opts)
     n, h, w = views.shape[:3]
     m = pb[:, :15].reshape(n, 3, 5)
+    if (m[:, :, 4][:, :3] <= 0).any():
+        raise SceneError(f"{pb_path}: height, width and focal (the hwf column) must be positive")
     rot_llff, t, hwf = m[:, :, :3], m[:, :, 3], m[:, :, 4]
     rot = np.stack([rot_llff[:, :, 1], -rot_llff[:, :, 0], rot_llff[:, :, 2]], axis=-1)
     c2w = np.tile(np.eye(4), (n, 1, 1))
@@ -44,7 +51,8 @@ def read_llff(folder: Path) -> LightField:
     f = float(hwf[0, 2]) * w / float(hwf[0, 1])
     return LightField(views=views[None], positions=t[None], c2w=c2w[None], focal=(f, f), layout="posed",
                       meta={"reader": "llff", "files": [p.name for p in files],
-                            "bounds": np.round(pb[:, 15:], 6).tolist()})
+                            "bounds": np.round(pb[:, 15:], 6).tolist(),
+                            "input_paths": [str(p.resolve()) for p in files] + [str(pb_path.resolve())]})
 
 
 def _frame_file(base: Path, file_path: str) -> Path:
@@ -57,7 +65,7 @@ def _frame_file(base: Path, file_path: str) -> Path:
     return p.with_name(p.name + ".png")
 
 
-def read_transforms(path: Path) -> LightField:
+def read_transforms(path: Path, opts: ReadOptions = ReadOptions()) -> LightField:
     """Read a ``transforms.json`` (nerfstudio, instant-ngp, NeRF synthetic).
 
     Intrinsics from ``fl_x``/``fl_y`` or ``camera_angle_x``/``camera_angle_y``, ``cx``/``cy``
@@ -65,32 +73,47 @@ def read_transforms(path: Path) -> LightField:
     """
     try:
         cfg = json.loads(path.read_text())
-        frames = cfg["frames"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        raise SceneError(f"{path}: not a transforms.json with frames ({e})") from None
-    if not frames:
-        raise SceneError(f"{path}: no frames")
-    files = [_frame_file(path.parent, str(fr["file_path"])) for fr in frames]
-    views = load_views(files, str(path))
+    except (OSError, ValueError, RecursionError) as e:
+        raise SceneError(f"{path}: not valid JSON ({e})") from None
+    frames = cfg.get("frames") if isinstance(cfg, dict) else None
+    if not isinstance(frames, list) or not frames:
+        raise SceneError(f"{path}: not a transforms.json with a non-empty frames list")
+    check_count(len(frames), str(path), opts)
+    if not all(isinstance(fr, dict) and isinstance(fr.get("file_path"), str) for fr in frames):
+        raise SceneError(f"{path}: every frame needs a file_path string")
+    files = [confine(_frame_file(path.parent, fr["file_path"]), path.parent, opts, str(path)) for fr in frames]
+    views = load_views(files, str(path), opts)
     n, h, w = views.shape[:3]
     try:
         c2w = np.asarray([fr["transform_matrix"] for fr in frames], dtype=np.float64)
-    except (KeyError, ValueError) as e:
+    except (KeyError, ValueError, TypeError) as e:
         raise SceneError(f"{path}: bad transform_matrix ({e})") from None
     if c2w.shape != (n, 4, 4):
         raise SceneError(f"{path}: transform_matrix must be 4x4 per frame, got {c2w.shape[1:]}")
+    if not np.isfinite(c2w).all():
+        raise SceneError(f"{path}: a transform_matrix holds NaN or infinite values")
     if "fl_x" in cfg:
-        fx = float(cfg["fl_x"])
-        fy = float(cfg.get("fl_y", fx))
+        fx = number(cfg["fl_x"], f"{path}: fl_x", positive=True)
+        fy = number(cfg.get("fl_y", fx), f"{path}: fl_y", positive=True)
     elif "camera_angle_x" in cfg:
-        fx = 0.5 * w / math.tan(0.5 * float(cfg["camera_angle_x"]))
-        fy = 0.5 * h / math.tan(0.5 * float(cfg["camera_angle_y"])) if "camera_angle_y" in cfg else fx
+        ax = number(cfg["camera_angle_x"], f"{path}: camera_angle_x", positive=True)
+        if ax >= math.pi:
+            raise SceneError(f"{path}: camera_angle_x must be below pi radians, got {ax}")
+        fx = 0.5 * w / math.tan(0.5 * ax)
+        fy = fx
+        if "camera_angle_y" in cfg:
+            ay = number(cfg["camera_angle_y"], f"{path}: camera_angle_y", positive=True)
+            if ay >= math.pi:
+                raise SceneError(f"{path}: camera_angle_y must be below pi radians, got {ay}")
+            fy = 0.5 * h / math.tan(0.5 * ay)
     else:
         raise SceneError(f"{path}: needs fl_x or camera_angle_x")
-    cx, cy = float(cfg.get("cx", w / 2.0)), float(cfg.get("cy", h / 2.0))
+    cx = number(cfg.get("cx", w / 2.0), f"{path}: cx")
+    cy = number(cfg.get("cy", h / 2.0), f"{path}: cy")
     return LightField(views=views[None], positions=c2w[None, :, :3, 3], c2w=c2w[None], focal=(fx, fy),
                       principal=(cx, cy), layout="posed",
-                      meta={"reader": "transforms", "files": [str(f.relative_to(path.parent)) for f in files]})
+                      meta={"reader": "transforms", "files": [os.path.relpath(f, path.parent) for f in files],
+                            "input_paths": [str(f.resolve()) for f in files] + [str(path.resolve())]})
 
 
 def plucker_rays(lf: LightField, row: int, col: int) -> tuple[np.ndarray, np.ndarray]:

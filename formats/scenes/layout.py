@@ -1,0 +1,53 @@
+"""Layout files for decoded views, so that a decoded folder reads back as the same scene:
+``scene.json`` for a regular grid, ``transforms.json`` (OpenGL camera-to-world poses, pixel
+intrinsics) for anything else — the formats :func:`formats.scenes.read_scene` reads."""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..lightfield import read_geometry
+
+
+def _atomic_write(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
+def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
+    """Write the layout file of views saved as ``filename(row, col)`` in ``folder``.
+
+    Args:
+        geometry: a file's scene geometry (:meth:`formats.lightfield.LightField.geometry`).
+        filename: (row, col) → the view's file name inside ``folder``.
+
+    Returns:
+        the path written (``scene.json`` or ``transforms.json``).
+    """
+    folder = Path(folder)
+    g = read_geometry(geometry, "scene")
+    rows, cols = g["rows"], g["cols"]
+    fx, fy = g["focal"]
+    if "baseline" in g and g["layout"] == "grid" and "c2w" not in g:
+        pattern = filename(0, 0).replace("00", "{row:02d}", 1).replace("00", "{col:02d}", 1)
+        doc = {"layout": "grid", "rows": rows, "cols": cols, "views": pattern,
+               "baseline": g["baseline"], "focal_px": fx, "source": "decoded by lfcodec"}
+        path = folder / "scene.json"
+    else:
+        if "c2w" in g:
+            c2w = g["c2w"]
+        else:                                   # positions only: parallel cameras looking down −z
+            c2w = np.tile(np.eye(4), (rows, cols, 1, 1))
+            c2w[..., :3, 3] = g["positions"]
+        cx, cy = g.get("principal", (g["width"] / 2.0, g["height"] / 2.0))
+        frames = [{"file_path": filename(r, c), "transform_matrix": np.round(c2w[r, c], 9).tolist()}
+                  for r in range(rows) for c in range(cols)]
+        doc = {"fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": g["width"], "h": g["height"],
+               "frames": frames, "source": "decoded by lfcodec"}
+        path = folder / "transforms.json"
+    _atomic_write(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
+    return path

@@ -1,0 +1,119 @@
+"""``lfcodec serve DIR``: a small HTTP file server with byte ranges, for local use and tests.
+
+GET and HEAD of files inside DIR (nothing outside it: paths are resolved and confined), one
+``Range: bytes=a-b`` per request (``206`` with ``Content-Range``; ``416`` when unsatisfiable),
+a strong ``ETag`` from the file's size and modification time, ``If-Match`` (``412`` when the
+file changed). ``latency_s`` delays every answer, to stand for a network in benchmarks.
+"""
+from __future__ import annotations
+
+import re
+import threading
+import time
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from urllib.parse import unquote, urlsplit
+
+_RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
+
+
+def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True):
+    """A request handler class serving ``root`` (``ranges=False``: a server that ignores
+    Range headers, to test clients against one)."""
+    root = Path(root).resolve()
+
+    class Handler(BaseHTTPRequestHandler):
+        protocol_version = "HTTP/1.1"
+
+        def log_message(self, *args):                  # quiet: this is a tool, not a web server
+            pass
+
+        def _file(self) -> Path | None:
+            rel = unquote(urlsplit(self.path).path).lstrip("/")
+            p = (root / rel).resolve()
+            if (p != root and root not in p.parents) or not p.is_file():
+                return None
+            return p
+
+        def _error(self, code: int, extra: dict | None = None):
+            self.send_response(code)
+            for k, v in (extra or {}).items():
+                self.send_header(k, v)
+            self.send_header("Content-Length", "0")
+            self.end_headers()
+
+        def _serve(self, head: bool):
+            if latency_s:
+                time.sleep(latency_s)
+            p = self._file()
+            if p is None:
+                return self._error(404)
+            st = p.stat()
+            size = st.st_size
+            etag = f'"{size:x}-{st.st_mtime_ns:x}"'
+            im = self.headers.get("If-Match")
+            if im is not None and im.strip() not in (etag, "*"):
+                return self._error(412)
+            rng = self.headers.get("Range") if ranges else None
+            a, b, code = 0, size - 1, 200
+            if rng is not None:
+                m = _RANGE.match(rng.strip())
+                if not m or (m.group(1) == "" and m.group(2) == ""):
+                    return self._error(416, {"Content-Range": f"bytes */{size}"})
+                if m.group(1) == "":                   # suffix range: the last n bytes
+                    a, b = max(0, size - int(m.group(2))), size - 1
+                else:
+                    a = int(m.group(1))
+                    b = min(int(m.group(2)), size - 1) if m.group(2) else size - 1
+                if a >= size or a > b:
+                    return self._error(416, {"Content-Range": f"bytes */{size}"})
+                code = 206
+            self.send_response(code)
+            self.send_header("Content-Type", "application/octet-stream")
+            self.send_header("Accept-Ranges", "bytes" if ranges else "none")
+            self.send_header("ETag", etag)
+            self.send_header("Content-Length", str(b - a + 1))
+            if code == 206:
+                self.send_header("Content-Range", f"bytes {a}-{b}/{size}")
+            self.end_headers()
+            if not head:
+                with open(p, "rb") as fh:
+                    fh.seek(a)
+                    self.wfile.write(fh.read(b - a + 1))
+
+        def do_GET(self):
+            self._serve(head=False)
+
+        def do_HEAD(self):
+            self._serve(head=True)
+
+    return Handler
+
+
+class FileServer:
+    """A threaded server of ``root`` on ``host:port`` (port 0 = any free port).
+
+    Use as a context manager in tests (``url_of(name)``), or :meth:`serve_forever`.
+    """
+
+    def __init__(self, root, host: str = "127.0.0.1", port: int = 0, latency_s: float = 0.0, ranges: bool = True):
+        self.root = Path(root)
+        self.httpd = ThreadingHTTPServer((host, port), make_handler(self.root, latency_s, ranges))
+        self.httpd.daemon_threads = True
+        self.host, self.port = self.httpd.server_address[:2]
+        self._thread = None
+
+    def url_of(self, name: str) -> str:
+        return f"http://{self.host}:{self.port}/{name}"
+
+    def serve_forever(self) -> None:
+        self.httpd.serve_forever()
+
+    def __enter__(self):
+        self._thread = threading.Thread(target=self.httpd.serve_forever, daemon=True)
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.httpd.shutdown()
+        self.httpd.server_close()

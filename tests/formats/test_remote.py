@@ -1,0 +1,92 @@
+"""Remote reading (issue 16): .lfc files over HTTP byte ranges from `lfcodec serve`'s server
+and through fsspec URLs, with a bounded page cache and typed errors for servers that cannot
+serve ranges, missing files and files that change while read."""
+import os
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats.errors import FormatError
+from formats.lfcfile import open_lfc
+from formats.registry import open_decoder
+from formats.remote import RemoteSource
+from formats.serve import FileServer
+
+GOLDEN = Path(__file__).parent.parent / "data" / "golden"
+NAME = "rlfc_tx2_lossy_rgba8.lfc"
+
+
+@pytest.fixture()
+def served(tmp_path):
+    shutil.copy(GOLDEN / NAME, tmp_path / NAME)
+    with FileServer(tmp_path) as srv:
+        yield srv, tmp_path
+
+
+def test_remote_blocks_equal_local_and_fetch_less_than_the_file(served):
+    srv, root = served
+    local = open_decoder(open_lfc(root / NAME))
+    f = open_lfc(srv.url_of(NAME), cache_bytes=1 << 20)
+    d = open_decoder(f)
+    assert (d.decode_all() == local.decode_all()).all()
+    src = f.container._src
+    assert isinstance(src, RemoteSource) and src.wire_bytes <= (root / NAME).stat().st_size + src.page
+    g = open_lfc(srv.url_of(NAME))                  # a fresh reader: one block costs a few ranges
+    d2 = open_decoder(g)
+    before = g.container._src.wire_bytes
+    blk = d2.decode_block(1, 2, 0, 0)
+    assert (blk == local.decode_block(1, 2, 0, 0)).all()
+    assert g.container._src.wire_requests <= 12 and g.container._src.wire_bytes - before < os.path.getsize(root / NAME)
+
+
+def test_page_cache_stays_within_its_budget(served):
+    srv, root = served
+    src = RemoteSource(srv.url_of(NAME), cache_bytes=4096, page=1024)
+    d = open_decoder(open_lfc(src, name=srv.url_of(NAME)))
+    for v in range(d.rows * d.cols):
+        d.decode_view(v // d.cols, v % d.cols)
+        assert src.cached_bytes <= 4096
+
+
+def test_missing_file_and_rangeless_server_are_typed_errors(tmp_path):
+    shutil.copy(GOLDEN / NAME, tmp_path / NAME)
+    with FileServer(tmp_path) as srv:
+        with pytest.raises(FormatError, match="404"):
+            open_lfc(srv.url_of("nope.lfc"))
+        with pytest.raises(FormatError, match="404"):
+            open_lfc(srv.url_of("../" + tmp_path.name + "/" + NAME + "x"))
+    with FileServer(tmp_path, ranges=False) as srv:
+        with pytest.raises(FormatError, match="range"):
+            open_decoder(open_lfc(srv.url_of(NAME))).decode_all()
+
+
+def test_file_changed_on_the_server_is_a_typed_error(served):
+    srv, root = served
+    d = open_decoder(open_lfc(RemoteSource(srv.url_of(NAME), cache_bytes=1024, page=512)))
+    data = (root / NAME).read_bytes()
+    time.sleep(0.01)
+    (root / NAME).write_bytes(data[:-1] + bytes([data[-1] ^ 1]))   # same size, new content and mtime
+    with pytest.raises(FormatError, match="changed"):
+        for v in range(d.rows * d.cols):
+            d.decode_view(v // d.cols, v % d.cols)
+
+
+def test_fsspec_file_url(tmp_path):
+    shutil.copy(GOLDEN / NAME, tmp_path / NAME)
+    d = open_decoder(open_lfc((tmp_path / NAME).as_uri()))
+    assert (d.decode_all() == open_decoder(open_lfc(tmp_path / NAME)).decode_all()).all()
+    with pytest.raises(FormatError):
+        open_lfc((tmp_path / "missing.lfc").as_uri())
+
+
+def test_cli_info_over_http(served, capsys):
+    from formats.cli import main
+
+    srv, _ = served
+    assert main(["info", srv.url_of(NAME), "--verify"]) == 0
+    assert main(["decode", srv.url_of(NAME), "--block", "0,0,0,0", "--out", str(served[1] / "b.npy"),
+                 "--quiet"]) == 0
+    assert np.load(served[1] / "b.npy").shape[-1] == 4

@@ -1,0 +1,429 @@
+"""Structure-aware fuzzing of every .lfc decoder, with valid checksums.
+
+Each mutant is a real file (the golden fixtures: every RLFC profile, lossless and lossy, RGB,
+RGBA, 16-bit grey + alpha, and an LFN file) with one to three structure-aware changes — JSON
+metadata fields replaced by hostile values, deleted, duplicated or nested; section bytes
+changed, integers overwritten with boundary values, spans zeroed, cut, repeated or moved;
+sections dropped, reordered or renamed — re-assembled with *valid* checksums, so that only
+the decoder's own validation stands between the file and the pixels.
+
+Every accepted mutant is decoded along every path — memory-mapped file, in-memory buffer,
+HTTP-style byte ranges, full/view/batched-block/single-block/torch decoders, every level —
+and the paths must agree bit for bit (or all raise a typed :class:`~formats.errors.LfcError`).
+Mutants run in a worker process under an address-space limit with a per-mutant deadline, so a
+huge allocation, a crash or a hang is counted, not suffered.
+
+Outcomes: ``typed`` (an LfcError), ``exact`` (accepted, all paths agree), and the defects
+``untyped`` (any other exception), ``mismatch`` (paths disagree), ``crash`` (the worker died,
+e.g. out of memory), ``hang`` (over the deadline).
+
+Usage::
+
+    python -m tools.fuzz --minutes 10 [--seed 1] [--mem-mib 3072] [--out report.json]
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import multiprocessing as mp
+import os
+import resource
+import tempfile
+import time
+import traceback
+import zlib
+from pathlib import Path
+
+import numpy as np
+
+from formats.container import ByteRangeSource, Container, build_container
+
+CORPUS = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden"
+DEFECTS = ("untyped", "mismatch", "crash", "hang")
+HOSTILE = [0, -1, 1, 2, 3, 7, 8, 255, 256, 65535, 65536, 2 ** 31 - 1, 2 ** 31, 2 ** 32, 2 ** 40, 2 ** 63,
+           -2 ** 63, 10 ** 30, 0.5, -0.0, 1e308, 16.0, "", "x", "tx", "bise", "uint8", "float64", None, True,
+           False, [], {}, [0], [[]], [1, 2, 3], {"a": 1}]
+
+
+def corpus_files() -> list[Path]:
+    """The fuzz corpus: every golden fixture."""
+    return sorted(CORPUS.glob("*.lfc"))
+
+
+def split_file(blob: bytes) -> tuple[dict, list[tuple[str, bytes]]]:
+    """A valid .lfc → (metadata dict, [(section name, bytes)] after "meta")."""
+    c = Container(blob)
+    meta = json.loads(bytes(c.read("meta")))
+    secs = [(n, bytes(c.read(n))) for n in c.sections if n != "meta"]
+    return meta, secs
+
+
+# -- mutations -------------------------------------------------------------------------------
+def _paths(obj, path=()):
+    """Every (path, value) in a JSON tree, containers included."""
+    yield path, obj
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            yield from _paths(v, path + (k,))
+    elif isinstance(obj, list):
+        for i, v in enumerate(obj):
+            yield from _paths(v, path + (i,))
+
+
+def _get(obj, path):
+    for p in path:
+        obj = obj[p]
+    return obj
+
+
+def _set(obj, path, value):
+    _get(obj, path[:-1])[path[-1]] = value
+
+
+def mutate_meta(meta: dict, rng: np.random.Generator) -> str:
+    """One change to the metadata tree (in place) → a description."""
+    paths = [p for p, _ in _paths(meta) if p and p[0] in ("config", "scene", "codec_version", "codec")]
+    path = paths[int(rng.integers(len(paths)))]
+    val = _get(meta, path)
+    parent = _get(meta, path[:-1])
+    op = int(rng.integers(7))
+    if op == 0 or (op == 1 and not (isinstance(val, int) and not isinstance(val, bool))):
+        new = HOSTILE[int(rng.integers(len(HOSTILE)))]
+        _set(meta, path, new)
+        return f"meta {path} = {new!r}"
+    if op == 1:
+        new = [val + 1, val - 1, val * 2, val * 1000 + 1, -val, val // 2, val + 2 ** 32][int(rng.integers(7))]
+        _set(meta, path, new)
+        return f"meta {path} = {new!r}"
+    if op == 2:
+        if isinstance(parent, dict):
+            del parent[path[-1]]
+        else:
+            parent.pop(path[-1])
+        return f"meta del {path}"
+    if op == 3 and isinstance(parent, list):
+        parent.insert(path[-1], json.loads(json.dumps(val)))
+        return f"meta dup {path}"
+    if op == 4:
+        deep = val
+        for _ in range(int(rng.integers(1, 40))):
+            deep = [deep]
+        _set(meta, path, deep)
+        return f"meta nest {path}"
+    if op == 5 and isinstance(val, list) and val:
+        val.append(json.loads(json.dumps(val[int(rng.integers(len(val)))])))
+        return f"meta append {path}"
+    if isinstance(val, float):
+        _set(meta, path, int(val) if math.isfinite(val) else 0)
+        return f"meta int {path}"
+    if isinstance(val, int) and not isinstance(val, bool):
+        _set(meta, path, float(val) + 0.5)
+        return f"meta float {path}"
+    _set(meta, path, HOSTILE[int(rng.integers(len(HOSTILE)))])
+    return f"meta {path} = hostile"
+
+
+def mutate_bytes(data: bytes, rng: np.random.Generator) -> tuple[bytes, str]:
+    """One change to a section's bytes → (new bytes, description)."""
+    b = bytearray(data)
+    n = len(b)
+    op = int(rng.integers(9)) if n else 6
+    at = int(rng.integers(n)) if n else 0
+    if op == 0:
+        b[at] = int(rng.integers(256))
+        return bytes(b), f"byte {at}"
+    if op == 1:
+        b[at] ^= 1 << int(rng.integers(8))
+        return bytes(b), f"bit {at}"
+    if op == 2:
+        w = [1, 2, 4, 8][int(rng.integers(4))]
+        v = [0, 1, 2 ** (8 * w) - 1, 2 ** (8 * w - 1), 2 ** (8 * w - 1) - 1, int(rng.integers(2 ** 16))][int(rng.integers(6))]
+        v %= 2 ** (8 * w)
+        b[at:at + w] = v.to_bytes(w, "little")[:max(0, min(w, n - at))]
+        return bytes(b), f"int{8 * w} {at} = {v}"
+    if op == 3:
+        ln = int(rng.integers(1, 65))
+        b[at:at + ln] = bytes([0 if rng.integers(2) else 255]) * len(b[at:at + ln])
+        return bytes(b), f"fill {at}+{ln}"
+    if op == 4:
+        return bytes(b[:at]), f"cut {at}"
+    if op == 5:
+        ln = int(rng.integers(1, 65))
+        return bytes(b[:at] + b[at + ln:]), f"delete {at}+{ln}"
+    if op == 6:
+        ln = int(rng.integers(1, 65))
+        return bytes(b[:at] + rng.integers(0, 256, ln, dtype=np.uint8).tobytes() + b[at:]), f"insert {at}+{ln}"
+    if op == 7:
+        ln = int(rng.integers(1, 65))
+        return bytes(b[:at] + b[at:at + ln] + b[at:]), f"repeat {at}+{ln}"
+    src = int(rng.integers(n))
+    ln = int(rng.integers(1, 65))
+    piece = b[src:src + ln]
+    b[at:at + len(piece)] = piece
+    return bytes(b[:n]), f"move {src}->{at}+{ln}"
+
+
+def run_lengths(index: bytes) -> np.ndarray:
+    """Byte lengths of the block runs from an ``rlfc.index`` section (zlib-coded lengths in
+    dcp files, raw u32 offsets otherwise)."""
+    try:
+        return np.frombuffer(zlib.decompress(index), "<u4").astype(np.int64)
+    except zlib.error:
+        return np.diff(np.frombuffer(index[:len(index) // 4 * 4], "<u4").astype(np.int64))
+
+
+def mutate_run(meta: dict, secs: list, rng: np.random.Generator) -> str | None:
+    """A change inside one block run of an RLFC ``rlfc.blocks`` section (its bitmap, a block
+    header or the first payload bytes), or None when the file has no such runs."""
+    names = [n for n, _ in secs]
+    if "rlfc.blocks" not in names or "rlfc.index" not in names:
+        return None
+    try:
+        lengths = run_lengths(dict(secs)["rlfc.index"])
+        lay = meta["config"]["layout"]
+        nbm, hs = int(lay["bitmap_bytes"]), int(lay["off_bytes"]) + 3 * int(meta["config"]["planes"])
+    except (zlib.error, KeyError, TypeError, ValueError):
+        return None
+    if (lengths < 0).any():
+        return None
+    runs = np.flatnonzero(lengths)
+    if runs.size == 0:
+        return None
+    r = int(runs[rng.integers(runs.size)])
+    start = int(lengths[:r].sum())
+    i = names.index("rlfc.blocks")
+    b = bytearray(secs[i][1])
+    where = int(rng.integers(3))
+    if where == 0:                                   # the bitmap
+        at = start + int(rng.integers(nbm))
+        val = [0xFF, 0, int(rng.integers(256))][int(rng.integers(3))]
+    else:                                            # a header field or an early payload byte
+        at = start + nbm + int(rng.integers(max(1, min(int(lengths[r]) - nbm, 4 * hs))))
+        val = [0xFF, 0, int(rng.integers(256)), -1][int(rng.integers(4))]
+    if at >= len(b):                                 # the section was already cut shorter
+        return None
+    b[at] = b[at] ^ 1 if val < 0 else val
+    secs[i] = ("rlfc.blocks", bytes(b))
+    return f"rlfc.blocks run {r}: byte {at - start} of the run"
+
+
+def make_mutant(blob: bytes, seed: int) -> tuple[bytes, list[str]]:
+    """A mutant of a valid file with valid checksums, and what was changed."""
+    rng = np.random.default_rng(seed)
+    meta, secs = split_file(blob)
+    secs = list(secs)
+    what = []
+    for _ in range(int(rng.integers(1, 4))):
+        k = int(rng.integers(10))
+        if k < 3:
+            what.append(mutate_meta(meta, rng))
+        elif k == 3 and (d := mutate_run(meta, secs, rng)) is not None:
+            what.append(d)
+        elif k < 9 and secs:
+            i = int(rng.integers(len(secs)))
+            data, d = mutate_bytes(secs[i][1], rng)
+            secs[i] = (secs[i][0], data)
+            what.append(f"{secs[i][0]}: {d}")
+        elif secs:
+            i = int(rng.integers(len(secs)))
+            op = int(rng.integers(3))
+            if op == 0:
+                what.append(f"drop section {secs.pop(i)[0]}")
+            elif op == 1:
+                j = int(rng.integers(len(secs)))
+                secs[i], secs[j] = secs[j], secs[i]
+                what.append(f"swap sections {i},{j}")
+            else:
+                j = int(rng.integers(len(secs)))
+                what.append(f"section {secs[j][0]} := {secs[i][0]}")
+                secs[j] = (secs[j][0], secs[i][1])
+    try:
+        mj = json.dumps(meta, allow_nan=False).encode()
+    except (ValueError, TypeError):
+        mj = b"{}"
+    return b"".join(bytes(p) for p in build_container(mj, secs)), what
+
+
+# -- decode every way ------------------------------------------------------------------------
+def _sample_blocks(d, rng, k=12):
+    n = d.rows * d.cols
+    return (rng.integers(0, n, k), rng.integers(0, d.nby, k), rng.integers(0, d.nbx, k))
+
+
+def decode_everything(blob: bytes, path: str, seed: int) -> None:
+    """Decode a file along every path; raises LfcError (typed), AssertionError (paths
+    disagree) or anything else (a defect)."""
+    from formats.lfcfile import open_lfc
+    from formats.registry import open_decoder
+    rng = np.random.default_rng(seed)
+    files = [open_lfc(path), open_lfc(blob, name="<mutant>"),
+             open_lfc(ByteRangeSource(lambda a, b: blob[a:b], len(blob)), name="<ranges>")]
+    try:
+        files[0].container.verify_all()
+        decs = [open_decoder(f) for f in files]
+        d = decs[0]
+        if f"{d.info().get('codec')}" == "lfn" or not hasattr(d, "nby"):
+            for level in sorted({0, d.levels}):
+                ref = d.decode_all(level)
+                assert np.array_equal(ref, decs[1].decode_all(level)), "lfn mmap != buffer"
+                r, c = int(rng.integers(d.rows)), int(rng.integers(d.cols))
+                assert np.array_equal(ref[r, c], decs[2].decode_view(r, c, level)), "lfn view != all"
+            return
+        from rlfc.torch_decode import TorchBlockDecoder
+        B = d.block_size
+        for level in sorted({0, d.levels}):
+            full = d.decode_all(level)
+            assert full.shape == (d.rows, d.cols, d.height, d.width, d.channels) and full.dtype == d.dtype
+            assert np.array_equal(full, decs[1].decode_all(level)), "mmap != buffer (full)"
+            v, by, bx = _sample_blocks(d, rng)
+            got = {"mmap": d.decode_blocks(v, by, bx, level), "ranges": decs[2].decode_blocks(v, by, bx, level)}
+            got["torch"] = TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level)
+            for name, blocks in got.items():
+                assert np.array_equal(blocks, got["mmap"]), f"batched {name} != mmap"
+            for i in range(min(4, v.size)):
+                r, c = divmod(int(v[i]), d.cols)
+                one = decs[2].decode_block(r, c, int(by[i]), int(bx[i]), level)
+                h, w = one.shape[:2]
+                crop = full[r, c, by[i] * B:by[i] * B + h, bx[i] * B:bx[i] * B + w]
+                assert np.array_equal(one, crop), "single block != full"
+                assert np.array_equal(got["mmap"][i, :h, :w], crop), "batched block != full"
+            r, c = int(rng.integers(d.rows)), int(rng.integers(d.cols))
+            assert np.array_equal(decs[2].decode_view(r, c, level), full[r, c]), "view != full"
+    finally:
+        for f in files:
+            f.close()
+
+
+def run_one(blob: bytes, seed: int, workdir: str) -> tuple[str, str]:
+    """(outcome, detail) of decoding one mutant in this process."""
+    from formats.errors import LfcError
+    path = os.path.join(workdir, "mutant.lfc")
+    with open(path, "wb") as fh:
+        fh.write(blob)
+    try:
+        decode_everything(blob, path, seed)
+        return "exact", ""
+    except LfcError as e:
+        return "typed", type(e).__name__
+    except AssertionError as e:
+        return "mismatch", str(e)
+    except MemoryError:
+        return "crash", "MemoryError"
+    except Exception as e:  # noqa: BLE001 - counting defects is the point
+        tb = traceback.extract_tb(e.__traceback__)[-1]
+        return "untyped", f"{type(e).__name__}: {e} at {Path(tb.filename).name}:{tb.lineno}"
+
+
+# -- worker process --------------------------------------------------------------------------
+def _worker(conn, mem_bytes: int, workdir: str) -> None:
+    import torch
+    torch.set_num_threads(1)
+    if mem_bytes:
+        resource.setrlimit(resource.RLIMIT_AS, (mem_bytes, mem_bytes))
+    while True:
+        job = conn.recv()
+        if job is None:
+            return
+        blob, seed = job
+        outcome, detail = run_one(blob, seed, workdir)
+        conn.send((outcome, detail, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+
+
+class Runner:
+    """Feeds mutants to a worker process under an address-space limit, restarting it after a
+    crash or a hang."""
+
+    def __init__(self, mem_mib: int = 3072, deadline_s: float = 60.0):
+        self.mem = mem_mib << 20
+        self.deadline = deadline_s
+        self.ctx = mp.get_context("spawn")
+        self.tmp = tempfile.TemporaryDirectory(prefix="lfcfuzz")
+        self.proc = None
+        self.peak_kib = 0
+
+    def _start(self):
+        self.conn, child = self.ctx.Pipe()
+        self.proc = self.ctx.Process(target=_worker, args=(child, self.mem, self.tmp.name), daemon=True)
+        self.proc.start()
+
+    def run(self, blob: bytes, seed: int) -> tuple[str, str]:
+        if self.proc is None or not self.proc.is_alive():
+            self._start()
+        self.conn.send((blob, seed))
+        if not self.conn.poll(self.deadline):
+            self.proc.kill()
+            self.proc.join()
+            self.proc = None
+            return "hang", f"over {self.deadline:.0f} s"
+        try:
+            outcome, detail, rss = self.conn.recv()
+        except EOFError:
+            self.proc.join()
+            code = self.proc.exitcode
+            self.proc = None
+            return "crash", f"worker exit code {code}"
+        self.peak_kib = max(self.peak_kib, rss)
+        return outcome, detail
+
+    def close(self):
+        if self.proc is not None and self.proc.is_alive():
+            self.conn.send(None)
+            self.proc.join(10)
+        self.tmp.cleanup()
+
+
+def fuzz(n: int | None = None, minutes: float | None = None, seed: int = 0, mem_mib: int = 3072,
+         files: list[Path] | None = None, deadline_s: float = 60.0, log=None) -> dict:
+    """Run ``n`` mutants (or as many as fit in ``minutes``), cycling over the corpus files.
+
+    Returns:
+        {"tried", "typed", "exact", "untyped", "mismatch", "crash", "hang", "peak_rss_mib",
+        "per_file": {...}, "defects": [{"file", "seed", "what", "outcome", "detail"}]}.
+    """
+    files = files or corpus_files()
+    blobs = [(p.name, p.read_bytes()) for p in files]
+    counts = dict.fromkeys(("tried", "typed", "exact") + DEFECTS, 0)
+    per_file = {name: dict.fromkeys(("tried", "typed", "exact") + DEFECTS, 0) for name, _ in blobs}
+    defects = []
+    runner = Runner(mem_mib, deadline_s)
+    t_end = time.monotonic() + 60 * minutes if minutes else None
+    i = 0
+    try:
+        while (n is None or i < n) and (t_end is None or time.monotonic() < t_end):
+            name, blob = blobs[i % len(blobs)]
+            s = seed * 1_000_003 + i
+            mutant, what = make_mutant(blob, s)
+            outcome, detail = runner.run(mutant, s)
+            for c in (counts, per_file[name]):
+                c["tried"] += 1
+                c[outcome] += 1
+            if outcome in DEFECTS:
+                defects.append({"file": name, "seed": s, "what": what, "outcome": outcome, "detail": detail})
+                if log:
+                    log(f"{outcome}: {name} seed {s} {what}: {detail}")
+            i += 1
+    finally:
+        runner.close()
+    return {**counts, "peak_rss_mib": round(runner.peak_kib / 1024, 1), "per_file": per_file, "defects": defects}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m tools.fuzz", description=__doc__.split("\n\n")[0])
+    ap.add_argument("--minutes", type=float, default=None, help="run for this long (default: --count)")
+    ap.add_argument("--count", type=int, default=None, help="mutants to try (default 500 without --minutes)")
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--mem-mib", type=int, default=3072, help="address-space limit of the worker (MiB)")
+    ap.add_argument("--out", default=None, help="write the report as JSON here")
+    a = ap.parse_args(argv)
+    count = a.count if a.count is not None or a.minutes else 500
+    rep = fuzz(n=count, minutes=a.minutes, seed=a.seed, mem_mib=a.mem_mib, log=print)
+    summary = {k: rep[k] for k in ("tried", "typed", "exact") + DEFECTS + ("peak_rss_mib",)}
+    print(json.dumps(summary))
+    if a.out:
+        Path(a.out).write_text(json.dumps(rep, indent=1))
+    return 1 if any(rep[k] for k in DEFECTS) else 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
