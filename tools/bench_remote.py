@@ -1,0 +1,83 @@
+"""Remote reading over a real local HTTP server: time to open, to the first block, to a view,
+and the bytes and requests each costs, with an added per-request latency standing for a
+network.
+
+Usage:
+    python -m tools.bench_remote FILE.lfc [--latency-ms 20] [--blocks 200] [--out DIR]
+
+Serves FILE's folder with :class:`formats.serve.FileServer` on 127.0.0.1 (byte ranges, ETags,
+the latency added to every answer) and reads it with ``open_lfc(url)``.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from formats.lfcfile import open_lfc
+from formats.registry import open_decoder
+from formats.remote import RemoteSource
+from formats.serve import FileServer
+from tools.common import log, machine
+
+
+def run(path: Path, latency_ms: float, n_blocks: int, cache_mib: float, page: int | None = None) -> dict:
+    size = path.stat().st_size
+    out = {"file": path.name, "bytes": size, "latency_ms": latency_ms, "cache_mib": cache_mib, "page": page,
+           "machine": machine()}
+    with FileServer(path.parent, latency_s=latency_ms / 1000) as srv:
+        url = srv.url_of(path.name)
+        t0 = time.perf_counter()
+        src = RemoteSource(url, cache_bytes=int(cache_mib * (1 << 20)), page=page)
+        d = open_decoder(open_lfc(src, name=url))
+        out["open_s"] = time.perf_counter() - t0
+        out["open_requests"], out["open_bytes"] = src.wire_requests, src.wire_bytes
+        rng = np.random.default_rng(0)
+        n = d.rows * d.cols
+        if hasattr(d, "nby"):
+            req, byt, ts = [], [], []
+            for i in range(n_blocks):
+                v, by, bx = int(rng.integers(n)), int(rng.integers(d.nby)), int(rng.integers(d.nbx))
+                r0, b0 = src.wire_requests, src.wire_bytes
+                t = time.perf_counter()
+                d.decode_block(v // d.cols, v % d.cols, by, bx)
+                ts.append(time.perf_counter() - t)
+                req.append(src.wire_requests - r0)
+                byt.append(src.wire_bytes - b0)
+            out["first_block_s"] = ts[0]
+            out["block_ms_p50"] = 1e3 * float(np.median(ts))
+            out["block_requests_mean"] = float(np.mean(req))
+            out["block_bytes_mean"] = float(np.mean(byt))
+        t = time.perf_counter()
+        d.decode_view(d.rows // 2, d.cols // 2)
+        out["view_s"] = time.perf_counter() - t
+        t = time.perf_counter()
+        d.decode_all()
+        out["all_s"] = time.perf_counter() - t
+        out["total_wire_bytes"], out["total_requests"] = src.wire_bytes, src.wire_requests
+        out["peak_cached_bytes"] = src.cached_bytes
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m tools.bench_remote", description=__doc__.split("\n\n")[0])
+    ap.add_argument("file")
+    ap.add_argument("--latency-ms", type=float, default=20.0)
+    ap.add_argument("--blocks", type=int, default=200)
+    ap.add_argument("--cache-mib", type=float, default=64.0)
+    ap.add_argument("--page", type=int, default=None, help="page size in bytes (default 64 KiB)")
+    ap.add_argument("--out", default=None)
+    a = ap.parse_args(argv)
+    res = run(Path(a.file), a.latency_ms, a.blocks, a.cache_mib, a.page)
+    log(json.dumps(res, indent=1))
+    if a.out:
+        Path(a.out).mkdir(parents=True, exist_ok=True)
+        (Path(a.out) / "remote.json").write_text(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
