@@ -201,6 +201,46 @@ def _save_npy(path: Path, arr: np.ndarray) -> None:
             tmp.unlink()
 
 
+def _floats(text: str, n: int, what: str) -> tuple:
+    try:
+        vals = tuple(float(x) for x in text.split(","))
+    except ValueError:
+        vals = ()
+    if len(vals) != n or not all(np.isfinite(vals)):
+        raise ParameterError(f"{what} must be {n} comma-separated numbers, got {text!r}")
+    return vals
+
+
+def cmd_render(a) -> int:
+    from .imageio import write_image
+    from .lfcfile import open_lfc
+    from .registry import open_decoder
+
+    out = Path(a.out)
+    if out.suffix.lower() != ".png":
+        raise ParameterError(f"{out}: render writes PNG files (name it .png)")
+    if not out.parent.exists():
+        raise ParameterError(f"{out}: folder {out.parent} does not exist")
+    with open_lfc(a.input) as f:
+        d = open_decoder(f)
+        if not hasattr(d, "renderer"):
+            raise ParameterError(f"{a.input}: novel views are rendered from RLFC grids (this is {f.codec}); "
+                                 f"an LFN renders any ray: decode --view")
+        ren = d.renderer()
+        t0 = time.perf_counter()
+        if a.quilt:
+            cols, rows = _grid(a.quilt)
+            img = ren.quilt(cols, rows, a.focus)
+        else:
+            s, t = _floats(a.at, 2, "--at") if a.at else ((d.rows - 1) / 2, (d.cols - 1) / 2)
+            img = ren.render(s, t, a.focus, a.aperture)
+        write_image(out, img)
+        if not a.quiet:
+            print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
+                  f"{ren.blocks_decoded} blocks decoded")
+    return 0
+
+
 def cmd_serve(a) -> int:
     from .serve import FileServer
 
@@ -222,7 +262,8 @@ def cmd_serve(a) -> int:
 def _grid(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d{1,5})\s*[xX]\s*(\d{1,5})\s*", text)
     if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
-        raise ParameterError(f"--grid must be ROWSxCOLS with positive integers, e.g. 9x9; got {text!r}")
+        raise ParameterError(f"expected ROWSxCOLS (COLSxROWS for --quilt) with positive integers, e.g. 9x9; "
+                             f"got {text!r}")
     return int(m.group(1)), int(m.group(2))
 
 
@@ -347,6 +388,24 @@ def build_parser() -> argparse.ArgumentParser:
                    help="0 = full quality (default); larger = coarser, up to the file's levels (lfcodec info)")
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_decode)
+
+    r = sub.add_parser("render", help="render a novel view (or a refocused view, or a quilt) from an .lfc grid",
+                       description="Render the view at a continuous grid position by disparity-compensated "
+                                   "interpolation of the decoded views around it, decoding only the blocks the "
+                                   "frame needs. IN.lfc may be a URL.")
+    r.add_argument("input")
+    r.add_argument("out", help="output PNG")
+    r.add_argument("--at", metavar="S,T", default=None,
+                   help="camera position: row S and column T in view units (view (r,c) is at r,c); default the "
+                        "grid centre")
+    r.add_argument("--focus", type=float, default=None,
+                   help="disparity in px per view step to focus on (default: the file's disparity maps)")
+    r.add_argument("--aperture", type=float, default=0.0,
+                   help="synthetic-aperture radius in view steps (0 = pinhole; >0 refocuses at --focus)")
+    r.add_argument("--quilt", metavar="COLSxROWS", default=None,
+                   help="write a quilt of COLS*ROWS views along the middle row (light-field displays)")
+    r.add_argument("--quiet", action="store_true")
+    r.set_defaults(func=cmd_render)
 
     v = sub.add_parser("serve", help="serve a folder over HTTP with byte ranges (for remote reading)",
                        description="Serve the files of a folder over HTTP with byte ranges and ETags, so that "

@@ -132,6 +132,12 @@ class RlfcDecoder(Decoder):
         out = self.decode_views(None, level)
         return out.reshape(self.rows, self.cols, *out.shape[1:])
 
+    def renderer(self, **kw):
+        """A :class:`rlfc.render.Renderer` of novel views over this decoder (grid files)."""
+        from .render import Renderer
+
+        return Renderer(self, **kw)
+
     def info(self) -> dict:
         return {"codec": CODEC_ID, "profile": self.profile, "levels": self.levels, "block_size": self.block_size,
                 "summary": f"RLFC profile {self.profile}, {self.block_size}x{self.block_size}-px blocks, levels "

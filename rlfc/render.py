@@ -1,0 +1,175 @@
+"""Novel views from a compressed grid light field: disparity-compensated interpolation of the
+captured views around a camera position, fetching only the blocks a frame needs.
+
+A camera is a continuous position (row s, column t) on the grid's plane, in view units
+(view (r, c) sits at (r, c)). Pixel (y, x) of the new view takes, from a captured view at
+(r, c), the sample at (y + d·(s − r), x + d·(t − c)), d the scene's disparity at that pixel in
+pixels per view step (the sign convention of the tx prediction: view v samples key k at
+y + d·(pos_v − pos_k)), bilinearly; the views are blended with weights that fall off with their
+distance to (s, t) (bilinear between the 4 around it; a disc of radius ``aperture`` view steps
+for synthetic-aperture refocusing, where d is the ``focus`` disparity everywhere).
+
+Geometry: the ``tx`` profile's disparity maps (one per 8×8 block and cell of views, the ones its
+prediction uses); other files, or ``focus=`` given, use one disparity for the whole frame.
+Blocks come from the batched random-access decoder through an LRU cache of decoded blocks.
+"""
+from __future__ import annotations
+
+import collections
+
+import numpy as np
+
+from formats.errors import ParameterError
+from formats.pixels import from_planes
+
+
+class Renderer:
+    """Renders views at continuous grid positions from an :class:`rlfc.decoder.RlfcDecoder`.
+
+    Args:
+        decoder: an opened RLFC decoder of a grid light field.
+        cache_blocks: decoded blocks kept (LRU); a frame's blocks beyond it are decoded anyway.
+        margin: how far outside the grid (in view steps) a camera may go (extrapolation).
+
+    Attributes:
+        blocks_decoded, blocks_requested: counters over the renderer's life (hit rate =
+            1 − decoded / requested).
+    """
+
+    def __init__(self, decoder, cache_blocks: int = 8192, margin: float = 0.5):
+        self.d = decoder
+        scene = decoder.file.meta.get("scene", {}) if hasattr(decoder, "file") else {}
+        if isinstance(scene, dict) and scene.get("layout") == "posed":
+            raise ParameterError("novel views are rendered on grids of parallel cameras; this capture is posed "
+                                 "(decode its views, or train an LFN)")
+        self.cache: collections.OrderedDict = collections.OrderedDict()
+        self.cache_blocks = int(cache_blocks)
+        self.margin = float(margin)
+        self.blocks_decoded = 0
+        self.blocks_requested = 0
+        core = decoder.core
+        self._maps = None
+        if hasattr(core, "lay") and getattr(core, "disp", None) is not None and core.disp.size:
+            lay = core.lay
+            users = np.flatnonzero(lay.cell >= 0)
+            self._maps = (core.disp.astype(np.float64) / 16.0, lay.cell, lay.positions.astype(np.float64), users,
+                          core.nby8, core.nbx8)
+
+    # -- geometry --------------------------------------------------------------------------
+    def disparity(self, s: float, t: float) -> np.ndarray | None:
+        """(H, W) disparity in pixels per view step at camera (s, t): the map of the cell of the
+        nearest view predicted from key views, upsampled per 8×8 block; None without maps."""
+        if self._maps is None:
+            return None
+        disp, cell, pos, users, ny, nx = self._maps
+        near = users[np.argmin(np.hypot(pos[users, 0] - s, pos[users, 1] - t))]
+        m = disp[cell[near]].reshape(ny, nx)
+        H, W = self.d.height, self.d.width
+        return np.repeat(np.repeat(m, 8, 0), 8, 1)[:H, :W]
+
+    # -- blocks ----------------------------------------------------------------------------
+    def _blocks(self, view: int, need: np.ndarray) -> dict:
+        """Decoded planes of blocks ``need`` ((k, 2) by, bx) of ``view``: {(by, bx): (B, B, P)}."""
+        out, miss = {}, []
+        for by, bx in need.tolist():
+            key = (view, by, bx)
+            self.blocks_requested += 1
+            blk = self.cache.get(key)
+            if blk is None:
+                miss.append((by, bx))
+            else:
+                self.cache.move_to_end(key)
+                out[(by, bx)] = blk
+        if miss:
+            m = np.asarray(miss, np.int64)
+            got = self.d.decode_blocks(np.full(len(miss), view), m[:, 0], m[:, 1], planes=True)
+            self.blocks_decoded += len(miss)
+            for (by, bx), blk in zip(miss, got):
+                out[(by, bx)] = blk
+                self.cache[(view, by, bx)] = blk
+            while len(self.cache) > self.cache_blocks:
+                self.cache.popitem(last=False)
+        return out
+
+    def _sample(self, view: int, Y: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """Bilinear samples (H, W, P) float of one view's planes at pixel positions Y, X (edge-clamped)."""
+        d = self.d
+        B = d.block_size
+        y0 = np.clip(np.floor(Y), 0, d.height - 1).astype(np.int64)
+        x0 = np.clip(np.floor(X), 0, d.width - 1).astype(np.int64)
+        y1 = np.minimum(y0 + 1, d.height - 1)
+        x1 = np.minimum(x0 + 1, d.width - 1)
+        fy = np.clip(Y - y0, 0, 1)[..., None]
+        fx = np.clip(X - x0, 0, 1)[..., None]
+        keys = np.unique(np.concatenate([(ya // B) * d.nbx + xa // B for ya in (y0, y1) for xa in (x0, x1)],
+                                        axis=None))
+        need = np.stack([keys // d.nbx, keys % d.nbx], 1)
+        blocks = self._blocks(view, need)
+        img = np.zeros((d.nby * B, d.nbx * B, d.P), np.float32)
+        for (by, bx), blk in blocks.items():
+            img[by * B:(by + 1) * B, bx * B:(bx + 1) * B] = blk.reshape(B, B, -1)
+        a, b = img[y0, x0], img[y0, x1]
+        c, e = img[y1, x0], img[y1, x1]
+        return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + e * fx) * fy
+
+    # -- frames ----------------------------------------------------------------------------
+    def _sources(self, s: float, t: float, aperture: float) -> list[tuple[int, int, float]]:
+        R, C = self.d.rows, self.d.cols
+        if aperture > 0:
+            rr, cc = np.mgrid[0:R, 0:C]
+            dist = np.hypot(rr - s, cc - t)
+            sel = np.flatnonzero(dist.ravel() <= aperture)
+            if sel.size == 0:
+                sel = np.array([int(np.argmin(dist))])
+            w = np.maximum(1.0 - dist.ravel()[sel] / (aperture + 1.0), 1e-3)
+            return [(int(i) // C, int(i) % C, float(x)) for i, x in zip(sel, w / w.sum())]
+        r0, c0 = int(np.clip(np.floor(s), 0, R - 1)), int(np.clip(np.floor(t), 0, C - 1))
+        r1, c1 = min(r0 + 1, R - 1), min(c0 + 1, C - 1)
+        fs = float(np.clip(s - r0, 0, 1)) if r1 > r0 else 0.0
+        ft = float(np.clip(t - c0, 0, 1)) if c1 > c0 else 0.0
+        out = {}
+        for r, c, w in ((r0, c0, (1 - fs) * (1 - ft)), (r0, c1, (1 - fs) * ft), (r1, c0, fs * (1 - ft)), (r1, c1, fs * ft)):
+            if w > 0:
+                out[(r, c)] = out.get((r, c), 0.0) + w
+        return [(r, c, w) for (r, c), w in out.items()]
+
+    def render(self, s: float, t: float, focus: float | None = None, aperture: float = 0.0) -> np.ndarray:
+        """The view at grid position (s, t): (H, W, C) pixels of the file's dtype.
+
+        Args:
+            s, t: row and column position in view units (0 … rows−1, 0 … cols−1, ± margin).
+            focus: disparity in pixels per view step to use everywhere (refocusing; default: the
+                file's disparity maps, or 0 when it has none).
+            aperture: synthetic-aperture radius in view steps (0 = a pinhole view).
+        """
+        d = self.d
+        for name, v, n in (("s", s, d.rows), ("t", t, d.cols)):
+            if not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) \
+                    or not -self.margin <= v <= n - 1 + self.margin:
+                raise ParameterError(f"camera {name}={v!r} is outside the grid (0..{n - 1} ± {self.margin:g} views)")
+        if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
+            raise ParameterError("aperture must be >= 0 and focus finite")
+        disp = self.disparity(s, t) if focus is None and aperture == 0 else None
+        if disp is None:
+            disp = np.full((d.height, d.width), float(focus or 0.0))
+        yy, xx = np.mgrid[0:d.height, 0:d.width].astype(np.float64)
+        acc = np.zeros((d.height, d.width, d.P), np.float64)
+        for r, c, w in self._sources(s, t, aperture):
+            acc += w * self._sample(r * d.cols + c, yy + disp * (s - r), xx + disp * (t - c))
+        return from_planes(np.rint(acc).astype(np.int32), d.dtype)
+
+    def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
+        """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row
+        from left to right (bottom-left first, as Looking Glass quilts are laid out), as one
+        (rows·H, cols·W, C) image."""
+        n = rows * cols
+        if not 1 <= n <= 256:
+            raise ParameterError("a quilt has 1..256 views")
+        d = self.d
+        ts = np.linspace(0, d.cols - 1, n) if n > 1 else np.array([(d.cols - 1) / 2])
+        views = [self.render((d.rows - 1) / 2, float(t), focus) for t in ts]
+        out = np.zeros((rows * d.height, cols * d.width, d.channels), d.dtype)
+        for i, v in enumerate(views):
+            qr, qc = rows - 1 - i // cols, i % cols
+            out[qr * d.height:(qr + 1) * d.height, qc * d.width:(qc + 1) * d.width] = v
+        return out
