@@ -28,7 +28,8 @@ class Renderer:
 
     Args:
         decoder: an opened RLFC decoder of a grid light field.
-        cache_blocks: decoded blocks kept (LRU); a frame's blocks beyond it are decoded anyway.
+        cache_mib: memory for decoded blocks, kept per view (the least recently used views go
+            first; a frame's views are decoded whatever the budget).
         margin: how far outside the grid (in view steps) a camera may go (extrapolation).
 
     Attributes:
@@ -36,14 +37,15 @@ class Renderer:
             1 − decoded / requested).
     """
 
-    def __init__(self, decoder, cache_blocks: int = 8192, margin: float = 0.5):
+    def __init__(self, decoder, cache_mib: float = 256.0, margin: float = 0.5):
         self.d = decoder
         scene = decoder.file.meta.get("scene", {}) if hasattr(decoder, "file") else {}
         if isinstance(scene, dict) and scene.get("layout") == "posed":
             raise ParameterError("novel views are rendered on grids of parallel cameras; this capture is posed "
                                  "(decode its views, or train an LFN)")
         self.cache: collections.OrderedDict = collections.OrderedDict()
-        self.cache_blocks = int(cache_blocks)
+        view_bytes = decoder.nby * decoder.nbx * decoder.block_size ** 2 * decoder.P * 4
+        self.cache_views = int(cache_mib * (1 << 20) // view_bytes)
         self.margin = float(margin)
         self.blocks_decoded = 0
         self.blocks_requested = 0
@@ -68,31 +70,23 @@ class Renderer:
         return np.repeat(np.repeat(m, 8, 0), 8, 1)[:H, :W]
 
     # -- blocks ----------------------------------------------------------------------------
-    def _blocks(self, view: int, need: np.ndarray) -> dict:
-        """Decoded planes of blocks ``need`` ((k, 2) by, bx) of ``view``: {(by, bx): (B, B, P)}."""
-        out, miss = {}, []
-        for by, bx in need.tolist():
-            key = (view, by, bx)
-            self.blocks_requested += 1
-            blk = self.cache.get(key)
-            if blk is None:
-                miss.append((by, bx))
-            else:
-                self.cache.move_to_end(key)
-                out[(by, bx)] = blk
-        if miss:
-            m = np.asarray(miss, np.int64)
-            got = self.d.decode_blocks(np.full(len(miss), view), m[:, 0], m[:, 1], planes=True)
-            self.blocks_decoded += len(miss)
-            for (by, bx), blk in zip(miss, got):
-                out[(by, bx)] = blk
-                self.cache[(view, by, bx)] = blk
-            while len(self.cache) > self.cache_blocks:
+    def _view_buffer(self, view: int):
+        """(planes (nby·B, nbx·B, P) int32, filled (nby, nbx) bool) of a view, LRU-cached."""
+        got = self.cache.get(view)
+        if got is None:
+            d = self.d
+            B = d.block_size
+            got = (np.zeros((d.nby * B, d.nbx * B, d.P), np.int32), np.zeros((d.nby, d.nbx), bool))
+            self.cache[view] = got
+            while len(self.cache) > max(1, self.cache_views):
                 self.cache.popitem(last=False)
-        return out
+        else:
+            self.cache.move_to_end(view)
+        return got
 
     def _sample(self, view: int, Y: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """Bilinear samples (H, W, P) float of one view's planes at pixel positions Y, X (edge-clamped)."""
+        """Bilinear samples (H, W, P) float of one view's planes at pixel positions Y, X
+        (edge-clamped), decoding the blocks they touch that are not decoded yet (one batched call)."""
         d = self.d
         B = d.block_size
         y0 = np.clip(np.floor(Y), 0, d.height - 1).astype(np.int64)
@@ -101,13 +95,19 @@ class Renderer:
         x1 = np.minimum(x0 + 1, d.width - 1)
         fy = np.clip(Y - y0, 0, 1)[..., None]
         fx = np.clip(X - x0, 0, 1)[..., None]
-        keys = np.unique(np.concatenate([(ya // B) * d.nbx + xa // B for ya in (y0, y1) for xa in (x0, x1)],
-                                        axis=None))
-        need = np.stack([keys // d.nbx, keys % d.nbx], 1)
-        blocks = self._blocks(view, need)
-        img = np.zeros((d.nby * B, d.nbx * B, d.P), np.float32)
-        for (by, bx), blk in blocks.items():
-            img[by * B:(by + 1) * B, bx * B:(bx + 1) * B] = blk.reshape(B, B, -1)
+        img, filled = self._view_buffer(view)
+        need = np.zeros((d.nby, d.nbx), bool)
+        for ya in (y0, y1):
+            for xa in (x0, x1):
+                need[ya // B, xa // B] = True
+        miss = need & ~filled
+        self.blocks_requested += int(need.sum())
+        if miss.any():
+            by, bx = np.nonzero(miss)
+            got = d.decode_blocks(np.full(by.size, view), by, bx, planes=True)
+            img.reshape(d.nby, B, d.nbx, B, d.P)[by, :, bx, :, :] = got.reshape(-1, B, B, d.P)
+            filled[by, bx] = True
+            self.blocks_decoded += int(by.size)
         a, b = img[y0, x0], img[y0, x1]
         c, e = img[y1, x0], img[y1, x1]
         return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + e * fx) * fy

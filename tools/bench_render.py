@@ -30,7 +30,7 @@ def bench_scene(path: str, target: float) -> dict:
     t0 = time.perf_counter()
     d, blob = open_encoded(lf, encode(lf, EncodeOptions(target_psnr=target)))
     t_enc = time.perf_counter() - t0
-    ren = d.renderer(cache_blocks=1 << 16)
+    ren = d.renderer(cache_mib=1024)
     rows = {"render": [], "nearest": [], "blend": []}
     ss = {"render": [], "nearest": [], "blend": []}
     R, C = full.shape[:2]
@@ -51,7 +51,7 @@ def bench_scene(path: str, target: float) -> dict:
     cs, ct = (d.rows - 1) / 2, (d.cols - 1) / 2
     rad = min(d.rows, d.cols) / 3
     ang = np.linspace(0, 2 * np.pi, 60, endpoint=False)
-    ren2 = d.renderer(cache_blocks=1 << 16)
+    ren2 = d.renderer(cache_mib=1024)
     t = time.perf_counter()
     ren2.render(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
     first = time.perf_counter() - t

@@ -45,7 +45,7 @@ def j2k():
         a = v[..., 0] if v.shape[-1] == 1 else v
         return imagecodecs.jpeg2k_encode(a, level=0, reversible=True) if s == "lossless" else imagecodecs.jpeg2k_encode(a, level=float(s))
     return PerViewImageCodec("JPEG 2000 (per view)", enc, imagecodecs.jpeg2k_decode,
-                             [32, 35, 38, 40, 42, 45, 48, 50, "lossless"])
+                             [32, 35, 38, 40, 42, 45, 48, 50, 53, 56, 60, "lossless"])
 
 
 def jxl():

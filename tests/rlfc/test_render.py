@@ -43,7 +43,7 @@ def test_rendered_missing_views_beat_nearest_and_blending(leave_out):
 
 def test_captured_positions_are_the_decoded_views_and_blocks_are_cached(leave_out):
     _, d, _ = leave_out
-    ren = d.renderer(cache_blocks=10_000)
+    ren = d.renderer(cache_mib=64)
     assert (ren.render(1, 2) == d.decode_view(1, 2)).all()
     ren.render(0.5, 0.5)
     decoded = ren.blocks_decoded
