@@ -52,6 +52,26 @@ class TrainOptions:
     time_limit_s: float | None = None
     history: list = field(default_factory=list)
 
+    def __post_init__(self):
+        for k, lo, hi in (("steps", 1, 10 ** 8), ("batch", 1, 1 << 22), ("holdout", 0, 1 << 16),
+                          ("checkpoint_every", 1, 10 ** 8)):
+            v = getattr(self, k)
+            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
+                raise ParameterError(f"--{k.replace('_', '-')} must be an integer within {lo}..{hi}, got {v!r}")
+        if not (isinstance(self.lr, (int, float)) and 0 < self.lr <= 1):
+            raise ParameterError(f"--lr must be within (0, 1], got {self.lr!r}")
+        if self.time_limit_s is not None and not self.time_limit_s > 0:
+            raise ParameterError(f"time limit must be > 0 s, got {self.time_limit_s!r}")
+        try:
+            dev = torch.device(self.device)
+        except (RuntimeError, TypeError):
+            raise ParameterError(f"--device must be cpu or cuda (or cuda:N), got {self.device!r}") from None
+        if dev.type not in ("cpu", "cuda"):
+            raise ParameterError(f"--device must be cpu or cuda (or cuda:N), got {self.device!r}")
+        if dev.type == "cuda" and not torch.cuda.is_available():
+            raise ParameterError("--device cuda: this torch has no usable CUDA GPU (the README installs the CPU "
+                                 "wheel; install a CUDA build of torch on a machine with a GPU)")
+
 
 def split_views(lf: LightField, holdout: int) -> tuple[np.ndarray, np.ndarray]:
     """(train, held-out) flat view indices: every ``holdout``-th view is held out."""
@@ -91,6 +111,16 @@ def _save(path: Path, model, occ, opt, step: int) -> None:
 
 
 def _load(path: Path, model, occ, opt) -> int:
+    """Resume from a checkpoint; anything that is not a checkpoint of this network is a
+    ParameterError naming the file."""
+    try:
+        return _load_unchecked(path, model, occ, opt)
+    except (ValueError, OSError, KeyError, RuntimeError, TypeError, EOFError) as e:
+        raise ParameterError(f"{path}: not a checkpoint of this network ({str(e).splitlines()[0][:120]}); "
+                             f"remove it or give another --checkpoint") from None
+
+
+def _load_unchecked(path: Path, model, occ, opt) -> int:
     with np.load(path, allow_pickle=False) as z:
         model.load_state_dict({k[2:]: torch.from_numpy(z[k]) for k in z.files if k.startswith("m.")})
         if occ is not None:

@@ -215,3 +215,29 @@ def test_training_learns_the_sample_scene():
         psnr.append([row["psnr"] for row in rows])
     assert psnr[1][1] > psnr[0][1] + 8 and psnr[1][1] > 26, psnr
     assert psnr[1][0] > psnr[0][0] + 5, psnr      # the base network (1/8 scale) learned too
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--device", "gpu"], "--device"), (["--steps", "0"], "--steps"), (["--lr", "-1"], "--lr"),
+    (["--batch", "0"], "--batch"), (["--max-neurons", "0"], "max_neurons")])
+def test_train_bad_options_are_one_line_errors(tmp_path, capsys, args, needle):
+    from formats.cli import main
+
+    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "n.lfc"), "--quiet"] + args) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_train_refuses_a_file_that_is_not_a_checkpoint_and_cuda_without_gpu(tmp_path, capsys):
+    import torch
+
+    from formats.cli import main
+
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"not a checkpoint")
+    args = ["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "n.lfc"), "--quiet", "--steps", "2"]
+    assert main(args + ["--checkpoint", str(junk)]) == 2
+    assert "not a checkpoint" in capsys.readouterr().err and junk.read_bytes() == b"not a checkpoint"
+    if not torch.cuda.is_available():
+        assert main(args + ["--device", "cuda"]) == 2
+        assert "CUDA" in capsys.readouterr().err
