@@ -586,11 +586,14 @@ class TxEncoder:
         ordered = streams
         intra_keys = [k for k in ck if self.intra[k]]
         imgs = [res["keyimg"][k] for k in self.s.keys if k in res["keyimg"]]
+        # one entry per intra key (0 = that view is transform-coded) when any is JPEG 2000
+        key_images = tuple(len(res["keyimg"][k]) if k in res["keyimg"] else 0
+                           for k in self.s.keys if self.intra[k]) if imgs else ()
         thumbs = np.stack([res["thumbs"][k] for k in intra_keys]) if intra_keys else \
             np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
         lay = TxLayout(self.s.positions, tuple(self.s.keys), self.s.refs, self.s.weights, self.s.cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
-                       "j2k" if imgs else "tx", tuple(len(b) for b in imgs))
+                       "j2k" if imgs else "tx", key_images)
         lay.check("tx encoder")
         cfg = {**self.hdr.to_config(), "tx": lay.to_config(),
                "params": {**asdict(self.p), "step": res["step"]},

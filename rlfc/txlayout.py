@@ -34,7 +34,9 @@ class TxLayout:
         thumb_step16: quantizer step of intra views' thumbnails, 1/16 units.
         intra_codec: how intra key views are coded: "tx" (thumbnail + transform) or "j2k"
             (a JPEG 2000 codestream in ``tx.keyimg``, lengths in ``key_images``).
-        key_images: byte lengths of the JPEG 2000 intra key views, in key order.
+        key_images: with intra_codec "j2k", one entry per intra key view in key order: the byte
+            length of its JPEG 2000 codestream, or 0 when that view is transform-coded (its
+            rows are in ``tx.blocks`` like any key's).
         version: 2 (1: the first files, whose rANS tables were built in float arithmetic).
     """
 
@@ -112,16 +114,25 @@ class TxLayout:
             raise FormatError(f"{where}: bypass must be {planes} booleans")
         thumb = f.int("thumb_step16", 16, 1 << 24)
         intra_codec = f.str("intra_codec", choices=("tx", "j2k"))
-        key_images = f.int_list("key_images", max_len=n_views, lo=1, hi=1 << 30)
+        key_images = f.int_list("key_images", max_len=n_views, lo=0, hi=1 << 30)
         lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
                        intra_codec, tuple(key_images), version)
         lay.check(where)
         return lay
 
     @property
+    def image_of(self) -> dict:
+        """{intra key view: JPEG 2000 byte length} for the keys coded as JPEG 2000 (j2k files)."""
+        if self.intra_codec != "j2k":
+            return {}
+        ik = [k for k in self.keys if self.intra[k]]
+        return {k: n for k, n in zip(ik, self.key_images) if n > 0}
+
+    @property
     def coded_keys(self) -> list:
-        """Key views coded as row streams (all but JPEG 2000 intra views), in key order."""
-        return [k for k in self.keys if not (self.intra_codec == "j2k" and self.intra[k])]
+        """Key views coded as row streams (all but the JPEG 2000 intra views), in key order."""
+        img = self.image_of
+        return [k for k in self.keys if k not in img]
 
     def check(self, where: str) -> None:
         """Structural rules: references are key views decoded earlier (for keys) or key views

@@ -95,12 +95,13 @@ class TxDecoder(ProfileDecoder):
         self.row_of = {k: i for i, k in enumerate(ck)}
         self.key_start = off[:nk].reshape(len(ck), self.nby)
         self.key_end = off[1:nk + 1].reshape(len(ck), self.nby)
-        img_off = np.concatenate([[0], np.cumsum(lay.key_images)]).astype(np.int64)
+        img = lay.image_of                                    # JPEG 2000 intra keys, in key order
+        img_keys = [k for k in lay.keys if k in img]
+        img_off = np.concatenate([[0], np.cumsum([img[k] for k in img_keys])]).astype(np.int64)
         if c.info("tx.keyimg").length != img_off[-1]:
             raise FormatError(f"{name}: section 'tx.keyimg' has {c.info('tx.keyimg').length} bytes, the header "
                               f"says {img_off[-1]}")
-        self.img_of = {k: (int(img_off[i]), int(img_off[i + 1]))
-                       for i, k in enumerate(k for k in lay.keys if k not in self.row_of)}
+        self.img_of = {k: (int(img_off[i]), int(img_off[i + 1])) for i, k in enumerate(img_keys)}
         sv, sl = stream_order(coded)
         self.start = np.full((N0, nloc), -1, np.int64)
         self.end = np.full((N0, nloc), -1, np.int64)

@@ -105,3 +105,24 @@ def test_posed_capture_costs_no_more_than_per_view_jpeg2000():
     assert coded <= 1.03 * j2k, (coded, j2k)
     geometry = len(json.dumps(lf.geometry()))               # the poses travel in the file's metadata
     assert len(blob) <= j2k * 1.03 + geometry + 2048, (len(blob), j2k, geometry)
+
+
+def test_posed_capture_mixes_jpeg2000_and_transform_coded_views():
+    """Per view, the smaller of JPEG 2000 and the transform path: two synthetic gradients (the
+    thumbnail + transform path wins) beside two llff_statue views (JPEG 2000 wins) in one file,
+    decoded exactly as the encoder's closed loop, every decode path agreeing."""
+    from rlfc import encode
+    from tests.rlfc.helpers import check_agreement, make_lf, open_encoded
+
+    v = np.ascontiguousarray(read_scene(shared_scene("llff_statue")).views[0, :4, ::4, ::4])
+    yy, xx = np.mgrid[0:v.shape[1], 0:v.shape[2]]
+    for i in (0, 1):
+        v[i] = np.stack([xx * 255 // v.shape[2], yy * 255 // v.shape[1], np.full_like(xx, 90 + 40 * i)], -1)
+    lf = make_lf(v[None])
+    lf.layout = "posed"
+    e = encode(lf, profile="tx", step=20.0)
+    imgs = e.config["tx"]["key_images"]
+    assert e.config["tx"]["intra_codec"] == "j2k" and imgs[:2] == [0, 0] and min(imgs[2:]) > 0
+    d, _ = open_encoded(lf, e)
+    assert (d.decode_all() == e.decoded).all()
+    check_agreement(d, e.decoded.shape)
