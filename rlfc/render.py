@@ -93,8 +93,8 @@ class Renderer:
         x0 = np.clip(np.floor(X), 0, d.width - 1).astype(np.int64)
         y1 = np.minimum(y0 + 1, d.height - 1)
         x1 = np.minimum(x0 + 1, d.width - 1)
-        fy = np.clip(Y - y0, 0, 1)[..., None]
-        fx = np.clip(X - x0, 0, 1)[..., None]
+        fy = np.clip(Y - y0, 0, 1).astype(np.float32)[..., None]
+        fx = np.clip(X - x0, 0, 1).astype(np.float32)[..., None]
         img, filled = self._view_buffer(view)
         need = np.zeros((d.nby, d.nbx), bool)
         for ya in (y0, y1):
@@ -152,10 +152,14 @@ class Renderer:
         disp = self.disparity(s, t) if focus is None and aperture == 0 else None
         if disp is None:
             disp = np.full((d.height, d.width), float(focus or 0.0))
-        yy, xx = np.mgrid[0:d.height, 0:d.width].astype(np.float64)
-        acc = np.zeros((d.height, d.width, d.P), np.float64)
+        if getattr(self, "_grid", None) is None:
+            self._grid = np.mgrid[0:d.height, 0:d.width].astype(np.float32)
+        yy, xx = self._grid
+        disp = disp.astype(np.float32)
+        acc = np.zeros((d.height, d.width, d.P), np.float32)
         for r, c, w in self._sources(s, t, aperture):
-            acc += w * self._sample(r * d.cols + c, yy + disp * (s - r), xx + disp * (t - c))
+            acc += np.float32(w) * self._sample(r * d.cols + c, yy + disp * np.float32(s - r),
+                                                xx + disp * np.float32(t - c))
         return from_planes(np.rint(acc).astype(np.int32), d.dtype)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
