@@ -45,7 +45,9 @@ class _Http:
         req = urllib.request.Request(url, method="HEAD")
         with self._open(req) as r:
             size = r.headers.get("Content-Length")
-            self.tag = r.headers.get("ETag") or r.headers.get("Last-Modified")
+            etag, modified = r.headers.get("ETag"), r.headers.get("Last-Modified")
+            self.tag = etag or modified
+            self.condition = "If-Match" if etag else "If-Unmodified-Since"
             ranges = r.headers.get("Accept-Ranges", "")
         if size is None or not size.isdigit():
             raise FormatError(f"{url}: the server gives no Content-Length; byte-range reading needs one")
@@ -70,8 +72,7 @@ class _Http:
     def fetch(self, start: int, stop: int) -> bytes:
         headers = {"Range": f"bytes={start}-{stop - 1}"}
         if self.tag:
-            headers["If-Match" if not self.tag.startswith(("Mon", "Tue", "Wed", "Thu", "Fri", "Sat", "Sun"))
-                    else "If-Unmodified-Since"] = self.tag
+            headers[self.condition] = self.tag
         with self._open(urllib.request.Request(self.url, headers=headers)) as r:
             if r.status != 206:
                 raise FormatError(f"{self.url}: the server ignored the byte range (HTTP {r.status} instead of 206); "

@@ -17,10 +17,10 @@ import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
 
-from ..kernels import dequantize
+from ..kernels import bilinear, dequantize
 from ..transform import COEF_MAX, UNZIG, inverse
 from ..txlayout import MAX_REFS, TxLayout
-from ..txpredict import TB, planar, predict_tbs, upsample_thumb
+from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsyntax import MODE_INTRA, Parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
@@ -320,8 +320,7 @@ class TxDecoder(ProfileDecoder):
         win = self.kp[:, idx]                                                                     # (P, nt, R, 9, 9)
         fy = (Y & 15).astype(np.int32)[None, :, :, None, None]
         fx = (X & 15).astype(np.int32)[None, :, :, None, None]
-        h = win[..., :, :TB] * (16 - fx) + win[..., :, 1:] * fx
-        smp = (h[..., :TB, :] * (16 - fy) + h[..., 1:, :] * fy + 128) >> 8                        # (P, nt, R, 8, 8)
+        smp = bilinear(win, fy, fx, DISP_BITS)                                                   # (P, nt, R, 8, 8)
         pred = ((smp * w.astype(np.int32)[None, :, :, None, None]).sum(axis=2) + 32) >> 6        # (P, nt, 8, 8)
         out = np.moveaxis(pred, 0, -1).astype(np.int64)                                           # (nt, 8, 8, P)
         loc = by * self.nbx + bx
