@@ -35,6 +35,9 @@ class EncodeOptions:
         lossless: bit-exact decode.
         profile: a codec's variant ("auto" lets the codec pick).
         params: codec-specific options (the codec validates them).
+        workers: local worker processes for the codec's independent tasks (1 = this process).
+        scheduler: a dask.distributed scheduler address (``tcp://host:8786``) or Client to run
+            them on instead (:mod:`formats.parallel`). Neither changes the file written.
     """
 
     target_psnr: float | None = None
@@ -43,6 +46,8 @@ class EncodeOptions:
     lossless: bool = False
     profile: str = "auto"
     params: dict = field(default_factory=dict)
+    workers: int = 1
+    scheduler: object = None
 
 
 @dataclass

@@ -33,3 +33,7 @@ class SceneError(LfcError):
 
 class ParameterError(LfcError, ValueError):
     """A codec parameter or argument is out of its valid range."""
+
+
+class WorkerError(LfcError):
+    """A worker process died, or a cluster could not be reached (parallel encodes)."""

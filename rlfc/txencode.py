@@ -19,6 +19,7 @@ import numpy as np
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
 from formats.metrics import psnr_rgb
+from formats.parallel import make_runner
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
@@ -185,14 +186,15 @@ class ViewCode:
 class TxEncoder:
     """Everything independent of the quantizer (planes, structure, maps), and the closed loop."""
 
-    def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0):
+    def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0, runner=None):
         """``side_lambda``: luma squared error worth one bit of side information at the quality
-        expected (:func:`side_lambda`)."""
+        expected (:func:`side_lambda`); ``runner``: where views are coded
+        (:class:`formats.parallel.Runner`; None = here, one after another)."""
         from .profiles.tx import plane_limits
 
         if lf.views.dtype not in (np.uint8, np.uint16):
             raise ParameterError(f"tx codes 8- or 16-bit views; this light field is {lf.views.dtype}")
-        self.lf, self.p = lf, params
+        self.lf, self.p, self.runner, self._shared = lf, params, runner, None
         B = params.block_size
         r, c, h, w, ch = lf.views.shape
         self.hdr = RlfcHeader.for_views("tx", r, c, (h, w, ch), lf.views.dtype, B)
@@ -200,8 +202,7 @@ class TxEncoder:
         self.nby, self.nbx = self.hdr.blocks
         self.nby8, self.nbx8 = self.Hp // TB, self.Wp // TB
         self.tpb, self.nt = B // TB, (B // TB) ** 2
-        pad = ((0, 0), (0, self.Hp - h), (0, self.Wp - w), (0, 0))
-        self.orig = to_planes(np.pad(lf.views.reshape(r * c, h, w, ch), pad, mode="edge"))   # (N0, Hp, Wp, P)
+        self.h, self.w_px, self.dtype, self.n0 = h, w, lf.views.dtype, r * c
         self.P = ch
         self.pcs = plane_classes(ch)
         self.peak = int(np.iinfo(lf.views.dtype).max)
@@ -229,13 +230,38 @@ class TxEncoder:
         n_maps = len(self.s.cell_views)
         nloc8 = self.nby8 * self.nbx8
         if params.max_disparity > 0 and n_maps:
+            luma = np.stack([self.planes(v)[..., 0].astype(np.float32) for v in range(self.n0)])
             self.base, self.disp, self.modes = estimate_maps(
-                self.orig[..., 0].astype(np.float32), self.s, max_disparity=params.max_disparity,
+                luma, self.s, max_disparity=params.max_disparity,
                 side_lambda=side_lambda, progress=progress)
         else:
             self.base = np.zeros(nloc8, np.int64)
             self.disp = np.zeros((n_maps, nloc8), np.int64)
             self.modes = np.zeros((n_maps, nloc8), np.int64)
+
+    def planes(self, v: int, pixels: np.ndarray | None = None) -> np.ndarray:
+        """(Hp, Wp, P) int32 YCoCg-R planes of view v (edge-padded), from ``pixels`` (H, W, C)
+        where given (a worker's copy), else from the light field (read when asked: the encoder
+        keeps no second copy of the views)."""
+        px = self.view_pixels(v) if pixels is None else pixels
+        pad = ((0, self.Hp - self.h), (0, self.Wp - self.w_px), (0, 0))
+        return to_planes(np.pad(np.asarray(px), pad, mode="edge"))
+
+    def view_pixels(self, v: int) -> np.ndarray:
+        """(H, W, C) pixels of view v (row-major view index)."""
+        return np.asarray(self.lf.views.reshape((self.n0,) + self.lf.views.shape[2:])[v])
+
+    def __getstate__(self):
+        """What a worker needs to code views (:func:`_code_task`): everything but the light
+        field and the runner."""
+        st = dict(self.__dict__)
+        for k in ("lf", "runner", "_shared", "_view_handles"):
+            st.pop(k, None)
+        return st
+
+    def __setstate__(self, st):
+        self.__dict__.update(st)
+        self.lf = self.runner = self._shared = None
 
     # -- steps -----------------------------------------------------------------------------
     DEFAULT_KEY_RATIO = 1.6
@@ -290,7 +316,7 @@ class TxEncoder:
 
     def thumb_levels(self, v: int, thumb16: int) -> np.ndarray:
         """(nby8, nbx8, P) thumbnail levels of an intra view: block means / step, rounded."""
-        o = self.orig[v].astype(np.float64).reshape(self.nby8, TB, self.nbx8, TB, self.P).mean(axis=(1, 3))
+        o = self.planes(v).astype(np.float64).reshape(self.nby8, TB, self.nbx8, TB, self.P).mean(axis=(1, 3))
         return np.rint(o * 16 / thumb16).astype(np.int64)
 
     def thumb_pred(self, levels: np.ndarray, thumb16: int) -> np.ndarray:
@@ -378,11 +404,13 @@ class TxEncoder:
         res = np.moveaxis(blocks, 1, -1)
         return (base.astype(np.int64) + res).clip(self.lo, self.hi).astype(np.int32)
 
-    def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model) -> ViewCode:
-        """Rate-distortion coding of one view against its prediction (Hp, Wp, P)."""
+    def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
+                  orig: np.ndarray | None = None) -> ViewCode:
+        """Rate-distortion coding of one view against its prediction (Hp, Wp, P); ``orig`` its
+        planes (:meth:`planes`) where the caller has them."""
         key = int(self.is_key[v])
         kind = int(self.intra[v])
-        orig = self._tbs(self.orig[v])
+        orig = self._tbs(self.planes(v) if orig is None else orig)
         pt = self._tbs(pred)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
@@ -420,8 +448,7 @@ class TxEncoder:
                         planes if key else None, bits)
 
     def _pixels(self, planes: np.ndarray) -> np.ndarray:
-        lf = self.lf
-        return from_planes(planes[:lf.height, :lf.width], lf.views.dtype)
+        return from_planes(planes[:self.h, :self.w_px], self.dtype)
 
     def _ra_tbs(self) -> np.ndarray:
         """(nloc, nt) raster tb indices of each random-access block's tbs (tb raster order)."""
@@ -442,7 +469,7 @@ class TxEncoder:
         s16 = self.steps16(step)
         lam_k = self.p.lam * (s16[0, 0] / 16.0) ** 2
         lam_n = self.p.lam * (s16[1, 0] / 16.0) ** 2
-        n0 = self.orig.shape[0]
+        n0 = self.n0
         keyplanes = np.zeros((len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
         kp = planar(keyplanes)
         codes: list = [None] * n0
@@ -472,14 +499,31 @@ class TxEncoder:
             kp = planar(keyplanes)
             if progress:
                 progress("code views", i + 1, n0)
-        done = len(self.s.keys)
-        for v in range(n0):
-            if self.is_key[v]:
-                continue
-            codes[v] = self.code_view(v, self.predict_view(v, kp), s16[1], lam_n, model)
-            done += 1
-            if progress:
-                progress("code views", done, n0)
+        others = [v for v in range(n0) if not self.is_key[v]]
+        runner = self.runner
+        if runner is None or runner.workers == 1 or len(others) < 2:
+            done = len(self.s.keys)
+            for v in others:
+                codes[v] = self.code_view(v, self.predict_view(v, kp), s16[1], lam_n, model)
+                done += 1
+                if progress:
+                    progress("code views", done, n0)
+        else:               # the other views are independent given the decoded key views
+            if self._shared is None:
+                self._shared = runner.share(self)
+                self._view_handles = dict(zip(others, runner.scatter([self.view_pixels(v) for v in others])))
+            keys_h, model_h = runner.share(keyplanes), runner.share(model)
+            done = [len(self.s.keys)]
+
+            def tick(n):
+                done[0] += n
+                if progress:
+                    progress("code views", done[0], n0)
+
+            out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n)
+                                          for v in others], tick)
+            for v, c in zip(others, out):
+                codes[v] = c
         return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step, "keyimg": keyimg}
 
     def _j2k_key(self, k: int, tx_code: ViewCode, thumb_bytes: int) -> tuple[bytes | None, ViewCode]:
@@ -490,8 +534,8 @@ class TxEncoder:
 
         from .topcodec import decode_image
 
-        dt = self.lf.views.dtype
-        px = from_planes(self.orig[k], dt)
+        dt = self.dtype
+        px = from_planes(self.planes(k), dt)
         target = psnr_rgb(px, from_planes(tx_code.planes, dt))
         a = px[..., 0] if self.P == 1 else px
         # OpenJPEG's PSNR "level" lands 0.3-0.45 dB below the level asked (llff_statue): ask more,
@@ -537,7 +581,7 @@ class TxEncoder:
             levels = c.levels(tbi.reshape(-1)).reshape(self.nby, nrow, self.P, 64)
             parts.append(block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])),
                                        np.ones(self.nby, np.int64), self.pcs))
-        n0 = self.orig.shape[0]
+        n0 = self.n0
         coded = np.zeros((n0, self.nby * self.nbx), bool)
         for v, c in enumerate(res["codes"]):
             if not self.is_key[v]:
@@ -608,6 +652,12 @@ class TxEncoder:
         return cfg, sections
 
 
+def _code_task(enc: TxEncoder, keyplanes: np.ndarray, model: Model, v: int, pixels: np.ndarray,
+               step16: np.ndarray, lam: float) -> ViewCode:
+    """One view that is not a key view, coded on a worker (the same integers as in the parent)."""
+    return enc.code_view(v, enc.predict_view(v, planar(keyplanes)), step16, lam, model, enc.planes(v, pixels))
+
+
 # -- rate control and the profile's encode ---------------------------------------------------------
 def _params_from(options: EncodeOptions) -> TxParams:
     p = dict(options.params)
@@ -667,14 +717,22 @@ def file_bytes(lf, cfg: dict, sections: list) -> int:
 
 
 def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
-    """Encode with the ``tx`` profile (rate control for a PSNR or bpp target)."""
-    from formats.metrics import bpp as bpp_of
-
-    from .ratecontrol import check_targets, depth_scale
+    """Encode with the ``tx`` profile (rate control for a PSNR or bpp target); the views
+    that are not key views are coded where ``options.workers`` / ``options.scheduler`` say."""
+    from .ratecontrol import check_targets
 
     check_targets(options.target_psnr, options.target_bpp)
     params = _params_from(options)
-    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params))
+    with make_runner(options.workers, options.scheduler) as runner:
+        return _encode_tx(lf, options, params, progress, runner)
+
+
+def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:
+    from formats.metrics import bpp as bpp_of
+
+    from .ratecontrol import depth_scale
+
+    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner)
     scale = depth_scale(lf.views.dtype)
     nv = lf.rows * lf.cols
     model = Model(default_counts())
@@ -772,7 +830,7 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
     return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
                    summary={"profile": "tx", "params": {**asdict(params), "step": res["step"],
                                                         "key_ratio": enc.key_ratio()},
-                            "key_views": len(enc.s.keys)})
+                            "key_views": len(enc.s.keys), **runner.describe()})
 
 
 __all__ = ["TxParams", "TxEncoder", "encode_tx", "Model", "default_counts"]

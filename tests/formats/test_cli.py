@@ -119,6 +119,9 @@ def _run(*args):
     (["decode", "nope.lfc", "out"], "cannot open"),
     (["encode", str(SAMPLE), "x.lfc", "--block-size", "5"], "block size"),
     (["encode", str(SAMPLE), str(SAMPLE / "scene.json")], "refusing"),
+    (["encode", str(SAMPLE), "x.lfc", "--workers", "0"], "--workers"),
+    (["encode", str(SAMPLE), "x.lfc", "--scheduler", "nowhere"], "address"),
+    (["encode", str(SAMPLE), "x.lfc", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not both"),
 ])
 def test_bad_input_one_line_exit_2(args, needle):
     code, out, err = _run(*args)
@@ -193,9 +196,11 @@ def test_16bit_grey_works_like_rgb(grey16_scene, tmp_path, capsys):
 
 def test_dcp_profile_from_the_cli(tmp_path, capsys):
     out = tmp_path / "dcp.lfc"
-    assert main(["encode", str(SAMPLE), str(out), "--profile", "dcp", "--target-psnr", "40", "--json", "--quiet"]) == 0
+    assert main(["encode", str(SAMPLE), str(out), "--profile", "dcp", "--target-psnr", "40", "--json", "--quiet",
+                 "--workers", "2"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["profile"] == "dcp" and rep["psnr_rgb"] >= 40
+    assert any("--workers/--scheduler had no effect" in n for n in rep["notes"])     # dcp codes in one process
     assert 39 <= rep["params"]["top_psnr"] <= 46          # key-view quality is searched too
     assert rep["bpp"] < 0.15                               # bise needs 1.73 bpp for 40 dB on the sample
     assert main(["info", str(out), "--json"]) == 0

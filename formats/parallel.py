@@ -1,0 +1,245 @@
+"""Where an encode's independent tasks run: in this process, on a local process pool
+(``--workers N``), or on a dask.distributed cluster (``--scheduler ADDRESS``, or a
+``distributed.Client`` passed from Python).
+
+A codec asks a :class:`Runner` for two things:
+
+* ``share(obj)``: an object many tasks read (the encoder's parameters, the decoded key views
+  of one rate-control pass, the entropy model). It is sent to each worker once, not once per
+  task: the pool writes it to a temporary file that workers load (and keep, a few at a time);
+  dask scatters it to every worker.
+* ``map(fn, arglists)``: ``[fn(*args) for args in arglists]`` with shared handles resolved,
+  results in the order given whatever order they finish in.
+
+Tasks must be deterministic functions of their arguments: the file an encode writes is then
+the same, byte for byte, whatever runs it (same platform and numpy build; floating-point
+results of a different CPU or numpy may differ). Workers run one thread each: the pool is the
+parallelism. The pool spawns fresh interpreters, so a script that asks for workers must keep
+its top level under ``if __name__ == "__main__":`` (as every multiprocessing program does).
+Failures come back as the task's own exception (an :class:`LfcError` stays one);
+a worker that dies (out of memory, killed) is a :class:`WorkerError`.
+"""
+from __future__ import annotations
+
+import os
+import pickle
+import tempfile
+import uuid
+from collections import OrderedDict
+from typing import Any, Callable, Sequence
+
+from .errors import ParameterError, WorkerError
+
+MAX_WORKERS = 256
+CONNECT_TIMEOUT = "20s"          # how long a --scheduler address is tried
+
+
+class Runner:
+    """Runs tasks in this process, one after another (``--workers 1``, the default)."""
+
+    workers = 1
+    kind = "serial"
+
+    def share(self, obj: Any) -> Any:
+        return obj
+
+    def scatter(self, objs: Sequence[Any]) -> list:
+        """Handles of objects each read by one task (a view's pixels): sent once, where the
+        task that reads them runs when the runner can arrange it."""
+        return list(objs)
+
+    def map(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None) -> list:
+        out = []
+        for args in arglists:
+            out.append(fn(*args))
+            if done:
+                done(1)
+        return out
+
+    def close(self) -> None:
+        pass
+
+    def describe(self) -> dict:
+        return {"runner": self.kind, "workers": self.workers}
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+# -- local process pool -----------------------------------------------------------------------
+class _Shared:
+    """A handle to an object pickled into a file (loaded by workers, cached per process)."""
+
+    __slots__ = ("path",)
+
+    def __init__(self, path: str):
+        self.path = path
+
+
+_CACHE: "OrderedDict[str, Any]" = OrderedDict()
+_CACHE_ENTRIES = 4
+
+
+def _resolve(a):
+    if isinstance(a, _Shared):
+        obj = _CACHE.get(a.path)
+        if obj is None:
+            with open(a.path, "rb") as f:
+                obj = pickle.load(f)
+            _CACHE[a.path] = obj
+            while len(_CACHE) > _CACHE_ENTRIES:
+                _CACHE.popitem(last=False)
+        else:
+            _CACHE.move_to_end(a.path)
+        return obj
+    return a
+
+
+def _call(fn, args):
+    return fn(*[_resolve(a) for a in args])
+
+
+def _init_worker():
+    try:
+        import torch
+        torch.set_num_threads(1)
+    except ImportError:                                          # pragma: no cover
+        pass
+
+
+class PoolRunner(Runner):
+    """A local pool of ``workers`` processes (spawned: no state leaks in from the parent)."""
+
+    kind = "pool"
+
+    def __init__(self, workers: int):
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        self.workers = workers
+        self._dir = tempfile.TemporaryDirectory(prefix="lfcodec-share-")
+        old = os.environ.get("OMP_NUM_THREADS")
+        os.environ["OMP_NUM_THREADS"] = "1"          # inherited by the spawned workers
+        try:
+            self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
+                                             initializer=_init_worker)
+            self._pool.submit(int, 0).result()       # start the workers while the variable is set
+        except Exception as e:
+            self._dir.cleanup()
+            raise WorkerError(f"the worker processes did not start ({type(e).__name__}); a script that asks for "
+                              "workers must guard its top level with if __name__ == '__main__':") from None
+        finally:
+            if old is None:
+                os.environ.pop("OMP_NUM_THREADS", None)
+            else:
+                os.environ["OMP_NUM_THREADS"] = old
+
+    def share(self, obj):
+        path = os.path.join(self._dir.name, uuid.uuid4().hex)
+        with open(path, "wb") as f:
+            pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
+        return _Shared(path)
+
+    def map(self, fn, arglists, done=None):
+        from concurrent.futures import as_completed
+        from concurrent.futures.process import BrokenProcessPool
+
+        futs = [self._pool.submit(_call, fn, tuple(args)) for args in arglists]
+        index = {f: i for i, f in enumerate(futs)}
+        out: list = [None] * len(futs)
+        try:
+            for f in as_completed(futs):
+                out[index[f]] = f.result()
+                if done:
+                    done(1)
+        except BrokenProcessPool as e:
+            raise WorkerError(f"a worker process died ({e}); try fewer --workers or a smaller light field") from None
+        finally:
+            for f in futs:
+                f.cancel()
+        return out
+
+    def close(self):
+        self._pool.shutdown(wait=True, cancel_futures=True)
+        self._dir.cleanup()
+
+
+# -- dask.distributed ---------------------------------------------------------------------------
+class DaskRunner(Runner):
+    """Tasks on a dask.distributed cluster: ``client`` is a Client, or a scheduler address
+    (``tcp://host:8786``) this runner connects to and closes."""
+
+    kind = "dask"
+
+    def __init__(self, client):
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ParameterError("--scheduler needs dask.distributed: pip install 'lfcodec[dask]'") from None
+        self._own = not isinstance(client, Client)
+        if self._own:
+            try:
+                client = Client(client, timeout=CONNECT_TIMEOUT, set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as e:
+                raise WorkerError(f"cannot reach the dask scheduler {client}: {e}") from None
+        self.client = client
+        self.workers = max(1, sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values()))
+
+    def share(self, obj):
+        return self.client.scatter(obj, broadcast=True, hash=False)
+
+    def scatter(self, objs):
+        return self.client.scatter(list(objs), hash=False)
+
+    def map(self, fn, arglists, done=None):
+        from distributed import as_completed
+
+        futs = [self.client.submit(fn, *args, pure=False) for args in arglists]
+        index = {f.key: i for i, f in enumerate(futs)}
+        out: list = [None] * len(futs)
+        try:
+            for f in as_completed(futs):
+                out[index[f.key]] = f.result()
+                if done:
+                    done(1)
+        finally:
+            for f in futs:
+                f.release()
+        return out
+
+    def close(self):
+        if self._own:
+            self.client.close()
+
+    def describe(self):
+        return {"runner": self.kind, "workers": self.workers, "scheduler": self.client.scheduler.address}
+
+
+def check_runner(workers: int = 1, scheduler=None) -> None:
+    """Raise :class:`ParameterError` for a worker count or scheduler that cannot be used."""
+    if not isinstance(workers, int) or isinstance(workers, bool) or not 1 <= workers <= MAX_WORKERS:
+        raise ParameterError(f"--workers must be an integer within 1..{MAX_WORKERS}, got {workers!r}")
+    if scheduler is not None:
+        if workers != 1:
+            raise ParameterError("give --workers or --scheduler, not both (the cluster has its own workers)")
+        if isinstance(scheduler, str) and ("://" not in scheduler and ":" not in scheduler or " " in scheduler):
+            raise ParameterError(f"--scheduler must be an address such as tcp://host:8786, got {scheduler!r}")
+
+
+def make_runner(workers: int = 1, scheduler=None) -> Runner:
+    """The runner for ``--workers N`` / ``--scheduler ADDRESS`` (or a distributed Client).
+
+    Raises:
+        ParameterError: workers outside 1..256, or both a pool and a scheduler asked for.
+        WorkerError: the scheduler cannot be reached.
+    """
+    check_runner(workers, scheduler)
+    if scheduler is not None:
+        return DaskRunner(scheduler)
+    return PoolRunner(workers) if workers > 1 else Runner()
+
+
+__all__ = ["Runner", "PoolRunner", "DaskRunner", "WorkerError", "check_runner", "make_runner"]

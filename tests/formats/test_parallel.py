@@ -1,0 +1,92 @@
+"""Parallel encode: runners, and the same file whatever runs the encode (serial, a local pool,
+a dask.distributed LocalCluster)."""
+import numpy as np
+import pytest
+
+from formats.codec_api import EncodeOptions
+from formats.errors import LfcError, ParameterError, WorkerError
+from formats.parallel import PoolRunner, Runner, check_runner, make_runner
+from formats.scenes import read_scene
+from rlfc.codec import RlfcCodec
+from tests.conftest import ROOT
+
+SAMPLE = ROOT / "samples" / "dino_crop"
+
+
+def _scale(x, k):
+    return x * k
+
+
+def _fail(x):
+    if x == 2:
+        raise ParameterError(f"task {x} refuses")
+    return x
+
+
+@pytest.mark.parametrize("workers,scheduler,needle", [
+    (0, None, "1..256"), (257, None, "1..256"), (True, None, "1..256"), (1.5, None, "1..256"),
+    (2, "tcp://127.0.0.1:8786", "not both"), (1, "not an address", "address"),
+])
+def test_bad_runner_options(workers, scheduler, needle):
+    with pytest.raises(ParameterError, match=needle):
+        check_runner(workers, scheduler)
+
+
+def test_serial_runner_is_a_loop():
+    r = make_runner(1)
+    assert type(r) is Runner and r.map(_scale, [(1, r.share(3)), (2, 3)]) == [3, 6]
+
+
+def test_pool_shares_objects_keeps_order_and_passes_typed_errors():
+    with PoolRunner(2) as r:
+        k = r.share(np.arange(5))
+        out = r.map(_scale, [(i, k) for i in range(6)])
+        assert [o.tolist() for o in out] == [(i * np.arange(5)).tolist() for i in range(6)]
+        with pytest.raises(ParameterError, match="task 2 refuses"):
+            r.map(_fail, [(i,) for i in range(4)])
+
+
+@pytest.fixture(scope="module")
+def small_lf():
+    lf = read_scene(SAMPLE)
+    lf.views = np.ascontiguousarray(lf.views[:5, :5, :64, :96])     # 5x5 views of 64x96
+    return lf
+
+
+def _encode(lf, **kw):
+    enc = RlfcCodec().encode(lf, EncodeOptions(target_psnr=38, **kw))
+    return b"".join(bytes(x) for _, x in enc.sections), enc
+
+
+@pytest.fixture(scope="module")
+def serial_file(small_lf):
+    return _encode(small_lf)
+
+
+def test_pool_encode_is_the_same_file(small_lf, serial_file):
+    blob, enc = _encode(small_lf, workers=2)
+    assert enc.summary["runner"] == "pool" and enc.summary["workers"] == 2
+    assert blob == serial_file[0]
+    assert np.array_equal(enc.decoded, serial_file[1].decoded)
+
+
+def test_dask_local_cluster_encode_is_the_same_file(small_lf, serial_file):
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+            distributed.Client(cl) as client:
+        blob, enc = _encode(small_lf, scheduler=client)
+        assert enc.summary["runner"] == "dask" and enc.summary["workers"] == 2
+        assert blob == serial_file[0]
+        # an address works the same way (the runner connects and closes its own client)
+        blob2, _ = _encode(small_lf, scheduler=cl.scheduler_address)
+        assert blob2 == serial_file[0]
+
+
+def test_unreachable_scheduler_is_a_worker_error(monkeypatch):
+    pytest.importorskip("distributed")
+    import formats.parallel as par
+
+    monkeypatch.setattr(par, "CONNECT_TIMEOUT", "1s")
+    with pytest.raises(WorkerError, match="cannot reach"):
+        make_runner(1, "tcp://127.0.0.1:9")
+    assert issubclass(WorkerError, LfcError)
