@@ -27,6 +27,7 @@ from .kernels import dequantize
 from .transform import COEF_MAX, UNZIG, ZIGZAG, forward, inverse
 from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
+from .ratesearch import secant_search
 from .txpredict import TB, planar, predict_tbs, upsample_thumb
 from .txmaps import pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
@@ -361,10 +362,21 @@ class TxEncoder:
             if wgt == 0:
                 continue
             d = step16[p] / 16.0
-            a = np.abs(X) / d
-            ln = np.floor(a + 0.5).astype(np.int64)
-            lo = np.maximum(ln - 1, 0)
+            lastb = model.last[pc, mode_cls, key]
+            # tbs whose every coefficient rounds to 0 code nothing: J = their error + the bits of
+            # "last = 0" (exactly what the search below finds for them), so only the rest search
+            act = np.flatnonzero(np.abs(X).max(1) >= 0.5 * d)
+            idle = np.ones(T, bool)
+            idle[act] = False
+            J[idle] += wgt * (X[idle] ** 2).sum(1) + lam * lastb[0]
+            Rb[idle] += lastb[0]
+            if act.size == 0:
+                continue
+            X = X[act]
+            Ta = act.size
             ax = np.abs(X)
+            ln = np.floor(ax / d + 0.5).astype(np.int64)
+            lo = np.maximum(ln - 1, 0)
             zero_bits = model.pos_bits(pc, key)[np.arange(64) * 16]
             j_ln = wgt * (ax - ln * d) ** 2 + lam * _level_bits(model, ln, pc, key)
             j_lo = wgt * (ax - lo * d) ** 2 + lam * _level_bits(model, lo, pc, key)
@@ -379,17 +391,17 @@ class TxEncoder:
             dz = wgt * X ** 2                                     # cost past the last position (not coded)
             # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} jc' + Σ_{i>=L} dz + λ·bits(L)
             jkeep = np.where(lv > 0, jc, jz)
-            c1 = np.concatenate([np.zeros((T, 1)), np.cumsum(jkeep, axis=1)], axis=1)          # (T, 65)
-            c0 = np.concatenate([np.cumsum(dz[:, ::-1], axis=1)[:, ::-1], np.zeros((T, 1))], axis=1)
-            JL = c1 + c0 + lam * model.last[pc, mode_cls, key][None, :]
-            valid = np.concatenate([np.ones((T, 1), bool), lv > 0], axis=1)                      # L-1 nonzero
+            c1 = np.concatenate([np.zeros((Ta, 1)), np.cumsum(jkeep, axis=1)], axis=1)          # (Ta, 65)
+            c0 = np.concatenate([np.cumsum(dz[:, ::-1], axis=1)[:, ::-1], np.zeros((Ta, 1))], axis=1)
+            JL = c1 + c0 + lam * lastb[None, :]
+            valid = np.concatenate([np.ones((Ta, 1), bool), lv > 0], axis=1)                     # L-1 nonzero
             JL = np.where(valid, JL, np.inf)
             L = JL.argmin(1)
             lv = np.where(np.arange(64)[None, :] < L[:, None], lv, 0)
-            levels[:, p] = np.where(X < 0, -lv, lv)
-            J += JL[np.arange(T), L]
+            levels[act, p] = np.where(X < 0, -lv, lv)
+            J[act] += JL[np.arange(Ta), L]
             kept = np.arange(64)[None, :] < L[:, None]
-            Rb += (_level_bits(model, lv, pc, key) * kept).sum(1) + model.last[pc, mode_cls, key, L]
+            Rb[act] += (_level_bits(model, lv, pc, key) * kept).sum(1) + lastb[L]
         return levels, J, D0, must, Rb
 
     def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
@@ -437,13 +449,14 @@ class TxEncoder:
             mode[tbi[~coded]] = MODE_SKIP
         levels = np.where((mode == MODE_RES)[:, None, None], lv_r, np.where((mode == MODE_INTRA)[:, None, None], lv_i, 0))
         base = np.where((mode == MODE_INTRA)[:, None, None, None], flat, pt)
-        rec = np.where((mode == MODE_SKIP)[:, None, None, None], pt.clip(self.lo, self.hi),
-                       self._reconstruct(base, levels, step16))
+        rec = pt.clip(self.lo, self.hi)
+        live = np.flatnonzero(mode != MODE_SKIP)
+        if live.size:                      # skipped tbs are their prediction: reconstruct only the rest
+            rec[live] = self._reconstruct(base[live], levels[live], step16)
         coded = np.zeros(nb, bool) | coded
         bits = float(np.where(mode == MODE_RES, R_r, np.where(mode == MODE_INTRA, R_i, 0.0)).sum() + mb[mode].sum()
                      + (FLUSH_BITS * coded.sum() if not key else FLUSH_BITS * self.nby))
         planes = self._untbs(rec)
-        live = np.flatnonzero(mode != MODE_SKIP)
         return ViewCode(mode.astype(np.int8), live, levels[live].astype(np.int32), coded, self._pixels(planes),
                         planes if key else None, bits)
 
@@ -683,6 +696,9 @@ def _params_from(options: EncodeOptions) -> TxParams:
     return TxParams(**p)
 
 
+PSNR_SLOPE = -2.5    # dB per octave of the step around 40 dB (dense grids: 2.2-2.8), the search's prior
+BPP_SLOPE = -1.0     # log2 bpp per octave of the step, the same for a bpp target
+
 SIDE_SCALE = 6.0   # side information is judged open loop on the original key views, which flatters it:
                    # measured best at 6..10 × the coding λ on the dense grids (BENCHMARKS.md)
 
@@ -748,8 +764,10 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         step0 = math.sqrt(12 * peak ** 2 * 10 ** (-options.target_psnr / 10))
     else:
         step0 = 8.0 * scale
+    probe = None
     if params.key_ratio == 0 and not params.lossless and (~enc.is_key).any():
-        enc.kr = enc.auto_key_ratio(run(step0))  # one probe run measures how much views inherit
+        probe = run(step0)
+        enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
 
     if params.lossless:
         res = run(1.0)
@@ -779,36 +797,31 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
         lo_q, hi_q = 0.0, math.log2(512.0 * scale)
         q0 = min(max(math.log2(step0), lo_q), hi_q)
-        # bracket (feasible at small steps for a PSNR target, at large steps for a bpp target),
-        # moving from q0 by half-octaves (×1.5), then bisect to 1/64 octave
-        small_ok = options.target_psnr is not None
-        better = (lambda new, old: True) if small_ok else (lambda new, old: enc.psnr(new) >= enc.psnr(old))
-        ok0, r0 = evaluate(q0)
-        direction = 1 if ok0 == small_ok else -1
-        good, bad, res = (q0, None, r0) if ok0 else (None, q0, None)
-        q = q0
-        while (good is None or bad is None) and (lo_q < q < hi_q if q != q0 else True):
-            q = min(max(q + direction * math.log2(1.5), lo_q), hi_q)
+        if probe is not None:          # the probe pass says where the target lies (prior slope)
+            ps0 = enc.psnr(probe)
+            if options.target_psnr is not None:
+                q0 = q0 + (options.target_psnr - ps0) / PSNR_SLOPE
+            else:
+                cfg, secs = enc.pack(probe)
+                b0 = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
+                q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
+            q0 = min(max(q0, lo_q), hi_q)
+        floor = options.target_psnr is not None
+
+        def value(q):
             ok, r = evaluate(q)
-            if ok:
-                good, res = q, r
-            else:
-                bad = q
-            if q in (lo_q, hi_q):
-                break
-        found = good is not None
+            t = trace[-1]
+            return (t["psnr_rgb"] if floor else math.log2(max(t["bpp"], 1e-12))), r
+
+        def prefer(qn, rn, qo, ro):      # a floor: the largest step; a ceiling: the best quality
+            return qn > qo if floor else enc.psnr(rn) >= enc.psnr(ro)
+
+        sr = secant_search(value, q0, options.target_psnr if floor else math.log2(options.target_bpp),
+                           feasible_above=floor, slope0=PSNR_SLOPE if floor else BPP_SLOPE, lo=lo_q, hi=hi_q,
+                           tol=0.03 if floor else 0.01, prefer=prefer)
+        found, res = sr.found, sr.result
         if not found:
-            res = r0
             notes.append("even the finest quantizer misses the target; the closest setting is written")
-        while good is not None and bad is not None and abs(good - bad) > 1 / 64:
-            mid = (good + bad) / 2
-            ok, r = evaluate(mid)
-            if ok:
-                good = mid
-                if better(r, res):
-                    res = r
-            else:
-                bad = mid
         # one more pass with the model of the chosen point, kept where it meets the target and,
         # for a bpp target, gives better quality
         again = enc.run(res["step"], enc.model_of(res), progress)

@@ -171,9 +171,8 @@ def pack_streams(S: int, lane, ctx, sym, rlane, rbits, tables: Tables) -> list[b
 
 def count_symbols(ctx, sym) -> np.ndarray:
     """(N_CTX, ALPHABET) counts of (context, symbol) pairs."""
-    c = np.zeros((N_CTX, ALPHABET), np.int64)
-    np.add.at(c, (ctx, sym), 1)
-    return c
+    flat = np.asarray(ctx, np.int64) * ALPHABET + np.asarray(sym, np.int64)
+    return np.bincount(flat, minlength=N_CTX * ALPHABET).astype(np.int64).reshape(N_CTX, ALPHABET)
 
 
 # -- tables on the wire ----------------------------------------------------------------------

@@ -1,0 +1,164 @@
+"""Encode time and memory against light-field size, serial and on a local process pool.
+
+Usage:
+    python -m tools.bench_scale [--data ../shared/data] [--scene hci_antinous] [--grids 5,9,17] [--workers 1,2]
+                                [--target-psnr 40] [--out docs/bench/scale]
+
+Grids of growing size are made from one shared dense grid: its centre 5×5, the grid itself
+(9×9), and a 17×17 grid that mirrors it across its last row and column (rows 0..8, 7..0: a
+real light field whose parallax turns around at the mirror, so each cell of views is still a
+real one). Each encode runs in its own process (``lfcodec encode`` through the library, the
+views built in memory, never written), sampled every 0.1 s for the resident memory of the
+process and of its worker processes. Reported: wall and CPU seconds, the peak resident memory
+of the parent and of the largest worker, both also as multiples of the raw input (views × H ×
+W × C bytes), and above the same interpreter's resident memory after importing the codec (the
+floor any run pays), the file's bytes and PSNR. Writes scale.json, scale.md and scale.png.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from tools.common import log, machine
+
+CHILD = r"""
+import json, os, sys, time
+import numpy as np
+from formats.codec_api import EncodeOptions
+from formats.metrics import psnr_rgb
+from formats.scenes import read_scene
+from rlfc.codec import RlfcCodec
+import psutil
+if __name__ == "__main__":
+    scene, n, workers, target = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+    floor = psutil.Process().memory_info().rss
+    lf = read_scene(scene)
+    r, c = lf.views.shape[:2]
+    if n <= r:
+        a, b = (r - n) // 2, (c - n) // 2
+        idx_r, idx_c = np.arange(a, a + n), np.arange(b, b + n)
+    else:                                   # mirror: 0..r-1, r-2..0, ... up to n
+        period = 2 * (r - 1)
+        k = np.arange(n) % period
+        idx_r = idx_c = np.where(k < r, k, period - k)
+    from formats.lightfield import LightField, grid_positions
+    views = np.ascontiguousarray(lf.views[idx_r][:, idx_c])
+    lf = LightField(views=views, positions=grid_positions(n, n), layout="grid")
+    raw = views.nbytes
+    print(json.dumps({"event": "start", "floor_rss": floor, "raw": raw}), flush=True)
+    t = time.perf_counter(); cpu = time.process_time()
+    e = RlfcCodec().encode(lf, EncodeOptions(target_psnr=target, workers=workers))
+    out = {"event": "done", "wall_s": time.perf_counter() - t, "parent_cpu_s": time.process_time() - cpu,
+           "bytes": sum(len(x) for _, x in e.sections), "psnr": psnr_rgb(lf.views, e.decoded),
+           "passes": len(e.trace), "step": e.summary["params"]["step"]}
+    print(json.dumps(out), flush=True)
+"""
+
+
+def run_one(scene: Path, n: int, workers: int, target: float) -> dict:
+    import psutil
+
+    p = subprocess.Popen([sys.executable, "-c", CHILD, str(scene), str(n), str(workers), str(target)],
+                         stdout=subprocess.PIPE, text=True, env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
+    proc = psutil.Process(p.pid)
+    peak_parent = peak_worker = peak_total = 0
+    cpu_children: dict = {}
+    import threading
+
+    lines: list = []
+    th = threading.Thread(target=lambda: lines.extend(p.stdout), daemon=True)
+    th.start()
+    while p.poll() is None:
+        try:
+            rp = proc.memory_info().rss
+            kids = proc.children(recursive=True)
+            rk = []
+            for k in kids:
+                try:
+                    rk.append(k.memory_info().rss)
+                    ct = k.cpu_times()
+                    cpu_children[k.pid] = ct.user + ct.system
+                except psutil.Error:
+                    pass
+            peak_parent = max(peak_parent, rp)
+            peak_worker = max([peak_worker] + rk)
+            peak_total = max(peak_total, rp + sum(rk))
+        except psutil.Error:
+            pass
+        time.sleep(0.1)
+    th.join()
+    recs = [json.loads(x) for x in lines if x.startswith("{")]
+    start = next(r for r in recs if r["event"] == "start")
+    done = next(r for r in recs if r["event"] == "done")
+    raw, floor = start["raw"], start["floor_rss"]
+    return {"grid": f"{n}x{n}", "views": n * n, "workers": workers, "raw_mib": raw / 2 ** 20,
+            "mpix": raw / 3 / 1e6, **{k: v for k, v in done.items() if k != "event"},
+            "worker_cpu_s": sum(cpu_children.values()),
+            "peak_parent_mib": peak_parent / 2 ** 20, "peak_worker_mib": peak_worker / 2 ** 20,
+            "peak_total_mib": peak_total / 2 ** 20, "floor_mib": floor / 2 ** 20,
+            "parent_x_raw": peak_parent / raw, "parent_above_floor_x_raw": (peak_parent - floor) / raw,
+            "worker_x_raw": peak_worker / raw, "worker_above_floor_x_raw": max(peak_worker - floor, 0) / raw}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default="../shared/data", help="the shared data folder")
+    ap.add_argument("--scene", default="hci_antinous")
+    ap.add_argument("--grids", default="5,9,17")
+    ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--target-psnr", type=float, default=40.0)
+    ap.add_argument("--out", default="docs/bench/scale")
+    a = ap.parse_args(argv)
+    scene = Path(a.data) / a.scene
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for n in [int(x) for x in a.grids.split(",")]:
+        for w in [int(x) for x in a.workers.split(",")]:
+            r = run_one(scene, n, w, a.target_psnr)
+            log(f"{a.scene} {n}x{n} workers {w}: {r['wall_s']:.0f} s, parent {r['peak_parent_mib']:.0f} MiB "
+                f"({r['parent_x_raw']:.1f}x raw), worker {r['peak_worker_mib']:.0f} MiB, {r['bytes']} B, "
+                f"{r['psnr']:.2f} dB")
+            rows.append(r)
+            (out / "scale.json").write_text(json.dumps({"scene": a.scene, "target_psnr": a.target_psnr,
+                                                        "machine": machine(), "runs": rows}, indent=1))
+    md = ["| grid | raw MiB | workers | wall s | CPU s (parent + workers) | peak parent MiB (× raw; above floor × raw) "
+          "| peak worker MiB | bytes | PSNR dB | passes |", "|" + "---|" * 10]
+    for r in rows:
+        md.append(f"| {r['grid']} | {r['raw_mib']:.0f} | {r['workers']} | {r['wall_s']:.0f} | "
+                  f"{r['parent_cpu_s'] + r['worker_cpu_s']:.0f} | {r['peak_parent_mib']:.0f} ({r['parent_x_raw']:.1f}×; "
+                  f"{r['parent_above_floor_x_raw']:.1f}×) | {r['peak_worker_mib']:.0f} | {r['bytes']} | "
+                  f"{r['psnr']:.2f} | {r['passes']} |")
+    (out / "scale.md").write_text("\n".join(md) + "\n")
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(1, 2, figsize=(10, 4))
+        for w in sorted({r["workers"] for r in rows}):
+            rs = [r for r in rows if r["workers"] == w]
+            ax[0].plot([r["mpix"] for r in rs], [r["wall_s"] for r in rs], "o-", label=f"{w} worker(s)")
+            ax[1].plot([r["mpix"] for r in rs], [r["peak_parent_mib"] for r in rs], "o-", label=f"parent, {w} worker(s)")
+            if w > 1:
+                ax[1].plot([r["mpix"] for r in rs], [r["peak_worker_mib"] for r in rs], "s--", label=f"largest of {w} workers")
+        rs = [r for r in rows if r["workers"] == rows[0]["workers"]]
+        ax[1].plot([r["mpix"] for r in rs], [4 * r["raw_mib"] for r in rs], "k:", label="4x raw input")
+        ax[0].set(xlabel="Mpix (all views)", ylabel="encode wall s", title=f"{a.scene} grids @ {a.target_psnr:g} dB")
+        ax[1].set(xlabel="Mpix (all views)", ylabel="peak resident MiB")
+        for x in ax:
+            x.legend(fontsize=8)
+            x.grid(alpha=0.3)
+        fig.tight_layout()
+        fig.savefig(out / "scale.png", dpi=110)
+    except ImportError:
+        log("matplotlib missing: no plot")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
