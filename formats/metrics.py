@@ -22,7 +22,7 @@ import numpy as np
 from .pixels import peak_of, to_planes
 
 __all__ = ["peak_of", "mse", "psnr_rgb", "psnr_views", "psnr_visible", "psnr_alpha", "psnr_ycocg", "ssim", "bpp",
-           "colour_channels", "quality_report", "finite"]
+           "colour_channels", "quality_report", "finite", "colour_sq_error", "psnr_from_sq_error"]
 
 
 def colour_channels(c: int) -> slice:
@@ -54,6 +54,20 @@ def _sq_err_per_view(ref: np.ndarray, dec: np.ndarray, mask: np.ndarray | None =
             cnt[i:i + 8] = np.prod(r.shape[1:])
         sse[i:i + 8] = e.sum(axis=(1, 2, 3))
     return sse, cnt
+
+
+def colour_sq_error(ref: np.ndarray, dec: np.ndarray) -> tuple[float, float]:
+    """(sum of squared errors, element count) over the colour channels of one or more views:
+    summed over views, the numbers :func:`psnr_rgb` pools (so a caller that codes views one at a
+    time reaches exactly the PSNR of the whole light field)."""
+    cs = colour_channels(ref.shape[-1])
+    sse, cnt = _sq_err_per_view(ref[..., cs], dec[..., cs])
+    return float(sse.sum()), float(cnt.sum())
+
+
+def psnr_from_sq_error(sse: np.ndarray, cnt: np.ndarray, peak: float) -> float:
+    """PSNR (dB) from per-view (sum of squared errors, count), pooled as :func:`psnr_rgb` does."""
+    return _psnr_from_mse(float(np.asarray(sse, np.float64).sum() / np.asarray(cnt, np.float64).sum()), peak)
 
 
 def mse(ref: np.ndarray, dec: np.ndarray) -> float:

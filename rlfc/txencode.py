@@ -18,7 +18,7 @@ import numpy as np
 
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
-from formats.metrics import psnr_rgb
+from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb
 from formats.parallel import make_runner
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
@@ -162,17 +162,21 @@ def _level_bits(model: Model, l: np.ndarray, pc: int, key: int) -> np.ndarray:
 @dataclass
 class ViewCode:
     """Coded form of one view, kept small: tb modes (nloc8,) int8; the levels of the tbs that
-    are not skipped only (``tbs`` their indices, ``lv`` (n, P, 64) int32, scan order); coded
-    random-access blocks (nloc,) bool; the decoded view as pixels (H, W, C) of the input dtype;
-    and, for key views (references of others), its planes (Hp, Wp, P) int32."""
+    are not skipped only (``tbs`` their indices, ``lv`` (n, P, 64) int16 where they fit, else
+    int32, scan order); coded random-access blocks (nloc,) bool; the colour squared error
+    against the original (``sse`` over ``cnt`` samples: PSNR without keeping pixels); the
+    decoded view as pixels (H, W, C) of the input dtype only when asked for; and, for key views
+    (references of others), its planes (Hp, Wp, P) int32."""
 
     modes: np.ndarray
     tbs: np.ndarray
     lv: np.ndarray
     coded: np.ndarray
-    px: np.ndarray
+    px: np.ndarray | None
     planes: np.ndarray | None = None
     bits: float = 0.0          # the model's estimate of the view's stream bits
+    sse: float = 0.0
+    cnt: float = 1.0
 
     def levels(self, idx: np.ndarray) -> np.ndarray:
         """(len(idx), P, 64) levels of tbs ``idx`` (zero where skipped)."""
@@ -231,7 +235,7 @@ class TxEncoder:
         n_maps = len(self.s.cell_views)
         nloc8 = self.nby8 * self.nbx8
         if params.max_disparity > 0 and n_maps:
-            luma = np.stack([self.planes(v)[..., 0].astype(np.float32) for v in range(self.n0)])
+            luma = np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])   # Y in [0, peak]
             self.base, self.disp, self.modes = estimate_maps(
                 luma, self.s, max_disparity=params.max_disparity,
                 side_lambda=side_lambda, progress=progress)
@@ -417,12 +421,14 @@ class TxEncoder:
         return (base.astype(np.int64) + res).clip(self.lo, self.hi).astype(np.int32)
 
     def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
-                  orig: np.ndarray | None = None) -> ViewCode:
+                  orig: np.ndarray | None = None, keep_pixels: bool = True) -> ViewCode:
         """Rate-distortion coding of one view against its prediction (Hp, Wp, P); ``orig`` its
-        planes (:meth:`planes`) where the caller has them."""
+        planes (:meth:`planes`) where the caller has them; ``keep_pixels``: keep the decoded
+        pixels (else only their error)."""
         key = int(self.is_key[v])
         kind = int(self.intra[v])
-        orig = self._tbs(self.planes(v) if orig is None else orig)
+        oplanes = self.planes(v) if orig is None else orig
+        orig = self._tbs(oplanes)
         pt = self._tbs(pred)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
@@ -457,8 +463,12 @@ class TxEncoder:
         bits = float(np.where(mode == MODE_RES, R_r, np.where(mode == MODE_INTRA, R_i, 0.0)).sum() + mb[mode].sum()
                      + (FLUSH_BITS * coded.sum() if not key else FLUSH_BITS * self.nby))
         planes = self._untbs(rec)
-        return ViewCode(mode.astype(np.int8), live, levels[live].astype(np.int32), coded, self._pixels(planes),
-                        planes if key else None, bits)
+        px = self._pixels(planes)
+        sse, cnt = colour_sq_error(self._pixels(oplanes), px)
+        lv = levels[live]
+        lv = lv.astype(np.int16 if lv.size == 0 or np.abs(lv).max() < 1 << 15 else np.int32)
+        return ViewCode(mode.astype(np.int8), live, lv, coded, px if keep_pixels else None,
+                        planes if key else None, bits, sse, cnt)
 
     def _pixels(self, planes: np.ndarray) -> np.ndarray:
         return from_planes(planes[:self.h, :self.w_px], self.dtype)
@@ -472,7 +482,7 @@ class TxEncoder:
         return ty * self.nbx8 + tx
 
     # -- the closed loop -------------------------------------------------------------------------
-    def run(self, step: float, model: Model, progress=None) -> dict:
+    def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False) -> dict:
         """Code every view at luma step Δ = ``step``: key views in order, then the others.
 
         Returns:
@@ -497,18 +507,19 @@ class TxEncoder:
                 best = None
                 for t16 in ([thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})):
                     lv = self.thumb_levels(k, t16)
-                    c = self.code_view(k, self.thumb_pred(lv, t16), s16[0], lam_k, model)
+                    c = self.code_view(k, self.thumb_pred(lv, t16), s16[0], lam_k, model, keep_pixels=keep_pixels)
                     cost = c.bits + 8 * len(pack_thumbs(lv[None]))
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
             else:
-                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model)
+                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=keep_pixels)
             if self.intra[k] and self.intra_codec == "j2k":
                 img, codes[k] = self._j2k_key(k, codes[k], len(pack_thumbs(thumbs[k][None])))
                 if img is not None:
                     keyimg[k] = img
             keyplanes[i] = codes[k].planes
+            codes[k].planes = None              # (kept once, in keyplanes, for this pass only)
             kp = planar(keyplanes)
             if progress:
                 progress("code views", i + 1, n0)
@@ -517,7 +528,7 @@ class TxEncoder:
         if runner is None or runner.workers == 1 or len(others) < 2:
             done = len(self.s.keys)
             for v in others:
-                codes[v] = self.code_view(v, self.predict_view(v, kp), s16[1], lam_n, model)
+                codes[v] = self.code_view(v, self.predict_view(v, kp), s16[1], lam_n, model, keep_pixels=keep_pixels)
                 done += 1
                 if progress:
                     progress("code views", done, n0)
@@ -533,11 +544,12 @@ class TxEncoder:
                 if progress:
                     progress("code views", done[0], n0)
 
-            out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n)
-                                          for v in others], tick)
+            out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n,
+                                           keep_pixels) for v in others], tick)
             for v, c in zip(others, out):
                 codes[v] = c
-        return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step, "keyimg": keyimg}
+        return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
+                "keyimg": keyimg, "model": model}
 
     def _j2k_key(self, k: int, tx_code: ViewCode, thumb_bytes: int) -> tuple[bytes | None, ViewCode]:
         """An intra key view as JPEG 2000 at the colour PSNR its transform coding reached, where
@@ -566,15 +578,26 @@ class TxEncoder:
             return None, tx_code
         z = np.zeros_like(tx_code.modes)
         rec = to_planes(dec)
-        return data, ViewCode(z, np.zeros(0, np.int64), np.zeros((0,) + tx_code.lv.shape[1:], np.int32),
-                              np.zeros_like(tx_code.coded), self._pixels(rec), rec, 0.0)
+        crop = self._pixels(rec)                      # the view's own size (the image coded is padded)
+        sse, cnt = colour_sq_error(self._pixels(self.planes(k)), crop)
+        return data, ViewCode(z, np.zeros(0, np.int64), np.zeros((0,) + tx_code.lv.shape[1:], np.int16),
+                              np.zeros_like(tx_code.coded), crop, rec, 0.0, sse, cnt)
 
     def decoded(self, res: dict) -> np.ndarray:
-        """(R, C, H, W, Ch) pixels of a run."""
-        return np.stack([c.px for c in res["codes"]]).reshape(self.lf.views.shape)
+        """(R, C, H, W, Ch) pixels of a run (the run again, keeping pixels, where it kept none:
+        the same integers)."""
+        if any(c.px is None for c in res["codes"]):
+            res = self.run(res["step"], res["model"], keep_pixels=True)
+        out = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
+        for i, c in enumerate(res["codes"]):
+            out[i] = c.px
+            c.px = None                       # one copy of the decoded views, not two
+        return out.reshape(self.lf.views.shape)
 
     def psnr(self, res: dict) -> float:
-        return psnr_rgb(self.lf.views, self.decoded(res))
+        """Colour PSNR of a run over all views (exactly :func:`formats.metrics.psnr_rgb`)."""
+        c = res["codes"]
+        return psnr_from_sq_error(np.array([x.sse for x in c]), np.array([x.cnt for x in c]), float(self.peak))
 
     # -- symbols and packing -----------------------------------------------------------------
     def symbols(self, res: dict):
@@ -666,9 +689,10 @@ class TxEncoder:
 
 
 def _code_task(enc: TxEncoder, keyplanes: np.ndarray, model: Model, v: int, pixels: np.ndarray,
-               step16: np.ndarray, lam: float) -> ViewCode:
+               step16: np.ndarray, lam: float, keep_pixels: bool) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent)."""
-    return enc.code_view(v, enc.predict_view(v, planar(keyplanes)), step16, lam, model, enc.planes(v, pixels))
+    return enc.code_view(v, enc.predict_view(v, planar(keyplanes)), step16, lam, model, enc.planes(v, pixels),
+                         keep_pixels)
 
 
 # -- rate control and the profile's encode ---------------------------------------------------------
@@ -771,11 +795,11 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
     if params.lossless:
         res = run(1.0)
-        res = enc.run(1.0, enc.model_of(res), progress)
+        res = enc.run(1.0, enc.model_of(res), progress, keep_pixels=True)
     elif options.target_psnr is None and options.target_bpp is None:
         step = params.step if params.step is not None else 8.0 * scale
         res = run(step)
-        res = enc.run(step, enc.model_of(res), progress)
+        res = enc.run(step, enc.model_of(res), progress, keep_pixels=True)
     else:
         models: dict = {}                     # step → the entropy model measured there
 
@@ -806,6 +830,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 b0 = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
                 q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
             q0 = min(max(q0, lo_q), hi_q)
+        probe = None                   # (its coded views are not needed any more)
         floor = options.target_psnr is not None
 
         def value(q):
@@ -824,7 +849,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             notes.append("even the finest quantizer misses the target; the closest setting is written")
         # one more pass with the model of the chosen point, kept where it meets the target and,
         # for a bpp target, gives better quality
-        again = enc.run(res["step"], enc.model_of(res), progress)
+        again = enc.run(res["step"], enc.model_of(res), progress, keep_pixels=True)
         ps = enc.psnr(again)
         if options.target_psnr is not None:
             keep = ps >= options.target_psnr

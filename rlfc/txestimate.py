@@ -26,7 +26,8 @@ class Estimator:
     """Costs of candidate disparities for every cell.
 
     Args:
-        luma: (N0, Hp, Wp) float32 luma (Y plane) of the original views.
+        luma: (N0, Hp, Wp) luma (Y plane) of the original views, any real dtype (the input's
+            own uint8/uint16 keeps it at a third of an RGB light field); used as float32.
         struct: :class:`rlfc.txstructure.Structure`.
     """
 
@@ -37,8 +38,12 @@ class Estimator:
         self.cells = [np.asarray(v) for v in struct.cell_views]
         self.key_slot = np.full(self.n0, -1, np.int64)
         self.key_slot[keys_order] = np.arange(len(keys_order))
-        kp = luma[keys_order][..., None].astype(np.int32)
+        kp = luma[keys_order][..., None].astype(np.float64)
         self.kp = planar(np.rint(kp).astype(np.int32))
+
+    def _y(self, v: int) -> np.ndarray:
+        """(Hp, Wp) float32 luma of view v."""
+        return self.luma[v].astype(np.float32)
 
     def _nrefs(self, m: int) -> int:
         return int((self.s.refs[self.cells[m][0]] >= 0).sum())
@@ -54,13 +59,13 @@ class Estimator:
             acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
             nr = self._nrefs(m)
             for v in views.tolist():
-                y = self.luma[v]
+                y = self._y(v)
                 blend = np.zeros_like(y)
                 for j in range(nr):
                     k = s.refs[v, j]
                     dy, dx = d * (s.positions[v] - s.positions[k])
                     mat = np.float32([[1, 0, dx], [0, 1, dy]])
-                    p = cv2.warpAffine(self.luma[k], mat, (self.wp, self.hp),
+                    p = cv2.warpAffine(self._y(k), mat, (self.wp, self.hp),
                                        flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
                     acc[1 + j] += _block_sums((y - p) ** 2, self.nby8, self.nbx8)
                     blend += p * (s.weights[v, j] / 64.0)
@@ -80,7 +85,7 @@ class Estimator:
             acc = np.zeros((1 + nr, nloc8))
             for v in views.tolist():
                 r = s.refs[v, :nr]
-                tgt = self.luma[v].reshape(self.nby8, TB, self.nbx8, TB).transpose(0, 2, 1, 3).reshape(nloc8, TB, TB)
+                tgt = self._y(v).reshape(self.nby8, TB, self.nbx8, TB).transpose(0, 2, 1, 3).reshape(nloc8, TB, TB)
                 dpos = s.positions[v] - s.positions[r]                              # (nr, 2)
                 dy, dx = d16[m][:, None] * dpos[None, :, 0], d16[m][:, None] * dpos[None, :, 1]
                 one = np.full((nloc8, 1), 64, np.int64)
