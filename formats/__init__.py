@@ -18,10 +18,12 @@ from .errors import (ChecksumError, FormatError, LfcError, ParameterError, Scene
 from .lfcfile import LfcFile, open_lfc, write_lfc
 from .lightfield import LightField
 from .registry import available_codecs, get_codec, open_decoder, register_codec
+from .parallel import WorkerError, make_runner
 from .scenes import plucker_rays, read_scene, write_views
+from .viewstack import ViewStack, from_array
 
 __all__ = ["__version__", "ByteRangeSource", "Container", "SectionInfo", "write_container", "ChecksumError",
            "FormatError", "LfcError", "ParameterError", "SceneError", "TruncatedError", "UnsupportedError",
            "LfcFile", "open_lfc", "write_lfc", "LightField", "plucker_rays", "read_scene", "write_views",
            "Codec", "Decoder", "EncodeOptions", "Encoded", "available_codecs", "get_codec", "open_decoder",
-           "register_codec"]
+           "register_codec", "WorkerError", "make_runner", "ViewStack", "from_array"]

@@ -80,7 +80,7 @@ class _Shared:
 
 
 _CACHE: "OrderedDict[str, Any]" = OrderedDict()
-_CACHE_ENTRIES = 4
+_CACHE_ENTRIES = 3          # a codec's task reads its shared parameters, one pass's data and model
 
 
 def _resolve(a):

@@ -39,6 +39,12 @@ class LfnCodec(Codec):
         if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
             raise ParameterError("light field networks take no --target-psnr/--target-bpp/--lossless "
                                  "(train longer or larger instead)")
+        import dataclasses
+
+        import numpy as np
+
+        if not isinstance(lf.views, np.ndarray):          # a ViewStack (zarr, dask, ...): read it all
+            lf = dataclasses.replace(lf, views=np.asarray(lf.views))
         from formats.transform import resize_lightfield
 
         p = dict(options.params)

@@ -1,6 +1,10 @@
 """RLFC as an lfcodec codec plug-in (entry point ``rlfc`` in the ``lfcodec.codecs`` group)."""
 from __future__ import annotations
 
+import dataclasses
+
+import numpy as np
+
 from formats.codec_api import Codec, EncodeOptions, Encoded
 from formats.errors import ParameterError
 
@@ -30,6 +34,8 @@ class RlfcCodec(Codec):
 
     def encode(self, lf, options: EncodeOptions, progress=None) -> Encoded:
         pid = choose_profile(lf, options.profile)
+        if pid != "tx" and not isinstance(lf.views, np.ndarray):     # only tx reads views as it codes them
+            lf = dataclasses.replace(lf, views=np.asarray(lf.views))
         enc = get_profile(pid).encode(lf, options, progress)
         enc.config["profile"] = pid
         enc.summary.setdefault("profile", pid)

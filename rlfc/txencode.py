@@ -20,6 +20,7 @@ from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
 from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb
 from formats.parallel import make_runner
+from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
@@ -254,7 +255,7 @@ class TxEncoder:
 
     def view_pixels(self, v: int) -> np.ndarray:
         """(H, W, C) pixels of view v (row-major view index)."""
-        return np.asarray(self.lf.views.reshape((self.n0,) + self.lf.views.shape[2:])[v])
+        return view_of(self.lf.views, v)
 
     def __getstate__(self):
         """What a worker needs to code views (:func:`_code_task`): everything but the light
@@ -536,7 +537,7 @@ class TxEncoder:
             if self._shared is None:
                 self._shared = runner.share(self)
                 self._view_handles = dict(zip(others, runner.scatter([self.view_pixels(v) for v in others])))
-            keys_h, model_h = runner.share(keyplanes), runner.share(model)
+            keys_h, model_h = runner.share(kp), runner.share(model)
             done = [len(self.s.keys)]
 
             def tick(n):
@@ -688,11 +689,11 @@ class TxEncoder:
         return cfg, sections
 
 
-def _code_task(enc: TxEncoder, keyplanes: np.ndarray, model: Model, v: int, pixels: np.ndarray,
+def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
                step16: np.ndarray, lam: float, keep_pixels: bool) -> ViewCode:
-    """One view that is not a key view, coded on a worker (the same integers as in the parent)."""
-    return enc.code_view(v, enc.predict_view(v, planar(keyplanes)), step16, lam, model, enc.planes(v, pixels),
-                         keep_pixels)
+    """One view that is not a key view, coded on a worker (the same integers as in the parent);
+    ``kp`` the pass's decoded key views, planar (:func:`rlfc.txpredict.planar`)."""
+    return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, enc.planes(v, pixels), keep_pixels)
 
 
 # -- rate control and the profile's encode ---------------------------------------------------------

@@ -1,0 +1,65 @@
+"""Light fields from arrays users already have (numpy, memmap, dask), read one view at a time."""
+import numpy as np
+import pytest
+
+from formats import EncodeOptions, from_array
+from formats.errors import SceneError
+from formats.lightfield import LightField, grid_positions
+from formats.viewstack import ViewStack
+from rlfc.codec import RlfcCodec
+from tests.rlfc.helpers import smooth_lf
+
+
+class CountingArray:
+    """An array-like that counts what is read (stands for a zarr array on disk)."""
+
+    def __init__(self, a):
+        self.a, self.shape, self.dtype, self.reads = a, a.shape, a.dtype, 0
+
+    def __getitem__(self, k):
+        self.reads += 1
+        return self.a[k]
+
+
+def test_views_are_read_one_at_a_time_and_match():
+    v = np.arange(6 * 5 * 7 * 3, dtype=np.uint16).reshape(6, 5, 7, 3)
+    src = CountingArray(v)
+    vs = ViewStack(src, grid=(2, 3))
+    assert vs.shape == (2, 3, 5, 7, 3) and vs.dtype == np.uint16 and src.reads == 0
+    assert (vs[1, 2] == v[5]).all() and src.reads == 1
+    assert (np.asarray(vs) == v.reshape(2, 3, 5, 7, 3)).all()
+
+
+def test_grey_and_five_d_arrays():
+    g = np.zeros((4, 5, 6), np.uint8)
+    assert ViewStack(g, grid=(2, 2)).shape == (2, 2, 5, 6, 1)
+    five = np.zeros((2, 2, 5, 6, 3), np.uint8)
+    assert (ViewStack(five)[1, 1] == five[1, 1]).all()
+
+
+@pytest.mark.parametrize("arr,grid,needle", [
+    (np.zeros((6, 5, 7, 3), np.uint8), (2, 2), "does not hold"),
+    (np.zeros((5, 7), np.uint8), None, "shape"),
+    ([1, 2, 3], None, "shape"),
+])
+def test_bad_arrays_are_scene_errors(arr, grid, needle):
+    with pytest.raises(SceneError, match=needle):
+        ViewStack(arr, grid)
+
+
+def test_dask_and_memmap_sources_encode_to_the_same_file(tmp_path):
+    da = pytest.importorskip("dask.array")
+    lf = smooth_lf(rows=3, cols=3, h=24, w=32)
+    flat = np.ascontiguousarray(lf.views.reshape(9, 24, 32, 3))
+    mm = np.lib.format.open_memmap(tmp_path / "views.npy", mode="w+", dtype=np.uint8, shape=flat.shape)
+    mm[:] = flat
+    mm.flush()
+    opts = EncodeOptions(params={"quant": 6})
+    ref = b"".join(bytes(x) for _, x in RlfcCodec().encode(
+        LightField(views=lf.views, positions=grid_positions(3, 3)), opts).sections)
+    for src in (da.from_array(flat, chunks=(1, 24, 32, 3)), np.load(tmp_path / "views.npy", mmap_mode="r")):
+        blob = b"".join(bytes(x) for _, x in RlfcCodec().encode(from_array(src, grid=(3, 3)), opts).sections)
+        assert blob == ref
+    # profiles that need every view at once read the array whole
+    enc = RlfcCodec().encode(from_array(flat, grid=(3, 3)), EncodeOptions(profile="dcp", params={"quant": 6}))
+    assert enc.decoded.shape == lf.views.shape
