@@ -163,7 +163,9 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
               "encode_s": round(enc_s, 3), "views": nv, "height": lf.height, "width": lf.width,
               "channels": lf.channels, "dtype": str(lf.views.dtype), "codec": codec.codec_id, **enc.summary}
     if enc.decoded is not None:
-        report.update(quality_report(lf.views, enc.decoded, with_ssim=a.json))
+        ref = lf.views if isinstance(lf.views, np.ndarray) else np.asarray(lf.views)     # (a ViewStack: read)
+        report.update(quality_report(ref, enc.decoded, with_ssim=a.json))
+        del ref
     # every requested target is met, or the report says so
     notes, missed = list(enc.notes), []
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
@@ -369,7 +371,7 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("encode", help="encode a scene folder to an .lfc file",
                        description="Encode a light field (grid scene, HCI/Stanford folder, LLFF capture or "
                                    "transforms.json) to an .lfc file.")
-    e.add_argument("scene", help="scene folder (or transforms*.json)")
+    e.add_argument("scene", help="scene folder, transforms*.json, or an .npy array of views (N,H,W[,C]) with --grid")
     e.add_argument("out", help="output .lfc file (replaced atomically)")
     e.add_argument("--codec", default="rlfc", help="codec id (default rlfc; lfn trains a light field network)")
     g = e.add_mutually_exclusive_group()

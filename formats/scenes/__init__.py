@@ -29,13 +29,37 @@ __all__ = ["read_scene", "write_views", "write_layout", "read_grid", "read_hci",
            "read_transforms", "plucker_rays", "view_filename"]
 
 
+def read_npy(p: Path, grid: tuple[int, int] | None, limits: Limits = DEFAULT) -> LightField:
+    """An (N, H, W[, C]) or (R, C, H, W, C) ``.npy`` array, memory-mapped and read a view at a
+    time (:class:`formats.viewstack.ViewStack`); ``grid`` (rows, cols) for an (N, ...) array
+    (default 1 × N). Checked against ``limits`` before any pixel is read."""
+    import numpy as np
+
+    from ..viewstack import from_array
+
+    try:
+        arr = np.load(p, mmap_mode="r", allow_pickle=False)
+    except (ValueError, OSError, EOFError) as e:
+        raise SceneError(f"{p}: not a readable .npy array of views ({type(e).__name__})") from None
+    if arr.ndim in (3, 4, 5) and arr.dtype in (np.uint8, np.uint16):
+        n = int(np.prod(arr.shape[:2])) if arr.ndim == 5 else arr.shape[0]
+        hw = int(np.prod(arr.shape[-3:-1])) if arr.ndim != 3 else int(np.prod(arr.shape[1:]))
+        if n > limits.max_views or hw > limits.max_view_pixels or n * hw > limits.max_scene_pixels:
+            raise SceneError(f"{p}: {n} views of {hw} pixels is over the limits")
+    elif arr.dtype not in (np.uint8, np.uint16):
+        raise SceneError(f"{p}: views must be uint8 or uint16, got {arr.dtype}")
+    lf = from_array(arr, grid if arr.ndim != 5 else None, meta={"reader": "npy", "input_paths": [str(p.resolve())]})
+    return lf
+
+
 def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float | None = None,
                focal: float | None = None, allow_outside: bool = False, limits: Limits = DEFAULT,
                grid: tuple[int, int] | None = None) -> LightField:
     """Read a light field from a folder (or a transforms JSON file), detecting its layout.
 
     Args:
-        path: scene folder or ``transforms*.json`` file.
+        path: scene folder, ``transforms*.json`` file, or an ``.npy`` array of views
+            (memory-mapped; ``grid`` gives its rows and columns).
         split: for NeRF-synthetic folders with ``transforms_<split>.json``.
         baseline, focal: override unknown grid geometry (scene units, pixels).
         allow_outside: read view files that lie outside the scene folder (off by default).
@@ -56,6 +80,8 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
     p = Path(path)
     if p.is_file() and p.suffix.lower() == ".json":
         return read_transforms(p, opts)
+    if p.is_file() and p.suffix.lower() == ".npy":
+        return read_npy(p, grid, limits)
     if not p.exists():
         raise SceneError(f"{p}: no such scene folder")
     if not p.is_dir():

@@ -63,3 +63,23 @@ def test_dask_and_memmap_sources_encode_to_the_same_file(tmp_path):
     # profiles that need every view at once read the array whole
     enc = RlfcCodec().encode(from_array(flat, grid=(3, 3)), EncodeOptions(profile="dcp", params={"quant": 6}))
     assert enc.decoded.shape == lf.views.shape
+
+
+def test_cli_encodes_an_npy_array_of_views(tmp_path, capsys):
+    import json
+
+    from formats import open_decoder, open_lfc
+    from formats.cli import main
+
+    lf = smooth_lf(rows=3, cols=4, h=20, w=28)
+    np.save(tmp_path / "views.npy", lf.views.reshape(12, 20, 28, 3))
+    out = tmp_path / "a.lfc"
+    assert main(["encode", str(tmp_path / "views.npy"), str(out), "--grid", "3x4", "--lossless", "--json",
+                 "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["exact"] and rep["views"] == 12
+    with open_lfc(out) as f:
+        assert (open_decoder(f).decode_all() == lf.views).all()
+    np.save(tmp_path / "f.npy", np.zeros((4, 5, 6), np.float64))
+    assert main(["encode", str(tmp_path / "f.npy"), str(tmp_path / "b.lfc"), "--quiet"]) == 2
+    assert "uint8 or uint16" in capsys.readouterr().err
