@@ -121,8 +121,9 @@ class PoolRunner(Runner):
 
         self.workers = workers
         self._dir = tempfile.TemporaryDirectory(prefix="lfcodec-share-")
-        old = os.environ.get("OMP_NUM_THREADS")
-        os.environ["OMP_NUM_THREADS"] = "1"          # inherited by the spawned workers
+        names = ("OMP_NUM_THREADS", "OPENCV_FOR_THREADS_NUM")
+        old = {k: os.environ.get(k) for k in names}
+        os.environ.update({k: "1" for k in names})     # inherited by the spawned workers
         try:
             self._pool = ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"),
                                              initializer=_init_worker)
@@ -132,10 +133,11 @@ class PoolRunner(Runner):
             raise WorkerError(f"the worker processes did not start ({type(e).__name__}); a script that asks for "
                               "workers must guard its top level with if __name__ == '__main__':") from None
         finally:
-            if old is None:
-                os.environ.pop("OMP_NUM_THREADS", None)
-            else:
-                os.environ["OMP_NUM_THREADS"] = old
+            for k, v in old.items():
+                if v is None:
+                    os.environ.pop(k, None)
+                else:
+                    os.environ[k] = v
 
     def share(self, obj):
         path = os.path.join(self._dir.name, uuid.uuid4().hex)

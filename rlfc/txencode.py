@@ -238,7 +238,7 @@ class TxEncoder:
         if params.max_disparity > 0 and n_maps:
             luma = np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])   # Y in [0, peak]
             self.base, self.disp, self.modes = estimate_maps(
-                luma, self.s, max_disparity=params.max_disparity,
+                luma, self.s, max_disparity=params.max_disparity, runner=runner,
                 side_lambda=side_lambda, progress=progress)
         else:
             self.base = np.zeros(nloc8, np.int64)

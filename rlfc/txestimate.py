@@ -48,63 +48,113 @@ class Estimator:
     def _nrefs(self, m: int) -> int:
         return int((self.s.refs[self.cells[m][0]] >= 0).sum())
 
+    def costs_global_many(self, ds, runner=None) -> list:
+        """[:meth:`costs_global` (d) for d in ds], the (d, cell) pairs on ``runner``."""
+        nm = len(self.cells)
+        pairs = [(float(d), m) for d in ds for m in range(nm)]
+        if runner is None or runner.workers == 1:
+            parts = [self._global_cell(m, d) for d, m in pairs]
+        else:
+            h = self._handle(runner)
+            parts = runner.map(_global_task, [(h, m, d) for d, m in pairs])
+        out = []
+        for i in range(len(ds)):
+            c = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
+            for m in range(nm):
+                nr = self._nrefs(m)
+                c[m, :1 + nr] = parts[i * nm + m]
+            out.append(c)
+        return out
+
+    def _handle(self, runner):
+        if getattr(self, "_shared", None) is None or self._shared[0] is not runner:
+            self._shared = (runner, runner.share(self))
+        return self._shared[1]
+
+    def __getstate__(self):
+        st = dict(self.__dict__)
+        st.pop("_shared", None)
+        return st
+
     def costs_global(self, d: float) -> np.ndarray:
         """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode at one global disparity d (px/step)
         (inf for modes a cell does not have)."""
+        return self.costs_global_many([d])[0]
+
+    def _global_cell(self, m: int, d: float) -> np.ndarray:
+        """(1 + nrefs, nloc8) costs of cell m at global disparity d."""
         import cv2
 
         s = self.s
-        out = np.full((len(self.cells), 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
-        for m, views in enumerate(self.cells):
-            acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
-            nr = self._nrefs(m)
-            for v in views.tolist():
-                y = self._y(v)
-                blend = np.zeros_like(y)
-                for j in range(nr):
-                    k = s.refs[v, j]
-                    dy, dx = d * (s.positions[v] - s.positions[k])
-                    mat = np.float32([[1, 0, dx], [0, 1, dy]])
-                    p = cv2.warpAffine(self._y(k), mat, (self.wp, self.hp),
-                                       flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-                    acc[1 + j] += _block_sums((y - p) ** 2, self.nby8, self.nbx8)
-                    blend += p * (s.weights[v, j] / 64.0)
-                acc[0] += _block_sums((y - blend) ** 2, self.nby8, self.nbx8)
-            out[m, :1 + nr] = acc[:1 + nr]
+        views = self.cells[m]
+        acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
+        nr = self._nrefs(m)
+        for v in views.tolist():
+            y = self._y(v)
+            blend = np.zeros_like(y)
+            for j in range(nr):
+                k = s.refs[v, j]
+                dy, dx = d * (s.positions[v] - s.positions[k])
+                mat = np.float32([[1, 0, dx], [0, 1, dy]])
+                p = cv2.warpAffine(self._y(k), mat, (self.wp, self.hp),
+                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
+                acc[1 + j] += _block_sums((y - p) ** 2, self.nby8, self.nbx8)
+                blend += p * (s.weights[v, j] / 64.0)
+            acc[0] += _block_sums((y - blend) ** 2, self.nby8, self.nbx8)
+        return acc[:1 + nr]
+
+    def costs_maps(self, d16: np.ndarray, runner=None) -> np.ndarray:
+        """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode for per-block disparities
+        ``d16`` (n_maps, nloc8) in 1/16 px per view step, with the exact integer predictor
+        (the cells on ``runner``)."""
+        nm = len(self.cells)
+        if runner is None or runner.workers == 1:
+            parts = [self._maps_cell(m, d16[m]) for m in range(nm)]
+        else:
+            h = self._handle(runner)
+            parts = runner.map(_maps_task, [(h, m, d16[m]) for m in range(nm)])
+        out = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
+        for m in range(nm):
+            out[m, :1 + self._nrefs(m)] = parts[m]
         return out
 
-    def costs_maps(self, d16: np.ndarray) -> np.ndarray:
-        """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode for per-block disparities
-        ``d16`` (n_maps, nloc8) in 1/16 px per view step, with the exact integer predictor."""
+    def _maps_cell(self, m: int, d16m: np.ndarray) -> np.ndarray:
+        """(1 + nrefs, nloc8) costs of cell m with per-block disparities d16m (nloc8,)."""
         s = self.s
         nloc8 = self.nby8 * self.nbx8
         ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
-        out = np.full((len(self.cells), 1 + MAX_REFS, nloc8), np.inf)
-        for m, views in enumerate(self.cells):
-            nr = self._nrefs(m)
-            acc = np.zeros((1 + nr, nloc8))
-            for v in views.tolist():
-                r = s.refs[v, :nr]
-                tgt = self._y(v).reshape(self.nby8, TB, self.nbx8, TB).transpose(0, 2, 1, 3).reshape(nloc8, TB, TB)
-                dpos = s.positions[v] - s.positions[r]                              # (nr, 2)
-                dy, dx = d16[m][:, None] * dpos[None, :, 0], d16[m][:, None] * dpos[None, :, 1]
-                one = np.full((nloc8, 1), 64, np.int64)
-                preds = []
-                for j in range(nr):               # each reference alone (R = 1): the blend is built from them
-                    slots = np.full((nloc8, 1), self.key_slot[r[j]], np.int64)
-                    p = predict_tbs(NUMPY, self.kp, (self.hp, self.wp), slots, one, dy[:, j:j + 1], dx[:, j:j + 1],
-                                    ty * TB, tx * TB)[..., 0]
-                    preds.append(p.astype(np.float32))
-                    acc[1 + j] += ((tgt - preds[-1]) ** 2).sum(axis=(1, 2))
-                wb = s.weights[v, :nr].astype(np.int64)
-                blend = (sum(int(wb[j]) * preds[j].astype(np.int64) for j in range(nr)) + 32) >> 6
-                acc[0] += ((tgt - blend) ** 2).sum(axis=(1, 2))
-            out[m, :1 + nr] = acc
-        return out
+        views = self.cells[m]
+        nr = self._nrefs(m)
+        acc = np.zeros((1 + nr, nloc8))
+        for v in views.tolist():
+            r = s.refs[v, :nr]
+            tgt = self._y(v).reshape(self.nby8, TB, self.nbx8, TB).transpose(0, 2, 1, 3).reshape(nloc8, TB, TB)
+            dpos = s.positions[v] - s.positions[r]                              # (nr, 2)
+            dy, dx = d16m[:, None] * dpos[None, :, 0], d16m[:, None] * dpos[None, :, 1]
+            one = np.full((nloc8, 1), 64, np.int64)
+            preds = []
+            for j in range(nr):               # each reference alone (R = 1): the blend is built from them
+                slots = np.full((nloc8, 1), self.key_slot[r[j]], np.int64)
+                p = predict_tbs(NUMPY, self.kp, (self.hp, self.wp), slots, one, dy[:, j:j + 1], dx[:, j:j + 1],
+                                ty * TB, tx * TB)[..., 0]
+                preds.append(p.astype(np.float32))
+                acc[1 + j] += ((tgt - preds[-1]) ** 2).sum(axis=(1, 2))
+            wb = s.weights[v, :nr].astype(np.int64)
+            blend = (sum(int(wb[j]) * preds[j].astype(np.int64) for j in range(nr)) + 32) >> 6
+            acc[0] += ((tgt - blend) ** 2).sum(axis=(1, 2))
+        return acc
+
+
+def _global_task(est: Estimator, m: int, d: float) -> np.ndarray:
+    return est._global_cell(m, d)
+
+
+def _maps_task(est: Estimator, m: int, d16m: np.ndarray) -> np.ndarray:
+    return est._maps_cell(m, d16m)
 
 
 def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, start: float = 4.0,
-                  side_lambda: float = 10.0, progress=None):
+                  side_lambda: float = 10.0, progress=None, runner=None):
     """One shared disparity map plus per-cell corrections and prediction modes.
 
     Returns:
@@ -114,7 +164,8 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     ``side_lambda``: luma squared error worth one bit of side information (the encoder's λ at
     the expected quality). A cell leaves the shared disparity, or a block leaves the blend, only
     where its error drops by more than the bits that costs (about 6 each); the shared map takes
-    its neighbours' median where that costs less than about 2 bits.
+    its neighbours' median where that costs less than about 2 bits. ``runner``: where the cells'
+    costs are computed (:class:`formats.parallel.Runner`; the maps do not depend on it).
     """
     est = Estimator(luma, struct, list(struct.keys))
     n_maps = len(est.cells)
@@ -131,7 +182,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
 
     D = min(start, max_disparity)
     cands = list(np.arange(-D, D + 1))
-    costs = [best_mode(est.costs_global(float(d))) for d in cands]
+    costs = [best_mode(c) for c in est.costs_global_many(cands, runner)]
     if progress:
         progress("disparity", len(costs), None)
     while D < max_disparity:               # widen where blocks sit at the range's edge and it pays
@@ -142,7 +193,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
             break
         D2 = min(2 * D, max_disparity)
         more = list(np.arange(-D2, -D)) + list(np.arange(D + 1, D2 + 1))
-        mc = [best_mode(est.costs_global(float(d))) for d in more]
+        mc = [best_mode(c) for c in est.costs_global_many(more, runner)]
         if progress:
             progress("disparity", len(costs) + len(mc), None)
         if np.minimum(np.stack(mc).sum(1).min(0), g.min(0)).sum() >= 0.995 * g.min(0).sum():
@@ -157,7 +208,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     lim = int(D * 16)
 
     def total(dmaps):
-        return best_mode(est.costs_maps(dmaps))               # (n_maps, nloc8)
+        return best_mode(est.costs_maps(dmaps, runner))       # (n_maps, nloc8)
 
     cur = total(disp)
     for step in (8, 4, 2, 1):              # refine the shared map, then each cell's own values
@@ -189,6 +240,6 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
         base = np.where(ok, med, base)
         upd = follow & ok[None, :]
         disp, cur = np.where(upd, cand, disp), np.where(upd, cc, cur)
-    c = est.costs_maps(disp) + pen
+    c = est.costs_maps(disp, runner) + pen
     modes = c.argmin(axis=1)
     return base, disp, modes
