@@ -74,7 +74,8 @@ class RlfcCodec(Codec):
                        help="tx: views between key views along rows and columns (default: 2 for grids up to 5x5, "
                             "else 4)")
         g.add_argument("--key-ratio", type=float, default=None,
-                       help="tx: key views' quantizer step is the others' divided by this (default 1.6)")
+                       help="tx: key views' quantizer step is the others' divided by this (default: set from a probe "
+                            "pass, 1.2-2.5)")
         g.add_argument("--intra-codec", default=None, choices=["auto", "tx", "j2k"],
                        help="tx: the intra key view as JPEG 2000 where that is smaller (auto, default) or always "
                             "with the transform coder")
