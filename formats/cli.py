@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import re
 import sys
@@ -287,6 +288,8 @@ def cmd_decode(a) -> int:
     if a.block is None and a.outdir is None:
         raise ParameterError("give an output folder (OUTDIR), or --block ROW,COL,BY,BX with --out FILE.npy")
     level = a.level
+    if not math.isfinite(level) or level < 0:
+        raise ParameterError(f"--level must be a finite number >= 0, got {level}")
     if level == int(level):
         level = int(level)
     with open_lfc(a.input) as f:
