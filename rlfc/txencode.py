@@ -601,69 +601,68 @@ class TxEncoder:
         return psnr_from_sq_error(np.array([x.sse for x in c]), np.array([x.cnt for x in c]), float(self.peak))
 
     # -- symbols and packing -----------------------------------------------------------------
-    def symbols(self, res: dict):
-        """Every stream's symbols, in ``tx.blocks`` order: the key views' rows, then the other
-        views' coded blocks (location-major).
+    SYMBOL_CHUNK = 1024        # random-access blocks turned into symbols at a time (bounds memory)
 
-        Returns:
-            (key row lengths shape (n_keys, nby), non-key (views, locations), symbols of
-            :func:`rlfc.txsyntax.block_symbols` with lanes numbered in stream order).
-        """
+    def coded_blocks(self, res: dict) -> np.ndarray:
+        """(n0, nloc) bool: the random-access blocks of the views that are not key views that
+        have a stream."""
+        coded = np.zeros((self.n0, self.nby * self.nbx), bool)
+        for v, c in enumerate(res["codes"]):
+            if not self.is_key[v]:
+                coded[v] = c.coded
+        return coded
+
+    def symbol_parts(self, res: dict):
+        """Every stream's symbols, in ``tx.blocks`` order (the key views' rows, then the other
+        views' coded blocks, location-major), a part at a time: yields (lanes in the part,
+        symbols of :func:`rlfc.txsyntax.block_symbols` with lanes numbered within the part).
+        Parts are one key view, or up to SYMBOL_CHUNK blocks of the others, so that symbols
+        of a high-rate light field never all exist at once."""
         tbi = self._ra_tbs()
         nrow = self.nbx * self.nt
-        parts = []
         for k in self.coded_keys(res):                   # key rows: lanes of nbx·nt tbs
             c = res["codes"][k]
             modes = c.modes[tbi].astype(np.int64).reshape(self.nby, nrow)
             levels = c.levels(tbi.reshape(-1)).reshape(self.nby, nrow, self.P, 64)
-            parts.append(block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])),
-                                       np.ones(self.nby, np.int64), self.pcs))
-        n0 = self.n0
-        coded = np.zeros((n0, self.nby * self.nbx), bool)
-        for v, c in enumerate(res["codes"]):
-            if not self.is_key[v]:
-                coded[v] = c.coded
-        sv, sl = stream_order(coded)
-        if sv.size:
-            vs, ms, ls, lo = [], [], [], []
-            for v in np.unique(sv).tolist():                 # gather per view, then into stream order
-                loc = np.flatnonzero(coded[v])
+            yield self.nby, block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])),
+                                          np.ones(self.nby, np.int64), self.pcs)
+        sv, sl = stream_order(self.coded_blocks(res))     # location-major, views ascending
+        for a in range(0, sv.size, self.SYMBOL_CHUNK):
+            v_, l_ = sv[a:a + self.SYMBOL_CHUNK], sl[a:a + self.SYMBOL_CHUNK]
+            modes = np.zeros((v_.size, self.nt), np.int64)
+            levels = np.zeros((v_.size, self.nt, self.P, 64), np.int64)
+            for v in np.unique(v_).tolist():
+                i = np.flatnonzero(v_ == v)
                 c = res["codes"][v]
-                ms.append(c.modes[tbi[loc]].astype(np.int64))
-                ls.append(c.levels(tbi[loc].reshape(-1)).reshape(loc.size, self.nt, self.P, 64))
-                vs.append(np.full(loc.size, v))
-                lo.append(loc)
-            order = np.lexsort((np.concatenate(vs), np.concatenate(lo)))   # location-major, views ascending
-            modes, levels = np.concatenate(ms)[order], np.concatenate(ls)[order]
-            parts.append(block_symbols(modes, levels, self.intra[sv].astype(np.int64), np.zeros(sv.size, np.int64),
-                                       self.pcs))
-        base = 0
-        out = [[], [], [], [], []]
-        nck = len(self.coded_keys(res))
-        for i, p in enumerate(parts):
-            n = self.nby if i < nck else sv.size
-            out[0].append(p[0] + base)
-            out[3].append(p[3] + base)
-            for j in (1, 2, 4):
-                out[j].append(p[j])
-            base += n
-        syms = tuple(np.concatenate(x) if x else np.zeros(0, np.int64) for x in out)
-        return base, coded, syms
+                modes[i] = c.modes[tbi[l_[i]]]
+                levels[i] = c.levels(tbi[l_[i]].reshape(-1)).reshape(i.size, self.nt, self.P, 64)
+            yield v_.size, block_symbols(modes, levels, self.intra[v_].astype(np.int64), np.zeros(v_.size, np.int64),
+                                         self.pcs)
+
+    def counts_of(self, res: dict) -> np.ndarray:
+        """(N_CTX, ALPHABET) symbol counts of a run (part by part)."""
+        total = None
+        for _, (lane, ctx, sym, _, _) in self.symbol_parts(res):
+            c = count_symbols(ctx, sym)
+            total = c if total is None else total + c
+        return total if total is not None else count_symbols(np.zeros(0, np.int64), np.zeros(0, np.int64))
 
     def coded_keys(self, res: dict) -> list:
         """Key views coded as row streams (not JPEG 2000), in key order."""
         return [k for k in self.s.keys if k not in res["keyimg"]]
 
     def model_of(self, res: dict) -> Model:
-        _, _, (lane, ctx, sym, _, _) = self.symbols(res)
-        return Model(count_symbols(ctx, sym) + default_counts() * 1e-3)
+        return Model(self.counts_of(res) + default_counts() * 1e-3)
 
     def pack(self, res: dict) -> tuple[dict, list]:
-        """(config, sections) of a run."""
-        n_streams, coded, (lane, ctx, sym, rl, rb) = self.symbols(res)
-        q = quantize_counts(count_symbols(ctx, sym))
+        """(config, sections) of a run: the tables from every part's counts, then each part's
+        streams (a lane's bytes depend on its own symbols and the tables only)."""
+        q = quantize_counts(self.counts_of(res))
         tables = tables_from_quantized(q)
-        streams = pack_streams(n_streams, lane, ctx, sym, rl, rb, tables)
+        streams = []
+        for n, (lane, ctx, sym, rl, rb) in self.symbol_parts(res):
+            streams += pack_streams(n, lane, ctx, sym, rl, rb, tables)
+        coded = self.coded_blocks(res)
         ck = self.coded_keys(res)
         nk = len(ck) * self.nby
         key_lengths = np.array([len(b) for b in streams[:nk]], np.int64).reshape(len(ck), self.nby)

@@ -145,8 +145,37 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     return lane[o], ctx[o], syms[o], rl[ro], rbits[ro]
 
 
+PACK_CELLS = 1 << 22          # lanes × longest lane coded at once (two int64 matrices of this size)
+
+
 def pack_streams(S: int, lane, ctx, sym, rlane, rbits, tables: Tables) -> list[bytes]:
-    """rANS-encode the symbols of S lanes and append each lane's raw bits."""
+    """rANS-encode the symbols of S lanes and append each lane's raw bits. Lanes are coded
+    in consecutive groups whose lanes × longest lane stays within PACK_CELLS (each lane's bytes
+    depend on its own symbols only, so the grouping changes no byte; one long key-view row
+    beside thousands of short blocks would otherwise make an S × K matrix of gigabytes)."""
+    counts = np.bincount(lane, minlength=S)
+    K = int(counts.max(initial=0))
+    if S > 1 and S * K > PACK_CELLS and not (np.diff(lane) < 0).any() and not (np.diff(rlane) < 0).any():
+        # greedy consecutive groups: extend while (lanes in group) × (longest so far) fits
+        out: list = []
+        a = 0
+        lo = np.searchsorted(lane, np.arange(S + 1))              # lane is sorted (lanes ascending)
+        rlo = np.searchsorted(rlane, np.arange(S + 1))
+        while a < S:
+            b, kmax = a, 0
+            while b < S:
+                k2 = max(kmax, int(counts[b]))
+                if b > a and (b - a + 1) * k2 > PACK_CELLS:
+                    break
+                kmax, b = k2, b + 1
+            sl, rs_ = slice(lo[a], lo[b]), slice(rlo[a], rlo[b])
+            out += _pack_group(b - a, lane[sl] - a, ctx[sl], sym[sl], rlane[rs_] - a, rbits[rs_], tables)
+            a = b
+        return out
+    return _pack_group(S, lane, ctx, sym, rlane, rbits, tables)
+
+
+def _pack_group(S: int, lane, ctx, sym, rlane, rbits, tables: Tables) -> list[bytes]:
     counts = np.bincount(lane, minlength=S)
     K = int(counts.max(initial=0))
     starts = np.cumsum(counts) - counts

@@ -67,3 +67,21 @@ def test_malformed_streams_raise():
                 tx.parse_one(b, tables, 4, pcs, 0, 0)
     with pytest.raises(FormatError):
         tx.tables_from_bytes(b"\x78\x9c\x03\x00\x00\x00\x00\x01", "x")
+
+
+@settings(max_examples=15)
+@given(st.integers(0, 2 ** 31), st.integers(2, 25), st.integers(1, 3000))
+def test_streams_packed_in_groups_are_the_same_bytes(seed, S, cells):
+    """pack_streams codes lanes in groups to bound memory; no byte may depend on the grouping."""
+    rng = np.random.default_rng(seed)
+    modes, levels = _random_blocks(rng, S, 4, 3, 0.5, False)
+    kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(3)
+    lane, ctx, sym, rl, rb = tx.block_symbols(modes, levels, kind, key, pcs)
+    tables = tx.tables_from_quantized(tx.quantize_counts(tx.count_symbols(ctx, sym)))
+    whole = tx._pack_group(S, lane, ctx, sym, rl, rb, tables)
+    old = tx.PACK_CELLS
+    try:
+        tx.PACK_CELLS = cells
+        assert tx.pack_streams(S, lane, ctx, sym, rl, rb, tables) == whole
+    finally:
+        tx.PACK_CELLS = old
