@@ -203,7 +203,7 @@ class DaskRunner(Runner):
         index = {f.key: i for i, f in enumerate(futs)}
         out: list = [None] * len(futs)
         try:
-            for f in as_completed(futs):
+            for f in as_completed(futs, loop=self.client.loop):      # (this client's loop: it may not be the default)
                 out[index[f.key]] = f.result()
                 if done:
                     done(1)

@@ -72,14 +72,15 @@ def test_pool_encode_is_the_same_file(small_lf, serial_file):
 
 def test_dask_local_cluster_encode_is_the_same_file(small_lf, serial_file):
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
-            distributed.Client(cl) as client:
-        blob, enc = _encode(small_lf, scheduler=client)
-        assert enc.summary["runner"] == "dask" and enc.summary["workers"] == 2
-        assert blob == serial_file[0]
-        # an address works the same way (the runner connects and closes its own client)
-        blob2, _ = _encode(small_lf, scheduler=cl.scheduler_address)
-        assert blob2 == serial_file[0]
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
+        # an address, as `lfcodec encode --scheduler` gives it: the runner connects (no default
+        # client exists) and closes its own client
+        blob2, enc2 = _encode(small_lf, scheduler=cl.scheduler_address)
+        assert blob2 == serial_file[0] and enc2.summary["runner"] == "dask"
+        with distributed.Client(cl) as client:
+            blob, enc = _encode(small_lf, scheduler=client)
+            assert enc.summary["runner"] == "dask" and enc.summary["workers"] == 2
+            assert blob == serial_file[0]
 
 
 def test_unreachable_scheduler_is_a_worker_error(monkeypatch):
