@@ -41,7 +41,6 @@ class ViewStack:
             if r * c != n:
                 raise SceneError(f"grid {r}x{c} does not hold the {n} views of the array")
             self._five = False
-        self._grey = len(shape) == 3
         self.arr = arr
         self.shape = (int(r), int(c)) + tuple(hwc)
         self.dtype = np.dtype(arr.dtype)

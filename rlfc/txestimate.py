@@ -52,7 +52,9 @@ class Estimator:
         return int((self.s.refs[self.cells[m][0]] >= 0).sum())
 
     def costs_global_many(self, ds, runner=None) -> list:
-        """[:meth:`costs_global` (d) for d in ds], the (d, cell) pairs on ``runner``."""
+        """[(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode at global disparity d (px per
+        view step; inf for modes a cell does not have) for d in ds], the (d, cell) pairs on
+        ``runner``."""
         nm = len(self.cells)
         pairs = [(float(d), m) for d in ds for m in range(nm)]
         if runner is None or runner.workers == 1:
@@ -78,11 +80,6 @@ class Estimator:
         st = dict(self.__dict__)
         st.pop("_shared", None)
         return st
-
-    def costs_global(self, d: float) -> np.ndarray:
-        """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode at one global disparity d (px/step)
-        (inf for modes a cell does not have)."""
-        return self.costs_global_many([d])[0]
 
     def _global_cell(self, m: int, d: float) -> np.ndarray:
         """(1 + nrefs, nloc8) costs of cell m at global disparity d."""
