@@ -15,6 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from .txlayout import MAX_REFS
+from formats.parallel import Runner
+
 from .txpredict import TB
 
 
@@ -57,11 +59,9 @@ class Estimator:
         ``runner``."""
         nm = len(self.cells)
         pairs = [(float(d), m) for d in ds for m in range(nm)]
-        if runner is None or runner.workers == 1:
-            parts = [self._global_cell(m, d) for d, m in pairs]
-        else:
-            h = self._handle(runner)
-            parts = runner.map(_global_task, [(h, m, d) for d, m in pairs])
+        runner = runner or Runner()                 # (the serial runner: a loop here, no copies)
+        h = self._handle(runner)
+        parts = runner.map(_global_task, [(h, m, d) for d, m in pairs])
         out = []
         for i in range(len(ds)):
             c = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
@@ -107,11 +107,9 @@ class Estimator:
         """(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode for per-block disparities
         ``d16`` (n_maps, nloc8) in 1/16 px per view step (the cells on ``runner``)."""
         nm = len(self.cells)
-        if runner is None or runner.workers == 1:
-            parts = [self._maps_cell(m, d16[m]) for m in range(nm)]
-        else:
-            h = self._handle(runner)
-            parts = runner.map(_maps_task, [(h, m, d16[m]) for m in range(nm)])
+        runner = runner or Runner()
+        h = self._handle(runner)
+        parts = runner.map(_maps_task, [(h, m, d16[m]) for m in range(nm)])
         out = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
         for m in range(nm):
             out[m, :1 + self._nrefs(m)] = parts[m]
