@@ -227,14 +227,20 @@ class LaneDecoder:
 
     def __init__(self, xp, buf, starts, tables: Tables, tabs=None):
         self.xp, self.buf = xp, buf
-        self.t = tabs or device_tables(xp, tables)
         self.ptr = starts + STATE_BYTES
         self.x = xp.cast(xp.word(buf, starts, STATE_BYTES), xp.int64)
         self.top = int(buf.shape[0]) - 1
+        if isinstance(buf, np.ndarray) and tabs is None:
+            self.t = None
+            self.slot, self.fc, self.A = numpy_tables(tables)
+        else:
+            self.t = tabs or device_tables(xp, tables)
 
     def step(self, lanes, ctx):
         """Decode one symbol in each lane of ``lanes`` (indices) with contexts ``ctx``; returns
         the symbols (int64)."""
+        if self.t is None:
+            return self._step_numpy(lanes, ctx)
         t, xp = self.t, self.xp
         x = self.x[lanes]
         slot = x & (M - 1)
@@ -250,6 +256,25 @@ class LaneDecoder:
         self.ptr[lanes] = p
         return s
 
+    def _step_numpy(self, lanes, ctx):
+        """:meth:`step` in numpy with fewer, narrower passes (the same integers): the slot
+        look-up in bytes, frequency and start of a symbol in one int64 word."""
+        x = self.x[lanes]
+        slot = x & (M - 1)
+        ctx = np.asarray(ctx)
+        s = self.slot[ctx * M + slot] if self.slot.ndim == 1 else self.slot[ctx, slot]
+        fc = self.fc[ctx * self.A + s]                      # freq << 32 | cum
+        x = (fc >> 32) * (x >> PROB_BITS) + slot - (fc & 0xFFFFFFFF)
+        p = self.ptr[lanes]
+        top, buf = self.top, self.buf
+        for _ in range(2):                                  # at most two bytes in per symbol
+            need = x < L
+            x = np.where(need, (x << 8) | buf[np.minimum(p, top)], x)
+            p += need
+        self.x[lanes] = x
+        self.ptr[lanes] = p
+        return s.astype(np.int64)
+
     def check(self, ends, back_bits=0):
         """Bool per lane: the stream is well-formed (read exactly to ``ends``, and its final
         state is L + R with R < 2^back_bits; ``back_bits`` an int or one per lane)."""
@@ -264,6 +289,18 @@ class LaneDecoder:
 def device_tables(xp, tables: Tables) -> dict:
     """The tables as backend arrays (flat, so one gather per look-up)."""
     return {"slot": xp.asarray(tables.slot), "freq": xp.asarray(tables.freq), "cum": xp.asarray(tables.cum)}
+
+
+def numpy_tables(tables: Tables):
+    """(slot look-up flat (C·M,) uint8 — or (C, M) int64 for alphabets over 256 —, freq << 32 |
+    cum flat (C·A,) int64, A) for :meth:`LaneDecoder._step_numpy`, cached on the tables."""
+    got = getattr(tables, "_numpy_lanes", None)
+    if got is None:
+        C, A = tables.freq.shape
+        slot = tables.slot.astype(np.uint8).reshape(-1) if A <= 256 else tables.slot
+        fc = ((tables.freq << 32) | tables.cum[:, :A]).reshape(-1)
+        got = tables._numpy_lanes = (slot, fc, A)
+    return got
 
 
 def slot_bytes(tables: Tables) -> list:

@@ -290,11 +290,39 @@ def tables_from_bytes_n(data: bytes, n_ctx: int, alphabet: int, name: str) -> np
 
 # -- decoders --------------------------------------------------------------------------------
 class Parsed:
-    """Decoded syntax of S blocks: modes (S, nt) int64; levels (S, nt, P, 64) int64 signed, in
-    scan order."""
+    """Decoded syntax of S blocks of nt tbs and P planes: ``modes`` (S, nt) int64 and the
+    nonzero quantized coefficients, sparse: ``index`` (K,) int64 into the flat (S, nt, P, 64)
+    scan-order array (grouped by lane, tb and plane in ascending order; any order within one
+    tb and plane) and ``values`` (K,) int64 signed. ``levels`` is the dense
+    array, built on request."""
 
-    def __init__(self, modes, levels):
-        self.modes, self.levels = modes, levels
+    def __init__(self, modes, index, values, planes: int):
+        self.modes, self.index, self.values, self.P = modes, index, values, planes
+
+    @classmethod
+    def from_levels(cls, modes: np.ndarray, levels: np.ndarray) -> "Parsed":
+        flat = levels.reshape(-1)
+        idx = np.flatnonzero(flat)
+        return cls(modes, idx, flat[idx], levels.shape[2])
+
+    @property
+    def levels(self) -> np.ndarray:
+        S, nt = self.modes.shape
+        out = np.zeros(S * nt * self.P * 64, np.int64)
+        out[self.index] = self.values
+        return out.reshape(S, nt, self.P, 64)
+
+    def split(self, bounds) -> list:
+        """Parsed of lanes [bounds[i], bounds[i+1]) each."""
+        per = self.modes.shape[1] * self.P * 64
+        cut = np.searchsorted(self.index, np.asarray(bounds, np.int64) * per)
+        return [Parsed(self.modes[a:b], self.index[cut[i]:cut[i + 1]] - a * per, self.values[cut[i]:cut[i + 1]], self.P)
+                for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))]
+
+    def reshape(self, lanes: int, nt: int) -> "Parsed":
+        """The same coefficients seen as ``lanes`` lanes of ``nt`` tbs (a stream of several
+        blocks in raster order = consecutive blocks)."""
+        return Parsed(self.modes.reshape(lanes, nt), self.index, self.values, self.P)
 
 
 def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: Tables, nt: int, pcs: np.ndarray,
@@ -309,9 +337,8 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
 
     S, P = starts.size, pcs.size
     modes = np.zeros((S, nt), np.int64)
-    levels = np.zeros((S, nt, P, 64), np.int64)
     if S == 0:
-        return Parsed(modes, levels)
+        return Parsed(modes, np.zeros(0, np.int64), np.zeros(0, np.int64), P)
     dec = LaneDecoder(xp, buf, starts.astype(np.int64), tables)
     lanes = np.arange(S)
     prev = np.full(S, 3, np.int64)
@@ -397,9 +424,8 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
             suffix[m] |= _raw_bits(buf, raw_start[e_lane[m]], back[e_lane[m]], kb[e_lane[m]], eoff[m] + b) << b
         vals[esc] = ESC + first + ((1 << buckets) - 1) + suffix
     vals[sidx] = np.where(sbit == 1, -vals[sidx], vals[sidx])
-    lv = levels.reshape(S, nt * P, 64)
-    lv[g_lane, g_tp, pos] = vals
-    return Parsed(modes, levels)
+    index = (gidx << 6) + pos                          # gidx = lane·nt·P + tb·P + plane: ascending
+    return Parsed(modes, index[sidx], vals[sidx], P)
 
 
 def _raw_bits(buf, start, back, kb, off):
@@ -484,4 +510,4 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
                 v = -v
             si += 1
         levels[0, c[0], c[1], c[2]] = v
-    return Parsed(np.array([modes], np.int64), levels)
+    return Parsed.from_levels(np.array([modes], np.int64), levels)

@@ -18,17 +18,20 @@ import numpy as np
 from formats.errors import FormatError, UnsupportedError
 
 from ..kernels import bilinear, dequantize
-from ..transform import COEF_MAX, UNZIG, inverse
+from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
-from ..txsyntax import MODE_INTRA, Parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
+from ..txsample import KeyAtlas, predict as remap_predict
+from ..txsyntax import MODE_INTRA, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
 
 PAD = 8
-CHUNK_BLOCKS = 256      # 16×16 requests per vectorized pass (fewer of larger blocks): measured best on 2 cores
+PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
+PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their streams step together)
+KEY_PARSE_TBS = 1 << 20  # tbs of key views parsed together at open (bounds the parsed coefficients held)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
 
 
@@ -73,6 +76,7 @@ class TxDecoder(ProfileDecoder):
         self.pcs = plane_classes(self.P)
         peak = int(np.iinfo(self.dtype).max)
         self.lo, self.hi, self.flat = plane_limits(self.P, peak)
+        self.lo32, self.hi32 = self.lo.astype(np.int32), self.hi.astype(np.int32)
         self.tables = tables_from_quantized(tables_from_bytes(c.read("tx.tables"), f"{name}: tx.tables"), lay.version)
         self.disp, self.modes = unpack_maps(c.read("tx.maps"), lay.n_maps, (self.nby8, self.nbx8), 1 + MAX_REFS,
                                             f"{name}: tx.maps")
@@ -117,9 +121,37 @@ class TxDecoder(ProfileDecoder):
         self.key_slot[keys] = np.arange(keys.size)
         self.is_key = self.key_slot >= 0
         self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
-        self.kp = planar(self.keyplanes)
-        for k in keys.tolist():                               # key views: decoded once, in order
-            self._decode_key(k)
+        self._kp = None
+        bits = int(np.iinfo(self.dtype).bits) + (1 if self.P >= 3 else 0)      # Co/Cg carry one more bit
+        self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, bits) if KeyAtlas.fits(
+            self.Hp, self.Wp, self.P) else None
+        self._decode_keys(keys.tolist())
+
+    def _decode_keys(self, keys: list) -> None:
+        """Decode the key views once, in order (a key is predicted from keys before it). The
+        block rows of every transform-coded key are parsed together, in groups of at most
+        KEY_PARSE_TBS tbs: the rANS lanes step together, so the parse costs the longest row's
+        symbols, not their sum."""
+        coded = [k for k in keys if k not in self.img_of]
+        per_key = self.nby * self.nbx * self.nt
+        group = max(1, KEY_PARSE_TBS // per_key)
+        parsed = {}
+        for i, k in enumerate(keys):
+            if k in coded and k not in parsed:
+                todo = [c for c in coded if c not in parsed][:group]
+                parsed.update(zip(todo, self._parse_key_rows(todo)))
+            self._decode_key(k, parsed.pop(k, None))
+
+    def _parse_key_rows(self, keys: list) -> list:
+        """Parsed (nloc lanes of nt tbs) of each key's block rows."""
+        nloc, nby = self.nby * self.nbx, self.nby
+        rows = np.array([self.row_of[k] for k in keys], np.int64)
+        s0, e0 = self.key_start[rows].reshape(-1), self.key_end[rows].reshape(-1)
+        buf, s2, e2 = self._streams(s0, e0)
+        kind = np.repeat(self.lay.intra[keys].astype(np.int64), nby)
+        got = parse_lanes(buf, s2, e2, self.tables, self.nt * self.nbx, self.pcs, kind, np.ones(kind.size, np.int64),
+                          self.container.name)
+        return [p.reshape(nloc, self.nt) for p in got.split(np.arange(len(keys) + 1) * nby)]
 
     # -- streams ----------------------------------------------------------------------------
     def _streams(self, starts: np.ndarray, ends: np.ndarray):
@@ -158,6 +190,20 @@ class TxDecoder(ProfileDecoder):
         return buf, new_start, new_start + (ends - starts)
 
     # -- prediction ---------------------------------------------------------------------------
+    @property
+    def kp(self) -> np.ndarray:
+        """(P, n_keys·Hp·Wp) planar key views (the gather layout of ``predict_tbs``), built on
+        first use."""
+        if self._kp is None:
+            self._kp = planar(self.keyplanes)
+        return self._kp
+
+    def _set_key(self, slot: int, planes: np.ndarray) -> None:
+        self.keyplanes[slot] = planes
+        self._kp = None
+        if self.atlas is not None:
+            self.atlas.set(slot, planes)
+
     def _pred(self, views, ty, tx, xp=NUMPY, kp=None):
         """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
         lay = self.lay
@@ -169,6 +215,9 @@ class TxDecoder(ProfileDecoder):
         w = np.where(mode[:, None] == 0, lay.weights[views], 64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
         r0 = refs.clip(0)
         dpos = lay.positions[views][:, None, :] - lay.positions[r0]          # (M, 4, 2)
+        if xp is NUMPY and self.atlas is not None:
+            return remap_predict(self.atlas, self.key_slot[r0].clip(0), w, d[:, None] * dpos[..., 0],
+                                 d[:, None] * dpos[..., 1], ty * TB, tx * TB)
         A = xp.asarray
         return predict_tbs(xp, self.kp if kp is None else kp, (self.Hp, self.Wp), A(self.key_slot[r0].clip(0)),
                            A(w), A(d[:, None] * dpos[..., 0]), A(d[:, None] * dpos[..., 1]), A(ty * TB), A(tx * TB))
@@ -181,18 +230,30 @@ class TxDecoder(ProfileDecoder):
         return np.repeat(views, self.nt), ty, tx
 
     def _residual(self, views, parsed):
-        """(S, nt, 8, 8, P) int64 residuals of parsed streams of ``views``; intra tbs flagged."""
-        lay = self.lay
+        """(S, nt, 8, 8, P) int32 residuals of parsed streams of ``views``: the nonzero
+        coefficients dequantized where they are, then only the 8×8 blocks that have any are
+        inverse-transformed."""
+        lay, P, nt = self.lay, self.P, self.nt
         S = views.size
-        step = lay.step16[np.where(self.is_key[views], 0, 1)]                # (S, P)
-        lv = parsed.levels                                                     # (S, nt, P, 64) scan order
-        raster = np.where(lay.bypass[None, None, :, None], lv, lv[..., UNZIG])
-        deq = dequantize(NUMPY, raster, step[:, None, :, None]).clip(-COEF_MAX, COEF_MAX)
-        blocks = deq.reshape(S, self.nt, self.P, TB, TB)
-        tr = ~lay.bypass
-        if tr.any():
-            blocks[:, :, tr] = inverse(blocks[:, :, tr])
-        return np.moveaxis(blocks, 2, -1)                                      # (S, nt, 8, 8, P)
+        res = np.zeros((S * nt * P, 64), np.int32)
+        idx, q = parsed.index, parsed.values
+        if idx.size:
+            blk, pos = idx >> 6, idx & 63                                    # (lane, tb, plane), scan position
+            plane = blk % P
+            q16 = lay.step16[np.where(self.is_key[views[blk // (nt * P)]], 0, 1), plane]
+            deq = dequantize(NUMPY, q, q16)
+            np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
+            raster = np.where(lay.bypass[plane], pos, ZIGZAG[pos])
+            new = np.ones(blk.size, bool)
+            new[1:] = blk[1:] != blk[:-1]
+            ub = blk[new]                                                    # blocks with coefficients
+            X = np.zeros((ub.size, 64), np.float64)
+            X[np.cumsum(new) - 1, raster] = deq
+            tr = ~lay.bypass[ub % P]
+            if tr.any():
+                X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
+            res[ub] = X
+        return np.moveaxis(res.reshape(S, nt, P, TB, TB), 2, -1)               # (S, nt, 8, 8, P)
 
     def _parse(self, views, locs):
         """Parse the streams of (view, location) pairs that have one."""
@@ -208,11 +269,15 @@ class TxDecoder(ProfileDecoder):
     def _reconstruct(self, views, locs, level, pred=None, parsed=None):
         """(M, B, B, P) int32 planes of block requests (views with references, or ``pred`` given
         as (M, nt, 8, 8, P)); ``parsed``: the syntax of every request (key rows), else the
-        requests' own streams are parsed."""
-        M, B, nt = views.size, self.block_size, self.nt
+        requests' own streams are parsed (all at once: the rANS lanes step together)."""
+        M, B, nt, P = views.size, self.block_size, self.nt, self.P
         if pred is None:
-            pred = self._pred(*self._tb_coords(views, locs)).reshape(M, nt, TB, TB, self.P)
-        out = pred.astype(np.int64)
+            pred = np.empty((M, nt, TB, TB, P), np.int32)
+            step = PRED_TBS // nt                             # requests per prediction pass: stays in cache
+            for a in range(0, M, step):
+                v, lc = views[a:a + step], locs[a:a + step]
+                pred[a:a + step] = self._pred(*self._tb_coords(v, lc)).reshape(v.size, nt, TB, TB, P)
+        out = pred if pred.dtype == np.int32 else pred.astype(np.int32)
         if level == 0:
             have = np.arange(M) if parsed is not None else np.flatnonzero(self.coded[views, locs])
             if have.size:
@@ -220,13 +285,15 @@ class TxDecoder(ProfileDecoder):
                     parsed = self._parse(views[have], locs[have])
                 res = self._residual(views[have], parsed)
                 intra = parsed.modes == MODE_INTRA                             # (S, nt)
-                base = np.where(intra[:, :, None, None, None], self.flat, out[have])
+                base = np.where(intra[:, :, None, None, None], self.flat.astype(np.int32), out[have])
                 out[have] = base + res
-        out = out.clip(self.lo, self.hi).astype(np.int32)
+        out = np.minimum(np.maximum(out, self.lo32, out=out), self.hi32, out=out)   # ufuncs: np.clip costs µs
         # tbs → blocks: (M, tpb, tpb, 8, 8, P) → (M, B, B, P)
-        return out.reshape(M, self.tpb, self.tpb, TB, TB, self.P).transpose(0, 1, 3, 2, 4, 5).reshape(M, B, B, self.P)
+        return out.reshape(M, self.tpb, self.tpb, TB, TB, P).transpose(0, 1, 3, 2, 4, 5).reshape(M, B, B, P)
 
-    def _decode_key(self, k: int) -> None:
+    def _decode_key(self, k: int, parsed=None) -> None:
+        """Decode key view ``k``: its JPEG 2000 image, or its blocks (``parsed``: its rows'
+        syntax from :meth:`_parse_key_rows`)."""
         slot = int(self.key_slot[k])
         if k in self.img_of:                                  # a JPEG 2000 intra key view
             from formats.pixels import to_planes
@@ -236,8 +303,7 @@ class TxDecoder(ProfileDecoder):
             a, b = self.img_of[k]
             img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)),
                                (self.Hp, self.Wp, self.P), self.dtype)
-            self.keyplanes[slot] = to_planes(img)
-            self.kp = planar(self.keyplanes)
+            self._set_key(slot, to_planes(img))
             return
         nloc = self.nby * self.nbx
         locs = np.arange(nloc)
@@ -249,16 +315,11 @@ class TxDecoder(ProfileDecoder):
             up = upsample_thumb(th, self.Hp, self.Wp)
             pred = up.reshape(self.nby, self.tpb, TB, self.nbx, self.tpb, TB, self.P).transpose(
                 0, 3, 1, 4, 2, 5, 6).reshape(nloc, self.nt, TB, TB, self.P)
-        s0, e0 = self.key_start[self.row_of[k]], self.key_end[self.row_of[k]]
-        buf, s2, e2 = self._streams(s0, e0)
-        n = np.full(self.nby, 1 if self.lay.intra[k] else 0)
-        rows = parse_lanes(buf, s2, e2, self.tables, self.nt * self.nbx, self.pcs, n, np.ones(self.nby, np.int64),
-                           self.container.name)
-        parsed = Parsed(rows.modes.reshape(nloc, self.nt), rows.levels.reshape(nloc, self.nt, self.P, 64))
+        if parsed is None:
+            parsed = self._parse_key_rows([k])[0]
         blocks = self._reconstruct(views, locs, 0, pred, parsed)
         img = blocks.reshape(self.nby, self.nbx, self.block_size, self.block_size, self.P).transpose(0, 2, 1, 3, 4)
-        self.keyplanes[slot] = img.reshape(self.Hp, self.Wp, self.P)
-        self.kp = planar(self.keyplanes)
+        self._set_key(slot, img.reshape(self.Hp, self.Wp, self.P))
 
     # -- ProfileDecoder ---------------------------------------------------------------------
     def _key_blocks(self, views, by, bx):
@@ -273,10 +334,12 @@ class TxDecoder(ProfileDecoder):
         if key.any():
             out[key] = self._key_blocks(views[key], by[key], bx[key])
         nk = np.flatnonzero(~key)
-        step = CHUNK_BLOCKS * 4 // self.nt                 # requests per pass: temporaries stay in cache
-        for a in range(0, nk.size, step):
-            c = nk[a:a + step]
-            out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level)
+        if nk.size:
+            order = nk[np.lexsort((bx[nk], by[nk], views[nk]))]          # by view, then raster: shared
+            step = PARSE_TBS // self.nt                                 # references stay in cache
+            for a in range(0, order.size, step):
+                c = order[a:a + step]
+                out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level)
         B = self.block_size
         return out.reshape(views.size, B * B, self.P)
 

@@ -1,0 +1,126 @@
+"""The ``tx`` prediction on the CPU through OpenCV's ``remap``: the same integers as
+:func:`rlfc.txpredict.predict_tbs`, in one fused sampling pass instead of about ten numpy
+passes over 9×9 windows.
+
+Why it is exact. ``predict_tbs`` samples key views at positions with 4 fractional bits, taps
+clamped to the image, ``((a(16−fx) + b·fx)(16−fy) + (c(16−fx) + e·fx)·fy + 128) >> 8``. Given a
+float image and float coordinates ``Y/16`` (exact), ``remap`` (INTER_LINEAR) returns that sum
+divided by 256: the bilinear weights are dyadic fractions with at most 8 bits, and every
+intermediate of either evaluation order (weights × taps, or two lerps) is representable in
+the float type when the samples have at most 10 bits (float32; 8-bit light fields, whose
+Co/Cg planes span ±255) or 17 bits (float64; 16-bit light fields). Clamping each tap
+(``BORDER_REPLICATE``) equals clamping the coordinate to [0, size − 1] first, which keeps every
+tap inside its own key view when the views are stacked into one tall image. Then
+``floor(r + 0.5)`` is the rounded shift, and the blend ``(Σ w·p + 32) >> 6`` is done in the
+same floats (integers below 2^24). ``tests/rlfc/test_txsample.py`` checks the equality on
+random and edge cases, 8- and 16-bit.
+
+Limits: OpenCV addresses source and destination images below 32767 pixels a side, so key
+views are stacked in groups (:class:`KeyAtlas`) and calls are cut into pieces; a key view
+32767 pixels or more on a side has no atlas (callers fall back to ``predict_tbs``).
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .txpredict import DISP_BITS, TB, W_BITS
+
+CV_MAX = 32766          # largest image side OpenCV's remap accepts (< SHRT_MAX)
+_E = np.arange(TB, dtype=np.float32)
+
+
+class KeyAtlas:
+    """Decoded key views as float images for ``remap``: key slot s lives in group
+    ``s // per_group`` at rows ``(s % per_group)·Hp ..``; each group is (rows, Wp, P).
+
+    Args:
+        n_keys, hp, wp, planes: key views, padded size and planes.
+        bits: bits of the samples' magnitude (Co/Cg included): ≤ 10 → float32, else float64.
+    """
+
+    def __init__(self, n_keys: int, hp: int, wp: int, planes: int, bits: int):
+        self.hp, self.wp, self.P = hp, wp, planes
+        self.ftype = np.float32 if bits <= 10 else np.float64
+        self.per_group = max(1, CV_MAX // hp)
+        ng = -(-n_keys // self.per_group) if n_keys else 0
+        self.groups = [np.zeros((min(self.per_group, n_keys - g * self.per_group) * hp, wp, planes), self.ftype)
+                       for g in range(ng)]
+
+    @staticmethod
+    def fits(hp: int, wp: int, planes: int) -> bool:
+        return hp <= CV_MAX and wp <= CV_MAX and 1 <= planes <= 4
+
+    def set(self, slot: int, planes: np.ndarray) -> None:
+        """Store key view ``slot``: (Hp, Wp, P) integer planes."""
+        g, i = divmod(slot, self.per_group)
+        self.groups[g][i * self.hp:(i + 1) * self.hp] = planes
+
+    def nbytes(self) -> int:
+        return sum(g.nbytes for g in self.groups)
+
+
+def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarray:
+    """Prediction of M 8×8 blocks from up to R references each (see
+    :func:`rlfc.txpredict.predict_tbs`, whose integers this returns).
+
+    Args:
+        slots: (M, R) key slot of each reference; weights: (M, R) ints summing to 64 per block
+            (references of weight 0 are not sampled); disp_y, disp_x: (M, R) displacements in
+            1/16 pixel; y0, x0: (M,) block origins in pixels.
+
+    Returns:
+        (M, 8, 8, P) int32.
+    """
+    M = slots.shape[0]
+    P, ft = atlas.P, atlas.ftype
+    nz = weights > 0
+    cnt = nz.sum(1)
+    # entries (block, reference) grouped by the block's reference count, so that each group's
+    # blend is a reshape and a sum
+    order = np.argsort(cnt, kind="stable")
+    counts = np.unique(cnt).tolist()
+    groups = [(c, order[cnt[order] == c]) for c in counts]
+    m = np.concatenate([np.repeat(g, c) for c, g in groups])
+    r = np.concatenate([np.nonzero(nz[g])[1] for c, g in groups])
+    N = m.size
+    scale = 1.0 / (1 << DISP_BITS)
+    Y = ((y0[m] << DISP_BITS) + disp_y[m, r]).astype(np.float32) * np.float32(scale)
+    X = ((x0[m] << DISP_BITS) + disp_x[m, r]).astype(np.float32) * np.float32(scale)
+    s = slots[m, r]
+    g, within = np.divmod(s, atlas.per_group)
+    rows = np.minimum(np.maximum(Y[:, None] + _E, 0), atlas.hp - 1) + (within * atlas.hp).astype(np.float32)[:, None]
+    cols = np.minimum(np.maximum(X[:, None] + _E, 0), atlas.wp - 1)
+    smp = np.empty((N, TB * TB, P), ft)
+    ng = len(atlas.groups)
+    sel_all = [np.arange(N)] if ng == 1 else [np.flatnonzero(g == k) for k in range(ng)]
+    for k, sel in enumerate(sel_all):
+        if sel.size == 0:
+            continue
+        src = atlas.groups[k]
+        for a in range(0, sel.size, CV_MAX):
+            part = sel[a:a + CV_MAX]
+            if ng == 1:
+                mr = np.broadcast_to(rows[a:a + CV_MAX, :, None], (part.size, TB, TB)).reshape(part.size, -1)
+                mc = np.broadcast_to(cols[a:a + CV_MAX, None, :], (part.size, TB, TB)).reshape(part.size, -1)
+                dst = smp[a:a + CV_MAX]
+                o = cv2.remap(src, mc, mr, cv2.INTER_LINEAR, dst=dst, borderMode=cv2.BORDER_REPLICATE)
+                if not np.shares_memory(o, dst):                  # OpenCV allocated its own output
+                    dst[...] = o.reshape(dst.shape)
+            else:
+                mr = np.broadcast_to(rows[part][:, :, None], (part.size, TB, TB)).reshape(part.size, -1)
+                mc = np.broadcast_to(cols[part][:, None, :], (part.size, TB, TB)).reshape(part.size, -1)
+                smp[part] = cv2.remap(src, mc, mr, cv2.INTER_LINEAR,
+                                      borderMode=cv2.BORDER_REPLICATE).reshape(part.size, TB * TB, P)
+    smp += 0.5
+    np.floor(smp, out=smp)                                     # each reference's sample, rounded
+    smp *= weights[m, r].astype(ft)[:, None, None]
+    acc = np.empty((M, TB * TB, P), ft)
+    a = 0
+    for c, gi in groups:
+        acc[gi] = smp[a:a + c * gi.size].reshape(gi.size, c, TB * TB, P).sum(1) if c > 1 else smp[a:a + gi.size]
+        a += c * gi.size
+    acc += 1 << (W_BITS - 1)
+    acc *= 1.0 / (1 << W_BITS)
+    np.floor(acc, out=acc)
+    return acc.astype(np.int32).reshape(M, TB, TB, P)
