@@ -40,6 +40,15 @@ def inverse_int(p):
     if p.shape[-1] < 3:
         return p
     y, co, cg = p[..., 0], p[..., 1], p[..., 2]
+    if isinstance(p, np.ndarray):                       # numpy: into one output, no stack
+        out = np.empty_like(p)
+        t = y - (cg >> 1)
+        np.add(cg, t, out=out[..., 1])
+        np.subtract(t, co >> 1, out=out[..., 2])
+        np.add(out[..., 2], co, out=out[..., 0])
+        if p.shape[-1] == 4:
+            out[..., 3] = p[..., 3]
+        return out
     t = y - (cg >> 1)
     g = cg + t
     b = t - (co >> 1)

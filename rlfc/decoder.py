@@ -7,6 +7,9 @@ file stays compressed (memory-mapped or behind a byte-range source).
 """
 from __future__ import annotations
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from formats.codec_api import Decoder
@@ -19,6 +22,18 @@ from .header import CODEC_ID, CODEC_VERSION, RlfcHeader
 from .profiles import get_profile
 
 
+DECODE_CHUNK = 1 << 19      # pixels per chunk of a batched call (its temporaries stay in the caches)
+
+
+def default_threads() -> int:
+    """Threads a decoder uses by default: the cores this process may run on, at most 4."""
+    try:
+        n = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        n = os.cpu_count() or 1
+    return max(1, min(4, n))
+
+
 class RlfcDecoder(Decoder):
     """Decoder over an opened .lfc file.
 
@@ -26,11 +41,15 @@ class RlfcDecoder(Decoder):
         rows, cols, height, width, channels, dtype: the light field's geometry.
         block_size: B; nby, nbx: blocks per column and row. levels: the coarsest progressive
             level (valid ``level`` arguments are 0..levels). profile: the file's profile id.
+        threads: threads of batched and whole-view decodes (default :func:`default_threads`;
+            profiles that are not thread-safe use one).
         core: the profile's planes decoder.
     """
 
-    def __init__(self, f: LfcFile, *, limits=None):
+    def __init__(self, f: LfcFile, *, limits=None, threads: int | None = None):
         check_codec_version(f, CODEC_ID, CODEC_VERSION)
+        self.threads = 1
+        self.threads = self._threads(default_threads() if threads is None else threads)
         self.file = f
         hdr, cfg = RlfcHeader.read(f.meta, f.container.name, limits or DEFAULT)
         self.header, self.profile = hdr, hdr.profile
@@ -75,23 +94,49 @@ class RlfcDecoder(Decoder):
         return row * self.cols + col
 
     # -- decoders ---------------------------------------------------------------------------
-    def decode_blocks(self, views, by, bx, level: int = 0, planes: bool = False) -> np.ndarray:
-        """Batched random access: many (view, block) requests in one vectorized pass.
+    def decode_blocks(self, views, by, bx, level: int = 0, planes: bool = False, threads: int | None = None
+                      ) -> np.ndarray:
+        """Batched random access: many (view, block) requests, vectorized in chunks of about
+        ``DECODE_CHUNK`` pixels (requests of one view together), the chunks on ``threads``
+        threads (default: the decoder's ``threads``).
 
         Args:
             views: (M,) flat view indices (row·cols + col); by, bx: (M,) block indices.
             level: progressive level (0 = full quality .. ``levels``).
             planes: return int32 YCoCg-R planes instead of pixels.
+            threads: threads for this call (1 = this thread only).
 
         Returns:
             (M, B, B, C) pixels (uint8/uint16; blocks past the image edge hold padding).
         """
         level = self.check_level(level)
         views, by, bx = self.requests(views, by, bx)
+        threads = self._threads(threads)
         self.file.container.check_unchanged()
-        B = self.block_size
-        acc = self.core.blocks(views, by, bx, level).reshape(views.size, B, B, self.P)
-        return acc if planes else from_planes(acc, self.dtype)
+        B, M = self.block_size, views.size
+        out = np.empty((M, B, B, self.P if planes else self.channels), np.int32 if planes else self.dtype)
+        order = np.lexsort((bx, by, views))           # requests of one view together: shared references
+        step = max(1, DECODE_CHUNK // (B * B))
+
+        def run(a: int) -> None:
+            i = order[a:a + step]
+            acc = self.core.blocks(views[i], by[i], bx[i], level).reshape(i.size, B, B, self.P)
+            out[i] = acc if planes else from_planes(acc, self.dtype)
+
+        starts = range(0, M, step)
+        if threads > 1 and len(starts) > 1 and getattr(self.core, "threads_ok", False):
+            with ThreadPoolExecutor(threads) as pool:       # numpy and OpenCV release the GIL
+                list(pool.map(run, starts))
+        else:
+            for a in starts:
+                run(a)
+        return out
+
+    def _threads(self, threads) -> int:
+        t = self.threads if threads is None else threads
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)) or not 1 <= t <= 256:
+            raise ParameterError(f"threads must be an integer within 1..256, got {t!r}")
+        return int(t)
 
     def decode_block(self, row: int, col: int, by: int, bx: int, level: int = 0) -> np.ndarray:
         """One block of one view: (b_h, b_w, C) pixels, cropped at the image edges.
@@ -108,8 +153,10 @@ class RlfcDecoder(Decoder):
         out = from_planes(self.core.block(v, int(by), int(bx), level).reshape(B, B, self.P), self.dtype)
         return out[:min(B, self.height - by * B), :min(B, self.width - bx * B)]
 
-    def decode_views(self, views=None, level: int = 0, planes: bool = False) -> np.ndarray:
-        """Decode whole views (flat indices; None = all) at a progressive level.
+    def decode_views(self, views=None, level: int = 0, planes: bool = False, threads: int | None = None
+                     ) -> np.ndarray:
+        """Decode whole views (flat indices; None = all) at a progressive level, one view at a
+        time (on ``threads`` threads; default: the decoder's ``threads``).
 
         Returns:
             (n, H, W, C) pixels (or int32 planes with ``planes=True``), cropped to the image.
@@ -119,17 +166,33 @@ class RlfcDecoder(Decoder):
             views = np.arange(self.rows * self.cols)
         else:
             views = self.requests(views, np.zeros(np.size(views), np.int64), np.zeros(np.size(views), np.int64))[0]
+        threads = self._threads(threads)
         self.file.container.check_unchanged()
-        out = self.core.views(views, level)[:, :self.height, :self.width]
-        return out if planes else from_planes(out, self.dtype)
+        H, W = self.height, self.width
+        if not getattr(self.core, "threads_ok", False):     # profiles that share work across views
+            p = self.core.views(views, level)[:, :H, :W]
+            return p if planes else from_planes(p, self.dtype)
+        out = np.empty((views.size, H, W, self.P if planes else self.channels), np.int32 if planes else self.dtype)
+
+        def run(i: int) -> None:                        # one view at a time: int32 planes of one view
+            p = self.core.views(views[i:i + 1], level)[0, :H, :W]
+            out[i] = p if planes else from_planes(p, self.dtype)
+
+        if threads > 1 and views.size > 1:
+            with ThreadPoolExecutor(threads) as pool:
+                list(pool.map(run, range(views.size)))
+        else:
+            for i in range(views.size):
+                run(i)
+        return out
 
     def decode_view(self, row: int, col: int, level: int = 0) -> np.ndarray:
         """One view: (H, W, C) pixels."""
         return self.decode_views([self.view_index(row, col)], level)[0]
 
-    def decode_all(self, level: int = 0) -> np.ndarray:
+    def decode_all(self, level: int = 0, threads: int | None = None) -> np.ndarray:
         """The whole light field: (rows, cols, H, W, C) pixels."""
-        out = self.decode_views(None, level)
+        out = self.decode_views(None, level, threads=threads)
         return out.reshape(self.rows, self.cols, *out.shape[1:])
 
     def renderer(self, **kw):

@@ -24,6 +24,7 @@ class ProfileDecoder(abc.ABC):
 
     levels: int
     block_size: int
+    threads_ok: bool = False      # blocks()/views() may run on several threads at once
     nby: int
     nbx: int
 

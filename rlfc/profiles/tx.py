@@ -13,6 +13,8 @@ Levels: 0 = full quality; 1 = prediction only (key views stay full).
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
@@ -23,7 +25,7 @@ from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
-from ..txsample import KeyAtlas, predict as remap_predict
+from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict
 from ..txsyntax import MODE_INTRA, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
@@ -49,6 +51,7 @@ class TxDecoder(ProfileDecoder):
     """Planes decoder of a ``tx`` file (see :class:`rlfc.profiles.base.ProfileDecoder`)."""
 
     levels = 1
+    threads_ok = True             # shared state: read-only after open; byte reads under a lock
 
     def __init__(self, container, header, cfg, limits=None):
         from formats.limits import DEFAULT
@@ -112,6 +115,9 @@ class TxDecoder(ProfileDecoder):
         self.start[sv, sl], self.end[sv, sl] = off[nk:-1], off[nk + 1:]
         self.coded = coded
         self._ref_cache: dict = {}
+        self._io = threading.Lock()
+        self._tby = np.repeat(np.arange(self.tpb), self.tpb)       # tbs of a block, raster order
+        self._tbx = np.tile(np.arange(self.tpb), self.tpb)
         if c.info("tx.blocks").length != off[-1] + PAD:
             raise FormatError(f"{name}: section 'tx.blocks' has {c.info('tx.blocks').length} bytes, the index "
                               f"says {off[-1] + PAD}")
@@ -157,6 +163,10 @@ class TxDecoder(ProfileDecoder):
     def _streams(self, starts: np.ndarray, ends: np.ndarray):
         """(buffer, starts, ends) holding the given streams of ``tx.blocks``, checksums verified
         for the bytes read (a byte-range source fetches only these ranges, merged)."""
+        with self._io:
+            return self._streams_locked(starts, ends)
+
+    def _streams_locked(self, starts: np.ndarray, ends: np.ndarray):
         c = self.container
         if not self._remote:
             if starts.size:
@@ -284,12 +294,37 @@ class TxDecoder(ProfileDecoder):
                 if parsed is None:
                     parsed = self._parse(views[have], locs[have])
                 res = self._residual(views[have], parsed)
-                intra = parsed.modes == MODE_INTRA                             # (S, nt)
-                base = np.where(intra[:, :, None, None, None], self.flat.astype(np.int32), out[have])
-                out[have] = base + res
-        out = np.minimum(np.maximum(out, self.lo32, out=out), self.hi32, out=out)   # ufuncs: np.clip costs µs
+                out[have] = self._add_residual(out[have], res, parsed.modes)
         # tbs → blocks: (M, tpb, tpb, 8, 8, P) → (M, B, B, P)
         return out.reshape(M, self.tpb, self.tpb, TB, TB, P).transpose(0, 1, 3, 2, 4, 5).reshape(M, B, B, P)
+
+    def _add_residual(self, pred, res, modes):
+        """Clipped prediction (intra tbs: the flat value) + residual, (S, nt, 8, 8, P) int32.
+        Predictions need no clipping: they blend clipped key views with weights summing to 64."""
+        base = np.where((modes == MODE_INTRA)[:, :, None, None, None], self.flat.astype(np.int32), pred)
+        base += res
+        return np.minimum(np.maximum(base, self.lo32, out=base), self.hi32, out=base)   # ufuncs: np.clip costs µs
+
+    def _view_planes(self, v: int, level: int) -> np.ndarray:
+        """(Hp, Wp, P) int32 planes of a view with references: its 8×8 blocks predicted in
+        raster order, the coded blocks' residuals added where they lie."""
+        n8y, n8x, tpb, P = self.nby8, self.nbx8, self.tpb, self.P
+        T = n8y * n8x
+        ty, tx = np.divmod(np.arange(T), n8x)
+        pred = np.empty((T, TB, TB, P), np.int32)
+        vv = np.full(min(T, PRED_TBS), v)
+        for a in range(0, T, PRED_TBS):
+            b = min(T, a + PRED_TBS)
+            pred[a:b] = self._pred(vv[:b - a], ty[a:b], tx[a:b])
+        locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
+        if locs.size:
+            by, bx = np.divmod(locs, self.nbx)
+            t = np.arange(self.nt)
+            tbi = (by[:, None] * tpb + t // tpb) * n8x + bx[:, None] * tpb + t % tpb      # (S, nt) raster tb index
+            vs = np.full(locs.size, v)
+            parsed = self._parse(vs, locs)
+            pred[tbi] = self._add_residual(pred[tbi], self._residual(vs, parsed), parsed.modes)
+        return pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
 
     def _decode_key(self, k: int, parsed=None) -> None:
         """Decode key view ``k``: its JPEG 2000 image, or its blocks (``parsed``: its rows'
@@ -355,24 +390,8 @@ class TxDecoder(ProfileDecoder):
             self._ref_cache[v] = got
         return got
 
-    def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
-        """One request, lean: the prediction of the block's nt tbs from every reference at once
-        ((nt·R) 9×9 windows, one gather), plus at most one parsed stream; the same integers as
-        :meth:`blocks`."""
-        B, P, tpb = self.block_size, self.P, self.tpb
-        if self.is_key[view]:
-            s = self.key_slot[view]
-            return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
-        slots, wv, dpos = self._view_refs(view)
-        cell = self.lay.cell[view]
-        t = np.arange(tpb)
-        ty = np.repeat(by * tpb + t, tpb)                                   # (nt,) raster within the block
-        tx = np.tile(bx * tpb + t, tpb)
-        loc8 = ty * self.nbx8 + tx
-        d = self.disp[cell, loc8]
-        mode = self.modes[cell, loc8]
-        R = wv.size
-        w = np.where(mode[:, None] == 0, wv[None, :], 64 * (np.arange(R)[None, :] == mode[:, None] - 1))   # (nt, R)
+    def _gather_pred(self, slots, w, d, dpos, ty, tx):
+        """(nt, 8, 8, P) int64 prediction of one request's tbs by gathers (no atlas)."""
         Y = (ty[:, None] << 4) * TB + d[:, None] * dpos[None, :, 0]                              # (nt, R)
         X = (tx[:, None] << 4) * TB + d[:, None] * dpos[None, :, 1]
         ext = np.arange(TB + 1)
@@ -385,27 +404,44 @@ class TxDecoder(ProfileDecoder):
         fx = (X & 15).astype(np.int32)[None, :, :, None, None]
         smp = bilinear(win, fy, fx, DISP_BITS)                                                   # (P, nt, R, 8, 8)
         pred = ((smp * w.astype(np.int32)[None, :, :, None, None]).sum(axis=2) + 32) >> 6        # (P, nt, 8, 8)
-        out = np.moveaxis(pred, 0, -1).astype(np.int64)                                           # (nt, 8, 8, P)
+        return np.moveaxis(pred, 0, -1).astype(np.int64)
+
+    def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
+        """One request, lean: the prediction of the block's nt tbs from every reference at once
+        ((nt·R) 9×9 windows, one gather), plus at most one parsed stream; the same integers as
+        :meth:`blocks`."""
+        B, P, tpb = self.block_size, self.P, self.tpb
+        if self.is_key[view]:
+            s = self.key_slot[view]
+            return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
+        slots, wv, dpos = self._view_refs(view)
+        cell = self.lay.cell[view]
+        ty = by * tpb + self._tby                                           # (nt,) raster within the block
+        tx = bx * tpb + self._tbx
+        loc8 = ty * self.nbx8 + tx
+        d = self.disp[cell, loc8]
+        mode = self.modes[cell, loc8]
+        R = wv.size
+        w = np.where(mode[:, None] == 0, wv[None, :], 64 * (np.arange(R)[None, :] == mode[:, None] - 1))   # (nt, R)
+        if self.atlas is not None:                          # the remap kernel, every reference at once
+            out = _predict_dense(self.atlas, np.broadcast_to(slots, (ty.size, R)), w, d[:, None] * dpos[None, :, 0],
+                                 d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
+        else:
+            out = self._gather_pred(slots, w, d, dpos, ty, tx).astype(np.int32)
         loc = by * self.nbx + bx
         if level == 0 and self.coded[view, loc]:
-            parsed = self._parse(np.array([view]), np.array([loc]))
-            res = self._residual(np.array([view]), parsed)[0]
-            intra = (parsed.modes[0] == MODE_INTRA)[:, None, None, None]
-            out = np.where(intra, self.flat, out) + res
-        out = mn(mx(out, self.lo), self.hi).astype(np.int32)
+            vv = np.array([view])
+            parsed = self._parse(vv, np.array([loc]))
+            out = self._add_residual(out[None], self._residual(vv, parsed), parsed.modes)[0]
         return out.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(B * B, P)
 
     def views(self, views, level):
-        nloc = self.nby * self.nbx
         out = np.empty((views.size, self.Hp, self.Wp, self.P), np.int32)
-        B = self.block_size
         for i, v in enumerate(views.tolist()):
             if self.is_key[v]:
                 out[i] = self.keyplanes[self.key_slot[v]]
                 continue
-            blk = self._reconstruct(np.full(nloc, v), np.arange(nloc), level)
-            out[i] = blk.reshape(self.nby, self.nbx, B, B, self.P).transpose(0, 2, 1, 3, 4).reshape(
-                self.Hp, self.Wp, self.P)
+            out[i] = self._view_planes(v, level)
         return out
 
     def torch(self, device):

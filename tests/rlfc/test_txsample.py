@@ -54,3 +54,18 @@ def test_remap_prediction_across_atlas_groups(monkeypatch):
     for s in range(7):
         atlas.set(s, keys[s])
     assert np.array_equal(ts.predict(atlas, slots, w, dy, dx, y0, x0), ref)
+
+
+@pytest.mark.parametrize("P,lo,hi,bits", [(3, -255, 255, 9), (1, 0, 255, 8), (4, -65535, 65535, 17)])
+def test_remap_prediction_few_blocks(P, lo, hi, bits):
+    """One request's tbs (the dense path that samples every reference) give the same integers."""
+    rng = np.random.default_rng(11)
+    keys, slots, w, dy, dx, y0, x0 = _case(rng, 4, 32, 40, P, lo, hi, 400, 30)
+    ref = predict_tbs(NUMPY, planar(keys), (32, 40), slots, w, dy, dx, y0, x0)
+    atlas = KeyAtlas(4, 32, 40, P, bits)
+    for s in range(4):
+        atlas.set(s, keys[s])
+    for a in range(0, 400, 4):
+        sl = slice(a, a + 4)
+        got = predict(atlas, slots[sl], w[sl], dy[sl], dx[sl], y0[sl], x0[sl])
+        assert np.array_equal(got, ref[sl])
