@@ -155,8 +155,8 @@ class RlfcDecoder(Decoder):
 
     def decode_views(self, views=None, level: int = 0, planes: bool = False, threads: int | None = None
                      ) -> np.ndarray:
-        """Decode whole views (flat indices; None = all) at a progressive level, one view at a
-        time (on ``threads`` threads; default: the decoder's ``threads``).
+        """Decode whole views (flat indices; None = all) at a progressive level, in the groups
+        the profile asks for (on ``threads`` threads; default: the decoder's ``threads``).
 
         Returns:
             (n, H, W, C) pixels (or int32 planes with ``planes=True``), cropped to the image.
@@ -169,20 +169,19 @@ class RlfcDecoder(Decoder):
         threads = self._threads(threads)
         self.file.container.check_unchanged()
         H, W = self.height, self.width
-        if not getattr(self.core, "threads_ok", False):     # profiles that share work across views
-            p = self.core.views(views, level)[:, :H, :W]
-            return p if planes else from_planes(p, self.dtype)
         out = np.empty((views.size, H, W, self.P if planes else self.channels), np.int32 if planes else self.dtype)
+        groups = self.core.view_groups(views)          # views whose streams are parsed together
+        starts = np.concatenate([[0], np.cumsum([g.size for g in groups])])
 
-        def run(i: int) -> None:                        # one view at a time: int32 planes of one view
-            p = self.core.views(views[i:i + 1], level)[0, :H, :W]
-            out[i] = p if planes else from_planes(p, self.dtype)
+        def run(i: int) -> None:
+            p = self.core.views(groups[i], level)[:, :H, :W]
+            out[starts[i]:starts[i + 1]] = p if planes else from_planes(p, self.dtype)
 
-        if threads > 1 and views.size > 1:
+        if threads > 1 and len(groups) > 1 and getattr(self.core, "threads_ok", False):
             with ThreadPoolExecutor(threads) as pool:
-                list(pool.map(run, range(views.size)))
+                list(pool.map(run, range(len(groups))))
         else:
-            for i in range(views.size):
+            for i in range(len(groups)):
                 run(i)
         return out
 

@@ -40,6 +40,11 @@ class ProfileDecoder(abc.ABC):
     def views(self, views: np.ndarray, level: int) -> np.ndarray:
         """(n,) validated view indices → (n, Hp, Wp, P) int32 planes."""
 
+    def view_groups(self, views: np.ndarray) -> list:
+        """How :meth:`views` is best called for many views (a list of index arrays); default: all
+        at once (profiles that share work across views)."""
+        return [views]
+
     def torch(self, device):
         """A batched decoder of the same planes on a torch device (``blocks`` returns tensors)."""
         from formats.errors import UnsupportedError

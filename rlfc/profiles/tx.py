@@ -33,6 +33,7 @@ from .base import Profile, ProfileDecoder
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
 PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their streams step together)
+GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
 KEY_PARSE_TBS = 1 << 20  # tbs of key views parsed together at open (bounds the parsed coefficients held)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
 
@@ -301,13 +302,16 @@ class TxDecoder(ProfileDecoder):
     def _add_residual(self, pred, res, modes):
         """Clipped prediction (intra tbs: the flat value) + residual, (S, nt, 8, 8, P) int32.
         Predictions need no clipping: they blend clipped key views with weights summing to 64."""
-        base = np.where((modes == MODE_INTRA)[:, :, None, None, None], self.flat.astype(np.int32), pred)
-        base += res
+        base = np.add(pred, res, dtype=np.int32)
+        intra = modes == MODE_INTRA                                   # (S, nt): flat value + residual
+        if intra.any():
+            base[intra] = (res[intra] + self.flat.astype(np.int32)).astype(np.int32)
         return np.minimum(np.maximum(base, self.lo32, out=base), self.hi32, out=base)   # ufuncs: np.clip costs µs
 
-    def _view_planes(self, v: int, level: int) -> np.ndarray:
+    def _view_planes(self, v: int, level: int, parsed=None) -> np.ndarray:
         """(Hp, Wp, P) int32 planes of a view with references: its 8×8 blocks predicted in
-        raster order, the coded blocks' residuals added where they lie."""
+        raster order, the coded blocks' residuals added where they lie (``parsed``: their
+        syntax, when the caller parsed several views together)."""
         n8y, n8x, tpb, P = self.nby8, self.nbx8, self.tpb, self.P
         T = n8y * n8x
         ty, tx = np.divmod(np.arange(T), n8x)
@@ -322,7 +326,8 @@ class TxDecoder(ProfileDecoder):
             t = np.arange(self.nt)
             tbi = (by[:, None] * tpb + t // tpb) * n8x + bx[:, None] * tpb + t % tpb      # (S, nt) raster tb index
             vs = np.full(locs.size, v)
-            parsed = self._parse(vs, locs)
+            if parsed is None:
+                parsed = self._parse(vs, locs)
             pred[tbi] = self._add_residual(pred[tbi], self._residual(vs, parsed), parsed.modes)
         return pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
 
@@ -436,13 +441,39 @@ class TxDecoder(ProfileDecoder):
         return out.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(B * B, P)
 
     def views(self, views, level):
+        """Whole views; the coded blocks of all of them parsed together (the rANS lanes step
+        together: one parse costs about the longest stream, so many views share it)."""
         out = np.empty((views.size, self.Hp, self.Wp, self.P), np.int32)
+        pv = [int(v) for v in views.tolist() if not self.is_key[v]]
+        parsed = {}
+        if level == 0 and len(pv) > 1:
+            locs = [np.flatnonzero(self.coded[v]) for v in pv]
+            n = np.array([x.size for x in locs])
+            if n.sum():
+                got = self._parse(np.repeat(pv, n), np.concatenate(locs))
+                parsed = dict(zip(pv, got.split(np.concatenate([[0], np.cumsum(n)]))))
         for i, v in enumerate(views.tolist()):
             if self.is_key[v]:
                 out[i] = self.keyplanes[self.key_slot[v]]
                 continue
-            out[i] = self._view_planes(v, level)
+            out[i] = self._view_planes(v, level, parsed.get(v))
         return out
+
+    def view_groups(self, views: np.ndarray) -> list:
+        """Views in groups whose coded blocks are parsed together (about PARSE_TBS tbs, at most
+        GROUP_PIXELS pixels each: the group's int32 planes are held at once)."""
+        cost = self.coded[views].sum(axis=1) * self.nt + 1
+        most = max(1, GROUP_PIXELS // (self.Hp * self.Wp))
+        groups, cur, acc = [], [], 0
+        for v, c in zip(views.tolist(), cost.tolist()):
+            if cur and (acc + c > PARSE_TBS or len(cur) >= most):
+                groups.append(np.array(cur))
+                cur, acc = [], 0
+            cur.append(v)
+            acc += c
+        if cur:
+            groups.append(np.array(cur))
+        return groups
 
     def torch(self, device):
         return TorchTx(self, device)

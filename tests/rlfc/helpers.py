@@ -1,5 +1,7 @@
 import numpy as np
 
+import rlfc.decoder as rdec
+
 from formats.container import build_container
 from formats.lfcfile import encode_meta, open_lfc
 from formats.lightfield import LightField, grid_positions
@@ -59,6 +61,15 @@ def check_agreement(d, lf_views_shape):
         img = blocks.reshape(rows * cols, d.nby, d.nbx, B, B, -1).transpose(0, 1, 3, 2, 4, 5)
         img = img.reshape(rows, cols, d.nby * B, d.nbx * B, -1)[:, :, :H, :W]
         assert (img == full).all()
+        # chunked and threaded batches, threaded whole views: the same pixels
+        old = rdec.DECODE_CHUNK
+        try:
+            rdec.DECODE_CHUNK = B * B * 7                   # 7 requests per chunk
+            for th in (1, 3):
+                assert (d.decode_blocks(views[::-1], by[::-1], bx[::-1], level, threads=th) == blocks[::-1]).all()
+        finally:
+            rdec.DECODE_CHUNK = old
+        assert (d.decode_all(level, threads=3) == full).all()
 
 
 def open_encoded(lf, enc):

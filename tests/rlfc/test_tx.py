@@ -159,3 +159,36 @@ def test_target_psnr_on_the_real_sample():
     e = encode(lf, EncodeOptions(profile="tx", params={"step": 3.0}))
     d, _ = open_encoded(lf, e)
     assert psnr_rgb(lf.views, d.decode_all(1)) < psnr_rgb(lf.views, d.decode_all(0)) - 1
+
+
+def test_decode_without_the_remap_atlas_is_the_same():
+    """Key views too large for OpenCV's remap fall back to the gather kernel: same integers."""
+    lf = smooth_lf(rows=4, cols=5, h=40, w=56)
+    e = tx(lf, step=4.0)
+    d, _ = open_encoded(lf, e)
+    full = d.decode_all()
+    one = d.decode_block(1, 2, 1, 2)
+    rng = np.random.default_rng(3)
+    v, by, bx = rng.integers(0, 20, 200), rng.integers(0, d.nby, 200), rng.integers(0, d.nbx, 200)
+    blocks = d.decode_blocks(v, by, bx)
+    assert d.core.atlas is not None
+    d.core.atlas = None
+    assert (d.decode_all() == full).all() and (d.decode_blocks(v, by, bx) == blocks).all()
+    assert (d.decode_block(1, 2, 1, 2) == one).all()
+
+
+@pytest.mark.parametrize("bad", [0, -1, 257, 1.5, "2", True, None])
+def test_bad_thread_counts_are_parameter_errors(bad):
+    from formats.errors import ParameterError
+
+    lf = smooth_lf(rows=2, cols=2)
+    d, blob = open_encoded(lf, tx(lf, step=4.0))
+    if bad is None:                                  # None = the decoder's own setting
+        assert d.decode_blocks([0], [0], [0], threads=bad).shape[0] == 1
+        return
+    with pytest.raises(ParameterError):
+        d.decode_blocks([0], [0], [0], threads=bad)
+    with pytest.raises(ParameterError):
+        d.decode_all(threads=bad)
+    with pytest.raises(ParameterError):
+        RlfcDecoder(open_lfc(blob), threads=bad)
