@@ -133,6 +133,24 @@ class Renderer:
                 out[(r, c)] = out.get((r, c), 0.0) + w
         return [(r, c, w) for (r, c), w in out.items()]
 
+    def check_camera(self, s: float, t: float) -> None:
+        """ParameterError unless (s, t) is a finite position within the grid ± ``margin``."""
+        d = self.d
+        for name, v, n in (("s", s, d.rows), ("t", t, d.cols)):
+            if not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) \
+                    or not -self.margin <= v <= n - 1 + self.margin:
+                raise ParameterError(f"camera {name}={v!r} is outside the grid (0..{n - 1} ± {self.margin:g} views)")
+
+    def render_path(self, cameras):
+        """Frames along a camera path: ``cameras`` (N, 4) rows of (s, t, focus or NaN for the
+        file's maps, aperture), e.g. from :func:`rlfc.campath.read_path`; yields (H, W, C)
+        frames (every camera is checked first)."""
+        cams = np.asarray(cameras, dtype=np.float64).reshape(-1, 4)
+        for s, t in cams[:, :2]:
+            self.check_camera(float(s), float(t))
+        for s, t, focus, ap in cams.tolist():
+            yield self.render(s, t, None if np.isnan(focus) else focus, ap)
+
     def render(self, s: float, t: float, focus: float | None = None, aperture: float = 0.0) -> np.ndarray:
         """The view at grid position (s, t): (H, W, C) pixels of the file's dtype.
 
@@ -143,10 +161,7 @@ class Renderer:
             aperture: synthetic-aperture radius in view steps (0 = a pinhole view).
         """
         d = self.d
-        for name, v, n in (("s", s, d.rows), ("t", t, d.cols)):
-            if not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) \
-                    or not -self.margin <= v <= n - 1 + self.margin:
-                raise ParameterError(f"camera {name}={v!r} is outside the grid (0..{n - 1} ± {self.margin:g} views)")
+        self.check_camera(s, t)
         if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
             raise ParameterError("aperture must be >= 0 and focus finite")
         disp = self.disparity(s, t) if focus is None and aperture == 0 else None

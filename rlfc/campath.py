@@ -1,0 +1,125 @@
+"""Camera paths for rendered sequences: preset orbits and sweeps, or a file of cameras.
+
+A camera is (s, t, focus, aperture): the grid position in view units (as ``--at``), the focus
+disparity in pixels per view step (NaN = the file's disparity maps) and the synthetic-aperture
+radius in view steps (0 = a pinhole view). A path is an (N, 4) float64 array.
+
+Path specs (``lfcodec render --path SPEC``):
+    ``orbit[:N]``   an ellipse around the grid centre, 80% of the way to the outer views (N frames,
+                    default 60), a pinhole camera on the file's geometry;
+    ``sweep[:N]``   along the middle row from the first column to the last and back;
+    FILE            a text file with one camera per line, ``s,t[,focus[,aperture]]`` (``#``
+                    comments and blank lines ignored; an empty focus field = the file's maps), or
+                    a JSON list of such lists.
+"""
+from __future__ import annotations
+
+import json
+import math
+import re
+from pathlib import Path
+
+import numpy as np
+
+from formats.errors import ParameterError
+
+MAX_FRAMES = 100_000
+MAX_PATH_FILE = 16 << 20
+DEFAULT_FRAMES = 60
+
+
+def orbit(rows: int, cols: int, frames: int = DEFAULT_FRAMES, radius: float = 0.8) -> np.ndarray:
+    """(frames, 4) cameras on an ellipse around the grid centre (``radius`` of the way to the
+    outer views), starting at the top and turning clockwise; a closed loop (the last frame is
+    one step before the first)."""
+    _check_frames(frames)
+    a = 2 * np.pi * np.arange(frames) / frames
+    s = (rows - 1) / 2 * (1 - radius * np.cos(a))
+    t = (cols - 1) / 2 * (1 + radius * np.sin(a))
+    return np.stack([s, t, np.full(frames, np.nan), np.zeros(frames)], axis=1)
+
+
+def sweep(rows: int, cols: int, frames: int = DEFAULT_FRAMES) -> np.ndarray:
+    """(frames, 4) cameras along the middle row, first column to last and back."""
+    _check_frames(frames)
+    u = np.arange(frames) / max(1, frames - 1)
+    t = (cols - 1) * (1 - np.abs(2 * u - 1))
+    return np.stack([np.full(frames, (rows - 1) / 2), t, np.full(frames, np.nan), np.zeros(frames)], axis=1)
+
+
+def read_path(spec: str, rows: int, cols: int) -> np.ndarray:
+    """The (N, 4) cameras of a path spec (see the module doc).
+
+    Raises:
+        ParameterError: an unknown preset, a bad frame count, a file that cannot be read or
+            parsed, a non-finite position or a negative aperture.
+    """
+    m = re.fullmatch(r"\s*(orbit|sweep)(?::(\d{1,7}))?\s*", spec or "")
+    if m:
+        n = int(m.group(2)) if m.group(2) else DEFAULT_FRAMES
+        return (orbit if m.group(1) == "orbit" else sweep)(rows, cols, n)
+    p = Path(spec)
+    if not spec or not p.is_file():
+        raise ParameterError(f"--path {spec!r}: not a preset (orbit[:N], sweep[:N]) nor a file of cameras")
+    if p.stat().st_size > MAX_PATH_FILE:
+        raise ParameterError(f"{p}: a camera path file is at most {MAX_PATH_FILE >> 20} MiB")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise ParameterError(f"{p}: cannot read the camera path ({e})") from None
+    rows_ = _parse_json(text, p) if text.lstrip().startswith("[") else _parse_lines(text, p)
+    if not rows_:
+        raise ParameterError(f"{p}: no cameras in the path file")
+    _check_frames(len(rows_))
+    cams = np.array(rows_, dtype=np.float64)
+    if not np.isfinite(cams[:, :2]).all() or not np.isfinite(cams[:, 3]).all() or (cams[:, 3] < 0).any() \
+            or np.isinf(cams[:, 2]).any():
+        raise ParameterError(f"{p}: positions must be finite, focus finite or empty, aperture finite and >= 0")
+    return cams
+
+
+def _check_frames(n) -> None:
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= MAX_FRAMES:
+        raise ParameterError(f"a camera path has 1..{MAX_FRAMES} frames, got {n!r}")
+
+
+def _camera(vals: list, where: str) -> list:
+    if not 2 <= len(vals) <= 4:
+        raise ParameterError(f"{where}: a camera is s,t[,focus[,aperture]], got {len(vals)} values")
+    out = []
+    for v in vals:
+        if v is None or (isinstance(v, str) and not v.strip()):
+            out.append(math.nan)
+            continue
+        if isinstance(v, bool):
+            raise ParameterError(f"{where}: {v!r} is not a number")
+        try:
+            out.append(float(v))
+        except (TypeError, ValueError):
+            raise ParameterError(f"{where}: {v!r} is not a number") from None
+    out += [math.nan, 0.0][len(out) - 2:]
+    if math.isnan(out[0]) or math.isnan(out[1]) or math.isnan(out[3]):
+        raise ParameterError(f"{where}: s, t and aperture must be numbers")
+    return out
+
+
+def _parse_lines(text: str, p: Path) -> list:
+    cams = []
+    for i, line in enumerate(text.splitlines(), 1):
+        line = line.split("#", 1)[0].strip()
+        if line:
+            cams.append(_camera(line.split(","), f"{p}:{i}"))
+            if len(cams) > MAX_FRAMES:
+                _check_frames(len(cams))
+    return cams
+
+
+def _parse_json(text: str, p: Path) -> list:
+    try:
+        data = json.loads(text)
+    except (ValueError, RecursionError) as e:
+        raise ParameterError(f"{p}: not valid JSON ({e})") from None
+    if not isinstance(data, list) or not all(isinstance(c, list) for c in data):
+        raise ParameterError(f"{p}: a JSON camera path is a list of [s, t, focus, aperture] lists")
+    _check_frames(len(data)) if data else None
+    return [_camera(c, f"{p}[{i}]") for i, c in enumerate(data)]
