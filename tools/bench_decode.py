@@ -86,9 +86,12 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
     pad = np.zeros((n, d.nby * B, d.nbx * B, d.channels), full.dtype)   # the gather limit: the same blocks'
     pad[:, :d.height, :d.width] = full                                   # pixels copied from memory, stored
     blk = np.ascontiguousarray(pad.reshape(n, d.nby, B, d.nbx, B, -1).swapaxes(2, 3)).reshape(-1, B * B * d.channels)
-    t = time.perf_counter()                                              # block-major (the fastest layout)
-    blk.take((v * d.nby + by) * d.nbx + bx, axis=0)
-    r["gather_us"] = (time.perf_counter() - t) / n_batch * 1e6
+    flat, g = (v * d.nby + by) * d.nbx + bx, []                         # block-major (the fastest layout);
+    for _ in range(3):                                                   # best of 3 (the first call's output
+        t = time.perf_counter()                                          # pages are faulted in)
+        blk.take(flat, axis=0)
+        g.append(time.perf_counter() - t)
+    r["gather_us"] = min(g) / n_batch * 1e6
     tv, tj = [], []
     for i in p["views"]:
         row, col = divmod(i, d.cols)
