@@ -71,12 +71,12 @@ class Renderer:
 
     # -- blocks ----------------------------------------------------------------------------
     def _view_buffer(self, view: int):
-        """(planes (nby·B, nbx·B, P) int32, filled (nby, nbx) bool) of a view, LRU-cached."""
+        """(planes (nby·B, nbx·B, P) float32, filled (nby, nbx) bool) of a view, LRU-cached."""
         got = self.cache.get(view)
         if got is None:
             d = self.d
             B = d.block_size
-            got = (np.zeros((d.nby * B, d.nbx * B, d.P), np.int32), np.zeros((d.nby, d.nbx), bool))
+            got = (np.zeros((d.nby * B, d.nbx * B, d.P), np.float32), np.zeros((d.nby, d.nbx), bool))
             self.cache[view] = got
             while len(self.cache) > max(1, self.cache_views):
                 self.cache.popitem(last=False)
@@ -84,22 +84,41 @@ class Renderer:
             self.cache.move_to_end(view)
         return got
 
+    def _blocks_touched(self, Y: np.ndarray, X: np.ndarray) -> np.ndarray:
+        """(nby, nbx) bool: the blocks that bilinear taps at clamped positions (Y, X) read,
+        from the extent of each 8×8 tile of positions (a superset when a tile's positions
+        spread over more than two blocks)."""
+        import cv2
+
+        d = self.d
+        B, H, W = d.block_size, d.height, d.width
+        k = np.ones((8, 8), np.uint8)                     # min / max over each 8×8 tile (OpenCV: fast)
+
+        def tiles(a, op):
+            return op(a, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)[::8, ::8]
+
+        y_lo = np.floor(tiles(Y, cv2.erode)).astype(np.int64) // B
+        y_hi = np.minimum(np.floor(tiles(Y, cv2.dilate)).astype(np.int64) + 1, H - 1) // B
+        x_lo = np.floor(tiles(X, cv2.erode)).astype(np.int64) // B
+        x_hi = np.minimum(np.floor(tiles(X, cv2.dilate)).astype(np.int64) + 1, W - 1) // B
+        need = np.zeros((d.nby, d.nbx), bool)
+        for dy in range(int((y_hi - y_lo).max(initial=0)) + 1):
+            for dx in range(int((x_hi - x_lo).max(initial=0)) + 1):
+                need[np.minimum(y_lo + dy, y_hi), np.minimum(x_lo + dx, x_hi)] = True
+        return need
+
     def _sample(self, view: int, Y: np.ndarray, X: np.ndarray) -> np.ndarray:
-        """Bilinear samples (H, W, P) float of one view's planes at pixel positions Y, X
-        (edge-clamped), decoding the blocks they touch that are not decoded yet (one batched call)."""
+        """Bilinear samples (H, W, P) float32 of one view's planes at pixel positions Y, X
+        (float32, clamped to the image), decoding the blocks they touch that are not decoded yet
+        (one batched call); the sampling is OpenCV's remap (positions to 1/32 pixel)."""
+        import cv2
+
         d = self.d
         B = d.block_size
-        y0 = np.clip(np.floor(Y), 0, d.height - 1).astype(np.int64)
-        x0 = np.clip(np.floor(X), 0, d.width - 1).astype(np.int64)
-        y1 = np.minimum(y0 + 1, d.height - 1)
-        x1 = np.minimum(x0 + 1, d.width - 1)
-        fy = np.clip(Y - y0, 0, 1).astype(np.float32)[..., None]
-        fx = np.clip(X - x0, 0, 1).astype(np.float32)[..., None]
+        Y = np.minimum(np.maximum(Y, 0, out=Y), d.height - 1, out=Y)
+        X = np.minimum(np.maximum(X, 0, out=X), d.width - 1, out=X)
         img, filled = self._view_buffer(view)
-        need = np.zeros((d.nby, d.nbx), bool)
-        for ya in (y0, y1):
-            for xa in (x0, x1):
-                need[ya // B, xa // B] = True
+        need = self._blocks_touched(Y, X)
         miss = need & ~filled
         self.blocks_requested += int(need.sum())
         if miss.any():
@@ -108,9 +127,8 @@ class Renderer:
             img.reshape(d.nby, B, d.nbx, B, d.P)[by, :, bx, :, :] = got.reshape(-1, B, B, d.P)
             filled[by, bx] = True
             self.blocks_decoded += int(by.size)
-        a, b = img[y0, x0], img[y0, x1]
-        c, e = img[y1, x0], img[y1, x1]
-        return (a * (1 - fx) + b * fx) * (1 - fy) + (c * (1 - fx) + e * fx) * fy
+        out = cv2.remap(img, X, Y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return out.reshape(d.height, d.width, d.P)
 
     # -- frames ----------------------------------------------------------------------------
     def _sources(self, s: float, t: float, aperture: float) -> list[tuple[int, int, float]]:
