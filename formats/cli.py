@@ -326,6 +326,7 @@ def cmd_decode(a) -> int:
     from .lfcfile import open_lfc
     from .registry import open_decoder
     from .scenes import view_filename, write_layout, write_views
+    from .viewnames import png_name, unpack_names
 
     if a.block is not None and a.out is None:
         raise ParameterError("--block needs --out FILE.npy")
@@ -354,20 +355,30 @@ def cmd_decode(a) -> int:
         if outdir.exists() and not outdir.is_dir():
             raise ParameterError(f"{outdir}: exists and is not a folder")
         layout = None
+        name = view_filename
+        if a.names == "original":
+            scene = f.meta.get("scene")
+            if not isinstance(scene, dict) or "names_z" not in scene:
+                raise ParameterError(f"{a.input}: the file does not record its views' original names (encoded "
+                                     f"from an array or by an older lfcodec); decode without --names original")
+            orig = unpack_names(scene["names_z"], d.rows * d.cols, f"{a.input}: scene names_z")
+
+            def name(r, c):
+                return png_name(orig[r * d.cols + c])
         if a.view is not None:
             r, c = _ints(a.view, 2, "--view")
             img = d.decode_view(r, c, level=level)
-            paths = write_views(outdir, img[None, None], rows=[r], cols=[c])
+            paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
         else:
             prog = _Progress(a.quiet)
             views = d.decode_all(level=level)
             paths = []
             for r in range(d.rows):   # write row by row for the progress bar
-                paths += write_views(outdir, views[r:r + 1], rows=[r])
+                paths += write_views(outdir, views[r:r + 1], rows=[r], filename=name)
                 prog("write views", r + 1, d.rows)
             prog.close()
             # the layout file, so that the folder encodes again as the same scene
-            layout = write_layout(outdir, f.meta["scene"], view_filename)
+            layout = write_layout(outdir, f.meta["scene"], name)
         if not a.quiet:
             print(f"wrote {len(paths)} view(s){f' and {layout.name}' if layout else ''} to {outdir} (level "
                   f"{a.level:g}) in {time.perf_counter() - t0:.2f} s")
@@ -447,6 +458,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--out", metavar="FILE.npy", help="where --block writes its (B, B, C) array")
     d.add_argument("--level", type=float, default=0,
                    help="0 = full quality (default); larger = coarser, up to the file's levels (lfcodec info)")
+    d.add_argument("--names", choices=("grid", "original"), default="grid",
+                   help="file names of decoded views: grid = rRR_cCC.png (default); original = the names the "
+                        "views had when encoded, as PNG (subfolders kept, e.g. images/IMG_0001.png)")
     d.add_argument("--quiet", action="store_true")
     d.set_defaults(func=cmd_decode)
 

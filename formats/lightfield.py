@@ -94,6 +94,11 @@ class LightField:
             g["positions"] = np.round(self.positions, 9).tolist()
         if self.c2w is not None:
             g["c2w"] = np.round(self.c2w, 9).tolist()
+        names = self.meta.get("view_names")
+        if isinstance(names, list) and len(names) == self.rows * self.cols:
+            from .viewnames import pack_names
+
+            g["names_z"] = pack_names(list(names))
         return g
 
     @staticmethod
@@ -149,7 +154,8 @@ def read_geometry(g: dict, where: str, limits: Limits = DEFAULT, rows: int | Non
 
     Returns:
         a dict with rows, cols, height, width, channels, dtype, layout, focal, principal and
-        either baseline (list) or positions ((rows, cols, 3) array), plus c2w when present.
+        either baseline (list) or positions ((rows, cols, 3) array), plus c2w and the views'
+        original file names (``names``, from ``names_z``: :mod:`formats.viewnames`) when present.
 
     Raises:
         FormatError naming ``where`` and the field.
@@ -181,4 +187,8 @@ def read_geometry(g: dict, where: str, limits: Limits = DEFAULT, rows: int | Non
         out["baseline"] = _finite_array(f._get("baseline", [1.0, 1.0]), (2,), where, "baseline").tolist()
     if f.has("c2w"):
         out["c2w"] = _finite_array(f.obj["c2w"], shape + (4, 4), where, "c2w")
+    if f.has("names_z"):
+        from .viewnames import unpack_names
+
+        out["names"] = unpack_names(f.obj["names_z"], out["rows"] * out["cols"], f"{where}: names_z")
     return out

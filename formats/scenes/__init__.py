@@ -114,10 +114,12 @@ def view_filename(row: int, col: int, ext: str = ".png") -> str:
 
 
 def write_views(folder: str | os.PathLike, views: np.ndarray, *, rows: list[int] | None = None,
-                cols: list[int] | None = None, ext: str = ".png") -> list[Path]:
+                cols: list[int] | None = None, ext: str = ".png", filename=None) -> list[Path]:
     """Write (R, C, H, W, Ch) views as ``rRR_cCC.png`` (16-bit PNG for uint16), atomically each.
 
-    ``rows``/``cols`` give the grid indices of the given views when they are a subset.
+    ``rows``/``cols`` give the grid indices of the given views when they are a subset;
+    ``filename(row, col)`` names the files instead (relative to ``folder``; subfolders are
+    made, and a name that would leave ``folder`` is a FormatError).
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
@@ -126,7 +128,13 @@ def write_views(folder: str | os.PathLike, views: np.ndarray, *, rows: list[int]
     out = []
     for i, r in enumerate(rows):
         for j, c in enumerate(cols):
-            path = folder / view_filename(r, c, ext)
+            if filename is None:
+                path = folder / view_filename(r, c, ext)
+            else:
+                from ..viewnames import output_path
+
+                path = output_path(folder, filename(r, c))
+                path.parent.mkdir(parents=True, exist_ok=True)
             write_image(path, views[i, j])
             out.append(path)
     return out

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import SceneError
 from ..lightfield import LightField, grid_positions
+from ..viewnames import relative_names
 from .common import ReadOptions, check_count, confine, load_views, number
 
 _SPEC = re.compile(r"^0?\d{0,2}d?$")          # {row:02d}, {col:d}, {row} … nothing wider than 99
@@ -44,14 +45,21 @@ def read_grid(folder: Path, baseline: float | None = None, focal: float | None =
     if not isinstance(cfg, dict):
         raise SceneError(f"{where}: expected a JSON object")
     rows, cols, pattern = cfg.get("rows"), cfg.get("cols"), cfg.get("views")
-    if not all(isinstance(x, int) and not isinstance(x, bool) for x in (rows, cols)) or not isinstance(pattern, str):
-        raise SceneError(f"{where}: needs rows, cols and views (integer rows and cols, a views pattern string)")
+    if not all(isinstance(x, int) and not isinstance(x, bool) for x in (rows, cols)) \
+            or not isinstance(pattern, (str, list)):
+        raise SceneError(f"{where}: needs rows, cols and views (integer rows and cols; views: a pattern string or "
+                         f"a list of rows*cols file names, row-major)")
     if cfg.get("layout", "grid") != "grid" or rows < 1 or cols < 1:
         raise SceneError(f"{where}: expected layout 'grid' with rows, cols >= 1")
     check_count(rows * cols, where, opts)
-    check_pattern(pattern, where)
-    paths = [confine(folder / pattern.format(row=r, col=c), folder, opts, where)
-             for r in range(rows) for c in range(cols)]
+    if isinstance(pattern, list):
+        if len(pattern) != rows * cols or not all(isinstance(x, str) and x for x in pattern):
+            raise SceneError(f"{where}: views lists {len(pattern)} entries; expected {rows * cols} file names")
+        names = pattern
+    else:
+        check_pattern(pattern, where)
+        names = [pattern.format(row=r, col=c) for r in range(rows) for c in range(cols)]
+    paths = [confine(folder / n, folder, opts, where) for n in names]
     views = load_views(paths, str(folder), opts)
     views = views.reshape(rows, cols, *views.shape[1:])
     assumed = []
@@ -69,7 +77,8 @@ def read_grid(folder: Path, baseline: float | None = None, focal: float | None =
         assumed.append("focal_px=max(H,W)")
     f = number(f, f"{where}: focal_px", positive=True)
     return LightField(views=views, positions=grid_positions(rows, cols, tuple(b)), focal=(f, f),
-                      layout="grid", meta={"reader": "grid", "source": str(cfg.get("source", ""))[:2000],
+                      layout="grid", meta={"reader": "grid", "view_names": relative_names(paths, folder),
+                                           "source": str(cfg.get("source", ""))[:2000],
                                            "license": str(cfg.get("license", ""))[:2000], "assumed": assumed,
                                            "input_paths": [str(p.resolve()) for p in paths] + [str((folder / "scene.json").resolve())]})
 
@@ -106,4 +115,5 @@ def read_image_folder(folder: Path, grid: tuple[int, int], baseline: float | Non
     f = number(focal, f"{where}: focal", positive=True)
     return LightField(views=views, positions=grid_positions(rows, cols, (b, b)), focal=(f, f), layout="grid",
                       meta={"reader": "folder", "assumed": assumed, "files": [p.name for p in files],
+                            "view_names": relative_names(paths, folder),
                             "input_paths": [str(p.resolve()) for p in paths]})

@@ -34,6 +34,8 @@ def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
     fx, fy = g["focal"]
     if "baseline" in g and g["layout"] == "grid" and "c2w" not in g:
         pattern = filename(0, 0).replace("00", "{row:02d}", 1).replace("00", "{col:02d}", 1)
+        if any(pattern.format(row=r, col=c) != filename(r, c) for r in range(rows) for c in range(cols)):
+            pattern = [filename(r, c) for r in range(rows) for c in range(cols)]      # names, row-major
         doc = {"layout": "grid", "rows": rows, "cols": cols, "views": pattern,
                "baseline": g["baseline"], "focal_px": fx, "source": "decoded by lfcodec"}
         path = folder / "scene.json"

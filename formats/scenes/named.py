@@ -8,6 +8,7 @@ from pathlib import Path
 
 from ..errors import SceneError
 from ..lightfield import LightField, grid_positions
+from ..viewnames import relative_names
 from .common import ReadOptions, check_count, confine, is_image, load_views, number
 
 HCI_RE = re.compile(r"^input_Cam(\d{3})\.\w+$")
@@ -61,7 +62,8 @@ def read_hci(folder: Path, baseline: float | None = None, focal: float | None = 
         b = 1.0
         assumed.append("baseline=1")
     return LightField(views=views, positions=grid_positions(rows, cols, (b, b)), focal=(f, f), layout="grid",
-                      meta={"reader": "hci", "assumed": assumed, "input_paths": [str(p.resolve()) for p in files]})
+                      meta={"reader": "hci", "assumed": assumed, "view_names": relative_names(files, folder),
+                            "input_paths": [str(p.resolve()) for p in files]})
 
 
 def read_stanford(folder: Path, baseline: float | None = None, focal: float | None = None,
@@ -90,4 +92,5 @@ def read_stanford(folder: Path, baseline: float | None = None, focal: float | No
     b = float(baseline) if baseline else 1.0
     return LightField(views=views, positions=grid_positions(rows, cols, (b, b)), focal=(f, f), layout="grid",
                       meta={"reader": "stanford", "assumed": [] if baseline else ["baseline=1"],
+                            "view_names": relative_names(files, folder),
                             "input_paths": [str(p.resolve()) for p in files]})

@@ -13,6 +13,7 @@ import numpy as np
 from ..errors import SceneError
 from ..imageio import IMAGE_EXTENSIONS
 from ..lightfield import LightField
+from ..viewnames import relative_names
 from .common import ReadOptions, check_count, confine, is_image, load_views, number
 
 
@@ -50,7 +51,7 @@ def read_llff(folder: Path, opts: ReadOptions = ReadOptions()) -> LightField:
     c2w[:, :3, 3] = t
     f = float(hwf[0, 2]) * w / float(hwf[0, 1])
     return LightField(views=views[None], positions=t[None], c2w=c2w[None], focal=(f, f), layout="posed",
-                      meta={"reader": "llff", "files": [p.name for p in files],
+                      meta={"reader": "llff", "files": [p.name for p in files], "view_names": relative_names(files, folder),
                             "bounds": np.round(pb[:, 15:], 6).tolist(),
                             "input_paths": [str(p.resolve()) for p in files] + [str(pb_path.resolve())]})
 
@@ -113,6 +114,7 @@ def read_transforms(path: Path, opts: ReadOptions = ReadOptions()) -> LightField
     return LightField(views=views[None], positions=c2w[None, :, :3, 3], c2w=c2w[None], focal=(fx, fy),
                       principal=(cx, cy), layout="posed",
                       meta={"reader": "transforms", "files": [os.path.relpath(f, path.parent) for f in files],
+                            "view_names": relative_names(files, path.parent),
                             "input_paths": [str(f.resolve()) for f in files] + [str(path.resolve())]})
 
 
