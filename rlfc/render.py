@@ -23,6 +23,10 @@ from formats.errors import ParameterError
 from formats.pixels import from_planes
 
 
+ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
+ROBUST_MARGIN = 0.5     # a more detailed disparity candidate must halve the disagreement to win
+
+
 class Renderer:
     """Renders views at continuous grid positions from an :class:`rlfc.decoder.RlfcDecoder`.
 
@@ -31,14 +35,18 @@ class Renderer:
         cache_mib: memory for decoded blocks, kept per view (the least recently used views go
             first; a frame's views are decoded whatever the budget).
         margin: how far outside the grid (in view steps) a camera may go (extrapolation).
+        robust: choose per pixel among smoother disparities where the file's maps make the
+            sources disagree (about 3× the sampling work of ``robust=False``; see
+            :meth:`_consistent`).
 
     Attributes:
         blocks_decoded, blocks_requested: counters over the renderer's life (hit rate =
             1 − decoded / requested).
     """
 
-    def __init__(self, decoder, cache_mib: float = 256.0, margin: float = 0.5):
+    def __init__(self, decoder, cache_mib: float = 256.0, margin: float = 0.5, robust: bool = True):
         self.d = decoder
+        self.robust = bool(robust)
         scene = decoder.file.meta.get("scene", {}) if hasattr(decoder, "file") else {}
         if isinstance(scene, dict) and scene.get("layout") == "posed":
             raise ParameterError("novel views are rendered on grids of parallel cameras; this capture is posed "
@@ -189,11 +197,50 @@ class Renderer:
             self._grid = np.mgrid[0:d.height, 0:d.width].astype(np.float32)
         yy, xx = self._grid
         disp = disp.astype(np.float32)
-        acc = np.zeros((d.height, d.width, d.P), np.float32)
-        for r, c, w in self._sources(s, t, aperture):
-            acc += np.float32(w) * self._sample(r * d.cols + c, yy + disp * np.float32(s - r),
-                                                xx + disp * np.float32(t - c))
+        src = self._sources(s, t, aperture)
+        if focus is None and aperture == 0 and len(src) > 1 and self._maps is not None and self.robust:
+            acc = self._consistent(s, t, src, disp)
+        else:
+            acc = np.zeros((d.height, d.width, d.P), np.float32)
+            for r, c, w in src:
+                acc += np.float32(w) * self._sample(r * d.cols + c, yy + disp * np.float32(s - r),
+                                                    xx + disp * np.float32(t - c))
         return from_planes(np.rint(acc).astype(np.int32), d.dtype)
+
+    def _consistent(self, s, t, src, disp):
+        """Blend of the sources under the most photo-consistent of three disparity candidates
+        per pixel, smoothest first: the frame's median disparity, the map's median over 5×5
+        blocks, the file's map. Disagreement = the weighted variance of the sources' luma around
+        their blend, averaged over ROBUST_WINDOW² pixels; a later candidate replaces an earlier
+        one where it has less than ROBUST_MARGIN times its disagreement (the maps are chosen for
+        prediction bits, so on noisy captures some blocks carry disparities that fit the noise)."""
+        import cv2
+
+        d = self.d
+        yy, xx = self._grid
+        H, W = d.height, d.width
+        blk = disp[::8, ::8]
+        med = cv2.medianBlur(blk.astype(np.float32), 5)
+        cands = [np.full((H, W), float(np.median(blk)), np.float32), np.repeat(np.repeat(med, 8, 0), 8, 1)[:H, :W],
+                 disp]                                   # smooth first: a later one must clearly win
+        best = out = None
+        for D in cands:
+            smp = [self._sample(r * d.cols + c, yy + D * np.float32(s - r), xx + D * np.float32(t - c))
+                   for r, c, _ in src]
+            acc = np.zeros((H, W, d.P), np.float32)
+            for (_, _, w), x in zip(src, smp):
+                acc += np.float32(w) * x
+            cost = np.zeros((H, W), np.float32)
+            for (_, _, w), x in zip(src, smp):
+                cost += np.float32(w) * np.square(x[..., 0] - acc[..., 0])
+            cost = cv2.blur(cost, (ROBUST_WINDOW, ROBUST_WINDOW))
+            if best is None:
+                best, out = cost, acc
+            else:
+                win = cost < best * ROBUST_MARGIN
+                best = np.where(win, cost, best)
+                out = np.where(win[..., None], acc, out)
+        return out
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
         """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row

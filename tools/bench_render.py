@@ -1,7 +1,8 @@
 """Novel-view rendering on real grids, by leaving views out: every second view (rows and
 columns) is encoded, the views in between are rendered from the file and compared with the
-captured ones, beside the nearest encoded view and plain bilinear blending (no disparity);
-then frame times along a camera path with a warm block cache.
+captured ones, beside the nearest encoded view and plain bilinear blending (no disparity), for
+the default renderer (robust disparity choice) and ``robust=False`` (the file's maps as they
+are, "fast"); then frame times of both along a camera path with a warm block cache.
 
 Usage:
     python -m tools.bench_render SCENE [SCENE ...] [--target-psnr 40] [--out DIR]
@@ -31,8 +32,9 @@ def bench_scene(path: str, target: float) -> dict:
     d, blob = open_encoded(lf, encode(lf, EncodeOptions(target_psnr=target)))
     t_enc = time.perf_counter() - t0
     ren = d.renderer(cache_mib=1024)
-    rows = {"render": [], "nearest": [], "blend": []}
-    ss = {"render": [], "nearest": [], "blend": []}
+    fast = d.renderer(cache_mib=1024, robust=False)
+    rows = {"render": [], "render_fast": [], "nearest": [], "blend": []}
+    ss = {"render": [], "render_fast": [], "nearest": [], "blend": []}
     R, C = full.shape[:2]
     for r in range(R):
         for c in range(C):
@@ -44,33 +46,36 @@ def bench_scene(path: str, target: float) -> dict:
             corners = [(int(np.floor(s)), int(np.floor(t))), (int(np.floor(s)), int(np.ceil(t))),
                        (int(np.ceil(s)), int(np.floor(t))), (int(np.ceil(s)), int(np.ceil(t)))]
             blend = np.rint(np.mean([d.decode_view(*k).astype(np.float64) for k in corners], 0)).astype(full.dtype)
-            for name, x in (("render", img), ("nearest", near), ("blend", blend)):
+            for name, x in (("render", img), ("render_fast", fast.render(s, t)), ("nearest", near), ("blend", blend)):
                 rows[name].append(psnr_rgb(full[r, c], x))
                 ss[name].append(ssim(full[r, c][None], x[None]))
     # a smooth path: a circle of radius 1/3 of the grid around the centre, 60 frames, twice
     cs, ct = (d.rows - 1) / 2, (d.cols - 1) / 2
     rad = min(d.rows, d.cols) / 3
     ang = np.linspace(0, 2 * np.pi, 60, endpoint=False)
-    ren2 = d.renderer(cache_mib=1024)
-    t = time.perf_counter()
-    ren2.render(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
-    first = time.perf_counter() - t
-    for a in ang:                                       # warm the cache along the path
-        ren2.render(cs + rad * np.sin(a), ct + rad * np.cos(a))
-    dec0, req0 = ren2.blocks_decoded, ren2.blocks_requested
-    t = time.perf_counter()
-    for a in ang:
-        ren2.render(cs + rad * np.sin(a), ct + rad * np.cos(a))
-    warm = (time.perf_counter() - t) / len(ang)
+    speed = {}
+    for label, robust in (("", True), ("_fast", False)):
+        ren2 = d.renderer(cache_mib=1024, robust=robust)
+        t = time.perf_counter()
+        ren2.render(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
+        first = time.perf_counter() - t
+        for a in ang:                                   # warm the cache along the path
+            ren2.render(cs + rad * np.sin(a), ct + rad * np.cos(a))
+        dec0, req0 = ren2.blocks_decoded, ren2.blocks_requested
+        t = time.perf_counter()
+        for a in ang:
+            ren2.render(cs + rad * np.sin(a), ct + rad * np.cos(a))
+        warm = (time.perf_counter() - t) / len(ang)
+        speed.update({f"first_frame_ms{label}": round(1e3 * first, 1), f"warm_fps{label}": round(1 / warm, 1),
+                      f"warm_hit_rate{label}": round(1 - (ren2.blocks_decoded - dec0)
+                                                     / max(1, ren2.blocks_requested - req0), 3),
+                      f"blocks_per_frame{label}": round((ren2.blocks_requested - req0) / len(ang), 1)})
     return {"scene": Path(path).name, "encoded_views": f"{lf.rows}x{lf.cols}", "target_psnr": target,
             "file_bytes": len(blob), "encode_s": round(t_enc, 1),
             "psnr": {k: round(float(np.mean(v)), 2) for k, v in rows.items()},
             "psnr_worst": {k: round(float(np.min(v)), 2) for k, v in rows.items()},
             "ssim": {k: round(float(np.mean(v)), 4) for k, v in ss.items()},
-            "frame": f"{d.height}x{d.width}", "first_frame_ms": round(1e3 * first, 1),
-            "warm_fps": round(1 / warm, 1),
-            "warm_hit_rate": round(1 - (ren2.blocks_decoded - dec0) / max(1, ren2.blocks_requested - req0), 3),
-            "blocks_per_frame": round((ren2.blocks_requested - req0) / len(ang), 1)}
+            "frame": f"{d.height}x{d.width}", **speed}
 
 
 def main(argv=None) -> int:
