@@ -25,6 +25,7 @@ from formats.pixels import from_planes
 
 ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
 ROBUST_MARGIN = 0.5     # a more detailed disparity candidate must halve the disagreement to win
+ROBUST_STEP = 4         # the choice is made on every 4th pixel (the frame is rendered once, at full size)
 
 
 class Renderer:
@@ -136,7 +137,7 @@ class Renderer:
             filled[by, bx] = True
             self.blocks_decoded += int(by.size)
         out = cv2.remap(img, X, Y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-        return out.reshape(d.height, d.width, d.P)
+        return out.reshape(*Y.shape, d.P)
 
     # -- frames ----------------------------------------------------------------------------
     def _sources(self, s: float, t: float, aperture: float) -> list[tuple[int, int, float]]:
@@ -208,39 +209,47 @@ class Renderer:
         return from_planes(np.rint(acc).astype(np.int32), d.dtype)
 
     def _consistent(self, s, t, src, disp):
-        """Blend of the sources under the most photo-consistent of three disparity candidates
-        per pixel, smoothest first: the frame's median disparity, the map's median over 5×5
-        blocks, the file's map. Disagreement = the weighted variance of the sources' luma around
-        their blend, averaged over ROBUST_WINDOW² pixels; a later candidate replaces an earlier
-        one where it has less than ROBUST_MARGIN times its disagreement (the maps are chosen for
-        prediction bits, so on noisy captures some blocks carry disparities that fit the noise)."""
+        """Blend of the sources under the most photo-consistent of three disparity candidates,
+        smoothest first: the frame's median disparity, the map's median over 5×5 blocks, the
+        file's map. The choice is made on a grid of every ROBUST_STEP-th pixel: disagreement =
+        the weighted variance of the sources' luma around their blend there, averaged over
+        ROBUST_WINDOW² pixels; a later candidate replaces an earlier one where it has less than
+        ROBUST_MARGIN times its disagreement (the maps are chosen for prediction bits, so on noisy
+        captures some blocks carry disparities that fit the noise). The frame is then rendered
+        once with the chosen disparities."""
         import cv2
 
         d = self.d
         yy, xx = self._grid
         H, W = d.height, d.width
+        S = ROBUST_STEP
         blk = disp[::8, ::8]
         med = cv2.medianBlur(blk.astype(np.float32), 5)
-        cands = [np.full((H, W), float(np.median(blk)), np.float32), np.repeat(np.repeat(med, 8, 0), 8, 1)[:H, :W],
-                 disp]                                   # smooth first: a later one must clearly win
-        best = out = None
-        for D in cands:
-            smp = [self._sample(r * d.cols + c, yy + D * np.float32(s - r), xx + D * np.float32(t - c))
+        full = [np.full((H, W), float(np.median(blk)), np.float32), np.repeat(np.repeat(med, 8, 0), 8, 1)[:H, :W],
+                disp]                                      # smooth first: a later one must clearly win
+        ys, xs = np.ascontiguousarray(yy[::S, ::S]), np.ascontiguousarray(xx[::S, ::S])
+        best = None
+        choice = np.zeros(ys.shape, np.int64)
+        for k, D in enumerate(full):
+            D = np.ascontiguousarray(D[::S, ::S])
+            smp = [self._sample(r * d.cols + c, ys + D * np.float32(s - r), xs + D * np.float32(t - c))[..., 0]
                    for r, c, _ in src]
-            acc = np.zeros((H, W, d.P), np.float32)
-            for (_, _, w), x in zip(src, smp):
-                acc += np.float32(w) * x
-            cost = np.zeros((H, W), np.float32)
-            for (_, _, w), x in zip(src, smp):
-                cost += np.float32(w) * np.square(x[..., 0] - acc[..., 0])
-            cost = cv2.blur(cost, (ROBUST_WINDOW, ROBUST_WINDOW))
+            acc = sum(np.float32(w) * x for (_, _, w), x in zip(src, smp))
+            cost = sum(np.float32(w) * np.square(x - acc) for (_, _, w), x in zip(src, smp))
+            win_px = max(1, ROBUST_WINDOW // S)
+            cost = cv2.blur(cost, (win_px, win_px))
             if best is None:
-                best, out = cost, acc
+                best = cost
             else:
                 win = cost < best * ROBUST_MARGIN
                 best = np.where(win, cost, best)
-                out = np.where(win[..., None], acc, out)
-        return out
+                choice[win] = k
+        sel = np.repeat(np.repeat(choice, S, 0), S, 1)[:H, :W]
+        D = np.choose(sel, full).astype(np.float32)
+        acc = np.zeros((H, W, d.P), np.float32)
+        for r, c, w in src:
+            acc += np.float32(w) * self._sample(r * d.cols + c, yy + D * np.float32(s - r), xx + D * np.float32(t - c))
+        return acc
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
         """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row
