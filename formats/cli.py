@@ -260,7 +260,7 @@ def cmd_render(a) -> int:
 
 def _render_path(a, out: Path) -> int:
     """``render --path``: a sequence of frames along a camera path, to PNG frames or an MP4."""
-    from rlfc.campath import read_path
+    from formats.campath import read_path
 
     from .lfcfile import open_lfc
     from .registry import open_decoder

@@ -66,27 +66,37 @@ class LfnRenderer(Decoder):
         if c.info("lfn.base").length != base_values(self.cfg) * itemsize:
             raise FormatError(f"{c.name}: section 'lfn.base' has {c.info('lfn.base').length} bytes, the network "
                               f"config needs {base_values(self.cfg) * itemsize}")
-        steps = []
-        limit = self.cfg.max_neurons if max_neurons is None else int(np.ceil(max_neurons))
-        for j in range(self.cfg.max_neurons - self.cfg.min_neurons):
-            if self.cfg.min_neurons + j >= limit or not c.available(step_name(j)):
-                break
-            if c.info(step_name(j)).length != step_bytes(self.cfg, self.cfg.min_neurons + j, self.dtype_w):
-                raise FormatError(f"{c.name}: section {step_name(j)!r} has {c.info(step_name(j)).length} bytes, the "
-                                  f"network config needs {step_bytes(self.cfg, self.cfg.min_neurons + j, self.dtype_w)}")
-            steps.append(bytes(c.read(step_name(j))))
+        self._steps: list[bytes] = []
+        self._read_steps(self.cfg.max_neurons if max_neurons is None else int(np.ceil(max_neurons)))
         occ = None
         if c.available("lfn.occ") and self.cfg.occupancy_neurons:
             if c.info("lfn.occ").length != occ_values(self.cfg) * itemsize:
                 raise FormatError(f"{c.name}: section 'lfn.occ' has {c.info('lfn.occ').length} bytes, the network "
                                   f"config needs {occ_values(self.cfg) * itemsize}")
             occ = bytes(c.read("lfn.occ"))
-        self.model, self.occ = unpack_network(self.cfg, bytes(c.read("lfn.base")), steps, occ, self.dtype_w)
-        self.neurons = self.model.cfg.max_neurons
-        self.levels = float(self.neurons - self.cfg.min_neurons)
+        self._base, self._occ_bytes = bytes(c.read("lfn.base")), occ
         self.rays_evaluated = 0   # network evaluations so far (rays the occupancy net let through)
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.half = self.device.type == "cuda"
+        self._build()
+
+    def _read_steps(self, limit: int) -> None:
+        """Read (fetch, for a remote file) the step sections after those held, up to a network
+        of ``limit`` neurons or the end of the available bytes; sizes checked first."""
+        c = self.file.container
+        for j in range(len(self._steps), self.cfg.max_neurons - self.cfg.min_neurons):
+            if self.cfg.min_neurons + j >= limit or not c.available(step_name(j)):
+                break
+            want = step_bytes(self.cfg, self.cfg.min_neurons + j, self.dtype_w)
+            if c.info(step_name(j)).length != want:
+                raise FormatError(f"{c.name}: section {step_name(j)!r} has {c.info(step_name(j)).length} bytes, the "
+                                  f"network config needs {want}")
+            self._steps.append(bytes(c.read(step_name(j))))
+
+    def _build(self) -> None:
+        self.model, self.occ = unpack_network(self.cfg, self._base, self._steps, self._occ_bytes, self.dtype_w)
+        self.neurons = self.model.cfg.max_neurons
+        self.levels = float(self.neurons - self.cfg.min_neurons)
         self.model.to(self.device).eval()
         if self.occ is not None:
             self.occ.to(self.device).eval()
@@ -94,6 +104,21 @@ class LfnRenderer(Decoder):
             self.model.half()
             if self.occ is not None:
                 self.occ.half()
+
+    def grow(self, max_neurons: float | None = None) -> float:
+        """Progressive streaming: read the next sections (over HTTP, only their bytes) so that
+        the network has up to ``max_neurons`` neurons per layer (None = all the file has), and
+        rebuild it; returns the neurons now available. Rendering at a level the grown network
+        shares gives the same pixels as a renderer opened with that many neurons."""
+        limit = self.cfg.max_neurons if max_neurons is None else max_neurons
+        if isinstance(limit, bool) or not isinstance(limit, (int, float, np.integer, np.floating)) \
+                or not np.isfinite(limit) or limit < self.cfg.min_neurons:
+            raise ParameterError(f"max_neurons must be a number >= {self.cfg.min_neurons}, got {max_neurons!r}")
+        n = len(self._steps)
+        self._read_steps(int(np.ceil(min(limit, self.cfg.max_neurons))))
+        if len(self._steps) != n:
+            self._build()
+        return float(self.neurons)
 
     @property
     def neuron_range(self) -> tuple[float, float]:

@@ -170,7 +170,7 @@ class Renderer:
 
     def render_path(self, cameras):
         """Frames along a camera path: ``cameras`` (N, 4) rows of (s, t, focus or NaN for the
-        file's maps, aperture), e.g. from :func:`rlfc.campath.read_path`; yields (H, W, C)
+        file's maps, aperture), e.g. from :func:`formats.campath.read_path`; yields (H, W, C)
         frames (every camera is checked first)."""
         cams = np.asarray(cameras, dtype=np.float64).reshape(-1, 4)
         for s, t in cams[:, :2]:

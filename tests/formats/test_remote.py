@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.errors import FormatError
+from formats.errors import FormatError, ParameterError
 from formats.lfcfile import open_lfc
 from formats.registry import open_decoder
 from formats.remote import RemoteSource
@@ -90,3 +90,34 @@ def test_cli_info_over_http(served, capsys):
     assert main(["decode", srv.url_of(NAME), "--block", "0,0,0,0", "--out", str(served[1] / "b.npy"),
                  "--quiet"]) == 0
     assert np.load(served[1] / "b.npy").shape[-1] == 4
+
+
+def test_lfn_streams_progressively_over_http(tmp_path):
+    """An LFN read over HTTP fetches the sections its level needs, and more as the level rises
+    (issue 16); the grown network renders exactly as one opened with that many neurons."""
+    from formats.cli import main
+    from formats.scenes import write_views
+    from lfn_stream.render import LfnRenderer
+    from tests.rlfc.helpers import smooth_lf
+
+    lf = smooth_lf(rows=2, cols=2, h=16, w=16)
+    write_views(tmp_path / "scene", lf.views)
+    lfn = "n.lfc"
+    assert main(["train", str(tmp_path / "scene"), str(tmp_path / lfn), "--grid", "2x2", "--steps", "1",
+                 "--max-neurons", "64", "--min-neurons", "16", "--quiet"]) == 0
+    size = (tmp_path / lfn).stat().st_size
+    with FileServer(tmp_path) as srv:
+        f = open_lfc(srv.url_of(lfn), cache_bytes=4096)           # 4 KiB pages, one page cached
+        src = f.container._src
+        r = LfnRenderer(f, device="cpu", max_neurons=18)
+        assert r.neurons == 18
+        small = src.wire_bytes
+        assert small < size / 2                                 # the later steps were not fetched
+        assert r.grow(40) == 40 and small < src.wire_bytes < size
+        assert r.grow() == 64
+        ref = LfnRenderer(open_lfc(tmp_path / lfn), device="cpu", max_neurons=40)
+        r40 = LfnRenderer(open_lfc(srv.url_of(lfn)), device="cpu", max_neurons=18)
+        r40.grow(40)
+        assert np.array_equal(r40.render(0, 1, neurons=33.5), ref.render(0, 1, neurons=33.5))
+        with pytest.raises(ParameterError):
+            r.grow(float("nan"))

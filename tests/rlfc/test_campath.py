@@ -10,7 +10,7 @@ from formats.cli import main
 from formats.errors import ParameterError, UnsupportedError
 from formats.imageio import read_image
 from rlfc import encode
-from rlfc.campath import MAX_FRAMES, orbit, read_path, sweep
+from formats.campath import MAX_FRAMES, orbit, read_path, sweep
 from tests.rlfc.helpers import open_encoded, smooth_lf
 
 
