@@ -30,6 +30,7 @@ from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, planar, predict_tbs, upsample_thumb
+from .txsample import KeyAtlas, predict as remap_predict
 from .txmaps import pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
 from .txstructure import build, build_intra
@@ -304,8 +305,21 @@ class TxEncoder:
         return out
 
     # -- prediction ------------------------------------------------------------------------
-    def predict_view(self, v: int, kp: np.ndarray) -> np.ndarray:
-        """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``."""
+    def key_source(self, keyplanes: np.ndarray):
+        """What :meth:`predict_view` samples: a :class:`rlfc.txsample.KeyAtlas` of the decoded key
+        views (the remap kernel) where OpenCV can take them, else their planar copy."""
+        if not KeyAtlas.fits(self.Hp, self.Wp, self.P):
+            return planar(keyplanes)
+        atlas = KeyAtlas(len(keyplanes), self.Hp, self.Wp, self.P,
+                         int(np.iinfo(self.dtype).bits) + (1 if self.P >= 3 else 0))
+        for i, k in enumerate(keyplanes):
+            if k.any():
+                atlas.set(i, k)
+        return atlas
+
+    def predict_view(self, v: int, kp) -> np.ndarray:
+        """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``
+        (:meth:`key_source`: an atlas, or planar planes); the same integers either way."""
         s = self.s
         nloc8 = self.nby8 * self.nbx8
         ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
@@ -316,8 +330,13 @@ class TxEncoder:
         r0 = s.refs[v].clip(0)
         dpos = s.positions[v] - s.positions[r0]
         slots = np.broadcast_to(self.key_slot[r0], (nloc8, MAX_REFS))
-        p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
-                        d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
+        if isinstance(kp, KeyAtlas):
+            p = np.concatenate([remap_predict(kp, slots[a:a + 4096], w[a:a + 4096], d[a:a + 4096, None] * dpos[None, :, 0],
+                                              d[a:a + 4096, None] * dpos[None, :, 1], ty[a:a + 4096] * TB,
+                                              tx[a:a + 4096] * TB) for a in range(0, nloc8, 4096)])
+        else:
+            p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
+                            d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
         return p.reshape(self.nby8, self.nbx8, TB, TB, self.P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, self.P)
 
     def thumb_levels(self, v: int, thumb16: int) -> np.ndarray:
@@ -495,7 +514,7 @@ class TxEncoder:
         lam_n = self.p.lam * (s16[1, 0] / 16.0) ** 2
         n0 = self.n0
         keyplanes = np.zeros((len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
-        kp = planar(keyplanes)
+        kp = self.key_source(keyplanes)
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
@@ -521,7 +540,10 @@ class TxEncoder:
                     keyimg[k] = img
             keyplanes[i] = codes[k].planes
             codes[k].planes = None              # (kept once, in keyplanes, for this pass only)
-            kp = planar(keyplanes)
+            if isinstance(kp, KeyAtlas):
+                kp.set(i, keyplanes[i])
+            else:
+                kp = planar(keyplanes)
             if progress:
                 progress("code views", i + 1, n0)
         others = [v for v in range(n0) if not self.is_key[v]]
@@ -691,7 +713,7 @@ class TxEncoder:
 def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
                step16: np.ndarray, lam: float, keep_pixels: bool) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
-    ``kp`` the pass's decoded key views, planar (:func:`rlfc.txpredict.planar`)."""
+    ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_source`)."""
     return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, enc.planes(v, pixels), keep_pixels)
 
 
