@@ -3,7 +3,10 @@ and the bytes and requests each costs, with an added per-request latency standin
 network.
 
 Usage:
-    python -m tools.bench_remote FILE.lfc [--latency-ms 20] [--blocks 200] [--out DIR]
+    python -m tools.bench_remote FILE.lfc [--latency-ms 20] [--blocks 200] [--frames 30] [--out DIR]
+
+Grid files also render ``--frames`` frames along an orbit from a fresh reader: open + first
+frame time, bytes and requests per frame (first and mean), frame time.
 
 Serves FILE's folder with :class:`formats.serve.FileServer` on 127.0.0.1 (byte ranges, ETags,
 the latency added to every answer) and reads it with ``open_lfc(url)``.
@@ -24,7 +27,8 @@ from formats.serve import FileServer
 from tools.common import log, machine
 
 
-def run(path: Path, latency_ms: float, n_blocks: int, cache_mib: float, page: int | None = None) -> dict:
+def run(path: Path, latency_ms: float, n_blocks: int, cache_mib: float, page: int | None = None,
+        frames: int = 30) -> dict:
     size = path.stat().st_size
     out = {"file": path.name, "bytes": size, "latency_ms": latency_ms, "cache_mib": cache_mib, "page": page,
            "machine": machine()}
@@ -51,6 +55,26 @@ def run(path: Path, latency_ms: float, n_blocks: int, cache_mib: float, page: in
             out["block_ms_p50"] = 1e3 * float(np.median(ts))
             out["block_requests_mean"] = float(np.mean(req))
             out["block_bytes_mean"] = float(np.mean(byt))
+        if frames and hasattr(d, "renderer") and (d.file.meta.get("scene") or {}).get("layout") != "posed":
+            from formats.campath import orbit
+
+            t0 = time.perf_counter()                          # a fresh reader: open + first frame
+            src2 = RemoteSource(url, cache_bytes=int(cache_mib * (1 << 20)), page=page)
+            ren = open_decoder(open_lfc(src2, name=url)).renderer(cache_mib=cache_mib)
+            req, byt, ts = [], [], []
+            for i, (s_, t_, _, _) in enumerate(orbit(d.rows, d.cols, frames).tolist()):
+                r0, b0, t = src2.wire_requests, src2.wire_bytes, time.perf_counter()
+                ren.render(s_, t_)
+                ts.append(time.perf_counter() - t)
+                if i == 0:
+                    out["open_and_first_frame_s"] = time.perf_counter() - t0
+                req.append(src2.wire_requests - r0)
+                byt.append(src2.wire_bytes - b0)
+            out["frames"] = frames
+            out["frame_ms_p50"] = 1e3 * float(np.median(ts))
+            out["frame_requests_mean"], out["frame_bytes_mean"] = float(np.mean(req)), float(np.mean(byt))
+            out["frame_requests_first"], out["frame_bytes_first"] = req[0], byt[0]
+            out["render_wire_bytes"] = src2.wire_bytes
         t = time.perf_counter()
         d.decode_view(d.rows // 2, d.cols // 2)
         out["view_s"] = time.perf_counter() - t
@@ -69,9 +93,10 @@ def main(argv=None) -> int:
     ap.add_argument("--blocks", type=int, default=200)
     ap.add_argument("--cache-mib", type=float, default=64.0)
     ap.add_argument("--page", type=int, default=None, help="page size in bytes (default 64 KiB)")
+    ap.add_argument("--frames", type=int, default=30, help="rendered frames along an orbit (grid files; 0 = none)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
-    res = run(Path(a.file), a.latency_ms, a.blocks, a.cache_mib, a.page)
+    res = run(Path(a.file), a.latency_ms, a.blocks, a.cache_mib, a.page, a.frames)
     log(json.dumps(res, indent=1))
     if a.out:
         Path(a.out).mkdir(parents=True, exist_ok=True)

@@ -1,0 +1,44 @@
+"""Smoke runs of the decode-speed and remote benchmarks on a tiny grid: every figure they report
+is produced and sane (the numbers themselves belong in BENCHMARKS.md, not in tests)."""
+import json
+
+import numpy as np
+
+from formats.cli import main as cli
+from formats.scenes import write_views
+from tests.rlfc.helpers import smooth_lf
+from tools import bench_decode, bench_remote
+
+
+def _tiny(tmp_path):
+    lf = smooth_lf(rows=3, cols=3, h=32, w=40)
+    write_views(tmp_path / "data" / "tiny", lf.views)
+    (tmp_path / "data" / "tiny" / "scene.json").write_text(json.dumps(
+        {"layout": "grid", "rows": 3, "cols": 3, "views": "r{row:02d}_c{col:02d}.png"}))
+    f = tmp_path / "tiny.lfc"
+    assert cli(["encode", str(tmp_path / "data" / "tiny"), str(f), "--target-psnr", "36", "--quiet"]) == 0
+    return f
+
+
+def test_bench_decode_worker_reports_every_figure(tmp_path, monkeypatch):
+    f = _tiny(tmp_path)
+    monkeypatch.setattr(bench_decode.tempfile, "gettempdir", lambda: str(tmp_path))
+    peer = bench_decode._prepare_peer(f, tmp_path / "data", tmp_path)
+    assert len(peer["views"]) == 6 and peer["psnr_j2k"] > 30
+    r = bench_decode._worker(str(f), peer["file"], 0, 300, 20, [1, 2])
+    for k in ("open_s", "batch_us_t1", "batch_us_t2", "all_s_t1", "j2k_all_s_t2", "gather_us", "view_s", "j2k_view_s"):
+        assert r[k] > 0, k
+    assert len(r["single_us"]) == 20
+    s = bench_decode._summarize([r, r], [1, 2])
+    assert s["batch_mpix_t2"] > 0 and s["view_vs_j2k"] > 0 and np.isfinite(s["single_p99_us"])
+    table = bench_decode._table({"tiny": {"new": s}}, "new", [1, 2])
+    assert table[2].startswith("| tiny |")
+
+
+def test_bench_remote_renders_frames_over_http(tmp_path):
+    f = _tiny(tmp_path)
+    res = bench_remote.run(f, latency_ms=0.0, n_blocks=5, cache_mib=1.0, page=512, frames=3)
+    assert res["frames"] == 3 and res["frame_requests_first"] >= 0 and res["frame_ms_p50"] > 0
+    # (a tiny file is fetched whole at open: its blocks share one checksum chunk)
+    assert res["open_and_first_frame_s"] > 0 and 0 < res["render_wire_bytes"] <= res["bytes"] + 512
+    json.dumps(res)
