@@ -79,6 +79,8 @@ def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarr
     """
     M, R = slots.shape
     P, ft = atlas.P, atlas.ftype
+    if M == 0:
+        return np.zeros((0, TB, TB, P), np.int32)
     if M * R <= SMALL and len(atlas.groups) == 1:
         return _predict_dense(atlas, slots, weights, disp_y, disp_x, y0, x0)
     nz = weights > 0

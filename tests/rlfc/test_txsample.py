@@ -69,3 +69,9 @@ def test_remap_prediction_few_blocks(P, lo, hi, bits):
         sl = slice(a, a + 4)
         got = predict(atlas, slots[sl], w[sl], dy[sl], dx[sl], y0[sl], x0[sl])
         assert np.array_equal(got, ref[sl])
+
+
+def test_remap_prediction_of_no_blocks():
+    atlas = KeyAtlas(1, 16, 16, 3, 9)
+    z = np.zeros((0, 4), np.int64)
+    assert predict(atlas, z, z, z, z, np.zeros(0, np.int64), np.zeros(0, np.int64)).shape == (0, 8, 8, 3)
