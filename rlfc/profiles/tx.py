@@ -284,7 +284,7 @@ class TxDecoder(ProfileDecoder):
         M, B, nt, P = views.size, self.block_size, self.nt, self.P
         if pred is None:
             pred = np.empty((M, nt, TB, TB, P), np.int32)
-            step = PRED_TBS // nt                             # requests per prediction pass: stays in cache
+            step = max(1, PRED_TBS // nt)                     # requests per prediction pass: stays in cache
             for a in range(0, M, step):
                 v, lc = views[a:a + step], locs[a:a + step]
                 pred[a:a + step] = self._pred(*self._tb_coords(v, lc)).reshape(v.size, nt, TB, TB, P)
@@ -376,7 +376,7 @@ class TxDecoder(ProfileDecoder):
         nk = np.flatnonzero(~key)
         if nk.size:
             order = nk[np.lexsort((bx[nk], by[nk], views[nk]))]          # by view, then raster: shared
-            step = PARSE_TBS // self.nt                                 # references stay in cache
+            step = max(1, PARSE_TBS // self.nt)                         # references stay in cache
             for a in range(0, order.size, step):
                 c = order[a:a + step]
                 out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level)
