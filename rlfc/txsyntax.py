@@ -31,7 +31,7 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import BACK_BITS, L as RANS_L, LaneDecoder, ScalarDecoder, Tables, encode_lanes
+from .rans import BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, LaneDecoder, ScalarDecoder, Tables, encode_lanes
 
 N_MODES = 3
 MODE_SKIP, MODE_RES, MODE_INTRA = 0, 1, 2
@@ -42,6 +42,7 @@ BAND = np.array([0] + [1] * 2 + [2] * 3 + [3] * 4 + [4] * 11 + [5] * 43, dtype=n
 N_BANDS = 6
 _BAND8 = [8 * int(b) for b in BAND]      # band·8: the band's offset among magnitude contexts
 N_PC = 3          # plane classes
+_MASK = RANS_M - 1
 
 # context layout: one table set, contexts numbered by kind of symbol
 CTX_MODE = 0                                    # 2 kinds × 4 previous modes
@@ -442,6 +443,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
     pcl = [int(x) for x in pcs]
     d = ScalarDecoder(data, tables)
     get = d.get
+    slot_t, freq_t, cum_t, n_data = d.slot, d.freq, d.cum, len(data)
     modes, prev = [], 3
     for _ in range(nt):
         s = get(CTX_MODE + kind * 4 + prev)
@@ -458,7 +460,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
                 if v > 64:
                     raise FormatError("tx block has a last position past 64")
                 last[t][p] = v
-    coefs = []                                          # (t, p, pos, magnitude, escaped, first)
+    coefs = []                       # nonzero coefficients: (t, p, pos, magnitude, escaped, first)
     for t in range(nt):
         for p in range(P):
             n = last[t][p]
@@ -471,12 +473,24 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
                 raise FormatError("tx block has an undefined magnitude symbol")
             h1, h2 = s + 1, 0
             coefs.append([t, p, pos, s + 1, s == ESC, True])
+            # the rest of the group: the decoder's step inlined (this loop is most of a parse)
+            x, ptr = d.x, d.ptr
             for pos in range(n - 2, -1, -1):
-                s = get(base + _BAND8[pos] + 1 + (h1 > 0) + (h2 > 0))
+                ctx = base + _BAND8[pos] + 1 + (h1 > 0) + (h2 > 0)
+                sl = x & _MASK
+                s = slot_t[ctx][sl]
+                x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+                while x < RANS_L:
+                    if ptr >= n_data:
+                        raise FormatError("rANS stream reads past its end")
+                    x = (x << 8) | data[ptr]
+                    ptr += 1
                 if s > ESC:
                     raise FormatError("tx block has an undefined magnitude symbol")
                 h2, h1 = h1, s
-                coefs.append([t, p, pos, s, s == ESC, False])
+                if s:                                   # zeros carry no sign, escape or level
+                    coefs.append([t, p, pos, s, s == ESC, False])
+            d.x, d.ptr = x, ptr
     for c in coefs:
         if c[4]:
             k = get(CTX_ESC + pcl[c[1]])
@@ -501,13 +515,6 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
             k = c[6]
             c[3] = ESC + c[5] + ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
             bit += k
-    levels = np.zeros((1, nt, P, 64), np.int64)
-    si = 0
-    for c in coefs:
-        v = c[3]
-        if v > 0:
-            if signs[si]:
-                v = -v
-            si += 1
-        levels[0, c[0], c[1], c[2]] = v
-    return Parsed.from_levels(np.array([modes], np.int64), levels)
+    index = [((c[0] * P + c[1]) << 6) + c[2] for c in coefs]       # grouped by (tb, plane), ascending
+    values = [-c[3] if sg else c[3] for c, sg in zip(coefs, signs)]
+    return Parsed(np.array([modes], np.int64), np.array(index, np.int64), np.array(values, np.int64), P)
