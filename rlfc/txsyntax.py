@@ -326,6 +326,14 @@ class Parsed:
         return Parsed(self.modes.reshape(lanes, nt), self.index, self.values, self.P)
 
 
+def concat_parsed(parts: list) -> "Parsed":
+    """One Parsed of the lanes of several, in order."""
+    per = parts[0].modes.shape[1] * parts[0].P * 64
+    off = np.cumsum([0] + [p.modes.shape[0] for p in parts[:-1]]) * per
+    return Parsed(np.concatenate([p.modes for p in parts]), np.concatenate([p.index + o for p, o in zip(parts, off)]),
+                  np.concatenate([p.values for p in parts]), parts[0].P)
+
+
 def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: Tables, nt: int, pcs: np.ndarray,
                 kind: np.ndarray, key: np.ndarray, name: str = "") -> Parsed:
     """Parse S streams at once (numpy lanes). ``buf`` holds the streams (8 bytes of slack after

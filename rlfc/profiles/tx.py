@@ -26,13 +26,14 @@ from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict
-from ..txsyntax import MODE_INTRA, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
+from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
 
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
 PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their streams step together)
+ONE_BY_ONE = 64         # up to this many streams, parse_one per stream (measured faster than lanes below ~100)
 GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
 KEY_PARSE_TBS = 1 << 20  # tbs of key views parsed together at open (bounds the parsed coefficients held)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
@@ -273,8 +274,10 @@ class TxDecoder(ProfileDecoder):
         kind = self.lay.intra[views].astype(np.int64)
         key = self.is_key[views].astype(np.int64)
         name = self.container.name
-        if views.size == 1:
-            return parse_one(bytes(buf[s2[0]:e2[0]]), self.tables, self.nt, self.pcs, int(kind[0]), int(key[0]))
+        if views.size <= ONE_BY_ONE:             # few streams: the scalar parser is faster than lanes
+            got = [parse_one(bytes(buf[a:b]), self.tables, self.nt, self.pcs, int(k), int(y))
+                   for a, b, k, y in zip(s2.tolist(), e2.tolist(), kind.tolist(), key.tolist())]
+            return got[0] if len(got) == 1 else concat_parsed(got)
         return parse_lanes(buf, s2, e2, self.tables, self.nt, self.pcs, kind, key, name)
 
     def _reconstruct(self, views, locs, level, pred=None, parsed=None):

@@ -44,9 +44,13 @@ def test_streams_parse_back_exactly(seed, S, nt, P, density, big):
     buf = np.frombuffer(b"".join(streams) + bytes(8), np.uint8)
     got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     assert (got.modes == modes).all() and (got.levels == levels).all()
+    ones = []
     for i in range(S):
         one = tx.parse_one(streams[i], tables, nt, pcs, int(kind[i]), int(key[i]))
         assert (one.modes[0] == modes[i]).all() and (one.levels[0] == levels[i]).all()
+        ones.append(one)
+    cat = tx.concat_parsed(ones)                      # the scalar path of a few streams, joined
+    assert (cat.modes == modes).all() and (cat.levels == levels).all()
 
 
 def test_malformed_streams_raise():
