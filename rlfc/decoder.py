@@ -123,14 +123,18 @@ class RlfcDecoder(Decoder):
             acc = self.core.blocks(views[i], by[i], bx[i], level).reshape(i.size, B, B, self.P)
             out[i] = acc if planes else from_planes(acc, self.dtype)
 
-        starts = range(0, M, step)
-        if threads > 1 and len(starts) > 1 and getattr(self.core, "threads_ok", False):
-            with ThreadPoolExecutor(threads) as pool:       # numpy and OpenCV release the GIL
-                list(pool.map(run, starts))
-        else:
-            for a in starts:
-                run(a)
+        self._run(run, range(0, M, step), threads)
         return out
+
+    def _run(self, fn, items, threads: int) -> None:
+        """``fn(item)`` for each item: on a pool of ``threads`` threads where the profile allows
+        it (numpy and OpenCV release the GIL), else in this thread."""
+        if threads > 1 and len(items) > 1 and getattr(self.core, "threads_ok", False):
+            with ThreadPoolExecutor(threads) as pool:
+                list(pool.map(fn, items))
+        else:
+            for x in items:
+                fn(x)
 
     def _threads(self, threads) -> int:
         t = self.threads if threads is None else threads
@@ -177,12 +181,7 @@ class RlfcDecoder(Decoder):
             p = self.core.views(groups[i], level)[:, :H, :W]
             out[starts[i]:starts[i + 1]] = p if planes else from_planes(p, self.dtype)
 
-        if threads > 1 and len(groups) > 1 and getattr(self.core, "threads_ok", False):
-            with ThreadPoolExecutor(threads) as pool:
-                list(pool.map(run, range(len(groups))))
-        else:
-            for i in range(len(groups)):
-                run(i)
+        self._run(run, range(len(groups)), threads)
         return out
 
     def decode_view(self, row: int, col: int, level: int = 0) -> np.ndarray:

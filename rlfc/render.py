@@ -196,27 +196,31 @@ class Renderer:
             disp = np.full((d.height, d.width), float(focus or 0.0))
         if getattr(self, "_grid", None) is None:
             self._grid = np.mgrid[0:d.height, 0:d.width].astype(np.float32)
-        yy, xx = self._grid
         disp = disp.astype(np.float32)
         src = self._sources(s, t, aperture)
         if focus is None and aperture == 0 and len(src) > 1 and self._maps is not None and self.robust:
-            acc = self._consistent(s, t, src, disp)
-        else:
-            acc = np.zeros((d.height, d.width, d.P), np.float32)
-            for r, c, w in src:
-                acc += np.float32(w) * self._sample(r * d.cols + c, yy + disp * np.float32(s - r),
-                                                    xx + disp * np.float32(t - c))
-        return from_planes(np.rint(acc).astype(np.int32), d.dtype)
+            disp = self._consistent(s, t, src, disp)
+        return from_planes(np.rint(self._blend(s, t, src, disp)).astype(np.int32), d.dtype)
 
-    def _consistent(self, s, t, src, disp):
-        """Blend of the sources under the most photo-consistent of three disparity candidates,
+    def _blend(self, s, t, src, disp) -> np.ndarray:
+        """(H, W, P) float32: the sources (view row, column, weight) warped to camera (s, t)
+        by ``disp`` (H, W) pixels per view step, weighted and summed."""
+        d = self.d
+        yy, xx = self._grid
+        acc = np.zeros((d.height, d.width, d.P), np.float32)
+        for r, c, w in src:
+            acc += np.float32(w) * self._sample(r * d.cols + c, yy + disp * np.float32(s - r), xx + disp * np.float32(t - c))
+        return acc
+
+    def _consistent(self, s, t, src, disp) -> np.ndarray:
+        """(H, W) disparities: per pixel the most photo-consistent of three candidates,
         smoothest first: the frame's median disparity, the map's median over 5×5 blocks, the
         file's map. The choice is made on a grid of every ROBUST_STEP-th pixel: disagreement =
         the weighted variance of the sources' luma around their blend there, averaged over
         ROBUST_WINDOW² pixels; a later candidate replaces an earlier one where it has less than
         ROBUST_MARGIN times its disagreement (the maps are chosen for prediction bits, so on noisy
-        captures some blocks carry disparities that fit the noise). The frame is then rendered
-        once with the chosen disparities."""
+        captures some blocks carry disparities that fit the noise). The caller renders the frame
+        once with them."""
         import cv2
 
         d = self.d
@@ -245,11 +249,7 @@ class Renderer:
                 best = np.where(win, cost, best)
                 choice[win] = k
         sel = np.repeat(np.repeat(choice, S, 0), S, 1)[:H, :W]
-        D = np.choose(sel, full).astype(np.float32)
-        acc = np.zeros((H, W, d.P), np.float32)
-        for r, c, w in src:
-            acc += np.float32(w) * self._sample(r * d.cols + c, yy + D * np.float32(s - r), xx + D * np.float32(t - c))
-        return acc
+        return np.choose(sel, full).astype(np.float32)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
         """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row

@@ -19,10 +19,10 @@ import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
 
-from ..kernels import bilinear, dequantize
+from ..kernels import dequantize
 from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
-from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
+from ..txpredict import TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict
@@ -398,26 +398,9 @@ class TxDecoder(ProfileDecoder):
             self._ref_cache[v] = got
         return got
 
-    def _gather_pred(self, slots, w, d, dpos, ty, tx):
-        """(nt, 8, 8, P) int64 prediction of one request's tbs by gathers (no atlas)."""
-        Y = (ty[:, None] << 4) * TB + d[:, None] * dpos[None, :, 0]                              # (nt, R)
-        X = (tx[:, None] << 4) * TB + d[:, None] * dpos[None, :, 1]
-        ext = np.arange(TB + 1)
-        mx, mn = np.maximum, np.minimum                     # ufuncs (np.clip's wrapper costs µs per call)
-        rows = mn(mx((Y >> 4)[..., None] + ext, 0), self.Hp - 1)                                 # (nt, R, 9)
-        cols = mn(mx((X >> 4)[..., None] + ext, 0), self.Wp - 1)
-        idx = ((slots[None, :, None] * self.Hp + rows)[..., None]) * self.Wp + cols[..., None, :]  # (nt, R, 9, 9)
-        win = self.kp[:, idx]                                                                     # (P, nt, R, 9, 9)
-        fy = (Y & 15).astype(np.int32)[None, :, :, None, None]
-        fx = (X & 15).astype(np.int32)[None, :, :, None, None]
-        smp = bilinear(win, fy, fx, DISP_BITS)                                                   # (P, nt, R, 8, 8)
-        pred = ((smp * w.astype(np.int32)[None, :, :, None, None]).sum(axis=2) + 32) >> 6        # (P, nt, 8, 8)
-        return np.moveaxis(pred, 0, -1).astype(np.int64)
-
     def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
         """One request, lean: the prediction of the block's nt tbs from every reference at once
-        ((nt·R) 9×9 windows, one gather), plus at most one parsed stream; the same integers as
-        :meth:`blocks`."""
+        (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
         B, P, tpb = self.block_size, self.P, self.tpb
         if self.is_key[view]:
             s = self.key_slot[view]
@@ -431,11 +414,12 @@ class TxDecoder(ProfileDecoder):
         mode = self.modes[cell, loc8]
         R = wv.size
         w = np.where(mode[:, None] == 0, wv[None, :], 64 * (np.arange(R)[None, :] == mode[:, None] - 1))   # (nt, R)
+        args = (np.broadcast_to(slots, (ty.size, R)), w, d[:, None] * dpos[None, :, 0], d[:, None] * dpos[None, :, 1],
+                ty * TB, tx * TB)
         if self.atlas is not None:                          # the remap kernel, every reference at once
-            out = _predict_dense(self.atlas, np.broadcast_to(slots, (ty.size, R)), w, d[:, None] * dpos[None, :, 0],
-                                 d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
-        else:
-            out = self._gather_pred(slots, w, d, dpos, ty, tx).astype(np.int32)
+            out = _predict_dense(self.atlas, *args)
+        else:                                               # (key views too large for OpenCV)
+            out = predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
         loc = by * self.nbx + bx
         if level == 0 and self.coded[view, loc]:
             vv = np.array([view])

@@ -72,31 +72,29 @@ def test_decode_original_names_round_trip(tmp_path, capsys):
     assert (tmp_path / "grid" / "r01_c02.png").exists()
 
 
-def test_original_names_keep_subfolders_and_extension_becomes_png(tmp_path):
+def _encoded_1x2(tmp_path, sub: str):
+    """A 1×2 grid whose scene.json lists its views as SUB/v0.png, SUB/v1.png, encoded losslessly."""
     lf = smooth_lf(rows=1, cols=2, h=16, w=16)
     root = tmp_path / "scene"
-    (root / "views").mkdir(parents=True)
+    (root / sub).mkdir(parents=True)
     for c in range(2):
-        write_image(root / "views" / f"v{c}.png", lf.views[0, c])
-    (root / "scene.json").write_text(json.dumps({"layout": "grid", "rows": 1, "cols": 2,
-                                                 "views": ["views/v0.png", "views/v1.png"]}))
-    assert read_scene(root).meta["view_names"] == ["views/v0.png", "views/v1.png"]
+        write_image(root / sub / f"v{c}.png", lf.views[0, c])
+    names = [f"{sub}/v0.png", f"{sub}/v1.png"]
+    (root / "scene.json").write_text(json.dumps({"layout": "grid", "rows": 1, "cols": 2, "views": names}))
+    assert read_scene(root).meta["view_names"] == names
     f = tmp_path / "a.lfc"
     assert main(["encode", str(root), str(f), "--lossless", "--quiet"]) == 0
+    return f
+
+
+def test_original_names_keep_subfolders_and_extension_becomes_png(tmp_path):
+    f = _encoded_1x2(tmp_path, "views")
     assert main(["decode", str(f), str(tmp_path / "dec"), "--names", "original", "--quiet"]) == 0
     assert (tmp_path / "dec" / "views" / "v1.png").exists()
 
 
 def test_names_are_confined_to_the_output_folder(tmp_path, capsys):
-    lf = smooth_lf(rows=1, cols=2, h=16, w=16)
-    root = tmp_path / "scene"
-    (root / "sub").mkdir(parents=True)
-    for c in range(2):
-        write_image(root / "sub" / f"v{c}.png", lf.views[0, c])
-    (root / "scene.json").write_text(json.dumps({"layout": "grid", "rows": 1, "cols": 2,
-                                                 "views": ["sub/v0.png", "sub/v1.png"]}))
-    f = tmp_path / "a.lfc"
-    assert main(["encode", str(root), str(f), "--lossless", "--quiet"]) == 0
+    f = _encoded_1x2(tmp_path, "sub")
     out, elsewhere = tmp_path / "out", tmp_path / "elsewhere"
     out.mkdir()
     elsewhere.mkdir()
