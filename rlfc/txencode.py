@@ -306,16 +306,13 @@ class TxEncoder:
 
     # -- prediction ------------------------------------------------------------------------
     def key_source(self, keyplanes: np.ndarray):
-        """What :meth:`predict_view` samples: a :class:`rlfc.txsample.KeyAtlas` of the decoded key
-        views (the remap kernel) where OpenCV can take them, else their planar copy."""
+        """What :meth:`predict_view` samples, for a pass whose key views are not decoded yet
+        (``keyplanes`` all zero; the pass stores each key as it is decoded): an empty
+        :class:`rlfc.txsample.KeyAtlas` (the remap kernel) where OpenCV can take the views, else
+        their planar copy."""
         if not KeyAtlas.fits(self.Hp, self.Wp, self.P):
             return planar(keyplanes)
-        atlas = KeyAtlas(len(keyplanes), self.Hp, self.Wp, self.P,
-                         int(np.iinfo(self.dtype).bits) + (1 if self.P >= 3 else 0))
-        for i, k in enumerate(keyplanes):
-            if k.any():
-                atlas.set(i, k)
-        return atlas
+        return KeyAtlas(len(keyplanes), self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P))
 
     def predict_view(self, v: int, kp) -> np.ndarray:
         """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``

@@ -50,6 +50,11 @@ class KeyAtlas:
                        for g in range(ng)]
 
     @staticmethod
+    def sample_bits(dtype, planes: int) -> int:
+        """Bits of the planes' magnitude: the sample depth, plus one for Co/Cg (3-4 planes)."""
+        return int(np.iinfo(dtype).bits) + (1 if planes >= 3 else 0)
+
+    @staticmethod
     def fits(hp: int, wp: int, planes: int) -> bool:
         return hp <= CV_MAX and wp <= CV_MAX and 1 <= planes <= 4
 

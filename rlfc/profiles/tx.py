@@ -130,9 +130,9 @@ class TxDecoder(ProfileDecoder):
         self.is_key = self.key_slot >= 0
         self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
         self._kp = None
-        bits = int(np.iinfo(self.dtype).bits) + (1 if self.P >= 3 else 0)      # Co/Cg carry one more bit
-        self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, bits) if KeyAtlas.fits(
-            self.Hp, self.Wp, self.P) else None
+        fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
+        self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P)) \
+            if fits else None
         self._decode_keys(keys.tolist())
 
     def _decode_keys(self, keys: list) -> None:
