@@ -304,9 +304,32 @@ def cmd_serve(a) -> int:
         raise ParameterError(f"{folder}: not a folder")
     if not 0 <= a.port <= 65535 or not 0 <= a.latency_ms <= 60000:
         raise ParameterError("--port must be 0..65535 and --latency-ms 0..60000")
-    srv = FileServer(folder, a.host, a.port, a.latency_ms / 1000.0)
-    print(f"serving {folder.resolve()} at http://{srv.host}:{srv.port}/ (byte ranges, ETags); Ctrl-C stops",
-          flush=True)
+    srv = FileServer(folder, a.host, a.port, a.latency_ms / 1000.0, viewer=True)
+    print(f"serving {folder.resolve()} at http://{srv.host}:{srv.port}/ (byte ranges, ETags); Ctrl-C stops\n"
+          f"viewer: {srv.viewer_url('FILE.lfc')}", flush=True)
+    try:
+        srv.serve_forever()
+    finally:
+        srv.httpd.server_close()
+    return 0
+
+
+def cmd_view(a) -> int:
+    from .serve import FileServer
+
+    path = Path(a.input)
+    if not path.is_file():
+        raise ParameterError(f"{path}: no such file")
+    if not 0 <= a.port <= 65535:
+        raise ParameterError("--port must be 0..65535")
+    srv = FileServer(path.resolve().parent, a.host, a.port, viewer=True)
+    url = srv.viewer_url(path.name)
+    print(f"viewer of {path}: {url}\n(the page reads the file by byte ranges and decodes it in the browser; "
+          "Ctrl-C stops)", flush=True)
+    if a.open:
+        import webbrowser
+
+        webbrowser.open(url)
     try:
         srv.serve_forever()
     finally:
@@ -499,6 +522,18 @@ def build_parser() -> argparse.ArgumentParser:
     v.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free port)")
     v.add_argument("--latency-ms", type=float, default=0.0, help="delay every answer, to stand for a network")
     v.set_defaults(func=cmd_serve)
+
+    w = sub.add_parser("view", help="open an .lfc file in the browser viewer (a local server; prints the URL)",
+                       description="Serve IN.lfc's folder on a local port with the browser viewer and print the "
+                                   "page's URL. The page fetches the file by HTTP Range requests and decodes it in "
+                                   "the browser (RLFC profile tx: key views, maps, residual blocks; JPEG 2000 key "
+                                   "views through OpenJPEG compiled to WebAssembly); drag to move the viewpoint, "
+                                   "sliders for focus and aperture.")
+    w.add_argument("input")
+    w.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
+    w.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free port)")
+    w.add_argument("--open", action="store_true", help="also open the page in the default browser")
+    w.set_defaults(func=cmd_view)
 
     t = sub.add_parser("train", help="train a light field network (same as encode --codec lfn)",
                        description="Train a nested-width light field network with continuous levels of detail and "

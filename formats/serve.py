@@ -4,6 +4,10 @@ GET and HEAD of files inside DIR (nothing outside it: paths are resolved and con
 ``Range: bytes=a-b`` per request (``206`` with ``Content-Range``; ``416`` when unsatisfiable),
 a strong ``ETag`` from the file's size and modification time, ``If-Match`` (``412`` when the
 file changed). ``latency_s`` delays every answer, to stand for a network in benchmarks.
+
+With ``viewer=True`` the browser viewer's files (``formats/web``: HTML, JavaScript, the
+OpenJPEG WebAssembly decoder) are served under ``/_viewer/``; :func:`viewer_url` gives the
+page's address for a file (``lfcodec view``).
 """
 from __future__ import annotations
 
@@ -15,11 +19,26 @@ from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
 _RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
+#: the browser viewer's files (shipped in the package)
+WEB_DIR = Path(__file__).resolve().parent / "web"
+VIEWER_PREFIX = "_viewer/"
+_TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=utf-8", ".wasm": "application/wasm",
+          ".json": "application/json", ".md": "text/plain; charset=utf-8", ".png": "image/png"}
+#: viewer files the server hands out (not package.json, node_modules, …)
+_WEB_FILES = ("index.html", "lfc.js", "render.js", "viewer.js", "openjpeg.js", "vendor/openjpegwasm_decode.js",
+              "vendor/openjpegwasm_decode.wasm", "vendor/LICENSES.md")
 
 
-def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True):
+def viewer_url(base: str, name: str) -> str:
+    """The viewer page's URL for file ``name`` (relative to the served folder) on server ``base``."""
+    from urllib.parse import quote
+
+    return f"{base.rstrip('/')}/{VIEWER_PREFIX}index.html?file=/{quote(name)}"
+
+
+def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True, viewer: bool = False):
     """A request handler class serving ``root`` (``ranges=False``: a server that ignores
-    Range headers, to test clients against one)."""
+    Range headers, to test clients against one; ``viewer``: also the viewer's files)."""
     root = Path(root).resolve()
 
     class Handler(BaseHTTPRequestHandler):
@@ -30,6 +49,9 @@ def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True):
 
         def _file(self) -> Path | None:
             rel = unquote(urlsplit(self.path).path).lstrip("/")
+            if viewer and rel.startswith(VIEWER_PREFIX):
+                name = rel[len(VIEWER_PREFIX):]
+                return WEB_DIR / name if name in _WEB_FILES and (WEB_DIR / name).is_file() else None
             p = (root / rel).resolve()
             if (p != root and root not in p.parents) or not p.is_file():
                 return None
@@ -69,7 +91,7 @@ def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True):
                     return self._error(416, {"Content-Range": f"bytes */{size}"})
                 code = 206
             self.send_response(code)
-            self.send_header("Content-Type", "application/octet-stream")
+            self.send_header("Content-Type", _TYPES.get(p.suffix.lower(), "application/octet-stream"))
             self.send_header("Accept-Ranges", "bytes" if ranges else "none")
             self.send_header("ETag", etag)
             self.send_header("Content-Length", str(b - a + 1))
@@ -96,15 +118,20 @@ class FileServer:
     Use as a context manager in tests (``url_of(name)``), or :meth:`serve_forever`.
     """
 
-    def __init__(self, root, host: str = "127.0.0.1", port: int = 0, latency_s: float = 0.0, ranges: bool = True):
+    def __init__(self, root, host: str = "127.0.0.1", port: int = 0, latency_s: float = 0.0, ranges: bool = True,
+                 viewer: bool = False):
         self.root = Path(root)
-        self.httpd = ThreadingHTTPServer((host, port), make_handler(self.root, latency_s, ranges))
+        self.httpd = ThreadingHTTPServer((host, port), make_handler(self.root, latency_s, ranges, viewer))
         self.httpd.daemon_threads = True
         self.host, self.port = self.httpd.server_address[:2]
         self._thread = None
 
     def url_of(self, name: str) -> str:
         return f"http://{self.host}:{self.port}/{name}"
+
+    def viewer_url(self, name: str) -> str:
+        """The viewer page for file ``name`` of the served folder (a server made with ``viewer=True``)."""
+        return viewer_url(f"http://{self.host}:{self.port}", name)
 
     def serve_forever(self) -> None:
         self.httpd.serve_forever()

@@ -122,6 +122,8 @@ def _run(*args):
     (["encode", str(SAMPLE), "x.lfc", "--workers", "0"], "--workers"),
     (["encode", str(SAMPLE), "x.lfc", "--scheduler", "nowhere"], "address"),
     (["encode", str(SAMPLE), "x.lfc", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not both"),
+    (["view", "nope.lfc"], "no such file"),
+    (["view", "README.md", "--port", "70000"], "--port"),
 ])
 def test_bad_input_one_line_exit_2(args, needle):
     code, out, err = _run(*args)

@@ -1,0 +1,36 @@
+"""`lfcodec view IN.lfc`: starts a local server, prints the viewer's URL; the page, its scripts
+(JavaScript MIME type, as module scripts require), the WebAssembly decoder and the file by byte
+ranges are all served from it."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import urllib.request
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+GOLDEN = ROOT / "tests" / "data" / "golden" / "rlfc_tx2_lossy_rgb8.lfc"
+
+
+def test_view_prints_a_working_url(tmp_path):
+    f = tmp_path / "lf.lfc"
+    f.write_bytes(GOLDEN.read_bytes())
+    p = subprocess.Popen([sys.executable, "-m", "formats.cli", "view", str(f), "--port", "0"], stdout=subprocess.PIPE,
+                         text=True, cwd=ROOT)
+    try:
+        line = p.stdout.readline()
+        url = line.split(": ", 1)[1].strip()
+        assert url.startswith("http://127.0.0.1:") and url.endswith("/_viewer/index.html?file=/lf.lfc"), line
+        base = url.split("/_viewer/")[0]
+        with urllib.request.urlopen(url) as r:
+            assert b"viewer.js" in r.read() and r.headers["Content-Type"].startswith("text/html")
+        for name, kind in (("viewer.js", "text/javascript"), ("lfc.js", "text/javascript"),
+                           ("vendor/openjpegwasm_decode.wasm", "application/wasm")):
+            with urllib.request.urlopen(f"{base}/_viewer/{name}") as r:
+                assert r.headers["Content-Type"].startswith(kind) and len(r.read()) > 1000
+        req = urllib.request.Request(f"{base}/lf.lfc", headers={"Range": "bytes=0-31"})
+        with urllib.request.urlopen(req) as r:
+            assert r.status == 206 and r.read()[:4] == b"\x89LFC"
+    finally:
+        p.terminate()
+        p.wait(10)

@@ -1,0 +1,137 @@
+"""The browser viewer in a real browser: headless Chromium (Debian's ``chromium``, driven by
+Playwright's Python API) opens the page served from 127.0.0.1 by ``formats.serve`` (what
+``lfcodec view`` runs), the page reads the .lfc by HTTP Range requests and decodes it in the
+browser, and the canvas is compared with the Python decoder (a captured view: bit for bit) and
+renderer (a novel view and a refocused one: PSNR >= 45 dB). Bad files show a message.
+
+Skipped with the reason where Chromium or Playwright is not installed (CI installs both)."""
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats import open_decoder, open_lfc
+from formats.metrics import psnr_rgb
+from formats.serve import FileServer
+
+ROOT = Path(__file__).resolve().parents[2]
+CHROMIUM = os.environ.get("LFC_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+try:
+    from playwright.sync_api import sync_playwright
+except ImportError:                                     # pragma: no cover - depends on the machine
+    sync_playwright = None
+pytestmark = [
+    pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed (apt-get install chromium)"),
+    pytest.mark.skipif(sync_playwright is None, reason="Playwright is not installed (pip install playwright)"),
+]
+FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run", "--disable-background-networking",
+         "--disable-component-update", "--disable-sync"]
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """A served folder: the bundled Lytro crop encoded with a JPEG 2000 key view, and with
+    residual blocks (a small quantizer step); a corrupt copy and a truncated copy."""
+    from formats.cli import main
+
+    d = tmp_path_factory.mktemp("site")
+    f = d / "dino.lfc"
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(f), "--target-psnr", "36", "--intra-codec", "j2k",
+                 "--quiet"]) == 0
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(d / "res.lfc"), "--quant", "3", "--intra-codec",
+                 "tx", "--quiet"]) == 0
+    data = f.read_bytes()
+    (d / "corrupt.lfc").write_bytes(data[:-40] + bytes([data[-40] ^ 1]) + data[-39:])
+    (d / "cut.lfc").write_bytes(data[: len(data) // 2])
+    (d / "secret.txt").write_text("a text file, not a light field\n" * 4)
+    with FileServer(d, viewer=True) as srv:
+        yield srv, f
+
+
+@pytest.fixture(scope="module")
+def page(site):
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, headless=True, args=FLAGS)
+        pg = browser.new_page()
+        yield pg
+        browser.close()
+
+
+def open_viewer(page, srv, name: str) -> str:
+    page.goto(srv.viewer_url(name))
+    page.wait_for_function("document.body.dataset.state !== 'loading'", timeout=120_000)
+    return page.evaluate("document.body.dataset.state")
+
+
+def canvas_rgb(page) -> np.ndarray:
+    w, h, data = page.evaluate("""() => { const c = document.getElementById('view');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height);
+        return [c.width, c.height, Array.from(d.data)]; }""")
+    return np.asarray(data, np.uint8).reshape(h, w, 4)[..., :3]
+
+
+@pytest.mark.parametrize("name", ["dino.lfc", "res.lfc"])
+def test_viewer_matches_python(site, page, name):
+    srv, f = site
+    f = f.parent / name
+    assert open_viewer(page, srv, f.name) == "ready", page.inner_text("#error")
+    d = open_decoder(open_lfc(f))
+    assert bool(d.core.img_of) == (name == "dino.lfc")    # a JPEG 2000 key view in the browser
+    assert (d.core.coded.sum() > 0) == (name == "res.lfc")  # residual blocks in the browser
+    info = page.evaluate("lfcViewer.show(4, 4)")          # a captured view
+    got = canvas_rgb(page)
+    want = d.decode_view(4, 4)
+    # JPEG 2000's float 9/7 inverse: OpenJPEG/wasm and imagecodecs may differ by 1 at a few samples
+    assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.001
+    r = d.renderer(robust=False)
+    for s, t, focus, ap in ((3.4, 5.7, None, 0.0), (4.0, 4.0, 1.0, 2.0)):
+        arg = "null" if focus is None else focus
+        page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {arg}, aperture: {ap}}})")
+        assert psnr_rgb(r.render(s, t, focus, ap), canvas_rgb(page)) >= 45.0
+    # byte ranges, not one download: several requests, never more bytes than the file
+    assert info["requests"] > 2 and info["bytesFetched"] <= f.stat().st_size
+    stats = page.inner_text("#stats")
+    assert "bytes fetched" in stats and "view cache" in stats and "frame" in stats
+
+
+def test_drag_moves_the_viewpoint(site, page):
+    srv, f = site
+    assert open_viewer(page, srv, f.name) == "ready"
+    before = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
+    box = page.locator("#view").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] / 4, box["y"] + box["height"] / 3, steps=5)
+    page.mouse.up()
+    page.wait_for_function("!lfcViewer.state.busy")
+    after = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
+    assert after[0] > before[0] and after[1] > before[1]
+
+
+@pytest.mark.parametrize("name, words", [("corrupt.lfc", "checksum"), ("cut.lfc", "truncated"),
+                                         ("missing.lfc", "HTTP 404"), ("secret.txt", "not an .lfc")])
+def test_bad_files_show_a_message(site, page, name, words):
+    srv, _ = site
+    assert open_viewer(page, srv, name) == "error"
+    msg = page.inner_text("#error")
+    assert words in msg and name in msg
+    assert page.locator("#error").is_visible()
+
+
+def test_server_confines_paths(site):
+    import urllib.error
+    import urllib.request
+
+    srv, _ = site
+    base = f"http://{srv.host}:{srv.port}/"
+    for path in ("../../etc/passwd", "_viewer/../../../etc/passwd", "_viewer/package.json", "%2e%2e/%2e%2e/etc/hosts",
+                 "_viewer/node_modules/x"):
+        with pytest.raises(urllib.error.HTTPError) as e:
+            urllib.request.urlopen(base + path)
+        assert e.value.code == 404, path
+    with urllib.request.urlopen(base + "_viewer/lfc.js") as r:
+        assert r.headers["Content-Type"].startswith("text/javascript")

@@ -1,0 +1,126 @@
+"""The browser viewer's JavaScript decoder (formats/web/lfc.js), run under Node: the same planes
+as the Python decoder, bit for bit, on golden files (grey+alpha 16-bit lossless, RGB, RGBA) and
+on files encoded from a real capture (the bundled Lytro crop, with and without JPEG 2000 key
+views); its renderer within rounding of the Python renderer's fast path; typed errors on bad files.
+
+Skipped with the reason where Node.js is not installed (CI installs it)."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from formats import open_decoder, open_lfc
+from formats.metrics import psnr_rgb
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parents[1]
+GOLDEN = ROOT / "tests" / "data" / "golden"
+NODE = shutil.which("node")
+pytestmark = pytest.mark.skipif(NODE is None, reason="Node.js is not installed (apt-get install nodejs)")
+
+
+def run_js(path: Path, out: Path, cams=(), chunk_budget=None) -> dict:
+    import os
+
+    env = dict(os.environ, LFC_CHUNK_BUDGET=str(chunk_budget)) if chunk_budget is not None else None
+    got = subprocess.run([NODE, str(HERE / "web_decode.mjs"), str(path), str(out), *cams], capture_output=True,
+                         text=True, timeout=600, env=env)
+    assert got.returncode == 0, got.stderr[-3000:]
+    return json.loads(got.stdout.strip().splitlines()[-1])
+
+
+def js_planes(out: Path, info: dict, v: int, h: int, w: int) -> np.ndarray:
+    a = np.fromfile(out / f"view_{v}.bin", np.int32).reshape(info["Hp"], info["Wp"], info["P"])
+    return a[:h, :w]
+
+
+def assert_same_planes(path: Path, out: Path, exact: bool = True, chunk_budget=None) -> int:
+    info = run_js(path, out, chunk_budget=chunk_budget)
+    assert info["ok"], info
+    d = open_decoder(open_lfc(path))
+    py = d.decode_views(planes=True)
+    differ = 0
+    for v in range(info["n"]):
+        js = js_planes(out, info, v, d.height, d.width)
+        if exact:
+            np.testing.assert_array_equal(js, py[v], err_msg=f"{path.name} view {v}")
+        else:
+            assert np.abs(js - py[v]).max() <= 1
+            differ += int((js != py[v]).sum())
+    return differ
+
+
+@pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16", "rlfc_tx2_lossy_rgb8", "rlfc_tx2_lossy_rgba8"])
+def test_golden_files_bit_exact(name, tmp_path):
+    assert_same_planes(GOLDEN / f"{name}.lfc", tmp_path)
+
+
+@pytest.fixture(scope="module")
+def sample_files(tmp_path_factory):
+    """The bundled Lytro crop encoded twice: transform-coded key views with residual
+    blocks (a small quantizer step forces coded blocks), and a JPEG 2000 intra key view."""
+    from formats.cli import main
+
+    d = tmp_path_factory.mktemp("web")
+    tx, j2k = d / "tx.lfc", d / "j2k.lfc"
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(tx), "--quant", "3", "--intra-codec", "tx",
+                 "--quiet"]) == 0
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(j2k), "--target-psnr", "36", "--intra-codec",
+                 "j2k", "--quiet"]) == 0
+    return tx, j2k
+
+
+def test_real_capture_with_residual_blocks_bit_exact(sample_files, tmp_path):
+    tx, _ = sample_files
+    d = open_decoder(open_lfc(tx))
+    assert d.core.coded.sum() > 0                    # the residual path is exercised
+    assert_same_planes(tx, tmp_path)
+    assert_same_planes(tx, tmp_path / "small", chunk_budget=1)   # every chunk dropped after use, fetched again
+
+
+def test_jpeg2000_key_views_agree(sample_files, tmp_path):
+    """JPEG 2000's 9/7 inverse is floating point (the standard bounds its error, not its bits):
+    OpenJPEG/wasm and imagecodecs' OpenJPEG may differ by 1 at a few samples."""
+    _, j2k = sample_files
+    d = open_decoder(open_lfc(j2k))
+    assert d.core.img_of                              # the file has a JPEG 2000 key view
+    differ = assert_same_planes(j2k, tmp_path, exact=False)
+    assert differ <= 0.001 * d.rows * d.cols * d.height * d.width * d.P
+
+
+def test_renderer_matches_python(sample_files, tmp_path):
+    tx, _ = sample_files
+    cams = ["4,4,nan,0", "3.25,5.6,nan,0", "4,4,1.5,2", "2.3,1.7,0.5,0", "0,8,nan,0"]
+    info = run_js(tx, tmp_path, cams)
+    assert info["ok"], info
+    d = open_decoder(open_lfc(tx))
+    r = d.renderer(robust=False)
+    for i, c in enumerate(cams):
+        s, t, focus, ap = (float(x) for x in c.split(","))
+        py = r.render(s, t, None if np.isnan(focus) else focus, ap)
+        js = np.fromfile(tmp_path / f"render_{i}.bin", py.dtype).reshape(py.shape)
+        if c == "4,4,nan,0":                          # a captured view: exactly its pixels
+            np.testing.assert_array_equal(js, d.decode_view(4, 4))
+        assert psnr_rgb(py, js) >= 45.0, c
+
+
+def test_bad_files_get_typed_errors(tmp_path):
+    good = (GOLDEN / "rlfc_tx2_lossy_rgba8.lfc").read_bytes()
+    cases = {
+        "truncated": (good[:-50], "truncated"),
+        "flipped": (good[:-30] + bytes([good[-30] ^ 4]) + good[-29:], "checksum"),
+        "not_lfc": (b"hello world" * 10, "not an .lfc"),
+        "empty": (b"", "too short"),
+    }
+    for name, (data, words) in cases.items():
+        p = tmp_path / f"{name}.lfc"
+        p.write_bytes(data)
+        info = run_js(p, tmp_path / name)
+        assert not info["ok"] and info["name"] == "FormatError" and words in info["message"], (name, info)
+    info = run_js(GOLDEN / "rlfc_dcp_lossy_rgb8.lfc", tmp_path / "dcp")
+    assert info["name"] == "UnsupportedError" and "dcp" in info["message"]

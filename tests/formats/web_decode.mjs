@@ -1,0 +1,40 @@
+// Test helper: decode an .lfc file with the browser viewer's JavaScript decoder under Node.
+// node web_decode.mjs FILE OUTDIR [S,T,FOCUS,APERTURE ...]
+// Writes OUTDIR/view_V.bin (Int32 planes, Hp·Wp·P) for every view, OUTDIR/render_I.bin (pixels of
+// the file's dtype) for every camera (FOCUS "nan" = the file's maps), and prints one JSON line:
+// {ok: true, Hp, Wp, P, n} or {ok: false, name, message} for an error the decoder raised.
+import fs from "fs";
+import path from "path";
+import { createRequire } from "module";
+import { fileURLToPath } from "url";
+
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../../formats/web");
+const { openDecoder, BufferSource, LfcError } = await import(path.join(web, "lfc.js"));
+const { makeKeyImage } = await import(path.join(web, "openjpeg.js"));
+const { Renderer } = await import(path.join(web, "render.js"));
+const factory = createRequire(import.meta.url)(path.join(web, "vendor/openjpegwasm_decode.js"));
+
+const [file, out, ...cams] = process.argv.slice(2);
+try {
+  const log = console.log;
+  console.log = () => {};                    // OpenJPEG prints progress lines
+  const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
+  const chunkBudget = Number(process.env.LFC_CHUNK_BUDGET || Infinity);      // bytes of file chunks kept
+  const dec = await openDecoder(new BufferSource(fs.readFileSync(file)), { name: path.basename(file), keyImage, chunkBudget });
+  fs.mkdirSync(out, { recursive: true });
+  for (let v = 0; v < dec.n0; v++) {
+    const p = await dec.decodeView(v, 0);
+    fs.writeFileSync(path.join(out, `view_${v}.bin`), Buffer.from(p.buffer, p.byteOffset, p.byteLength));
+  }
+  const r = new Renderer(dec);
+  for (let i = 0; i < cams.length; i++) {
+    const [s, t, focus, ap] = cams[i].split(",").map(Number);
+    const f = await r.render(s, t, { focus: Number.isNaN(focus) ? null : focus, aperture: ap });
+    fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(f.pixels.buffer));
+  }
+  console.log = log;
+  console.log(JSON.stringify({ ok: true, Hp: dec.Hp, Wp: dec.Wp, P: dec.P, n: dec.n0 }));
+} catch (e) {
+  if (!(e instanceof LfcError)) throw e;        // anything else is a bug: a non-zero exit and a trace
+  process.stdout.write(JSON.stringify({ ok: false, name: e.name, message: e.message }) + "\n");
+}

@@ -1,0 +1,39 @@
+// Timings of the browser viewer's decoder and renderer under Node (V8, one thread), for
+// tools/bench_web.py: node tools/web_bench.mjs FILE ROUNDS → one JSON line {open_ms, view_ms
+// (median per view over all views), frame_ms (median novel-view frame, 4 sources)}.
+import fs from "fs";
+import path from "path";
+import { createRequire } from "module";
+import { fileURLToPath } from "url";
+
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
+const { openDecoder, BufferSource } = await import(path.join(web, "lfc.js"));
+const { makeKeyImage } = await import(path.join(web, "openjpeg.js"));
+const { Renderer } = await import(path.join(web, "render.js"));
+const factory = createRequire(import.meta.url)(path.join(web, "vendor/openjpegwasm_decode.js"));
+const [file, rounds = "1"] = process.argv.slice(2);
+const log = console.log;
+console.log = () => {};
+const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
+const bytes = fs.readFileSync(file);
+const med = (a) => a.slice().sort((x, y) => x - y)[a.length >> 1];
+const opens = [], views = [], frames = [];
+for (let r = 0; r < Number(rounds); r++) {
+  let t = performance.now();
+  const dec = await openDecoder(new BufferSource(bytes), { keyImage });
+  opens.push(performance.now() - t);
+  for (let v = 0; v < dec.n0; v++) {
+    t = performance.now();
+    await dec.decodeView(v, 0);
+    views.push(performance.now() - t);
+  }
+  const ren = new Renderer(dec);
+  for (let i = 0; i < 8; i++) {
+    const s = (dec.rows - 1) * (0.3 + 0.05 * i), tt = (dec.cols - 1) * (0.6 - 0.04 * i);
+    t = performance.now();
+    await ren.render(s, tt);
+    frames.push(performance.now() - t);
+  }
+}
+console.log = log;
+console.log(JSON.stringify({ open_ms: med(opens), view_ms: med(views), frame_ms: med(frames.slice(1)) }));
