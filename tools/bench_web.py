@@ -1,6 +1,6 @@
 """The browser viewer's JavaScript decoder against the Python decoder on the same files, one
 process per measurement, rounds interleaved: open (key views decoded), median whole-view decode,
-median novel-view frame (the viewer's renderer: JS; Python: ``Renderer(robust=False)``).
+median novel-view frame (the viewer's renderer in JS against ``Renderer()`` in Python, both robust).
 
     python -m tools.bench_web FILE.lfc [FILE.lfc ...] [--rounds 3]
 
@@ -25,7 +25,7 @@ t = time.perf_counter(); d = open_decoder(open_lfc(sys.argv[1]), threads=1); o =
 v = []
 for i in range(d.rows * d.cols):
     t = time.perf_counter(); d.decode_views(np.array([i]), planes=True); v.append(time.perf_counter() - t)
-r = d.renderer(robust=False); fr = []
+r = d.renderer(); fr = []
 for i in range(8):
     s, tt = (d.rows - 1) * (0.3 + 0.05 * i), (d.cols - 1) * (0.6 - 0.04 * i)
     t = time.perf_counter(); r.render(s, tt); fr.append(time.perf_counter() - t)

@@ -1,5 +1,5 @@
-// render.js — novel views from a TxDecoder (lfc.js): the same method as the Python renderer's
-// fast path (rlfc.render.Renderer(robust=False)): pixel (y, x) of the view at grid position
+// render.js — novel views from a TxDecoder (lfc.js): the same method as the Python renderer
+// (rlfc.render.Renderer, robust by default, or robust=false): pixel (y, x) of the view at grid position
 // (s, t) takes from captured view (r, c) the bilinear sample at (y + d·(s − r), x + d·(t − c)),
 // d in pixels per view step; the views around (s, t) are blended with bilinear weights, or, for
 // synthetic-aperture refocusing, every view within `aperture` view steps with weights falling
@@ -97,40 +97,32 @@ export class Renderer {
 
   /** The view at grid position (s, t): {pixels (H·W·C of the file's dtype), ms}. `focus`:
    *  one disparity everywhere (null: the file's maps); `aperture`: synthetic-aperture radius
-   *  in view steps; `level`: the decoder level of the source views. */
-  async render(s, t, { focus = null, aperture = 0, level = 0 } = {}) {
+   *  in view steps; `level`: the decoder level of the source views; `robust` (default true, as
+   *  the Python renderer): where the maps make the views disagree, smoother disparities
+   *  (see _consistent). */
+  async render(s, t, { focus = null, aperture = 0, level = 0, robust = true } = {}) {
     const t0 = performance.now();
-    const d = this.d, H = d.H, W = d.W, P = d.P, Wp = d.Wp;
+    const d = this.d, H = d.H, W = d.W, P = d.P;
     this.checkCamera(s, t);
     if (!(aperture >= 0) || !Number.isFinite(aperture) || (focus !== null && !Number.isFinite(focus))) {
       throw new LfcError("aperture must be >= 0 and focus finite");
     }
     let disp = focus === null && aperture === 0 ? this.disparity(s, t) : null;
+    const maps = disp !== null;
     if (!disp) disp = new Float32Array(H * W).fill(focus || 0);
     const src = this.sources(s, t, aperture);
-    const acc = new Float32Array(H * W * P);
     const keep = new Set(src.map(([r, c]) => `${r * d.cols + c}:${level}`));
-    for (const [r, c, w] of src) {
-      const img = await this.view(r * d.cols + c, level);
-      const wf = Math.fround(w), ds = Math.fround(s - r), dt = Math.fround(t - c);
-      for (let y = 0; y < H; y++) {
-        for (let x = 0; x < W; x++) {
-          const dd = disp[y * W + x];
-          let Y = Math.fround(y + Math.fround(dd * ds)), X = Math.fround(x + Math.fround(dd * dt));
-          Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
-          X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
-          const qy = Math.round(Y * 32), qx = Math.round(X * 32);        // 1/32 pixel, as OpenCV
-          const y0 = qy >> 5, x0 = qx >> 5, fy = (qy & 31) / 32, fx = (qx & 31) / 32;
-          const y1 = Math.min(y0 + 1, d.Hp - 1), x1 = Math.min(x0 + 1, Wp - 1);
-          const i00 = (y0 * Wp + x0) * P, i01 = (y0 * Wp + x1) * P, i10 = (y1 * Wp + x0) * P, i11 = (y1 * Wp + x1) * P;
-          const o = (y * W + x) * P;
-          for (let p = 0; p < P; p++) {
-            const v = (img[i00 + p] * (1 - fx) + img[i01 + p] * fx) * (1 - fy) + (img[i10 + p] * (1 - fx) + img[i11 + p] * fx) * fy;
-            acc[o + p] += wf * v;
-          }
-        }
-      }
-    }
+    const imgs = [];
+    for (const [r, c] of src) imgs.push(await this.view(r * d.cols + c, level));
+    if (robust && maps && src.length > 1) disp = this._consistent(s, t, src, imgs, disp);
+    const acc = new Float32Array(H * W * P);
+    const smp = new Float32Array(H * W * P);
+    const all = Int32Array.from({ length: H * W }, (_, i) => i);
+    src.forEach(([r, c, w], j) => {
+      this._sample(imgs[j], all, W, disp, s - r, t - c, P, smp);
+      const wf = Math.fround(w);
+      for (let i = 0; i < acc.length; i++) acc[i] += wf * smp[i];
+    });
     this._trim(keep);
     const planes = new Int32Array(H * W * P);
     for (let i = 0; i < planes.length; i++) {
@@ -139,6 +131,101 @@ export class Renderer {
     }
     const pixels = fromPlanes(planes, H, W, H, W, d.C, d.peak);
     return { pixels, ms: performance.now() - t0, sources: src.length };
+  }
+
+  /** Bilinear samples of the first `np` planes of view planes `img` at the pixels `idx` (flat
+   *  indices y·W + x of a W-wide raster; grid positions (y, x)·1 here, or a subsampled grid via
+   *  `step`), displaced by disp[k]·(ds, dt): out[k·np + p]. Positions clamped to the image and
+   *  rounded to 1/32 pixel, as OpenCV's remap. */
+  _sample(img, idx, W, disp, ds, dt, np, out, step = 1, dispW = W) {
+    const d = this.d, P = d.P, Wp = d.Wp, H = d.H, Wi = d.W;
+    const dsf = Math.fround(ds), dtf = Math.fround(dt);
+    for (let k = 0; k < idx.length; k++) {
+      const gy = Math.floor(idx[k] / W), gx = idx[k] - gy * W;
+      const y = gy * step, x = gx * step;
+      const dd = disp[gy * dispW + gx];
+      let Y = Math.fround(y + Math.fround(dd * dsf)), X = Math.fround(x + Math.fround(dd * dtf));
+      Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
+      X = X < 0 ? 0 : X > Wi - 1 ? Wi - 1 : X;
+      const qy = Math.round(Y * 32), qx = Math.round(X * 32);
+      const y0 = qy >> 5, x0 = qx >> 5, fy = (qy & 31) / 32, fx = (qx & 31) / 32;
+      const y1 = Math.min(y0 + 1, d.Hp - 1), x1 = Math.min(x0 + 1, Wp - 1);
+      const i00 = (y0 * Wp + x0) * P, i01 = (y0 * Wp + x1) * P, i10 = (y1 * Wp + x0) * P, i11 = (y1 * Wp + x1) * P;
+      for (let p = 0; p < np; p++) {
+        out[k * np + p] = (img[i00 + p] * (1 - fx) + img[i01 + p] * fx) * (1 - fy) + (img[i10 + p] * (1 - fx) + img[i11 + p] * fx) * fy;
+      }
+    }
+  }
+
+  /** (H·W) disparities: per pixel the most photo-consistent of three candidates, smoothest
+   *  first (the frame's median disparity, the map's 5×5-block median, the map), chosen on every
+   *  4th pixel by the weighted variance of the sources' luma around their blend, box-averaged
+   *  over 4×4 grid points; a later candidate wins where its cost is below half the best so far.
+   *  The method and constants of rlfc.render.Renderer._consistent. */
+  _consistent(s, t, src, imgs, disp) {
+    const d = this.d, H = d.H, W = d.W, S = 4, f32 = Math.fround;
+    const by = Math.ceil(H / 8), bx = Math.ceil(W / 8);
+    const blk = new Float32Array(by * bx);
+    for (let i = 0; i < by; i++) for (let j = 0; j < bx; j++) blk[i * bx + j] = disp[8 * i * W + 8 * j];
+    const sorted = Float32Array.from(blk).sort(), n = sorted.length;
+    const median = n % 2 ? sorted[n >> 1] : f32((sorted[n / 2 - 1] + sorted[n / 2]) / 2);
+    const med = new Float32Array(by * bx), win = [];
+    for (let i = 0; i < by; i++) {                              // 5×5 median, replicated border
+      for (let j = 0; j < bx; j++) {
+        win.length = 0;
+        for (let a = -2; a <= 2; a++) {
+          for (let b = -2; b <= 2; b++) {
+            win.push(blk[Math.min(Math.max(i + a, 0), by - 1) * bx + Math.min(Math.max(j + b, 0), bx - 1)]);
+          }
+        }
+        win.sort((u, v) => u - v);
+        med[i * bx + j] = win[12];
+      }
+    }
+    const gh = Math.ceil(H / S), gw = Math.ceil(W / S), G = gh * gw;
+    const cand = [
+      () => median,
+      (y, x) => med[(y >> 3) * bx + (x >> 3)],
+      (y, x) => disp[y * W + x],
+    ];
+    const idx = Int32Array.from({ length: G }, (_, i) => i);
+    const best = new Float32Array(G), choice = new Uint8Array(G);
+    const D = new Float32Array(G), acc = new Float32Array(G), cost = new Float32Array(G);
+    const smp = src.map(() => new Float32Array(G));
+    const refl = (i, m) => {                                   // BORDER_REFLECT_101
+      if (m === 1) return 0;
+      for (;;) {
+        if (i < 0) i = -i; else if (i >= m) i = 2 * m - 2 - i; else return i;
+      }
+    };
+    const blurred = new Float32Array(G);
+    cand.forEach((fn, k) => {
+      for (let i = 0; i < gh; i++) for (let j = 0; j < gw; j++) D[i * gw + j] = fn(i * S, j * S);
+      src.forEach(([r, c], q) => this._sample(imgs[q], idx, gw, D, s - r, t - c, 1, smp[q], S, gw));
+      acc.fill(0);
+      src.forEach(([, , w], q) => { const wf = f32(w); for (let i = 0; i < G; i++) acc[i] = f32(acc[i] + f32(wf * smp[q][i])); });
+      cost.fill(0);
+      src.forEach(([, , w], q) => {
+        const wf = f32(w);
+        for (let i = 0; i < G; i++) { const e = f32(smp[q][i] - acc[i]); cost[i] = f32(cost[i] + f32(wf * f32(e * e))); }
+      });
+      for (let i = 0; i < gh; i++) {                          // 4×4 box, anchor (2, 2)
+        for (let j = 0; j < gw; j++) {
+          let sum = 0;
+          for (let a = -2; a <= 1; a++) for (let b = -2; b <= 1; b++) sum += cost[refl(i + a, gh) * gw + refl(j + b, gw)];
+          blurred[i * gw + j] = f32(sum / 16);
+        }
+      }
+      for (let i = 0; i < G; i++) {
+        if (k === 0) best[i] = blurred[i];
+        else if (blurred[i] < f32(best[i] * 0.5)) { best[i] = blurred[i]; choice[i] = k; }
+      }
+    });
+    const out = new Float32Array(H * W);
+    for (let y = 0; y < H; y++) {
+      for (let x = 0; x < W; x++) out[y * W + x] = cand[choice[(y >> 2) * gw + (x >> 2)]](y, x);
+    }
+    return out;
   }
 }
 

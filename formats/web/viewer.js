@@ -23,7 +23,7 @@ function fail(e) {
   console.error(e);
 }
 
-const state = { s: 0, t: 0, focus: 0, aperture: 0, level: 0, useMaps: true, busy: null, pending: false, last: null };
+const state = { s: 0, t: 0, focus: 0, aperture: 0, level: 0, useMaps: true, robust: true, busy: null, pending: false, last: null };
 
 async function main() {
   if (!fileUrl) throw new Error("no file given: open this page as index.html?file=NAME.lfc");
@@ -63,7 +63,7 @@ async function main() {
 
   const draw = async () => {
     const focus = state.useMaps && state.aperture === 0 ? null : state.focus;
-    const f = await r.render(state.s, state.t, { focus, aperture: state.aperture, level: state.level });
+    const f = await r.render(state.s, state.t, { focus, aperture: state.aperture, level: state.level, robust: state.robust });
     ctx.putImageData(new ImageData(toRGBA(f.pixels, dec.H, dec.W, dec.C, dec.peak), dec.W, dec.H), 0, 0);
     state.last = f;
     stats();
@@ -93,6 +93,7 @@ async function main() {
   $("focus").addEventListener("input", (e) => { state.focus = Number(e.target.value); state.useMaps = false; $("usemaps").checked = false; request(); });
   $("aperture").addEventListener("input", (e) => { state.aperture = Number(e.target.value); request(); });
   $("usemaps").addEventListener("change", (e) => { state.useMaps = e.target.checked; request(); });
+  $("robust").addEventListener("change", (e) => { state.robust = e.target.checked; request(); });
   $("level").addEventListener("change", (e) => { state.level = Number(e.target.value); request(); });
 
   await request();
@@ -100,14 +101,14 @@ async function main() {
   $("status").textContent = "drag the image to move the viewpoint";
   return {
     decoder: dec, renderer: r, source,
-    /** Render (s, t) with opts {focus (null = maps), aperture, level}; resolves with frame info. */
+    /** Render (s, t) with opts {focus (null = maps), aperture, level, robust}; resolves with frame info. */
     async show(s, t, opts = {}) {
       if (state.busy) await state.busy;
-      Object.assign(state, { s, t, aperture: opts.aperture || 0, level: opts.level || 0 });
+      Object.assign(state, { s, t, aperture: opts.aperture || 0, level: opts.level || 0, robust: opts.robust !== false });
       state.useMaps = opts.focus === undefined || opts.focus === null;
       if (!state.useMaps) state.focus = opts.focus;
       $("focus").value = state.focus; $("aperture").value = state.aperture;           // the controls follow
-      $("usemaps").checked = state.useMaps; $("level").value = String(state.level);
+      $("usemaps").checked = state.useMaps; $("robust").checked = state.robust; $("level").value = String(state.level);
       return draw();
     },
   };

@@ -87,7 +87,7 @@ def test_viewer_matches_python(site, page, name):
     want = d.decode_view(4, 4)
     # JPEG 2000's float 9/7 inverse: OpenJPEG/wasm and imagecodecs may differ by 1 at a few samples
     assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.001
-    r = d.renderer(robust=False)
+    r = d.renderer()
     for s, t, focus, ap in ((3.4, 5.7, None, 0.0), (4.0, 4.0, 1.0, 2.0)):
         arg = "null" if focus is None else focus
         page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {arg}, aperture: {ap}}})")

@@ -1,7 +1,7 @@
 """The browser viewer's JavaScript decoder (formats/web/lfc.js), run under Node: the same planes
 as the Python decoder, bit for bit, on golden files (grey+alpha 16-bit lossless, RGB, RGBA) and
 on files encoded from a real capture (the bundled Lytro crop, with and without JPEG 2000 key
-views); its renderer within rounding of the Python renderer's fast path; typed errors on bad files.
+views); its renderer within rounding of the Python renderer; typed errors on bad files.
 
 Skipped with the reason where Node.js is not installed (CI installs it)."""
 from __future__ import annotations
@@ -95,11 +95,11 @@ def test_jpeg2000_key_views_agree(sample_files, tmp_path):
 
 def test_renderer_matches_python(sample_files, tmp_path):
     tx, _ = sample_files
-    cams = ["4,4,nan,0", "3.25,5.6,nan,0", "4,4,1.5,2", "2.3,1.7,0.5,0", "0,8,nan,0"]
+    cams = ["4,4,nan,0", "3.25,5.6,nan,0", "2.6,1.3,nan,0", "4,4,1.5,2", "2.3,1.7,0.5,0", "0,8,nan,0"]
     info = run_js(tx, tmp_path, cams)
     assert info["ok"], info
     d = open_decoder(open_lfc(tx))
-    r = d.renderer(robust=False)
+    r = d.renderer()                                  # robust, the default of both
     for i, c in enumerate(cams):
         s, t, focus, ap = (float(x) for x in c.split(","))
         py = r.render(s, t, None if np.isnan(focus) else focus, ap)
