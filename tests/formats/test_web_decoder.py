@@ -122,5 +122,6 @@ def test_bad_files_get_typed_errors(tmp_path):
         p.write_bytes(data)
         info = run_js(p, tmp_path / name)
         assert not info["ok"] and info["name"] == "FormatError" and words in info["message"], (name, info)
-    info = run_js(GOLDEN / "rlfc_dcp_lossy_rgb8.lfc", tmp_path / "dcp")
-    assert info["name"] == "UnsupportedError" and "dcp" in info["message"]
+    for name, words in (("rlfc_dcp_lossy_rgb8", "dcp"), ("rlfc_tx_lossy_rgb8", "version 1"), ("lfn_tiny_rgba8", "lfn")):
+        info = run_js(GOLDEN / f"{name}.lfc", tmp_path / name)
+        assert info["name"] == "UnsupportedError" and words in info["message"], info
