@@ -28,17 +28,27 @@ def view_rays(lf: LightField, view: int, scale: float = 1.0, centre=(0, 0, 0), r
     Returns:
         (h, w, 6) float32 with h, w = round(H·scale), round(W·scale) (or ``size``).
     """
-    H, W = lf.height, lf.width
-    h, w = size or (max(1, round(H * scale)), max(1, round(W * scale)))
-    sy, sx = h / H, w / W
     r, c = divmod(view, lf.cols)
     if lf.c2w is not None:
         c2w = lf.c2w[r, c]
     else:
         c2w = np.eye(4)
         c2w[:3, 3] = lf.positions[r, c]
-    fx, fy = lf.focal[0] * sx, lf.focal[1] * sy
-    cx, cy = lf.principal[0] * sx, lf.principal[1] * sy
+    return camera_rays(c2w, lf.focal, lf.principal, lf.height, lf.width, scale, centre, radius, size)
+
+
+def camera_rays(c2w: np.ndarray, focal, principal, H: int, W: int, scale: float = 1.0, centre=(0, 0, 0),
+                radius: float = 1.0, size: tuple[int, int] | None = None) -> np.ndarray:
+    """Plücker rays through the pixel centres of a camera with pose ``c2w`` (4×4, OpenGL axes),
+    focal lengths and principal point in pixels of an H×W view, rendered at ``scale``.
+
+    Returns:
+        (h, w, 6) float32 with h, w = round(H·scale), round(W·scale) (or ``size``).
+    """
+    h, w = size or (max(1, round(H * scale)), max(1, round(W * scale)))
+    sy, sx = h / H, w / W
+    fx, fy = focal[0] * sx, focal[1] * sy
+    cx, cy = principal[0] * sx, principal[1] * sy
     ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
     d = np.stack([(xs - cx) / fx, -(ys - cy) / fy, -np.ones_like(xs)], -1) @ c2w[:3, :3].T
     d /= np.linalg.norm(d, axis=-1, keepdims=True)

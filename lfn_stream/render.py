@@ -17,7 +17,8 @@ from formats.schema import Fields, read_vector
 
 from .config import LfnConfig
 from .pack import base_values, occ_values, step_bytes, step_name, unpack_network
-from .rays import view_rays
+from .cameras import captured_poses, grid_pose, orbit_pose, scene_pivot, stereo_poses
+from .rays import camera_rays, view_rays
 
 CODEC_ID = "lfn"
 CODEC_VERSION = 2          # 2: network sizes named *_neurons on the wire (1: *_width)
@@ -172,6 +173,53 @@ class LfnRenderer(Decoder):
         neurons = self.neurons if neurons is None else neurons
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         rays = self.view_rays(row, col, scale)
+        h, w = rays.shape[:2]
+        return self.render_rays(rays.reshape(-1, 6), neurons).reshape(h, w, 4)
+
+    # -- free cameras (lfn_stream.cameras; the browser viewer uses the same formulas) ---------
+    def pose(self, row: int, col: int) -> np.ndarray:
+        """4×4 camera-to-world matrix of a captured view (OpenGL axes, scene units)."""
+        if not (0 <= row < self.rows and 0 <= col < self.cols):
+            raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+        return captured_poses(self.geom.positions, self.geom.c2w)[row, col].copy()
+
+    def grid_pose(self, s: float, t: float) -> np.ndarray:
+        """Pose at a continuous grid position (row s, column t): centres blended bilinearly, the
+        nearest view's rotation."""
+        return grid_pose(captured_poses(self.geom.positions, self.geom.c2w), float(s), float(t))
+
+    def orbit_pose(self, row: int, col: int, yaw: float, pitch: float = 0.0) -> np.ndarray:
+        """A captured view turned about the scene's pivot (the point nearest every optical axis):
+        ``yaw`` degrees about the mean up vector, ``pitch`` degrees about the camera's right axis."""
+        pivot, up = scene_pivot(captured_poses(self.geom.positions, self.geom.c2w), self.norm["centre"])
+        return orbit_pose(self.pose(row, col), pivot, up, float(yaw), float(pitch))
+
+    def stereo_poses(self, pose: np.ndarray, ipd: float) -> tuple[np.ndarray, np.ndarray]:
+        """(left, right) poses ``ipd`` scene units apart along ``pose``'s x axis."""
+        return stereo_poses(self._check_pose(pose), float(ipd))
+
+    @staticmethod
+    def _check_pose(c2w) -> np.ndarray:
+        try:
+            a = np.asarray(c2w, dtype=np.float64)
+        except (TypeError, ValueError):
+            a = np.zeros(0)
+        if a.shape != (4, 4) or not np.isfinite(a).all() or abs(np.linalg.det(a[:3, :3])) < 1e-9:
+            raise ParameterError("a camera pose must be a finite 4x4 camera-to-world matrix with an invertible rotation")
+        return a
+
+    def render_pose(self, c2w, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
+        """A view from any camera pose (4×4 camera-to-world, OpenGL axes, scene units) with the
+        captured views' intrinsics; neurons and scale as in :meth:`render`.
+
+        Returns:
+            (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
+        """
+        c2w = self._check_pose(c2w)
+        neurons = self.neurons if neurons is None else neurons
+        scale = self.cfg.scale_of(neurons) if scale is None else scale
+        g = self.geom
+        rays = camera_rays(c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"])
         h, w = rays.shape[:2]
         return self.render_rays(rays.reshape(-1, 6), neurons).reshape(h, w, 4)
 

@@ -263,6 +263,36 @@ export class LfcFile {
     return out;
   }
 
+  /** Fetch every missing chunk of the named sections (consecutive in the file, as the LFN
+   *  steps are) in one range request per run of missing chunks, verified and cached; later
+   *  reads of those sections cost no request while the chunks stay in the budget. */
+  async prefetch(snames) {
+    const want = [];                          // [file offset, end, section, chunk] of missing chunks
+    for (const n of snames) {
+      const s = this.info(n);
+      for (let j = 0; j < s.nChunks; j++) {
+        if (!s.chunks.has(j)) want.push([s.offset + j * s.chunk, s.offset + Math.min((j + 1) * s.chunk, s.length), s, j]);
+      }
+    }
+    want.sort((x, y) => x[0] - y[0]);
+    let i = 0;
+    while (i < want.length) {
+      let e = i;
+      while (e + 1 < want.length && want[e + 1][0] === want[e][1]) e++;
+      const lo = want[i][0], got = await this.source.read(lo, want[e][1]);
+      for (let k = i; k <= e; k++) {
+        const [a, b, s, j] = want[k], part = got.slice(a - lo, b - lo);
+        if (crc32(part) !== this.crcs[s.first + j]) {
+          throw new FormatError(`${this.name}: checksum mismatch in section '${s.name}' chunk ${j} (corrupt file)`);
+        }
+        s.chunks.set(j, part);
+        this.lru.set(`${s.name}/${j}`, part);
+        this.held += part.length;
+      }
+      i = e + 1;
+    }
+  }
+
   _assemble(s, a, b, k0, k1) {
     if (k0 === k1) {
       const base = k0 * s.chunk;

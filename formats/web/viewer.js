@@ -3,9 +3,16 @@
 // render.js onto a canvas. Drag to move the viewpoint; sliders for focus and aperture; a level
 // selector; a panel with bytes fetched, cache size and frame time.
 //
-// For tests and scripts: window.lfcViewer = {ready (a promise), show(s, t, opts) → frame info,
-// state}; document.body.dataset.state is "loading", "ready" or "error" (the message in #error).
-import { RangeSource, openDecoder } from "./lfc.js";
+// Light field networks (codec "lfn") open in the same page: lfn.js renders the network in JS at
+// a chosen (fractional) number of neurons, fetching further step sections as the level rises;
+// drag moves along the grid, or orbits a posed capture's cameras about their common target.
+//
+// For tests and scripts: window.lfcViewer = {ready (a promise), show(...) → frame info, state};
+// RLFC files: show(s, t, {focus, aperture, level, robust}); LFN files: show({s, t} | {view, yaw,
+// pitch}, {neurons, scale}). document.body.dataset.state is "loading", "ready" or "error" (the
+// message in #error); state.mode is "rlfc" or "lfn".
+import { LfcFile, RangeSource, TxDecoder } from "./lfc.js";
+import { LfnDecoder } from "./lfn.js";
 import { makeKeyImage } from "./openjpeg.js";
 import { Renderer, toRGBA } from "./render.js";
 
@@ -23,18 +30,33 @@ function fail(e) {
   console.error(e);
 }
 
-const state = { s: 0, t: 0, focus: 0, aperture: 0, level: 0, useMaps: true, robust: true, busy: null, pending: false, last: null };
+const state = { mode: "rlfc", s: 0, t: 0, focus: 0, aperture: 0, level: 0, useMaps: true, robust: true, busy: null, pending: false, last: null };
+
+// one frame at a time; a newer request replaces a waiting one
+function scheduler(draw) {
+  const request = () => {
+    if (state.busy) { state.pending = true; return state.busy; }
+    state.busy = draw().catch(fail).finally(() => {
+      state.busy = null;
+      if (state.pending) { state.pending = false; request(); }
+    });
+    return state.busy;
+  };
+  return request;
+}
 
 async function main() {
   if (!fileUrl) throw new Error("no file given: open this page as index.html?file=NAME.lfc");
   const source = new RangeSource(new URL(fileUrl, location.href).href);
+  const t0 = performance.now();
+  const file = await LfcFile.open(source, fileUrl, chunkMiB * (1 << 20));
+  if (file.meta.codec === "lfn") return mainLfn(file, source, t0);
   let keyImage = null;
   if (typeof globalThis.OpenJPEGWASM === "function") {
     const factory = () => globalThis.OpenJPEGWASM({ locateFile: (p) => new URL(`vendor/${p}`, import.meta.url).href });
     keyImage = await makeKeyImage(factory);
   }
-  const t0 = performance.now();
-  const dec = await openDecoder(source, { name: fileUrl, keyImage, chunkBudget: chunkMiB * (1 << 20) });
+  const dec = await new TxDecoder().init(file, keyImage);
   const openMs = performance.now() - t0;
   const r = new Renderer(dec, { cacheBytes: cacheMiB * (1 << 20) });
   const canvas = $("view");
@@ -70,15 +92,7 @@ async function main() {
     return { s: state.s, t: state.t, ms: f.ms, sources: f.sources, bytesFetched: source.bytesFetched, requests: source.requests };
   };
 
-  // one frame at a time; a newer request replaces a waiting one
-  const request = () => {
-    if (state.busy) { state.pending = true; return state.busy; }
-    state.busy = draw().catch(fail).finally(() => {
-      state.busy = null;
-      if (state.pending) { state.pending = false; request(); }
-    });
-    return state.busy;
-  };
+  const request = scheduler(draw);
 
   let drag = null;
   canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, s: state.s, t: state.t }; canvas.classList.add("dragging"); canvas.setPointerCapture(e.pointerId); });
@@ -109,6 +123,106 @@ async function main() {
       if (!state.useMaps) state.focus = opts.focus;
       $("focus").value = state.focus; $("aperture").value = state.aperture;           // the controls follow
       $("usemaps").checked = state.useMaps; $("robust").checked = state.robust; $("level").value = String(state.level);
+      return draw();
+    },
+  };
+}
+
+async function mainLfn(file, source, t0) {
+  const dec = await LfnDecoder.open(file, { maxNeurons: 0 });      // the base network first
+  const openMs = performance.now() - t0;
+  const posed = dec.layout === "posed";
+  Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
+    neurons: dec.maxN, scale: "auto" });
+  const want = Number(params.get("neurons"));
+  if (want >= dec.minN && want <= dec.maxN) state.neurons = want;
+  $("rlfc-controls").hidden = true;
+  $("lfn-controls").hidden = false;
+  $("viewidx").max = String(dec.rows * dec.cols - 1);
+  $("neurons").min = String(dec.minN); $("neurons").max = String(dec.maxN); $("neurons").value = String(state.neurons);
+  $("title").textContent = `${fileUrl} — light field network, ${dec.depth} layers of ${dec.minN}..${dec.maxN} neurons; ${dec.rows}×${dec.cols} views of ${dec.W}×${dec.H}`;
+  const canvas = $("view"), ctx = canvas.getContext("2d");
+  canvas.style.width = `${dec.W}px`;
+
+  let drag = null;
+  const pose = () => (posed ? dec.orbitPose(state.view, state.yaw, state.pitch) : dec.gridPose(state.s, state.t));
+  const stats = () => {
+    const f = state.last;
+    const held = dec.steps.reduce((a, x) => a + x.length, dec.base.length + (dec.occ ? dec.occ.length : 0)) * dec.itemsize;
+    $("stats").textContent = [
+      `bytes fetched  ${source.bytesFetched.toLocaleString()} of ${source._size.toLocaleString()}`,
+      `range requests ${source.requests}`,
+      `network        ${dec.neurons} of ${dec.maxN} neurons fetched (${(held / 1024).toFixed(1)} KiB of weights)`,
+      `open           ${openMs.toFixed(0)} ms`,
+      `frame          ${f ? f.ms.toFixed(1) : "-"} ms, ${f ? `${f.w}×${f.h}` : "-"} at ${f ? f.neurons.toFixed(2) : "-"} neurons`,
+      `rays evaluated ${f ? f.evaluated.toLocaleString() : "-"}${dec.occ ? " (the occupancy net skips the others)" : ""}`,
+    ].join("\n");
+    $("st").textContent = posed ? `view ${state.view}, yaw ${state.yaw.toFixed(1)}°, pitch ${state.pitch.toFixed(1)}°`
+      : `${state.s.toFixed(2)}, ${state.t.toFixed(2)}`;
+    $("viewv").textContent = String(state.view);
+    $("neuronsv").textContent = `${state.neurons} (scale ${dec.scaleOf(state.neurons).toFixed(3)})`;
+  };
+
+  const draw = async (neurons = state.neurons) => {
+    await dec.grow(neurons);                 // fetches the step sections this level needs
+    const n = Math.min(neurons, dec.neurons), p = pose();
+    const t = performance.now();
+    const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
+    const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc);      // a quarter-scale preview while dragging
+    const px = dec.toPixels(r.rgba, r.h, r.w);
+    const ms = performance.now() - t;
+    canvas.width = r.w;
+    canvas.height = r.h;
+    ctx.putImageData(new ImageData(toRGBA(px, r.h, r.w, dec.C, dec.peak), r.w, r.h), 0, 0);
+    state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated };
+    stats();
+    return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons };
+  };
+  const request = scheduler(() => draw());
+
+  canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, s: state.s, t: state.t, yaw: state.yaw, pitch: state.pitch }; canvas.classList.add("dragging"); canvas.setPointerCapture(e.pointerId); });
+  canvas.addEventListener("pointerup", () => { drag = null; canvas.classList.remove("dragging"); request(); });
+  canvas.addEventListener("pointermove", (e) => {
+    if (!drag) return;
+    const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
+    if (posed) {                               // half a degree per pixel
+      state.yaw = drag.yaw - dx * 0.5;
+      state.pitch = Math.min(Math.max(drag.pitch - dy * 0.5, -80), 80);
+    } else {
+      const k = Math.max(dec.rows, dec.cols) / canvas.getBoundingClientRect().width;
+      state.s = Math.min(Math.max(drag.s - dy * k, 0), dec.rows - 1);
+      state.t = Math.min(Math.max(drag.t - dx * k, 0), dec.cols - 1);
+    }
+    request();
+  });
+  $("viewidx").addEventListener("input", (e) => {
+    state.view = Number(e.target.value);
+    if (!posed) { state.s = Math.floor(state.view / dec.cols); state.t = state.view % dec.cols; }
+    state.yaw = state.pitch = 0;
+    request();
+  });
+  $("neurons").addEventListener("input", (e) => { state.neurons = Number(e.target.value); request(); });
+  $("scale").addEventListener("change", (e) => { state.scale = e.target.value; request(); });
+
+  await draw(dec.minN);                        // the base network at its own scale: the first useful bytes
+  await request();                             // then the chosen level, its steps streamed in
+  document.body.dataset.state = "ready";
+  $("status").textContent = posed ? "drag the image to orbit the scene" : "drag the image to move the viewpoint";
+  return {
+    decoder: dec, source,
+    /** Render a camera ({s, t} on a grid, or {view, yaw, pitch}) with opts {neurons, scale
+     *  ("auto" or a number)}; resolves with frame info. */
+    async show(cam, opts = {}) {
+      if (state.busy) await state.busy;
+      if (cam.view !== undefined) {
+        state.view = cam.view;
+        if (!posed) { state.s = Math.floor(cam.view / dec.cols); state.t = cam.view % dec.cols; }
+      }
+      if (cam.s !== undefined) { state.s = cam.s; state.t = cam.t; }
+      state.yaw = cam.yaw || 0; state.pitch = cam.pitch || 0;
+      if (opts.neurons !== undefined) state.neurons = opts.neurons;
+      if (opts.scale !== undefined) state.scale = String(opts.scale);
+      $("neurons").value = String(state.neurons); $("scale").value = state.scale === "auto" ? "auto" : "1";
       return draw();
     },
   };

@@ -2,7 +2,9 @@
 Playwright's Python API) opens the page served from 127.0.0.1 by ``formats.serve`` (what
 ``lfcodec view`` runs), the page reads the .lfc by HTTP Range requests and decodes it in the
 browser, and the canvas is compared with the Python decoder (a captured view: bit for bit) and
-renderer (a novel view and a refocused one: PSNR >= 45 dB). Bad files show a message.
+renderer (a novel view and a refocused one: PSNR >= 45 dB). Light field networks render in the
+page within one grey level of the Python renderer, their weights streamed as the level rises.
+Bad files show a message.
 
 Skipped with the reason where Chromium or Playwright is not installed (CI installs both)."""
 from __future__ import annotations
@@ -48,6 +50,10 @@ def site(tmp_path_factory):
     (d / "corrupt.lfc").write_bytes(data[:-40] + bytes([data[-40] ^ 1]) + data[-39:])
     (d / "cut.lfc").write_bytes(data[: len(data) // 2])
     (d / "secret.txt").write_text("a text file, not a light field\n" * 4)
+    from tests.formats.test_web_lfn import lfn_file
+
+    lfn_file(d, 3, posed=True, occ=False).rename(d / "net_posed.lfc")
+    lfn_file(d, 3, posed=False, occ=False, seed=1).rename(d / "net_grid.lfc")
     with FileServer(d, viewer=True) as srv:
         yield srv, f
 
@@ -135,3 +141,50 @@ def test_server_confines_paths(site):
         assert e.value.code == 404, path
     with urllib.request.urlopen(base + "_viewer/lfc.js") as r:
         assert r.headers["Content-Type"].startswith("text/javascript")
+
+
+def canvas_rgba(page) -> np.ndarray:
+    w, h, data = page.evaluate("""() => { const c = document.getElementById('view');
+        const d = c.getContext('2d').getImageData(0, 0, c.width, c.height);
+        return [c.width, c.height, Array.from(d.data)]; }""")
+    return np.asarray(data, np.uint8).reshape(h, w, 4)
+
+
+def test_light_field_networks_render_in_the_page(site, page):
+    from lfn_stream import LfnRenderer
+
+    srv, f = site
+    net = f.parent / "net_posed.lfc"
+    assert open_viewer(page, srv, net.name) == "ready", page.inner_text("#error")
+    assert page.evaluate("lfcViewer.state.mode") == "lfn" and "neurons" in page.inner_text("#stats")
+    r = LfnRenderer(open_lfc(net), device="cpu")
+    for cam, pose, neurons, scale in (("{view: 2}", r.pose(0, 2), 20, 1), ("{view: 4, yaw: 25, pitch: -10}",
+                                      r.orbit_pose(0, 4, 25, -10), 13.5, 1), ("{view: 1}", r.pose(0, 1), 9.25, "'auto'")):
+        info = page.evaluate(f"lfcViewer.show({cam}, {{neurons: {neurons}, scale: {scale}}})")
+        np.testing.assert_allclose(np.array(info["pose"]).reshape(4, 4), pose, atol=1e-12)
+        want = r.to_pixels(r.render_pose(pose, float(neurons), None if scale == "'auto'" else 1.0))
+        got = canvas_rgba(page)[..., :3]
+        assert got.shape == want.shape
+        assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.02
+
+
+def test_network_weights_stream_as_the_level_rises(site, page):
+    srv, f = site
+    net = f.parent / "net_grid.lfc"
+    page.goto(srv.viewer_url(net.name) + "&neurons=8")
+    page.wait_for_function("document.body.dataset.state !== 'loading'", timeout=120_000)
+    assert page.evaluate("document.body.dataset.state") == "ready", page.inner_text("#error")
+    low = page.evaluate("lfcViewer.show({s: 1.3, t: 2.6}, {neurons: 8})")
+    high = page.evaluate("lfcViewer.show({s: 1.3, t: 2.6}, {neurons: 20})")
+    assert low["neuronsFetched"] == 8 and high["neuronsFetched"] == 20
+    assert low["bytesFetched"] < high["bytesFetched"] <= net.stat().st_size
+    assert 0 < high["requests"] - low["requests"] <= 2          # one range request for all the new steps
+    before = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
+    box = page.locator("#view").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] / 4, box["y"] + box["height"] / 3, steps=3)
+    page.mouse.up()
+    page.wait_for_function("!lfcViewer.state.busy")
+    after = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
+    assert after != before

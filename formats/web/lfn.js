@@ -1,0 +1,463 @@
+// lfn.js — light field networks (codec "lfn", docs/FORMAT.md "LFN codec") in the browser: the
+// network read from an .lfc file (or the prefix fetched so far), grown by fetching further
+// `lfn.step.NNNN` sections as the level rises, and rendered in plain JS (double precision; the
+// Python renderer computes in float32, so pixels agree within one grey level).
+//
+// Cameras follow lfn_stream/cameras.py: gridPose(s, t) (continuous grid position), orbitPose(v,
+// yaw, pitch) (a captured view turned about the scene's pivot), with the captured intrinsics.
+import { FormatError, LfcError, UnsupportedError } from "./lfc.js";
+
+/** Values of all networks the viewer builds together (weights as doubles): 2^25 = 256 MiB. */
+export const MAX_NETWORK_VALUES = 2 ** 25;
+
+const HALF = (() => {                       // fp16 bit pattern → value
+  const t = new Float64Array(65536);
+  for (let h = 0; h < 65536; h++) {
+    const s = h & 0x8000 ? -1 : 1, e = (h >> 10) & 31, m = h & 1023;
+    t[h] = e === 0 ? s * m * 2 ** -24 : e === 31 ? (m ? NaN : s * Infinity) : s * (1 + m / 1024) * 2 ** (e - 15);
+  }
+  return t;
+})();
+
+function floats(bytes, dtype) {
+  const dv = new DataView(bytes.buffer, bytes.byteOffset, bytes.byteLength);
+  const n = dtype === "fp16" ? bytes.length >> 1 : bytes.length >> 2;
+  const out = new Float64Array(n);
+  if (dtype === "fp16") for (let i = 0; i < n; i++) out[i] = HALF[dv.getUint16(2 * i, true)];
+  else for (let i = 0; i < n; i++) out[i] = dv.getFloat32(4 * i, true);
+  for (let i = 0; i < n; i++) if (!Number.isFinite(out[i])) throw new FormatError("lfn network weights hold NaN or infinite values");
+  return out;
+}
+
+function intIn(obj, key, lo, hi, where, dflt) {
+  const v = obj[key] === undefined ? dflt : obj[key];
+  if (!Number.isInteger(v) || v < lo || v > hi) throw new FormatError(`${where}: ${key} must be an integer in ${lo}..${hi}, got ${JSON.stringify(v)}`);
+  return v;
+}
+
+function finiteList(v, n, where) {
+  if (!Array.isArray(v) || v.length !== n || !v.every((x) => typeof x === "number" && Number.isFinite(x))) {
+    throw new FormatError(`${where} must be a list of ${n} finite numbers`);
+  }
+  return v;
+}
+
+/** A nested JSON list of exactly `shape` finite numbers, flattened (row-major). */
+function nested(v, shape, where) {
+  const out = [];
+  const walk = (a, k) => {
+    if (k === shape.length) {
+      if (typeof a !== "number" || !Number.isFinite(a)) throw new FormatError(`${where} must hold finite numbers`);
+      out.push(a);
+      return;
+    }
+    if (!Array.isArray(a) || a.length !== shape[k]) throw new FormatError(`${where} must be a ${shape.join("x")} array`);
+    for (const x of a) walk(x, k + 1);
+  };
+  walk(v, 0);
+  return out;
+}
+
+const stepName = (j) => `lfn.step.${String(j).padStart(4, "0")}`;
+
+// -- small 3-vector / 4×4 helpers (row-major 4×4 in a 16-array) -------------------------------------
+const col = (M, j) => [M[j], M[4 + j], M[8 + j]];
+const norm3 = (v) => Math.hypot(v[0], v[1], v[2]);
+
+function rotation(axis, deg) {               // Rodrigues, as lfn_stream/cameras.py _rotation
+  const [x, y, z] = axis, a = (deg * Math.PI) / 180;
+  const c = Math.cos(a), s = Math.sin(a), k = 1 - c;
+  return [[c + x * x * k, x * y * k - z * s, x * z * k + y * s],
+    [y * x * k + z * s, c + y * y * k, y * z * k - x * s],
+    [z * x * k - y * s, z * y * k + x * s, c + z * z * k]];
+}
+const mul3 = (A, B) => A.map((r) => [0, 1, 2].map((j) => r[0] * B[0][j] + r[1] * B[1][j] + r[2] * B[2][j]));
+const mv3 = (A, v) => A.map((r) => r[0] * v[0] + r[1] * v[1] + r[2] * v[2]);
+
+function solve3(A, b) {                       // Gaussian elimination with partial pivoting
+  const M = A.map((r, i) => [...r, b[i]]);
+  for (let c = 0; c < 3; c++) {
+    let p = c;
+    for (let r = c + 1; r < 3; r++) if (Math.abs(M[r][c]) > Math.abs(M[p][c])) p = r;
+    [M[c], M[p]] = [M[p], M[c]];
+    for (let r = 0; r < 3; r++) {
+      if (r === c) continue;
+      const f = M[r][c] / M[c][c];
+      for (let k = c; k < 4; k++) M[r][k] -= f * M[c][k];
+    }
+  }
+  return [M[0][3] / M[0][0], M[1][3] / M[1][1], M[2][3] / M[2][2]];
+}
+
+function symEigMinMax(A) {                    // smallest and largest eigenvalue of a symmetric 3×3
+  const p1 = A[0][1] ** 2 + A[0][2] ** 2 + A[1][2] ** 2, q = (A[0][0] + A[1][1] + A[2][2]) / 3;
+  if (p1 === 0) { const d = [A[0][0], A[1][1], A[2][2]]; return [Math.min(...d), Math.max(...d)]; }
+  const p2 = (A[0][0] - q) ** 2 + (A[1][1] - q) ** 2 + (A[2][2] - q) ** 2 + 2 * p1, p = Math.sqrt(p2 / 6);
+  const B = A.map((r, i) => r.map((v, j) => (v - (i === j ? q : 0)) / p));
+  const det = B[0][0] * (B[1][1] * B[2][2] - B[1][2] * B[2][1]) - B[0][1] * (B[1][0] * B[2][2] - B[1][2] * B[2][0])
+    + B[0][2] * (B[1][0] * B[2][1] - B[1][1] * B[2][0]);
+  const phi = Math.acos(Math.min(Math.max(det / 2, -1), 1)) / 3;
+  const e1 = q + 2 * p * Math.cos(phi), e3 = q + 2 * p * Math.cos(phi + (2 * Math.PI) / 3);
+  return [e3, e1];
+}
+
+export class LfnDecoder {
+  /** Open the LFN in an LfcFile (lfc.js): config and geometry checked, the base network and
+   *  the steps up to `maxNeurons` neurons read (fetched) and verified. */
+  static async open(file, { maxNeurons = Infinity } = {}) {
+    const d = new LfnDecoder();
+    const name = file.name, meta = file.meta;
+    if (meta.codec !== "lfn") throw new UnsupportedError(`${name}: codec '${meta.codec}' is not a light field network`);
+    const version = meta.codec_version === undefined ? 1 : meta.codec_version;
+    if (version !== 1 && version !== 2) throw new UnsupportedError(`${name}: lfn codec version ${version} is not supported (this reader knows 1 and 2)`);
+    const conf = meta.config;
+    if (!conf || typeof conf !== "object" || Array.isArray(conf)) throw new FormatError(`${name}: config is not an object`);
+    const net = conf.network, where = `${name}: config.network`;
+    if (!net || typeof net !== "object" || Array.isArray(net)) throw new FormatError(`${where} is not an object`);
+    const k = version < 2 ? { min: "min_width", max: "max_width", occ: "occupancy_width" } : { min: "min_neurons", max: "max_neurons", occ: "occupancy_neurons" };
+    d.depth = intIn(net, "depth", 1, 32, where, 6);
+    d.minN = intIn(net, k.min, 1, 4096, where, 16);
+    d.maxN = intIn(net, k.max, d.minN, 4096, where, 128);
+    d.occN = intIn(net, k.occ, 0, 4096, where, 32);
+    intIn(net, "in_features", 6, 6, where, 6);
+    intIn(net, "out_features", 4, 4, where, 4);
+    d.minScale = net.min_scale === undefined ? 0.125 : net.min_scale;
+    if (typeof d.minScale !== "number" || !(d.minScale > 0 && d.minScale <= 1)) throw new FormatError(`${where}: min_scale must be in (0, 1]`);
+    const nrm = conf.norm || {};
+    d.centre = finiteList(nrm.centre, 3, `${name}: config.norm.centre`);
+    d.radius = nrm.radius;
+    if (typeof d.radius !== "number" || !(d.radius >= 1e-12 && d.radius <= 1e12)) throw new FormatError(`${name}: config.norm.radius must be in [1e-12, 1e12]`);
+    d.dtypeW = conf.weights === undefined ? "fp16" : conf.weights;
+    if (d.dtypeW !== "fp16" && d.dtypeW !== "fp32") throw new FormatError(`${name}: config.weights must be fp16 or fp32`);
+    d.itemsize = d.dtypeW === "fp16" ? 2 : 4;
+    d._geometry(meta.scene, name);
+    d.file = file;
+    const base = file.info("lfn.base");
+    if (base.length !== d.valuesBase() * d.itemsize) {
+      throw new FormatError(`${name}: section 'lfn.base' has ${base.length} bytes, the network config needs ${d.valuesBase() * d.itemsize}`);
+    }
+    d.base = floats(await file.read("lfn.base"), d.dtypeW);
+    d.occ = null;
+    if (d.occN && file.sections.has("lfn.occ")) {
+      const n = d.occN, want = 6 * n + n + n * n + n + n + 1;
+      if (file.info("lfn.occ").length !== want * d.itemsize) throw new FormatError(`${name}: section 'lfn.occ' has the wrong size for the config`);
+      d.occ = floats(await file.read("lfn.occ"), d.dtypeW);
+    }
+    d.steps = [];
+    await d.grow(maxNeurons);
+    return d;
+  }
+
+  _geometry(g, name) {
+    const where = `${name}: scene`;
+    if (!g || typeof g !== "object" || Array.isArray(g)) throw new FormatError(`${where} is not an object`);
+    this.rows = intIn(g, "rows", 1, 65536, where);
+    this.cols = intIn(g, "cols", 1, 65536, where);
+    if (this.rows * this.cols > 65536) throw new FormatError(`${where}: too many views`);
+    this.H = intIn(g, "height", 1, 2 ** 26, where);
+    this.W = intIn(g, "width", 1, 2 ** 26, where);
+    if (this.H * this.W > 2 ** 26) throw new FormatError(`${where}: views of ${this.H}x${this.W} exceed the limit`);
+    this.C = intIn(g, "channels", 1, 4, where);
+    if (g.dtype !== "uint8" && g.dtype !== "uint16") throw new FormatError(`${where}: dtype must be uint8 or uint16 for an LFN`);
+    this.peak = g.dtype === "uint8" ? 255 : 65535;
+    this.layout = g.layout === undefined ? "grid" : g.layout;
+    this.focal = finiteList(g.focal === undefined ? [1, 1] : g.focal, 2, `${where}.focal`);
+    this.principal = g.principal === undefined ? [this.W / 2, this.H / 2] : finiteList(g.principal, 2, `${where}.principal`);
+    const n = this.rows * this.cols;
+    this.poses = new Array(n);
+    if (g.c2w !== undefined) {
+      const m = nested(g.c2w, [this.rows, this.cols, 4, 4], `${where}.c2w`);
+      for (let v = 0; v < n; v++) this.poses[v] = m.slice(16 * v, 16 * v + 16);
+    } else {
+      let pos;
+      if (g.positions !== undefined) {
+        pos = nested(g.positions, [this.rows, this.cols, 3], `${where}.positions`);
+      } else {
+        const [bx, by] = finiteList(g.baseline === undefined ? [1, 1] : g.baseline, 2, `${where}.baseline`);
+        pos = [];
+        for (let r = 0; r < this.rows; r++) for (let c = 0; c < this.cols; c++) pos.push(c * bx, -r * by, 0);
+      }
+      for (let v = 0; v < n; v++) this.poses[v] = [1, 0, 0, pos[3 * v], 0, 1, 0, pos[3 * v + 1], 0, 0, 1, pos[3 * v + 2], 0, 0, 0, 1];
+    }
+    this._pivot();
+  }
+
+  /** The scene's pivot and up (lfn_stream.cameras.scene_pivot). */
+  _pivot() {
+    const A = [[0, 0, 0], [0, 0, 0], [0, 0, 0]], b = [0, 0, 0], up = [0, 0, 0];
+    for (const P of this.poses) {
+      let d = col(P, 2).map((x) => -x);
+      const l = norm3(d);
+      d = d.map((x) => x / l);
+      const o = [P[3], P[7], P[11]], dot = d[0] * o[0] + d[1] * o[1] + d[2] * o[2];
+      for (let i = 0; i < 3; i++) {
+        for (let j = 0; j < 3; j++) A[i][j] += (i === j ? 1 : 0) - d[i] * d[j];
+        b[i] += o[i] - d[i] * dot;
+        up[i] += P[4 * i + 1];
+      }
+    }
+    const [lo, hi] = symEigMinMax(A);
+    this.pivot = lo > 1e-3 * Math.max(hi, 1e-12) ? solve3(A, b) : this.centre.slice();
+    const u = norm3(up);
+    this.up = u > 1e-9 ? up.map((x) => x / u) : [0, 1, 0];
+  }
+
+  valuesBase() {
+    const m = this.minN;
+    return m * 6 + 3 * m + (this.depth - 1) * (m * m + 3 * m) + 4 * m + 4;
+  }
+
+  stepValues(j) { return 6 + 3 + (this.depth - 1) * (2 * j + 1 + 3) + 4; }
+
+  /** Network size a level stands for (0 = the largest available network). */
+  neuronsAt(level) { return this.neurons - level; }
+
+  /** Image scale a (fractional) neuron count stands for (log-linear from min_scale to 1). */
+  scaleOf(neurons) {
+    if (this.maxN === this.minN) return 1;
+    const t = Math.min(Math.max((neurons - this.minN) / (this.maxN - this.minN), 0), 1);
+    return Math.exp(Math.log(this.minScale) * (1 - t));
+  }
+
+  /** Fetch the step sections up to a network of `maxNeurons` (as far as the file goes) and
+   *  rebuild the weights; returns the neurons now available. */
+  async grow(maxNeurons = Infinity) {
+    const limit = Math.min(Math.ceil(maxNeurons), this.maxN);
+    const before = this.steps.length;
+    const f = this.file, names = [];
+    for (let j = this.steps.length; this.minN + j < limit && f.sections.has(stepName(j)); j++) names.push(stepName(j));
+    await f.prefetch(names);                  // one range request for all the steps this level needs
+    for (let j = this.steps.length; this.minN + j < limit; j++) {
+      const sname = stepName(j);
+      if (!f.sections.has(sname)) break;
+      const want = this.stepValues(this.minN + j) * this.itemsize;
+      if (f.info(sname).length !== want) throw new FormatError(`${f.name}: section '${sname}' has ${f.info(sname).length} bytes, the network config needs ${want}`);
+      this.steps.push(floats(await f.read(sname), this.dtypeW));
+    }
+    if (this.steps.length !== before || !this.Wt) this._build();
+    return this.neurons;
+  }
+
+  _build() {
+    const m = this.minN, D = this.depth, w = m + this.steps.length;
+    const values = 6 * w + (D - 1) * w * w + (3 * D + 4) * w + 4 + (this.occ ? this.occ.length : 0);
+    if (values > MAX_NETWORK_VALUES) throw new UnsupportedError(`${this.file.name}: a network of ${w} neurons x ${D} layers is too large for the browser viewer`);
+    const Wt = [], b = [], g = [], be = [];
+    for (let i = 0; i < D; i++) {
+      Wt.push(new Float64Array(w * (i === 0 ? 6 : w)));
+      b.push(new Float64Array(w)); g.push(new Float64Array(w)); be.push(new Float64Array(w));
+    }
+    const ow = new Float64Array(4 * w), ob = new Float64Array(4);
+    let vals = this.base, pos = 0;
+    const take = () => {
+      if (pos >= vals.length) throw new FormatError("lfn network section is shorter than its configuration needs");
+      return vals[pos++];
+    };
+    for (let i = 0; i < D; i++) {
+      const k = i === 0 ? 6 : m, stride = i === 0 ? 6 : w;
+      for (let r = 0; r < m; r++) for (let c = 0; c < k; c++) Wt[i][r * stride + c] = take();
+      for (let r = 0; r < m; r++) b[i][r] = take();
+      for (let r = 0; r < m; r++) g[i][r] = take();
+      for (let r = 0; r < m; r++) be[i][r] = take();
+    }
+    for (let o = 0; o < 4; o++) for (let c = 0; c < m; c++) ow[o * w + c] = take();
+    for (let o = 0; o < 4; o++) ob[o] = take();
+    if (pos !== vals.length) throw new FormatError("lfn.base has trailing data");
+    this.steps.forEach((sv, s) => {
+      const j = m + s;
+      vals = sv; pos = 0;
+      for (let c = 0; c < 6; c++) Wt[0][j * 6 + c] = take();
+      b[0][j] = take(); g[0][j] = take(); be[0][j] = take();
+      for (let i = 1; i < D; i++) {
+        for (let c = 0; c <= j; c++) Wt[i][j * w + c] = take();
+        for (let r = 0; r < j; r++) Wt[i][r * w + j] = take();
+        b[i][j] = take(); g[i][j] = take(); be[i][j] = take();
+      }
+      for (let o = 0; o < 4; o++) ow[o * w + j] = take();
+      if (pos !== vals.length) throw new FormatError(`${stepName(s)} has ${vals.length} values, expected ${pos}`);
+    });
+    Object.assign(this, { Wt, b, g, be, ow, ob, w, neurons: w, levels: w - m });
+  }
+
+  /** 4×4 pose (row-major) of captured view v. */
+  pose(v) { return this.poses[v].slice(); }
+
+  /** Pose at continuous grid position (s, t) (lfn_stream.cameras.grid_pose). */
+  gridPose(s, t) {
+    const R = this.rows, C = this.cols;
+    if (!(s >= 0 && s <= R - 1 && t >= 0 && t <= C - 1)) throw new LfcError(`grid position (${s}, ${t}) is outside the ${R}x${C} grid`);
+    const r0 = Math.min(Math.floor(s), R - 1), c0 = Math.min(Math.floor(t), C - 1);
+    const r1 = Math.min(r0 + 1, R - 1), c1 = Math.min(c0 + 1, C - 1), a = s - r0, bb = t - c0;
+    const P = (r, c) => this.poses[r * C + c];
+    const out = P(Math.floor(s + 0.5), Math.floor(t + 0.5)).slice();
+    for (const i of [3, 7, 11]) {
+      out[i] = (1 - a) * (1 - bb) * P(r0, c0)[i] + (1 - a) * bb * P(r0, c1)[i] + a * (1 - bb) * P(r1, c0)[i] + a * bb * P(r1, c1)[i];
+    }
+    return out;
+  }
+
+  /** View v turned about the pivot: pitch degrees about its right axis, then yaw about up
+   *  (lfn_stream.cameras.orbit_pose). */
+  orbitPose(v, yaw, pitch = 0) {
+    const P = this.poses[v], right = col(P, 0), l = norm3(right);
+    const M = mul3(rotation(this.up, yaw), rotation(right.map((x) => x / l), pitch));
+    const R0 = [[P[0], P[1], P[2]], [P[4], P[5], P[6]], [P[8], P[9], P[10]]];
+    const R = mul3(M, R0);
+    const rel = [P[3] - this.pivot[0], P[7] - this.pivot[1], P[11] - this.pivot[2]];
+    const o = mv3(M, rel).map((x, i) => x + this.pivot[i]);
+    return [R[0][0], R[0][1], R[0][2], o[0], R[1][0], R[1][1], R[1][2], o[1], R[2][0], R[2][1], R[2][2], o[2], 0, 0, 0, 1];
+  }
+
+  /** Render a camera pose at (fractional) `neurons` and image `scale` (default: the size's own).
+   *  Returns {rgba: Float64Array h·w·4 premultiplied in [0, 1], h, w, evaluated: rays run}. */
+  render(pose, neurons = this.neurons, scale = null) {
+    if (!(neurons >= this.minN && neurons <= this.neurons)) {
+      throw new LfcError(`${neurons} neurons outside the available range [${this.minN}, ${this.neurons}]`);
+    }
+    if (scale === null) scale = this.scaleOf(neurons);
+    const H = this.H, W = this.W;
+    const h = Math.max(1, Math.round(H * scale)), w = Math.max(1, Math.round(W * scale));
+    const sx = w / W, sy = h / H, fx = this.focal[0] * sx, fy = this.focal[1] * sy;
+    const cx = this.principal[0] * sx, cy = this.principal[1] * sy;
+    const o = [0, 1, 2].map((i) => (pose[4 * i + 3] - this.centre[i]) / this.radius);
+    const rgba = new Float64Array(h * w * 4), x = new Float64Array(6);
+    const f32 = Math.fround;
+    const ws = this._workspace(neurons), RB = ws.RB, X = ws.X;
+    let evaluated = 0, cnt = 0;
+    const flush = () => {
+      this._forwardBatch(ws, cnt);
+      for (let r = 0; r < cnt; r++) {
+        const p = 4 * ws.pix[r];
+        for (let c = 0; c < 4; c++) rgba[p + c] = ws.out[c * RB + r];
+      }
+      evaluated += cnt;
+      cnt = 0;
+    };
+    for (let yy = 0; yy < h; yy++) {
+      for (let xx = 0; xx < w; xx++) {
+        const u = (xx + 0.5 - cx) / fx, v = -(yy + 0.5 - cy) / fy;
+        let d0 = u * pose[0] + v * pose[1] - pose[2], d1 = u * pose[4] + v * pose[5] - pose[6], d2 = u * pose[8] + v * pose[9] - pose[10];
+        const l = Math.sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+        d0 /= l; d1 /= l; d2 /= l;
+        x[0] = f32(d0); x[1] = f32(d1); x[2] = f32(d2);        // the Python renderer's rays are float32
+        x[3] = f32(o[1] * d2 - o[2] * d1); x[4] = f32(o[2] * d0 - o[0] * d2); x[5] = f32(o[0] * d1 - o[1] * d0);
+        if (this.occ && !this._occupied(x, ws)) continue;
+        for (let q = 0; q < 6; q++) X[q * RB + cnt] = x[q];
+        ws.pix[cnt++] = yy * w + xx;
+        if (cnt === RB) flush();
+      }
+    }
+    if (cnt) flush();
+    return { rgba, h, w, evaluated };
+  }
+
+  _workspace(neurons) {
+    const n0 = Math.floor(neurons + 1e-9), a = neurons - n0;
+    const n = a > 1e-6 ? n0 + 1 : n0, m = new Float64Array(n).fill(1);
+    if (a > 1e-6) m[n - 1] = a;
+    let msum = 0;
+    for (let i = 0; i < n; i++) msum += m[i];
+    const RB = 64, big = Math.max(n, 6) * RB;       // rays per batch (a multiple of 4)
+    return { n, m, msum, RB, X: new Float64Array(6 * RB), z: new Float64Array(n * RB), h: new Float64Array(big),
+      h2: new Float64Array(big), out: new Float64Array(4 * RB), pix: new Int32Array(RB),
+      o1: new Float64Array(this.occN), o2: new Float64Array(this.occN) };
+  }
+
+  /** The occupancy net: sigmoid(logit) > 0.1 (Linear 6→k, ReLU, k→k, ReLU, k→1). */
+  _occupied(x, ws) {
+    const k = this.occN, P = this.occ, h1 = ws.o1, h2 = ws.o2;
+    const b1 = 6 * k, W2 = b1 + k, b2 = W2 + k * k, W3 = b2 + k, b3 = W3 + k;
+    for (let j = 0; j < k; j++) {
+      let s = P[b1 + j];
+      for (let q = 0; q < 6; q++) s += P[j * 6 + q] * x[q];
+      h1[j] = s > 0 ? s : 0;
+    }
+    for (let j = 0; j < k; j++) {
+      let s = P[b2 + j];
+      for (let q = 0; q < k; q++) s += P[W2 + j * k + q] * h1[q];
+      h2[j] = s > 0 ? s : 0;
+    }
+    let s = P[b3];
+    for (let q = 0; q < k; q++) s += P[W3 + q] * h2[q];
+    return 1 / (1 + Math.exp(-s)) > 0.1;
+  }
+
+  /** `cnt` rays (ws.X, feature q of ray r at q·RB + r) through the nested network at the
+   *  workspace's (fractional) size → ws.out (channel c of ray r at c·RB + r). Matrix products
+   *  in 2-neuron × 4-ray register blocks (about 3× a ray-at-a-time loop in V8). */
+  _forwardBatch(ws, cnt) {
+    const { n, m, msum, RB, z } = ws, w = this.w, R4 = (cnt + 3) & ~3;
+    let hin = ws.X, hout = ws.h, k = 6;
+    for (let r = cnt; r < R4; r++) for (let q = 0; q < 6; q++) hin[q * RB + r] = 0;     // padding rays
+    for (let i = 0; i < this.depth; i++) {
+      const Wi = this.Wt[i], stride = i === 0 ? 6 : w, bi = this.b[i], gi = this.g[i], bei = this.be[i];
+      for (let r = 0; r < R4; r += 4) {
+        let j = 0;
+        for (; j + 1 < n; j += 2) {
+          const ra = j * stride, rb = ra + stride;
+          let a0 = 0, a1 = 0, a2 = 0, a3 = 0, b0 = 0, b1 = 0, b2 = 0, b3 = 0;
+          for (let q = 0; q < k; q++) {
+            const wa = Wi[ra + q], wb = Wi[rb + q], o = q * RB + r;
+            const x0 = hin[o], x1 = hin[o + 1], x2 = hin[o + 2], x3 = hin[o + 3];
+            a0 += wa * x0; a1 += wa * x1; a2 += wa * x2; a3 += wa * x3;
+            b0 += wb * x0; b1 += wb * x1; b2 += wb * x2; b3 += wb * x3;
+          }
+          const za = j * RB + r, zb = za + RB, ba = bi[j], bb = bi[j + 1];
+          z[za] = a0 + ba; z[za + 1] = a1 + ba; z[za + 2] = a2 + ba; z[za + 3] = a3 + ba;
+          z[zb] = b0 + bb; z[zb + 1] = b1 + bb; z[zb + 2] = b2 + bb; z[zb + 3] = b3 + bb;
+        }
+        if (j < n) {
+          const ra = j * stride;
+          let a0 = 0, a1 = 0, a2 = 0, a3 = 0;
+          for (let q = 0; q < k; q++) {
+            const wa = Wi[ra + q], o = q * RB + r;
+            a0 += wa * hin[o]; a1 += wa * hin[o + 1]; a2 += wa * hin[o + 2]; a3 += wa * hin[o + 3];
+          }
+          const za = j * RB + r, ba = bi[j];
+          z[za] = a0 + ba; z[za + 1] = a1 + ba; z[za + 2] = a2 + ba; z[za + 3] = a3 + ba;
+        }
+      }
+      for (let r = 0; r < R4; r++) {            // LayerNorm with the neuron weights, ReLU, mask
+        let mean = 0;
+        for (let j = 0; j < n; j++) mean += z[j * RB + r] * m[j];
+        mean /= msum;
+        let vr = 0;
+        for (let j = 0; j < n; j++) { const e = z[j * RB + r] - mean; vr += e * e * m[j]; }
+        const inv = 1 / Math.sqrt(vr / msum + 1e-5);
+        for (let j = 0; j < n; j++) {
+          const y = (z[j * RB + r] - mean) * inv * gi[j] + bei[j];
+          hout[j * RB + r] = (y > 0 ? y : 0) * m[j];
+        }
+      }
+      if (i === 0) { hin = hout; hout = ws.h2; } else { const t = hin; hin = hout; hout = t; }
+      k = n;
+    }
+    for (let c = 0; c < 4; c++) {
+      const oc = c * w, bc = this.ob[c];
+      for (let r = 0; r < cnt; r++) {
+        let s = bc;
+        for (let j = 0; j < n; j++) s += this.ow[oc + j] * hin[j * RB + r];
+        ws.out[c * RB + r] = 1 / (1 + Math.exp(-s));
+      }
+    }
+  }
+
+  /** Premultiplied RGBA → the file's pixels (H·W·C, Uint8Array/Uint16Array), as LfnRenderer.to_pixels. */
+  toPixels(rgba, h, w) {
+    const C = this.C, peak = this.peak;
+    const out = peak > 255 ? new Uint16Array(h * w * C) : new Uint8Array(h * w * C);
+    const q = (v) => {
+      const x = Math.min(Math.max(v, 0), 1) * peak, f = Math.floor(x), r = x - f;
+      return r > 0.5 ? f + 1 : r < 0.5 ? f : (f % 2 === 0 ? f : f + 1);       // rint: half to even
+    };
+    for (let i = 0; i < h * w; i++) {
+      const a = rgba.subarray(4 * i, 4 * i + 4).map((v) => Math.min(Math.max(v, 0), 1));
+      const al = a[3], un = (v) => (al > 0 ? v / Math.max(al, 1e-6) : 0);
+      if (C === 4) { out[4 * i] = q(un(a[0])); out[4 * i + 1] = q(un(a[1])); out[4 * i + 2] = q(un(a[2])); out[4 * i + 3] = q(al); }
+      else if (C === 2) { out[2 * i] = q(un(a[0])); out[2 * i + 1] = q(al); }
+      else if (C === 1) out[i] = q(a[0]);
+      else { out[3 * i] = q(a[0]); out[3 * i + 1] = q(a[1]); out[3 * i + 2] = q(a[2]); }
+    }
+    return out;
+  }
+}

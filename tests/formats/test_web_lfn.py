@@ -1,0 +1,160 @@
+"""Light field networks in the browser viewer (formats/web/lfn.js), run under Node: the same
+pixels as the Python renderer (within one grey level: JS computes in doubles, torch in float32)
+for captured views, continuous grid positions, orbits about a posed capture's pivot, fractional
+network sizes and reduced scales; networks grown section by section equal networks opened
+whole; typed errors for bad files. Skipped with the reason where Node.js is not installed."""
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from formats.container import build_container
+from formats.lfcfile import encode_meta, open_lfc
+from formats.lightfield import LightField
+from lfn_stream import LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, to_sections
+from lfn_stream.cameras import captured_poses, scene_pivot
+
+HERE = Path(__file__).resolve().parent
+GOLDEN = HERE.parents[0] / "data" / "golden"
+NODE = shutil.which("node")
+pytestmark = pytest.mark.skipif(NODE is None, reason="Node.js is not installed (apt-get install nodejs)")
+
+
+def run_js(path: Path, out: Path, cams, first=None) -> dict:
+    import os
+
+    env = dict(os.environ, LFN_FIRST_NEURONS=str(first)) if first is not None else None
+    got = subprocess.run([NODE, str(HERE / "web_lfn.mjs"), str(path), str(out), *cams], capture_output=True,
+                         text=True, timeout=600, env=env)
+    assert got.returncode == 0, got.stderr[-3000:]
+    return json.loads(got.stdout.strip().splitlines()[-1])
+
+
+def orbit_c2w(n: int, radius: float = 4.0) -> np.ndarray:
+    """(1, n, 4, 4) cameras on a tilted ring looking at (0.2, -0.1, 0.3), OpenGL axes, z up."""
+    target = np.array([0.2, -0.1, 0.3])
+    out = np.zeros((1, n, 4, 4))
+    for i in range(n):
+        a = 2 * np.pi * i / n
+        o = target + radius * np.array([np.cos(a), np.sin(a), 0.5 + 0.2 * np.sin(3 * a)])
+        f = (target - o) / np.linalg.norm(target - o)
+        r = np.cross(f, [0, 0, 1.0])
+        r /= np.linalg.norm(r)
+        u = np.cross(r, f)
+        out[0, i, :3, :3] = np.stack([r, u, -f], 1)
+        out[0, i, :3, 3] = o
+        out[0, i, 3, 3] = 1
+    return out
+
+
+def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=True, occ=True, seed=0) -> Path:
+    torch.manual_seed(seed)
+    cfg = LfnConfig(depth=4, min_neurons=6, max_neurons=20, occupancy_neurons=8 if occ else 0)
+    m = NestedLFN(cfg)
+    with torch.no_grad():   # non-trivial LayerNorm parameters; outputs spread over [0, 1]
+        for p in list(m.gammas) + list(m.betas) + list(m.biases):
+            p.uniform_(-1, 1)
+        m.out_w.mul_(8)
+    o = OccupancyNet(8) if occ else None
+    if o is not None:       # about half of the rays rejected (sigmoid ≤ 0.1 ⇔ logit ≤ −2.197)
+        with torch.no_grad():
+            o.net[4].weight.mul_(10)
+            o.net[4].bias.fill_(-2.2)
+    views = np.zeros((1, 6, 24, 30, channels), dtype) if posed else np.zeros((3, 4, 24, 30, channels), dtype)
+    if posed:
+        c2w = orbit_c2w(6)
+        lf = LightField(views=views, positions=c2w[..., :3, 3], c2w=c2w, focal=(28.0, 27.0), principal=(15.5, 11.0),
+                        layout="posed")
+    else:
+        r, c = np.meshgrid(np.arange(3), np.arange(4), indexing="ij")
+        pos = np.stack([c * 0.3, -r * 0.25, np.zeros_like(r, float)], -1)
+        lf = LightField(views=views, positions=pos, focal=(30.0, 30.0))
+    config, sections = to_sections(m, o, {"norm": {"centre": [0.1, 0.0, 0.2], "radius": 2.5}}, weights)
+    p = tmp / f"net_{channels}_{np.dtype(dtype).name}_{weights}_{posed}.lfc"
+    p.write_bytes(b"".join(bytes(x) for x in build_container(encode_meta("lfn", 2, config, lf.geometry()), sections)))
+    return p
+
+
+def compare(path: Path, out: Path, cams, py_poses, first=None):
+    info = run_js(path, out, [c[0] for c in cams], first)
+    assert info["ok"], info
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    for i, ((_, neurons, scale), pose) in enumerate(zip(cams, py_poses)):
+        got = info["renders"][i]
+        np.testing.assert_allclose(np.array(got["pose"]).reshape(4, 4), pose, atol=1e-12)
+        want = r.to_pixels(r.render_pose(pose, neurons, scale))
+        js = np.fromfile(out / f"render_{i}.bin", want.dtype).reshape(want.shape)
+        diff = np.abs(js.astype(np.int64) - want)
+        peak = np.iinfo(want.dtype).max
+        assert diff.max() <= max(1, peak // 255), (path.name, i, diff.max())
+        assert (diff > 0).mean() < 0.02, (path.name, i, (diff > 0).mean())
+    return info, r
+
+
+def test_golden_network_matches_python_exactly(tmp_path):
+    path = GOLDEN / "lfn_tiny_rgba8.lfc"
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    cams = [("view,5,max,1", 8.0, 1.0), ("grid,1.5,2.25,6.5,1", 6.5, 1.0), ("view,0,4,auto", 4.0, None)]
+    poses = [r.pose(1, 1), r.grid_pose(1.5, 2.25), r.pose(0, 0)]
+    info, _ = compare(path, tmp_path, cams, poses)
+    assert [x["h"] for x in info["renders"]] == [29, 29, round(29 / 8)]
+
+
+@pytest.mark.parametrize("channels,dtype,weights", [(4, np.uint8, "fp16"), (3, np.uint8, "fp32"),
+                                                     (2, np.uint16, "fp16"), (1, np.uint16, "fp32")])
+def test_posed_networks_match_python(tmp_path, channels, dtype, weights):
+    path = lfn_file(tmp_path, channels, dtype, weights)
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    cams = [("view,2,max,1", 20.0, 1.0), ("orbit,4,25,-10,13.5,1", 13.5, 1.0), ("orbit,1,-140,30,9.25,auto", 9.25, None)]
+    poses = [r.pose(0, 2), r.orbit_pose(0, 4, 25, -10), r.orbit_pose(0, 1, -140, 30)]
+    info, _ = compare(path, tmp_path, cams, poses)
+    pivot, up = scene_pivot(captured_poses(r.geom.positions, r.geom.c2w), r.norm["centre"])
+    np.testing.assert_allclose(info["pivot"], pivot, atol=1e-9)
+    np.testing.assert_allclose(info["up"], up, atol=1e-12)
+    np.testing.assert_allclose(pivot, [0.2, -0.1, 0.3], atol=1e-6)     # the cameras' common target
+    if channels in (2, 4):   # the occupancy net skipped rays in both renderers
+        assert 0.1 * 24 * 30 < info["renders"][0]["evaluated"] < 0.9 * 24 * 30
+
+
+def test_grown_network_equals_the_whole_one(tmp_path):
+    path = lfn_file(tmp_path, 3, posed=False, occ=False)
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    cams = [("grid,0.4,2.7,7,1", 7.0, 1.0), ("grid,2,3,11.5,0.5", 11.5, 0.5), ("view,6,max,1", 20.0, 1.0)]
+    poses = [r.grid_pose(0.4, 2.7), r.grid_pose(2, 3), r.pose(1, 2)]
+    info, _ = compare(path, tmp_path, cams, poses, first=6)
+    assert info["opened"] == 6 and [x["neurons"] for x in info["renders"]] == [7, 12, 20]
+    assert run_js(path, tmp_path / "whole", [c[0] for c in cams])["ok"]
+    for i in range(3):
+        assert (tmp_path / f"render_{i}.bin").read_bytes() == (tmp_path / "whole" / f"render_{i}.bin").read_bytes()
+
+
+def test_bad_networks_get_typed_errors(tmp_path):
+    src = lfn_file(tmp_path, 3, posed=False, occ=False)
+    f = open_lfc(src)
+    meta = dict(f.meta)
+    secs = [(n, bytes(f.container.read(n))) for n in f.container.sections if n != "meta"]
+
+    def write(name, meta, secs):
+        p = tmp_path / f"{name}.lfc"
+        m = encode_meta(meta["codec"], meta["codec_version"], meta["config"], meta["scene"])
+        p.write_bytes(b"".join(bytes(x) for x in build_container(m, secs)))
+        return p
+
+    cases = {
+        "depth": ({**meta, "config": {**meta["config"], "network": {**meta["config"]["network"], "depth": 5}}}, secs,
+                  "FormatError", "lfn.base"),
+        "nan": (meta, [(n, b"\x00\x7e" + d[2:]) if n == "lfn.step.0003" else (n, d) for n, d in secs],
+                "FormatError", "NaN"),
+        "version": ({**meta, "codec_version": 9}, secs, "UnsupportedError", "version 9"),
+        "radius": ({**meta, "config": {**meta["config"], "norm": {"centre": [0, 0, 0], "radius": -1}}}, secs,
+                   "FormatError", "radius"),
+    }
+    for name, (m, s, err, needle) in cases.items():
+        info = run_js(write(name, m, s), tmp_path / name, ["view,0,max,1"])
+        assert not info["ok"] and info["name"] == err and needle in info["message"], (name, info)

@@ -1,0 +1,41 @@
+// Test helper: render views of an LFN .lfc file with the browser viewer's JavaScript renderer
+// (formats/web/lfn.js) under Node.
+// node web_lfn.mjs FILE OUTDIR CAM...   CAM = view,V,N,S | grid,S,T,N,S | orbit,V,YAW,PITCH,N,S
+// (N neurons, "max" = all; S image scale, "auto" = the size's own). Writes OUTDIR/render_I.bin
+// (pixels of the file's dtype, h·w·C) per camera and prints one JSON line: {ok: true, renders:
+// [{h, w, pose, evaluated}], neurons, bytesRead} or {ok: false, name, message}.
+import fs from "fs";
+import path from "path";
+import { fileURLToPath } from "url";
+
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../../formats/web");
+const { LfcFile, BufferSource, LfcError } = await import(path.join(web, "lfc.js"));
+const { LfnDecoder } = await import(path.join(web, "lfn.js"));
+
+const [file, out, ...cams] = process.argv.slice(2);
+try {
+  const src = new BufferSource(fs.readFileSync(file));
+  const f = await LfcFile.open(src, path.basename(file));
+  const first = Number(process.env.LFN_FIRST_NEURONS || Infinity);      // open with a smaller network, then grow
+  const dec = await LfnDecoder.open(f, { maxNeurons: first });
+  const opened = dec.neurons;
+  fs.mkdirSync(out, { recursive: true });
+  const renders = [];
+  for (let i = 0; i < cams.length; i++) {
+    const a = cams[i].split(",");
+    let pose, rest;
+    if (a[0] === "view") { pose = dec.pose(Number(a[1])); rest = a.slice(2); }
+    else if (a[0] === "grid") { pose = dec.gridPose(Number(a[1]), Number(a[2])); rest = a.slice(3); }
+    else { pose = dec.orbitPose(Number(a[1]), Number(a[2]), Number(a[3])); rest = a.slice(4); }
+    const n = rest[0] === "max" ? Infinity : Number(rest[0]);
+    await dec.grow(n);
+    const r = dec.render(pose, Math.min(n, dec.neurons), rest[1] === "auto" ? null : Number(rest[1]));
+    const px = dec.toPixels(r.rgba, r.h, r.w);
+    fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
+    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, neurons: dec.neurons });
+  }
+  console.log(JSON.stringify({ ok: true, renders, opened, pivot: dec.pivot, up: dec.up }));
+} catch (e) {
+  if (!(e instanceof LfcError)) throw e;
+  process.stdout.write(JSON.stringify({ ok: false, name: e.name, message: e.message }) + "\n");
+}

@@ -1,0 +1,34 @@
+// Helper of tools/bench_web_lfn.py: time the browser viewer's LFN renderer (formats/web/lfn.js)
+// under Node. node web_lfn_bench.mjs FILE OUTDIR ROUNDS NEURONS,SCALE ...  (SCALE "auto" = the
+// size's own). For each setting: grows the network (counting the section bytes read), renders the
+// captured view 0 ROUNDS times, writes OUTDIR/px_I.bin (the file's pixels) and prints one JSON
+// line: [{neurons, scale, h, w, ms (median), evaluated, bytes}].
+import fs from "fs";
+import path from "path";
+import { fileURLToPath } from "url";
+
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
+const { LfcFile, BufferSource } = await import(path.join(web, "lfc.js"));
+const { LfnDecoder } = await import(path.join(web, "lfn.js"));
+
+const [file, out, rounds, ...settings] = process.argv.slice(2);
+const src = new BufferSource(fs.readFileSync(file));
+const dec = await LfnDecoder.open(await LfcFile.open(src, path.basename(file)), { maxNeurons: 0 });
+const res = [];
+for (let i = 0; i < settings.length; i++) {
+  const [n, sc] = settings[i].split(",");
+  await dec.grow(Number(n));
+  const pose = dec.pose(0), times = [];
+  let r;
+  for (let k = 0; k < Number(rounds); k++) {
+    const t = performance.now();
+    r = dec.render(pose, Number(n), sc === "auto" ? null : Number(sc));
+    times.push(performance.now() - t);
+  }
+  times.sort((a, b) => a - b);
+  const px = dec.toPixels(r.rgba, r.h, r.w);
+  fs.writeFileSync(path.join(out, `px_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
+  const held = dec.steps.reduce((a, x) => a + x.length, dec.base.length + (dec.occ ? dec.occ.length : 0)) * dec.itemsize;
+  res.push({ neurons: Number(n), scale: sc, h: r.h, w: r.w, ms: times[times.length >> 1], evaluated: r.evaluated, bytes: held });
+}
+console.log(JSON.stringify(res));
