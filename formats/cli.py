@@ -30,8 +30,29 @@ def _ints(text: str, n: int, what: str) -> tuple[int, ...]:
     return vals
 
 
+class _Stderr:
+    """Whatever ``sys.stderr`` is at the time of each write (a bar outlives the stream that
+    :func:`formats.imageio.native_stderr` swaps in while image files are decoded)."""
+
+    def write(self, text):
+        return sys.stderr.write(text)
+
+    def flush(self):
+        sys.stderr.flush()
+
+    @property
+    def encoding(self):
+        return getattr(sys.stderr, "encoding", None) or "utf-8"
+
+    def isatty(self):
+        try:
+            return sys.stderr.isatty()
+        except (AttributeError, ValueError):
+            return False
+
+
 class _Progress:
-    """tqdm bars named by stage (one bar per stage), on stderr, off with --quiet."""
+    """tqdm bars named by stage (one bar per stage), on stderr when it is a terminal, off with --quiet."""
 
     def __init__(self, quiet: bool):
         self.quiet, self.bar, self.stage = quiet, None, None
@@ -44,7 +65,8 @@ class _Progress:
         if stage != self.stage:
             self.close()
             self.stage = stage
-            self.bar = tqdm(total=total, desc=stage, file=sys.stderr, leave=False)
+            # bars on a terminal only (disable=None): logs and pipes get the result lines alone
+            self.bar = tqdm(total=total, desc=stage, file=_Stderr(), leave=False, disable=None)
         elif done < self.bar.n:                 # the stage again (a new rate-control pass): a fresh bar
             self.bar.reset(total=total)
         self.bar.n = done
@@ -142,8 +164,12 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     if not out.parent.exists():
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
     t0 = time.perf_counter()
-    lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split, allow_outside=a.allow_outside_paths,
-                    grid=_grid(a.grid) if a.grid else None)
+    prog = _Progress(a.quiet)
+    try:
+        lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split, allow_outside=a.allow_outside_paths,
+                        grid=_grid(a.grid) if a.grid else None, progress=prog)
+    finally:
+        prog.close()
     if str(out.resolve()) in set(lf.meta.get("input_paths", ())):
         raise ParameterError(f"{out}: refusing to write over one of the input files of the scene")
     opts = EncodeOptions(target_psnr=a.target_psnr, target_bpp=a.target_bpp, min_view_psnr=a.min_view_psnr,
@@ -169,6 +195,8 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
         del ref
     # every requested target is met, or the report says so
     notes, missed = list(enc.notes), []
+    for sp in lf.meta.get("other_splits", ()):
+        notes.append(f"{scene}: split '{sp}' (transforms_{sp}.json) was not encoded; encode it with --split {sp}")
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
         notes.append(f"{enc.summary.get('profile', codec.codec_id)} codes in this process only; "
                       "--workers/--scheduler had no effect")
@@ -193,6 +221,9 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
         print(_dump(report))
     elif not a.quiet:
         quality = (f", PSNR_RGB {q:.2f} dB" if q is not None else (", exact" if report.get("exact") else ""))
+        if report.get("psnr_heldout") is not None:
+            quality += (f", held-out PSNR {report['psnr_heldout']:.2f} dB on {report['heldout_views']} views "
+                        f"(nearest training view {report['psnr_heldout_nearest_view']:.2f} dB)")
         print(f"wrote {out}: {nbytes} bytes, {report['bpp']:.4f} bpp{quality}, {enc_s:.1f} s")
     return 0
 
@@ -377,6 +408,8 @@ def cmd_decode(a) -> int:
         outdir = Path(a.outdir)
         if outdir.exists() and not outdir.is_dir():
             raise ParameterError(f"{outdir}: exists and is not a folder")
+        if not outdir.exists() and not outdir.absolute().parent.is_dir():     # as encode: no folders made on the way
+            raise ParameterError(f"{outdir}: folder {outdir.absolute().parent} does not exist")
         layout = None
         name = view_filename
         if a.names == "original":
@@ -473,7 +506,7 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Decode an .lfc file: all views as PNG (rRR_cCC.png), one view (--view), or "
                                    "one pixel block of one view (--block ROW,COL,BY,BX --out FILE.npy).")
     d.add_argument("input")
-    d.add_argument("outdir", nargs="?", help="output folder for PNG views (created if missing)")
+    d.add_argument("outdir", nargs="?", help="output folder for PNG views (created if missing; its parent must exist)")
     d.add_argument("--view", metavar="ROW,COL", help="decode only this view")
     d.add_argument("--block", metavar="ROW,COL,BY,BX",
                    help="decode one block: view (ROW,COL), block row BY and column BX (pixels [BY*B,(BY+1)*B) x "

@@ -5,7 +5,10 @@ Pixels come back as numpy arrays of shape (H, W, C) in the file's own integer de
 """
 from __future__ import annotations
 
+import contextlib
 import os
+import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +28,47 @@ def _one_line(msg: str) -> str:
     """An image library's message as one short line (libpng and friends print several)."""
     lines = [x.strip() for x in (msg or "").splitlines() if x.strip()]
     return (lines[-1] if lines else "unknown format")[:200]
+
+
+@contextlib.contextmanager
+def native_stderr():
+    """Hold what C libraries print on file descriptor 2 while image files are decoded (libpng
+    prints "libpng error: ..." before OpenImageIO reports the same error, which our SceneError
+    names in one line): the text is written out after the block when it ends normally and dropped
+    when it raises. Python's own ``sys.stderr`` (progress bars) is not affected. Not reentrant
+    across threads: enter it from one thread around the threaded reads."""
+    try:
+        fd = sys.stderr.fileno()
+    except (AttributeError, OSError, ValueError):      # no real descriptor (pytest capture, IDEs)
+        yield
+        return
+    with tempfile.TemporaryFile() as tmp:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        # Python's sys.stderr keeps writing to the terminal through its own duplicate
+        py_fd = os.dup(saved) if fd == 2 else None
+        old_stream = sys.stderr
+        if py_fd is not None:
+            sys.stderr = os.fdopen(py_fd, "w", buffering=1, encoding=getattr(old_stream, "encoding", None) or "utf-8",
+                                   errors="backslashreplace")
+        os.dup2(tmp.fileno(), 2)
+        ok = False
+        try:
+            yield
+            ok = True
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+            if py_fd is not None:
+                sys.stderr.flush()
+                sys.stderr.close()
+                sys.stderr = old_stream
+            if ok:
+                tmp.seek(0)
+                text = tmp.read()
+                if text:
+                    old_stream.write(text.decode("utf-8", "replace"))
+                    old_stream.flush()
 
 
 def image_size(path: str | os.PathLike) -> tuple[int, int, int, str]:

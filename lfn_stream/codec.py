@@ -21,6 +21,25 @@ def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: s
     return config, sections
 
 
+def heldout_report(lf, config: dict, sections, info: dict) -> dict:
+    """Held-out quality of a trained network as the file will hold it (fp16 weights included):
+    the full network renders every held-out view at the scene's resolution, scored against the
+    views (RGB premultiplied on black, plus alpha when present; :mod:`lfn_stream.evaluate`) beside
+    the nearest training view (camera distance)."""
+    from formats.container import build_container
+    from formats.lfcfile import encode_meta, open_lfc
+
+    from .evaluate import evaluate
+
+    blob = b"".join(bytes(p) for p in build_container(encode_meta(CODEC_ID, CODEC_VERSION, config, lf.geometry()),
+                                                      sections))
+    r = LfnRenderer(open_lfc(blob), device="cpu")
+    row = evaluate(r, lf, info["test_views"], info["train_views"], [float(r.cfg.max_neurons)])[0]
+    return {"heldout_views": len(info["test_views"]), "psnr_heldout": round(row["psnr"], 3),
+            "ssim_heldout": None if row["ssim"] is None else round(row["ssim"], 4),
+            "psnr_heldout_nearest_view": round(row["psnr_nearest_view"], 3)}
+
+
 NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
 TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s")
 OPTIONS = {"depth": int, "min_neurons": int, "max_neurons": int, "occupancy_neurons": int, "steps": int,
@@ -50,6 +69,7 @@ class LfnCodec(Codec):
         p = dict(options.params)
         weights = p.pop("weights", "fp16")
         resolution = p.pop("resolution", 128)
+        full = lf
         if resolution:   # train at reduced resolution; the file keeps the scene's geometry (renders full size)
             if resolution < 8:
                 raise ParameterError(f"--resolution must be 0 (full) or >= 8 pixels, got {resolution}")
@@ -68,9 +88,18 @@ class LfnCodec(Codec):
 
         model, occ, info = train(lf, cfg, opts, progress=prog)
         config, sections = to_sections(model, occ, info, weights)
-        return Encoded(config, sections, None, [], [], None,
-                       summary={"steps": info["steps"], "train_s": round(info["train_s"], 1),
-                                "params": model.n_params(), "final_loss": opts.history[-1][1] if opts.history else None})
+        summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
+                   "final_loss": opts.history[-1][1] if opts.history else None}
+        if info["test_views"]:
+            if progress:
+                progress("held-out views", 0, len(info["test_views"]))
+            summary.update(heldout_report(full, config, sections, info))
+        notes = []
+        if summary.get("psnr_heldout", np.inf) < summary.get("psnr_heldout_nearest_view", -np.inf):
+            notes.append(f"held-out views: the network ({summary['psnr_heldout']:.2f} dB) is below the nearest "
+                         f"training view ({summary['psnr_heldout_nearest_view']:.2f} dB); train longer (--steps) "
+                         f"or larger (--max-neurons)")
+        return Encoded(config, sections, None, notes=notes, summary=summary)
 
     def open(self, f, **kw) -> LfnRenderer:
         return LfnRenderer(f, **kw)
@@ -97,4 +126,4 @@ class LfnCodec(Codec):
         return {k: getattr(a, k) for k in OPTIONS if getattr(a, k, None) is not None}
 
 
-__all__ = ["to_sections", "LfnCodec", "CODEC_ID", "CODEC_VERSION"]
+__all__ = ["to_sections", "heldout_report", "LfnCodec", "CODEC_ID", "CODEC_VERSION"]

@@ -54,7 +54,7 @@ def read_npy(p: Path, grid: tuple[int, int] | None, limits: Limits = DEFAULT) ->
 
 def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float | None = None,
                focal: float | None = None, allow_outside: bool = False, limits: Limits = DEFAULT,
-               grid: tuple[int, int] | None = None) -> LightField:
+               grid: tuple[int, int] | None = None, progress=None) -> LightField:
     """Read a light field from a folder (or a transforms JSON file), detecting its layout.
 
     Args:
@@ -66,6 +66,7 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         limits: caps on the number of views and pixels, checked before pixels are read.
         grid: (rows, cols) for a plain folder of images (natural name order, row-major); a
             folder with its own layout file ignores it.
+        progress: ``progress(stage, done, total)`` as views are decoded, or None.
 
     Returns:
         the light field; ``meta["input_paths"]`` lists every file read (resolved).
@@ -74,7 +75,7 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         SceneError: not a folder, empty, no recognizable layout, unreadable/mismatched views,
             paths outside the scene, or sizes over the limits.
     """
-    opts = ReadOptions(limits, allow_outside)
+    opts = ReadOptions(limits, allow_outside, progress)
     if split not in ("train", "val", "test") and not (isinstance(split, str) and split.isidentifier()):
         raise SceneError(f"split must be a plain name like train or test, got {split!r}")
     p = Path(path)
@@ -92,7 +93,12 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         return read_llff(p, opts)
     for name in ("transforms.json", f"transforms_{split}.json"):
         if (p / name).is_file():
-            return read_transforms(p / name, opts)
+            lf = read_transforms(p / name, opts)
+            others = sorted(q.name[len("transforms_"):-len(".json")] for q in p.glob("transforms_*.json")
+                            if q.name != name and q.is_file())
+            if others:      # splits not read: the CLI says so (a user may want them too)
+                lf.meta["other_splits"] = others
+            return lf
     entries = [e for e in p.iterdir() if not e.name.startswith(".")]
     if not entries:
         raise SceneError(f"{p}: empty folder")

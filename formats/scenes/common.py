@@ -5,13 +5,14 @@ from __future__ import annotations
 import math
 import os
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Callable
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import SceneError
-from ..imageio import IMAGE_EXTENSIONS, image_size, read_image
+from ..imageio import IMAGE_EXTENSIONS, image_size, native_stderr, read_image
 from ..limits import DEFAULT, Limits
 
 
@@ -24,10 +25,12 @@ class ReadOptions:
         allow_outside: read files that lie outside the scene folder (``..``, absolute paths,
             symlinks leading out). Off by default: a scene file from elsewhere must not pull in
             arbitrary images from the host.
+        progress: ``progress(stage, done, total)`` as views are decoded (the CLI's bars), or None.
     """
 
     limits: Limits = DEFAULT
     allow_outside: bool = False
+    progress: Callable[[str, int, int], None] | None = field(default=None, compare=False)
 
 
 def is_image(p: Path) -> bool:
@@ -100,8 +103,12 @@ def load_views(paths: list[Path], what: str, opts: ReadOptions = ReadOptions()) 
                 f"{what}: view {p.name} is {hd[0]}x{hd[1]}x{hd[2]} {hd[3]}, but {paths[0].name} is "
                 f"{h}x{w}x{c} {fmt}; all views must share size, channels and bit depth")
     workers = min(4, len(paths))
-    with ThreadPoolExecutor(workers) as ex:
-        imgs = list(ex.map(lambda p: read_image(p, opts.limits.max_view_pixels), paths))
+    imgs = []
+    with native_stderr(), ThreadPoolExecutor(workers) as ex:
+        for im in ex.map(lambda p: read_image(p, opts.limits.max_view_pixels), paths):
+            imgs.append(im)
+            if opts.progress is not None:
+                opts.progress("read views", len(imgs), len(paths))
     first = imgs[0]
     for p, im in zip(paths, imgs):
         if im.shape != first.shape or im.dtype != first.dtype:

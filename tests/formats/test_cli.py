@@ -229,9 +229,12 @@ def test_posed_captures_code_view_by_view_and_round_trip(tmp_path, capsys):
         m[0, 3] = 0.1 * i
         frames.append({"file_path": f"./train/r_{i}", "transform_matrix": m.tolist()})
     (scene / "transforms_train.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames}))
+    (scene / "transforms_test.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames[:1]}))
     assert main(["encode", str(scene), str(tmp_path / "p.lfc"), "--lossless", "--json", "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert rep["profile"] == "tx" and any("coded on its own" in w for w in rep["notes"])
+    assert any("split 'test'" in w and "--split test" in w for w in rep["notes"])     # not dropped silently
+    (scene / "transforms_test.json").unlink()
     assert main(["encode", str(scene), str(tmp_path / "q.lfc"), "--profile", "dcp", "--quiet"]) == 2
     assert main(["decode", str(tmp_path / "p.lfc"), str(tmp_path / "dec"), "--quiet"]) == 0
     assert (tmp_path / "dec" / "transforms.json").is_file()
@@ -273,3 +276,23 @@ def test_plain_folder_with_grid_option(tmp_path, capsys):
     assert main(["encode", str(folder), str(tmp_path / "a.lfc"), "--grid", "2x3", "--lossless", "--quiet"]) == 0
     assert main(["decode", str(tmp_path / "a.lfc"), str(tmp_path / "d"), "--quiet"]) == 0
     assert (read_scene(tmp_path / "d").views == views).all()
+
+
+def test_corrupt_image_is_one_line_and_decode_needs_the_parent_folder(tmp_path, capfd):
+    """libpng's own "libpng error: ..." line is held back (the SceneError names the file and the
+    error); decode, like encode, makes no folders on the way to its output."""
+    import shutil
+
+    scene = tmp_path / "scene"
+    shutil.copytree(SAMPLE, scene)
+    png = scene / "views" / "r03_c04.png"
+    png.write_bytes(png.read_bytes()[:3000])
+    capfd.readouterr()
+    assert main(["encode", str(scene), str(tmp_path / "x.lfc"), "--quiet"]) == 2
+    err = capfd.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "r03_c04.png" in err[0] and "libpng" not in err[0], err
+    golden = ROOT / "tests" / "data" / "golden" / "rlfc_tx2_lossy_rgb8.lfc"
+    assert main(["decode", str(golden), str(tmp_path / "no" / "such" / "out"), "--quiet"]) == 2
+    assert "does not exist" in capfd.readouterr().err and not (tmp_path / "no").exists()
+    assert main(["decode", str(golden), str(tmp_path / "out"), "--quiet"]) == 0     # the folder itself is made
+    assert (tmp_path / "out" / "r00_c00.png").is_file()

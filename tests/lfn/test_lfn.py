@@ -185,6 +185,10 @@ def test_train_checkpoint_resume_and_cli(tmp_path, capsys):
                  "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert rep["bytes"] == out.stat().st_size
+    # held-out views (every 4th of 81) scored at the scene's resolution beside the nearest training view
+    assert rep["heldout_views"] == 20 and 5 < rep["psnr_heldout"] < 60 and rep["psnr_heldout_nearest_view"] > 30
+    assert any("below the nearest training view" in n for n in rep["notes"]) == \
+        (rep["psnr_heldout"] < rep["psnr_heldout_nearest_view"])
     assert main(["info", str(out), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["codec"] == "lfn"
     # level 1.5 = 6.5 neurons of 8; trained at 32 px, rendered at the scene's own 128x160
