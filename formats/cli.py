@@ -196,7 +196,8 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     # every requested target is met, or the report says so
     notes, missed = list(enc.notes), []
     for sp in lf.meta.get("other_splits", ()):
-        notes.append(f"{scene}: split '{sp}' (transforms_{sp}.json) was not encoded; encode it with --split {sp}")
+        notes.append(f"{scene}: split '{sp}' (transforms_{sp}.json) was not encoded; encode it with --split {sp}, "
+                     f"or every split as one capture with --split all")
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
         notes.append(f"{enc.summary.get('profile', codec.codec_id)} codes in this process only; "
                       "--workers/--scheduler had no effect")
@@ -436,7 +437,8 @@ def cmd_decode(a) -> int:
             # the layout file, so that the folder encodes again as the same scene
             layout = write_layout(outdir, f.meta["scene"], name)
         if not a.quiet:
-            print(f"wrote {len(paths)} view(s){f' and {layout.name}' if layout else ''} to {outdir} (level "
+            lname = layout.name if layout is None or not layout.name.startswith("transforms_") else "transforms_*.json"
+            print(f"wrote {len(paths)} view(s){f' and {lname}' if layout else ''} to {outdir} (level "
                   f"{a.level:g}) in {time.perf_counter() - t0:.2f} s")
     return 0
 
@@ -461,7 +463,8 @@ def _add_codec_groups(parser, only: str | None = None) -> dict:
 def _add_scene_options(e) -> None:
     e.add_argument("--baseline", type=float, default=None, help="grid baseline when the scene has none")
     e.add_argument("--focal", type=float, default=None, help="focal length in pixels when the scene has none")
-    e.add_argument("--split", default="train", help="transforms_<split>.json to read (default train)")
+    e.add_argument("--split", default="train", help="transforms_<split>.json to read (default train; all = every "
+                                                    "split as one capture, written back split by split on decode)")
     e.add_argument("--grid", metavar="ROWSxCOLS", default=None,
                    help="read a plain folder of images as this grid (natural name order, row-major)")
     e.add_argument("--allow-outside-paths", action="store_true",
@@ -517,7 +520,7 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--names", choices=("grid", "original"), default="grid",
                    help="file names of decoded views: grid = rRR_cCC.png (default); original = the names the "
                         "views had when encoded, as PNG (subfolders kept, e.g. images/IMG_0001.png)")
-    d.add_argument("--quiet", action="store_true")
+    d.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     d.set_defaults(func=cmd_decode)
 
     r = sub.add_parser("render", help="render a novel view (or a refocused view, or a quilt) from an .lfc grid",
@@ -543,7 +546,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fast", action="store_true",
                    help="use the file's disparity maps as they are (about 3x faster; the default also tries "
                         "smoother disparities where the maps make the views disagree, e.g. on noisy captures)")
-    r.add_argument("--quiet", action="store_true")
+    r.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     r.set_defaults(func=cmd_render)
 
     v = sub.add_parser("serve", help="serve a folder over HTTP with byte ranges (for remote reading)",

@@ -99,6 +99,9 @@ class LightField:
             from .viewnames import pack_names
 
             g["names_z"] = pack_names(list(names))
+        splits = self.meta.get("splits")
+        if isinstance(splits, list) and sum(n for _, n in splits) == self.rows * self.cols:
+            g["splits"] = [[str(k), int(n)] for k, n in splits]
         return g
 
     @staticmethod
@@ -155,7 +158,8 @@ def read_geometry(g: dict, where: str, limits: Limits = DEFAULT, rows: int | Non
     Returns:
         a dict with rows, cols, height, width, channels, dtype, layout, focal, principal and
         either baseline (list) or positions ((rows, cols, 3) array), plus c2w and the views'
-        original file names (``names``, from ``names_z``: :mod:`formats.viewnames`) when present.
+        original file names (``names``, from ``names_z``: :mod:`formats.viewnames`) and the
+        splits of a posed capture (``splits``: [(name, views)] in view order) when present.
 
     Raises:
         FormatError naming ``where`` and the field.
@@ -187,6 +191,16 @@ def read_geometry(g: dict, where: str, limits: Limits = DEFAULT, rows: int | Non
         out["baseline"] = _finite_array(f._get("baseline", [1.0, 1.0]), (2,), where, "baseline").tolist()
     if f.has("c2w"):
         out["c2w"] = _finite_array(f.obj["c2w"], shape + (4, 4), where, "c2w")
+    if f.has("splits"):
+        sp = f.obj["splits"]
+        n_views = out["rows"] * out["cols"]
+        if not (isinstance(sp, list) and 1 <= len(sp) <= 64 and all(
+                isinstance(x, list) and len(x) == 2 and isinstance(x[0], str) and x[0].isidentifier()
+                and len(x[0]) <= 32 and isinstance(x[1], int) and not isinstance(x[1], bool) and x[1] >= 1
+                for x in sp) and len({x[0] for x in sp}) == len(sp) and sum(x[1] for x in sp) == n_views):
+            raise FormatError(f"{where}: field 'splits' must be a list of distinct [name, views] pairs (plain "
+                              f"names, counts >= 1) covering the {n_views} views in order")
+        out["splits"] = [(x[0], x[1]) for x in sp]
     if f.has("names_z"):
         from .viewnames import unpack_names
 

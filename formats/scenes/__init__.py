@@ -23,10 +23,10 @@ from .common import ReadOptions, is_image
 from .grid import read_grid, read_image_folder
 from .layout import write_layout
 from .named import HCI_RE, STANFORD_RE, read_hci, read_stanford
-from .posed import plucker_rays, read_llff, read_transforms
+from .posed import plucker_rays, read_llff, read_transform_splits, read_transforms
 
 __all__ = ["read_scene", "write_views", "write_layout", "read_grid", "read_hci", "read_stanford", "read_llff",
-           "read_transforms", "plucker_rays", "view_filename"]
+           "read_transforms", "read_transform_splits", "plucker_rays", "view_filename"]
 
 
 def read_npy(p: Path, grid: tuple[int, int] | None, limits: Limits = DEFAULT) -> LightField:
@@ -60,7 +60,9 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
     Args:
         path: scene folder, ``transforms*.json`` file, or an ``.npy`` array of views
             (memory-mapped; ``grid`` gives its rows and columns).
-        split: for NeRF-synthetic folders with ``transforms_<split>.json``.
+        split: for NeRF-synthetic folders with ``transforms_<split>.json``; ``"all"`` reads every
+            split as one posed capture (train, val, test, then others by name), recording the
+            splits so that a decode writes them back as separate files.
         baseline, focal: override unknown grid geometry (scene units, pixels).
         allow_outside: read view files that lie outside the scene folder (off by default).
         limits: caps on the number of views and pixels, checked before pixels are read.
@@ -91,6 +93,8 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         return read_grid(p, baseline=baseline, focal=focal, opts=opts)
     if (p / "poses_bounds.npy").is_file():
         return read_llff(p, opts)
+    if split == "all" and not (p / "transforms.json").is_file() and any(p.glob("transforms_*.json")):
+        return read_transform_splits(p, opts)
     for name in ("transforms.json", f"transforms_{split}.json"):
         if (p / name).is_file():
             lf = read_transforms(p / name, opts)

@@ -26,7 +26,8 @@ def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
         filename: (row, col) → the view's file name inside ``folder``.
 
     Returns:
-        the path written (``scene.json`` or ``transforms.json``).
+        the path written (``scene.json`` or ``transforms.json``; the first ``transforms_<split>.json``
+        when the geometry records splits, one file per split).
     """
     folder = Path(folder)
     g = read_geometry(geometry, "scene")
@@ -48,8 +49,16 @@ def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
         cx, cy = g.get("principal", (g["width"] / 2.0, g["height"] / 2.0))
         frames = [{"file_path": filename(r, c), "transform_matrix": np.round(c2w[r, c], 9).tolist()}
                   for r in range(rows) for c in range(cols)]
-        doc = {"fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": g["width"], "h": g["height"],
-               "frames": frames, "source": "decoded by lfcodec"}
+        head = {"fl_x": fx, "fl_y": fy, "cx": cx, "cy": cy, "w": g["width"], "h": g["height"]}
+        if "splits" in g:               # one transforms_<split>.json per recorded split, frames in order
+            start, paths = 0, []
+            for name, n in g["splits"]:
+                doc = {**head, "frames": frames[start:start + n], "source": "decoded by lfcodec"}
+                paths.append(folder / f"transforms_{name}.json")
+                _atomic_write(paths[-1], json.dumps(doc, indent=1, allow_nan=False) + "\n")
+                start += n
+            return paths[0]
+        doc = {**head, "frames": frames, "source": "decoded by lfcodec"}
         path = folder / "transforms.json"
     _atomic_write(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return path

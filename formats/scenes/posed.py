@@ -118,6 +118,48 @@ def read_transforms(path: Path, opts: ReadOptions = ReadOptions()) -> LightField
                             "input_paths": [str(f.resolve()) for f in files] + [str(path.resolve())]})
 
 
+SPLIT_ORDER = ("train", "val", "test")
+
+
+def read_transform_splits(folder: Path, opts: ReadOptions = ReadOptions()) -> LightField:
+    """Every ``transforms_<split>.json`` of a folder as one posed capture (train, val, test, then
+    other splits by name). The splits must share view size, channels, depth and intrinsics; the
+    light field records them (``meta["splits"]``: [(name, views)] in view order), so a decode
+    writes each split back to its own file."""
+    names = [q.name[len("transforms_"):-len(".json")] for q in folder.glob("transforms_*.json") if q.is_file()]
+    names = sorted(names, key=lambda n: (SPLIT_ORDER.index(n) if n in SPLIT_ORDER else len(SPLIT_ORDER), n))
+    if not names:
+        raise SceneError(f"{folder}: no transforms_<split>.json files")
+    parts, total = [], 0
+    for n in names:
+        lf = read_transforms(folder / f"transforms_{n}.json", opts)
+        total += lf.cols
+        check_count(total, str(folder), opts)
+        if total * lf.height * lf.width > opts.limits.max_scene_pixels:
+            raise SceneError(f"{folder}: {total} views of {lf.height}x{lf.width} pixels exceed the limit of "
+                             f"{opts.limits.max_scene_pixels} pixels per scene")
+        if parts:
+            a = parts[0][1]
+            if lf.views.shape[2:] != a.views.shape[2:] or lf.views.dtype != a.views.dtype:
+                raise SceneError(f"{folder}: split '{n}' has views of {lf.views.shape[2:]} {lf.views.dtype}, split "
+                                 f"'{parts[0][0]}' {a.views.shape[2:]} {a.views.dtype}; --split all needs them equal")
+            if not (np.allclose(lf.focal, a.focal, rtol=1e-6) and np.allclose(lf.principal, a.principal, rtol=1e-6)):
+                raise SceneError(f"{folder}: split '{n}' has other camera intrinsics than split '{parts[0][0]}'; "
+                                 f"--split all needs one camera model")
+        parts.append((n, lf))
+    first = parts[0][1]
+
+    def cat(key):
+        return [x for _, lf in parts for x in lf.meta[key]]
+
+    return LightField(views=np.concatenate([lf.views for _, lf in parts], 1),
+                      positions=np.concatenate([lf.positions for _, lf in parts], 1),
+                      c2w=np.concatenate([lf.c2w for _, lf in parts], 1), focal=first.focal, principal=first.principal,
+                      layout="posed",
+                      meta={"reader": "transforms", "files": cat("files"), "view_names": cat("view_names"),
+                            "input_paths": cat("input_paths"), "splits": [(n, lf.cols) for n, lf in parts]})
+
+
 def plucker_rays(lf: LightField, row: int, col: int) -> tuple[np.ndarray, np.ndarray]:
     """Per-pixel rays of one view: origins and unit directions, both (H, W, 3) float64.
 

@@ -296,3 +296,40 @@ def test_corrupt_image_is_one_line_and_decode_needs_the_parent_folder(tmp_path, 
     assert "does not exist" in capfd.readouterr().err and not (tmp_path / "no").exists()
     assert main(["decode", str(golden), str(tmp_path / "out"), "--quiet"]) == 0     # the folder itself is made
     assert (tmp_path / "out" / "r00_c00.png").is_file()
+
+
+def test_split_all_encodes_every_split_and_decodes_them_back(tmp_path, capsys):
+    """--split all: a NeRF-style folder's splits as one posed capture; decode --names original
+    writes each split back to its own transforms_<split>.json and folder, which reads again (split
+    all) to the same views, cameras and split sizes."""
+    from formats.imageio import write_image
+
+    scene = tmp_path / "posed"
+    rng = np.random.default_rng(1)
+    for split, n in (("train", 3), ("test", 2)):
+        (scene / split).mkdir(parents=True)
+        frames = []
+        for i in range(n):
+            write_image(scene / split / f"r_{i}.png", rng.integers(0, 256, (16, 24, 3), dtype=np.uint8))
+            m = np.eye(4)
+            m[:3, 3] = [0.1 * i, 0.05 * len(split), 0.0]
+            frames.append({"file_path": f"./{split}/r_{i}", "transform_matrix": m.tolist()})
+        (scene / f"transforms_{split}.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames}))
+    a = read_scene(scene, split="all")
+    assert a.cols == 5 and a.meta["splits"] == [("train", 3), ("test", 2)]
+    assert main(["encode", str(scene), str(tmp_path / "p.lfc"), "--split", "all", "--lossless", "--json",
+                 "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert rep["views"] == 5 and not any("was not encoded" in n for n in rep["notes"])
+    assert main(["decode", str(tmp_path / "p.lfc"), str(tmp_path / "dec"), "--names", "original", "--quiet"]) == 0
+    assert sorted(p.name for p in (tmp_path / "dec").glob("transforms*.json")) == ["transforms_test.json",
+                                                                                  "transforms_train.json"]
+    assert (tmp_path / "dec" / "test" / "r_1.png").is_file()
+    b = read_scene(tmp_path / "dec", split="all")
+    assert (a.views == b.views).all() and np.allclose(a.c2w, b.c2w) and b.meta["splits"] == a.meta["splits"]
+    assert read_scene(tmp_path / "dec", split="test").cols == 2
+    # intrinsics that differ between splits are refused, not mixed
+    doc = json.loads((scene / "transforms_test.json").read_text())
+    (scene / "transforms_test.json").write_text(json.dumps({**doc, "camera_angle_x": 0.7}))
+    assert main(["encode", str(scene), str(tmp_path / "q.lfc"), "--split", "all", "--quiet"]) == 2
+    assert "intrinsics" in capsys.readouterr().err

@@ -33,13 +33,18 @@ def _base(cmd, root, out):
     return {"encode": ["encode", str(root / "scene"), str(out)],
             "decode": ["decode", str(root / "t.lfc"), str(out)],
             "info": ["info", str(root / "t.lfc")],
+            "serve": ["serve", str(root)],
+            "view": ["view", str(root / "t.lfc")],
             "render": ["render", str(root / "t.lfc"), str(out) + ".png", "--at", "0.5,0.5"],
             "train": ["train", str(root / "scene"), str(out), "--steps", "1", "--max-neurons", "32"]}[cmd]
 
 
-@pytest.mark.parametrize("cmd", ["encode", "decode", "render", "train"])
+@pytest.mark.parametrize("cmd", ["encode", "decode", "render", "train", "serve", "view"])
 def test_every_option_with_bad_values_exits_0_or_2(cmd, tiny, tmp_path, capsys, monkeypatch):
     monkeypatch.chdir(tmp_path)        # a bad value may be a valid file name (--checkpoint nan): keep it here
+    from formats.serve import FileServer
+
+    monkeypatch.setattr(FileServer, "serve_forever", lambda self: None)   # serve/view: bind, print, return
     seen = 0
     for opt in _options(cmd):
         if cmd == "train" and opt == "--steps":
@@ -50,8 +55,7 @@ def test_every_option_with_bad_values_exits_0_or_2(cmd, tiny, tmp_path, capsys, 
             continue                                          # lfn options: refused for rlfc (below)
         for bad in BAD:
             out = tmp_path / f"o{seen}"
-            argv = _base(cmd, tiny, out) + [opt, bad, "--quiet"] if cmd != "info" else \
-                _base(cmd, tiny, out) + [opt, bad]
+            argv = _base(cmd, tiny, out) + [opt, bad] + (["--quiet"] if cmd not in ("info", "serve", "view") else [])
             try:
                 rc = main(argv)
             except SystemExit as e:                            # argparse: usage line, exit 2

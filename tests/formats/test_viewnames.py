@@ -112,3 +112,15 @@ def test_original_names_need_a_file_that_has_them(tmp_path, capsys):
     assert "names_z" not in open_lfc(str(f)).meta["scene"]
     assert main(["decode", str(f), str(tmp_path / "dec"), "--names", "original", "--quiet"]) == 2
     assert "original names" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("splits", [[["train", 3]], [["train", 2], ["train", 2]], [["../x", 4]], [["a", 0], ["b", 4]],
+                                    [["a", True], ["b", 3]], "train", [["a", 2, 3]], [[1, 4]], [["a", 4.0]]])
+def test_bad_splits_are_format_errors(splits):
+    """A file's recorded splits are untrusted: distinct plain names, counts >= 1 covering every view."""
+    from formats.lightfield import read_geometry
+
+    g = {"rows": 1, "cols": 4, "height": 2, "width": 2, "channels": 3, "dtype": "uint8", "splits": splits}
+    with pytest.raises(FormatError, match="splits"):
+        read_geometry(g, "scene")
+    assert read_geometry({**g, "splits": [["train", 3], ["test", 1]]}, "scene")["splits"] == [("train", 3), ("test", 1)]
