@@ -865,7 +865,9 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                            tol=0.03 if floor else 0.01, prefer=prefer)
         found, res = sr.found, sr.result
         if not found:
-            notes.append("even the finest quantizer misses the target; the closest setting is written")
+            notes.append("even the finest quantizer misses the target; the closest setting is written" if floor else
+                         "even the coarsest quantizer (and the smallest key views) cannot reach this bpp; the "
+                         "closest setting is written")
         # one more pass with the model of the chosen point, kept where it meets the target and,
         # for a bpp target, gives better quality
         again = enc.run(res["step"], enc.model_of(res), progress, keep_pixels=True)
