@@ -80,6 +80,16 @@ def canvas_rgb(page) -> np.ndarray:
     return np.asarray(data, np.uint8).reshape(h, w, 4)[..., :3]
 
 
+def drag(page) -> None:
+    """Drag across the canvas (up and to the left) and wait for the frame."""
+    box = page.locator("#view").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.mouse.down()
+    page.mouse.move(box["x"] + box["width"] / 4, box["y"] + box["height"] / 3, steps=5)
+    page.mouse.up()
+    page.wait_for_function("!lfcViewer.state.busy")
+
+
 @pytest.mark.parametrize("name", ["dino.lfc", "res.lfc"])
 def test_viewer_matches_python(site, page, name):
     srv, f = site
@@ -108,12 +118,7 @@ def test_drag_moves_the_viewpoint(site, page):
     srv, f = site
     assert open_viewer(page, srv, f.name) == "ready"
     before = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
-    box = page.locator("#view").bounding_box()
-    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-    page.mouse.down()
-    page.mouse.move(box["x"] + box["width"] / 4, box["y"] + box["height"] / 3, steps=5)
-    page.mouse.up()
-    page.wait_for_function("!lfcViewer.state.busy")
+    drag(page)
     after = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
     assert after[0] > before[0] and after[1] > before[1]
 
@@ -180,11 +185,6 @@ def test_network_weights_stream_as_the_level_rises(site, page):
     assert low["bytesFetched"] < high["bytesFetched"] <= net.stat().st_size
     assert 0 < high["requests"] - low["requests"] <= 2          # one range request for all the new steps
     before = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
-    box = page.locator("#view").bounding_box()
-    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
-    page.mouse.down()
-    page.mouse.move(box["x"] + box["width"] / 4, box["y"] + box["height"] / 3, steps=3)
-    page.mouse.up()
-    page.wait_for_function("!lfcViewer.state.busy")
+    drag(page)
     after = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
     assert after != before
