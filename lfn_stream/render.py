@@ -57,6 +57,7 @@ class LfnRenderer(Decoder):
         shape = (scene["rows"], scene["cols"], scene["height"], scene["width"], 1)
         # geometry only: a zero-stride placeholder of the views' shape (no pixel memory)
         self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), f.meta["scene"])
+        self.poses = captured_poses(self.geom.positions, self.geom.c2w)      # (R, C, 4, 4) camera-to-world
         self.rows, self.cols = scene["rows"], scene["cols"]
         self.height, self.width, self.channels = scene["height"], scene["width"], scene["channels"]
         if scene["dtype"] not in ("uint8", "uint16"):
@@ -181,17 +182,17 @@ class LfnRenderer(Decoder):
         """4×4 camera-to-world matrix of a captured view (OpenGL axes, scene units)."""
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
-        return captured_poses(self.geom.positions, self.geom.c2w)[row, col].copy()
+        return self.poses[row, col].copy()
 
     def grid_pose(self, s: float, t: float) -> np.ndarray:
         """Pose at a continuous grid position (row s, column t): centres blended bilinearly, the
         nearest view's rotation."""
-        return grid_pose(captured_poses(self.geom.positions, self.geom.c2w), float(s), float(t))
+        return grid_pose(self.poses, float(s), float(t))
 
     def orbit_pose(self, row: int, col: int, yaw: float, pitch: float = 0.0) -> np.ndarray:
         """A captured view turned about the scene's pivot (the point nearest every optical axis):
         ``yaw`` degrees about the mean up vector, ``pitch`` degrees about the camera's right axis."""
-        pivot, up = scene_pivot(captured_poses(self.geom.positions, self.geom.c2w), self.norm["centre"])
+        pivot, up = scene_pivot(self.poses, self.norm["centre"])
         return orbit_pose(self.pose(row, col), pivot, up, float(yaw), float(pitch))
 
     def stereo_poses(self, pose: np.ndarray, ipd: float) -> tuple[np.ndarray, np.ndarray]:

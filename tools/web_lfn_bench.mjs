@@ -28,7 +28,7 @@ for (let i = 0; i < settings.length; i++) {
   times.sort((a, b) => a - b);
   const px = dec.toPixels(r.rgba, r.h, r.w);
   fs.writeFileSync(path.join(out, `px_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
-  const held = dec.steps.reduce((a, x) => a + x.length, dec.base.length + (dec.occ ? dec.occ.length : 0)) * dec.itemsize;
+  const held = dec.weightBytes();
   res.push({ neurons: Number(n), scale: sc, h: r.h, w: r.w, ms: times[times.length >> 1], evaluated: r.evaluated, bytes: held });
 }
 console.log(JSON.stringify(res));

@@ -240,15 +240,7 @@ export class LfcFile {
       while (e + 1 <= k1 && !s.chunks.has(e + 1)) e++;
       const lo = k * s.chunk, hi = Math.min((e + 1) * s.chunk, s.length);
       const got = await this.source.read(s.offset + lo, s.offset + hi);
-      for (let j = k; j <= e; j++) {
-        const part = got.slice((j - k) * s.chunk, Math.min((j - k + 1) * s.chunk, got.length));
-        if (crc32(part) !== this.crcs[s.first + j]) {
-          throw new FormatError(`${this.name}: checksum mismatch in section '${sname}' chunk ${j} (corrupt file)`);
-        }
-        s.chunks.set(j, part);
-        this.lru.set(`${sname}/${j}`, part);
-        this.held += part.length;
-      }
+      for (let j = k; j <= e; j++) this._store(s, j, got.slice((j - k) * s.chunk, Math.min((j - k + 1) * s.chunk, got.length)));
       k = e + 1;
     }
     const out = this._assemble(s, a, b, k0, k1);
@@ -280,17 +272,19 @@ export class LfcFile {
       let e = i;
       while (e + 1 < want.length && want[e + 1][0] === want[e][1]) e++;
       const lo = want[i][0], got = await this.source.read(lo, want[e][1]);
-      for (let k = i; k <= e; k++) {
-        const [a, b, s, j] = want[k], part = got.slice(a - lo, b - lo);
-        if (crc32(part) !== this.crcs[s.first + j]) {
-          throw new FormatError(`${this.name}: checksum mismatch in section '${s.name}' chunk ${j} (corrupt file)`);
-        }
-        s.chunks.set(j, part);
-        this.lru.set(`${s.name}/${j}`, part);
-        this.held += part.length;
-      }
+      for (let k = i; k <= e; k++) this._store(want[k][2], want[k][3], got.slice(want[k][0] - lo, want[k][1] - lo));
       i = e + 1;
     }
+  }
+
+  /** Verify chunk j of section s against its CRC and keep it (counted in the budget). */
+  _store(s, j, part) {
+    if (crc32(part) !== this.crcs[s.first + j]) {
+      throw new FormatError(`${this.name}: checksum mismatch in section '${s.name}' chunk ${j} (corrupt file)`);
+    }
+    s.chunks.set(j, part);
+    this.lru.set(`${s.name}/${j}`, part);
+    this.held += part.length;
   }
 
   _assemble(s, a, b, k0, k1) {

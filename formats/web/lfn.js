@@ -279,6 +279,11 @@ export class LfnDecoder {
     Object.assign(this, { Wt, b, g, be, ow, ob, w, neurons: w, levels: w - m });
   }
 
+  /** Bytes of network weights held (as stored in the file). */
+  weightBytes() {
+    return this.steps.reduce((a, x) => a + x.length, this.base.length + (this.occ ? this.occ.length : 0)) * this.itemsize;
+  }
+
   /** 4×4 pose (row-major) of captured view v. */
   pose(v) { return this.poses[v].slice(); }
 

@@ -148,7 +148,7 @@ async function mainLfn(file, source, t0) {
   const pose = () => (posed ? dec.orbitPose(state.view, state.yaw, state.pitch) : dec.gridPose(state.s, state.t));
   const stats = () => {
     const f = state.last;
-    const held = dec.steps.reduce((a, x) => a + x.length, dec.base.length + (dec.occ ? dec.occ.length : 0)) * dec.itemsize;
+    const held = dec.weightBytes();
     $("stats").textContent = [
       `bytes fetched  ${source.bytesFetched.toLocaleString()} of ${source._size.toLocaleString()}`,
       `range requests ${source.requests}`,
