@@ -103,6 +103,9 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
             if others:      # splits not read: the CLI says so (a user may want them too)
                 lf.meta["other_splits"] = others
             return lf
+    splits = sorted(q.name[len("transforms_"):-len(".json")] for q in p.glob("transforms_*.json") if q.is_file())
+    if splits:
+        raise SceneError(f"{p}: no transforms_{split}.json (the splits here: {', '.join(splits)}; or --split all)")
     entries = [e for e in p.iterdir() if not e.name.startswith(".")]
     if not entries:
         raise SceneError(f"{p}: empty folder")

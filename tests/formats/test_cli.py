@@ -328,6 +328,8 @@ def test_split_all_encodes_every_split_and_decodes_them_back(tmp_path, capsys):
     b = read_scene(tmp_path / "dec", split="all")
     assert (a.views == b.views).all() and np.allclose(a.c2w, b.c2w) and b.meta["splits"] == a.meta["splits"]
     assert read_scene(tmp_path / "dec", split="test").cols == 2
+    assert main(["encode", str(scene), str(tmp_path / "v.lfc"), "--split", "val", "--quiet"]) == 2
+    assert "no transforms_val.json (the splits here: test, train" in capsys.readouterr().err
     # intrinsics that differ between splits are refused, not mixed
     doc = json.loads((scene / "transforms_test.json").read_text())
     (scene / "transforms_test.json").write_text(json.dumps({**doc, "camera_angle_x": 0.7}))
