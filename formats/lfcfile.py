@@ -121,6 +121,8 @@ def open_lfc(source, *, name: str | None = None, partial: bool = False, limits: 
 def check_codec_version(f: LfcFile, codec: str, supported: int) -> None:
     if f.meta.get("codec") != codec:
         raise UnsupportedError(f"{f.container.name}: codec {f.meta.get('codec')!r} is not {codec!r}")
-    if f.meta.get("codec_version", 1) > supported:
-        raise UnsupportedError(f"{f.container.name}: {codec} version {f.meta['codec_version']} is newer than "
-                               f"this decoder ({supported})")
+    v = f.meta.get("codec_version")
+    if type(v) is not int or v < 1:              # FORMAT.md: every codec's versions start at 1
+        raise FormatError(f"{f.container.name}: metadata codec_version must be an integer >= 1, got {v!r}")
+    if v > supported:
+        raise UnsupportedError(f"{f.container.name}: {codec} version {v} is newer than this decoder ({supported})")

@@ -64,6 +64,9 @@ class LfnConfig:
         known = set(LfnConfig.__dataclass_fields__)
         if set(d) - known:
             raise ParameterError(f"unknown network config keys: {', '.join(sorted(set(d) - known))}")
+        missing = {"depth", "min_neurons", "max_neurons", "occupancy_neurons"} - set(d)
+        if missing:                              # a file states its network's sizes (FORMAT.md)
+            raise ParameterError(f"network config lacks {', '.join(sorted(missing))}")
         return LfnConfig(**d)
 
     def scale_of(self, neurons: float) -> float:

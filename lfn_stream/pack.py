@@ -21,6 +21,9 @@ from .config import LfnConfig
 from .model import NestedLFN, OccupancyNet
 
 DTYPES = {"fp16": "<f2", "fp32": "<f4"}
+#: largest weight magnitude a file may hold (fp16's range, for fp32 files too: float32
+#: arithmetic then cannot overflow in a network of the sizes the config allows)
+MAX_WEIGHT = 65504.0
 
 
 def step_name(j: int) -> str:
@@ -117,8 +120,8 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
         ow[:, j] = take(cfg.out_features)
         if pos != vals.size:
             raise FormatError(f"{step_name(s)} has {vals.size} values, expected {pos}")
-    if not all(np.isfinite(a).all() for a in (*W, b, g, be, ow, ob)):
-        raise FormatError("lfn network weights hold NaN or infinite values")
+    if not all((np.abs(a) <= MAX_WEIGHT).all() for a in (*W, b, g, be, ow, ob)):     # NaN fails too
+        raise FormatError(f"lfn network weights hold NaN, infinite or values beyond ±{MAX_WEIGHT:g}")
     with torch.no_grad():
         for i in range(cfg.depth):
             model.weights[i].copy_(torch.from_numpy(W[i]).float())
@@ -135,6 +138,6 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
         with torch.no_grad():
             for p in occ_net.parameters():
                 p.copy_(torch.from_numpy(take(p.numel()).reshape(p.shape)).float())
-        if pos != vals.size or not np.isfinite(vals).all():
-            raise FormatError("lfn.occ has trailing data or NaN/infinite weights")
+        if pos != vals.size or not (np.abs(vals) <= MAX_WEIGHT).all():
+            raise FormatError(f"lfn.occ has trailing data or NaN, infinite or values beyond ±{MAX_WEIGHT:g}")
     return model, occ_net

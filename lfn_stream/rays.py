@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from formats.errors import ParameterError
 from formats.lightfield import LightField
 
 
@@ -50,8 +51,13 @@ def camera_rays(c2w: np.ndarray, focal, principal, H: int, W: int, scale: float 
     fx, fy = focal[0] * sx, focal[1] * sy
     cx, cy = principal[0] * sx, principal[1] * sy
     ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
-    d = np.stack([(xs - cx) / fx, -(ys - cy) / fy, -np.ones_like(xs)], -1) @ c2w[:3, :3].T
-    d /= np.linalg.norm(d, axis=-1, keepdims=True)
-    o = (c2w[:3, 3] - np.asarray(centre)) / radius
-    m = np.cross(np.broadcast_to(o, d.shape), d)
-    return np.concatenate([d, m], -1).astype(np.float32)
+    with np.errstate(all="ignore"):          # checked below: a ray that is not finite is an error
+        d = np.stack([(xs - cx) / fx, -(ys - cy) / fy, -np.ones_like(xs)], -1) @ c2w[:3, :3].T
+        d /= np.linalg.norm(d, axis=-1, keepdims=True)
+        o = (c2w[:3, 3] - np.asarray(centre)) / radius
+        m = np.cross(np.broadcast_to(o, d.shape), d)
+        rays = np.concatenate([d, m], -1).astype(np.float32)
+    if not np.isfinite(rays).all():
+        raise ParameterError("the camera's rays are not finite in float32 (focal length, pose or scene scale "
+                             "out of range)")
+    return rays

@@ -21,6 +21,7 @@ from .cameras import captured_poses, grid_pose, orbit_pose, scene_pivot, stereo_
 from .rays import camera_rays, view_rays
 
 CODEC_ID = "lfn"
+ALPHA_MIN = 2.0 ** -20   # below it a pixel's colour is 0 (invisible at 16 bits; exact in float32 and float64)
 CODEC_VERSION = 2          # 2: network sizes named *_neurons on the wire (1: *_width)
 
 # 4×4 ordered-dither (Bayer) thresholds in (0, 1): a pixel takes the upper size where its
@@ -58,6 +59,11 @@ class LfnRenderer(Decoder):
         # geometry only: a zero-stride placeholder of the views' shape (no pixel memory)
         self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), f.meta["scene"])
         self.poses = captured_poses(self.geom.positions, self.geom.c2w)      # (R, C, 4, 4) camera-to-world
+        for pose in self.poses.reshape(-1, 4, 4):
+            try:
+                self._check_pose(pose, self.norm)
+            except ParameterError as e:
+                raise FormatError(f"{c.name}: a captured camera is unusable ({e})") from None
         self.rows, self.cols = scene["rows"], scene["cols"]
         self.height, self.width, self.channels = scene["height"], scene["width"], scene["channels"]
         if scene["dtype"] not in ("uint8", "uint16"):
@@ -163,7 +169,10 @@ class LfnRenderer(Decoder):
     def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
-        return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"])
+        try:
+            return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"])
+        except ParameterError as e:                  # the file's own camera and intrinsics
+            raise FormatError(f"{self.file.container.name}: view ({row},{col}): {e}") from None
 
     def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
         """One view with a (fractional) network size; scale defaults to the size's own (1/8 … 1).
@@ -200,13 +209,18 @@ class LfnRenderer(Decoder):
         return stereo_poses(self._check_pose(pose), float(ipd))
 
     @staticmethod
-    def _check_pose(c2w) -> np.ndarray:
+    def _check_pose(c2w, norm=None) -> np.ndarray:
+        """A usable camera (FORMAT.md): finite 4×4, rotation entries within ±2^20 and invertible,
+        origin within 2^20 scene radii of the centre (so rays are finite in float32)."""
         try:
             a = np.asarray(c2w, dtype=np.float64)
         except (TypeError, ValueError):
             a = np.zeros(0)
-        if a.shape != (4, 4) or not np.isfinite(a).all() or abs(np.linalg.det(a[:3, :3])) < 1e-9:
+        if a.shape != (4, 4) or not np.isfinite(a).all() or np.abs(a[:3, :3]).max() > 2 ** 20 \
+                or abs(np.linalg.det(a[:3, :3])) < 1e-9:
             raise ParameterError("a camera pose must be a finite 4x4 camera-to-world matrix with an invertible rotation")
+        if norm is not None and np.abs((a[:3, 3] - norm["centre"]) / norm["radius"]).max() > 2 ** 20:
+            raise ParameterError("a camera lies more than 2^20 scene radii from the scene's centre")
         return a
 
     def render_pose(self, c2w, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
@@ -216,7 +230,7 @@ class LfnRenderer(Decoder):
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
-        c2w = self._check_pose(c2w)
+        c2w = self._check_pose(c2w, self.norm)
         neurons = self.neurons if neurons is None else neurons
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         g = self.geom
@@ -260,13 +274,10 @@ class LfnRenderer(Decoder):
     def to_pixels(self, rgba: np.ndarray) -> np.ndarray:
         peak = float(np.iinfo(self.dtype).max)
         a = np.clip(rgba, 0, 1)
-        if self.channels == 4:
+        if self.channels in (2, 4):          # un-premultiply where α ≥ 2^-20 (FORMAT.md), else colour 0
             alpha = a[..., 3:4]
-            rgb = np.where(alpha > 0, a[..., :3] / np.maximum(alpha, 1e-6), 0)
-            px = np.concatenate([rgb, alpha], -1)
-        elif self.channels == 2:
-            alpha = a[..., 3:4]
-            px = np.concatenate([np.where(alpha > 0, a[..., :1] / np.maximum(alpha, 1e-6), 0), alpha], -1)
+            col = a[..., :self.channels - 1]
+            px = np.concatenate([np.where(alpha >= ALPHA_MIN, col / np.maximum(alpha, ALPHA_MIN), 0), alpha], -1)
         elif self.channels == 1:
             px = a[..., :1]
         else:

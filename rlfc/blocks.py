@@ -192,6 +192,32 @@ _VALID_MODE[:MODE_CONST + 1] = True
 _VALID_MODE[MODE_PLAIN + 1:MODE_PLAIN + 32] = True
 
 
+#: largest stored value ``q − min`` of one plane per mode (raw and constant: 0)
+_VMAX = np.zeros(256, dtype=np.int64)
+_VMAX[:len(RANGE_VALUES)] = _RANGES - 1
+_VMAX[MODE_PLAIN + 1:MODE_PLAIN + 32] = (1 << np.arange(1, 32)) - 1
+#: the largest dequantized residual a block may carry (FORMAT.md); keeps every sum of a
+#: residual chain (≤ 16 levels) exact in int32
+MAX_RESIDUAL = 1 << 24
+
+
+def check_blocks(modes: np.ndarray, mins: np.ndarray, q16, bitmaps_high=None) -> None:
+    """(S, P) modes and minimums of present blocks, (P,) quantizer steps: every mode defined
+    (:func:`check_modes`) and every residual the header allows within ±MAX_RESIDUAL; else
+    FormatError. ``bitmaps_high``: bitmap bits beyond the last node (must be zero)."""
+    check_modes(modes)
+    if bitmaps_high is not None and np.any(bitmaps_high):
+        raise FormatError("rlfc block run's bitmap names a node the tree does not have (corrupt file)")
+    if q16 is None:
+        return
+    vmax = _VMAX[modes]
+    qmax = np.maximum(np.abs(mins), np.abs(mins + vmax))          # |min| < 2^31: int64 is exact
+    big = ((qmax * np.asarray(q16, np.int64) + 8) >> 4) > MAX_RESIDUAL
+    big[modes[:, 0] == MODE_RAW] = False
+    if big.any():
+        raise FormatError(f"rlfc block header allows residuals beyond ±{MAX_RESIDUAL} (corrupt file)")
+
+
 def check_modes(modes: np.ndarray) -> None:
     """(S, P) uint8 plane modes of present blocks: every mode defined, raw only in plane 0
     (and then the other planes "constant"); else FormatError."""
@@ -211,11 +237,15 @@ class BlockStore:
         planes: P; block: B; channels: C of raw blocks; bps: bytes per raw sample;
         layout: off_bytes, min_bytes, bitmap_bytes (from the file's config).
         verify: ``verify(starts, stops)`` checks the checksum chunks of byte ranges before use.
+        n_nodes: residual nodes (bitmap bits at or beyond it must be zero); q16: (P,) quantizer
+        steps (headers whose residuals could exceed ±MAX_RESIDUAL are refused).
     """
 
     def __init__(self, index: np.ndarray, buf: np.ndarray, planes: int, block: int, channels: int, bps: int,
-                 layout: dict, verify=None, verify_span=None):
+                 layout: dict, verify=None, verify_span=None, n_nodes: int | None = None, q16=None):
         self.index = index.astype(np.int64)
+        self.n_nodes, self.q16 = n_nodes, None if q16 is None else np.asarray(q16, np.int64)
+        self._high = 0 if n_nodes is None else (0xFF << (n_nodes - 8 * (layout["bitmap_bytes"] - 1))) & 0xFF
         self.buf = buf
         self.P, self.B, self.C, self.bps = planes, block, channels, bps
         self.off_bytes, self.min_bytes, self.nbm = layout["off_bytes"], layout["min_bytes"], layout["bitmap_bytes"]
@@ -270,7 +300,7 @@ class BlockStore:
         modes = hdr[:, self.off_bytes:self.off_bytes + self.P]
         mins = _from_le(hdr[:, self.off_bytes + self.P:].reshape(-1, self.min_bytes), True).reshape(-1, self.P)
         is_raw = modes[:, 0] == MODE_RAW
-        check_modes(modes)
+        check_blocks(modes, mins, self.q16, bm[:, -1] & self._high if self._high and self.nbm else None)
         psize = self.table[modes]
         psize[is_raw] = 0
         pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)
@@ -296,6 +326,8 @@ class BlockStore:
         if b - a < self.nbm:
             raise FormatError("rlfc block run is shorter than its bitmap (corrupt file)")
         bitmap = int.from_bytes(buf[a:a + self.nbm].tobytes(), "little")
+        if self.n_nodes is not None and bitmap >> self.n_nodes:
+            raise FormatError("rlfc block run's bitmap names a node the tree does not have (corrupt file)")
         heads_end = a + self.nbm + bin(bitmap).count("1") * self.hs
         if heads_end > b:
             raise FormatError("rlfc block run is shorter than its block headers (corrupt file)")
@@ -307,7 +339,10 @@ class BlockStore:
             hb = buf[h:h + self.hs].tobytes()
             pos = a + int.from_bytes(hb[:self.off_bytes], "little")
             modes = hb[self.off_bytes:self.off_bytes + P]
-            check_modes(np.frombuffer(modes, np.uint8)[None])
+            mb = self.off_bytes + P
+            mins = [int.from_bytes(hb[mb + c * self.min_bytes:mb + (c + 1) * self.min_bytes], "little", signed=True)
+                    for c in range(P)]
+            check_blocks(np.frombuffer(modes, np.uint8)[None], np.asarray(mins, np.int64)[None], self.q16)
             if pos < heads_end:
                 raise FormatError("rlfc block payload lies outside its run (corrupt file)")
             if modes[0] == MODE_RAW:
@@ -317,9 +352,6 @@ class BlockStore:
                 dt = "<u2" if self.bps == 2 else np.uint8
                 out[i] = ("raw", np.frombuffer(buf[pos:pos + nbytes].tobytes(), dtype=dt).astype(np.int64).reshape(n, self.C))
                 continue
-            mb = self.off_bytes + P
-            mins = [int.from_bytes(hb[mb + c * self.min_bytes:mb + (c + 1) * self.min_bytes], "little", signed=True)
-                    for c in range(P)]
             q = np.empty((n, P), dtype=np.int32)
             out[i] = ("q", q)
             for c in range(P):

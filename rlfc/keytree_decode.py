@@ -122,14 +122,14 @@ class KeyTreeDecoder(ProfileDecoder):
         if info.length != index[-1] + PAD:
             raise FormatError(f"{name}: section 'rlfc.blocks' has {info.length} bytes, index says {index[-1] + PAD}")
         self._remote = c.is_remote
-        self._layout, self._index = layout, index
+        self._layout, self._index, self._n_res = layout, index, n_res
         if self._remote:
             self.store = None
         else:
             buf = c.array("rlfc.blocks", verify=False)
             self.store = BlockStore(index, buf, self.P, B, self.channels, self.dtype.itemsize, layout,
                                     lambda a, b: c.verify_ranges("rlfc.blocks", a, b),
-                                    lambda a, b: c.verify_span("rlfc.blocks", a, b))
+                                    lambda a, b: c.verify_span("rlfc.blocks", a, b), n_nodes=n_res, q16=self.q16)
         self.st = {"top_blocks": self.top_blocks, "anc_top": self.anc[H], **strategy.arrays(self)}
         self.n_blocks = cfg.int("n_blocks", 0, default=0)
 
@@ -147,7 +147,7 @@ class KeyTreeDecoder(ProfileDecoder):
         buf = np.concatenate(parts + [np.zeros(PAD, np.uint8)])
         # the fetched runs are stored back to back: run i is idx[i]..idx[i+1] of the local buffer
         st = BlockStore(np.asarray(idx, dtype=np.int64), buf, self.P, self.block_size, self.channels,
-                        self.dtype.itemsize, self._layout)
+                        self.dtype.itemsize, self._layout, n_nodes=self._n_res, q16=self.q16)
         return st, inv.reshape(-1)
 
     def _residual(self, store: BlockStore, g: np.ndarray, loc: np.ndarray, xp=NUMPY, buf=None):

@@ -1,7 +1,8 @@
 """Hostile files with valid checksums (issue 14): structure-aware mutations of every golden
 fixture, decoded along every path in a worker under an address-space limit; and targeted
 block-run cases. Every outcome is a typed LfcError or an accepted decode on which every path
-agrees — no tracebacks, crashes, hangs or disagreeing decoders."""
+agrees and which a reference decoder written from FORMAT.md reproduces — no tracebacks,
+crashes, hangs or disagreeing decoders."""
 import json
 from pathlib import Path
 
@@ -27,6 +28,10 @@ def test_structure_aware_fuzz_finds_no_defects():
     assert rep["tried"] == 4 * len(corpus_files()) * 6
     assert all(rep[k] == 0 for k in DEFECTS), json.dumps(rep["defects"][:5], indent=1)
     assert rep["typed"] > 0 and rep["exact"] > 0      # both outcomes are exercised
+    for name, c in rep["per_file"].items():            # accepted files met a reference decoder
+        if not name.startswith("rlfc_tx_"):            # (tx version 1 has none: only the paths agree)
+            assert c["referenced"] == c["exact"], (name, c)
+    assert rep["referenced"] > 0
 
 
 def _rebuild(meta, secs):
@@ -87,3 +92,57 @@ def test_lfn_metadata_checked_before_allocation(field, value):
     blob = b"".join(bytes(p) for p in build_container(json.dumps(meta).encode(), secs))
     with pytest.raises(LfcError):
         open_decoder(open_lfc(blob)).decode_all()
+
+
+def test_bitmap_bits_beyond_the_tree_are_refused():
+    meta, secs, lengths = _bise_runs()
+    n_res, nbm = meta["config"]["n_res_nodes"], meta["config"]["layout"]["bitmap_bytes"]
+    assert n_res % 8                                  # the last bitmap byte has unused bits
+    start = int(lengths[:int(np.flatnonzero(lengths)[0])].sum())
+    b = bytearray(dict(secs)["rlfc.blocks"])
+    b[start + nbm - 1] |= 0x80                        # bit 8·nbm − 1 ≥ n_res_nodes
+    secs = [(n, bytes(b) if n == "rlfc.blocks" else d) for n, d in secs]
+    with pytest.raises(FormatError, match="bitmap names a node"):
+        _decode_all_paths(_rebuild(meta, secs))
+
+
+def test_residuals_beyond_the_stated_range_are_refused():
+    """A 32-bit minimum times a large step would wrap int32 planes: the header is refused
+    instead (before the change: a silently wrong block, 0 where the exact sum gives 65535)."""
+    meta, secs = split_file((GOLDEN / "rlfc_dcp_lossy_ga16.lfc").read_bytes())
+    lengths = run_lengths(dict(secs)["rlfc.index"])
+    lay = meta["config"]["layout"]
+    assert lay["min_bytes"] == 4 and max(meta["config"]["q16"]) > 16
+    start = int(lengths[:int(np.flatnonzero(lengths)[0])].sum())
+    at = start + lay["bitmap_bytes"] + lay["off_bytes"] + meta["config"]["planes"]      # plane 0's minimum
+    b = bytearray(dict(secs)["rlfc.blocks"])
+    b[at:at + 4] = (2 ** 31 - 1).to_bytes(4, "little")
+    secs = [(n, bytes(b) if n == "rlfc.blocks" else d) for n, d in secs]
+    with pytest.raises(FormatError, match="residuals beyond"):
+        _decode_all_paths(_rebuild(meta, secs))
+
+
+def test_dcp_key_view_must_lie_in_the_grid():
+    meta, secs = split_file((GOLDEN / "rlfc_dcp_lossy_rgb8.lfc").read_bytes())
+    meta["config"]["dcp"]["offsets"][13] = [-1, 0]     # view (3, 1): its key would be row 4 of 4
+    with pytest.raises(FormatError, match="inside the 4x4 grid"):
+        open_decoder(open_lfc(_rebuild(meta, secs)))
+
+
+@pytest.mark.parametrize("pos", [[1e12, 0, 0], [1e308, 0, 0]])
+def test_lfn_cameras_far_outside_the_scene_are_refused(pos):
+    meta, secs = split_file((GOLDEN / "lfn_tiny_rgba8.lfc").read_bytes())
+    meta["scene"]["positions"][1][2] = pos
+    with pytest.raises(FormatError, match="captured camera"):
+        open_decoder(open_lfc(_rebuild(meta, secs)))
+
+
+def test_lfn_colour_of_nearly_transparent_pixels_is_zero():
+    """Below α = 2^-20 the colour is 0 (FORMAT.md), so float32 and float64 renderers agree
+    where α underflows in one of them (a fuzzed network gave α = 2e-268)."""
+    from lfn_stream import LfnRenderer
+    r = LfnRenderer(open_lfc(GOLDEN / "lfn_tiny_rgba8.lfc"), device="cpu")
+    rgba = np.array([[[0.4, 0.2, 0.1, 1e-7], [0.4, 0.2, 0.1, 0.0], [2 ** -18, 2 ** -19, 0, 2 ** -18]]])
+    px = r.to_pixels(rgba)
+    assert px[0, :2].tolist() == [[0, 0, 0, 0], [0, 0, 0, 0]]
+    assert px[0, 2].tolist() == [255, 128, 0, 0]

@@ -10,12 +10,18 @@ the decoder's own validation stands between the file and the pixels.
 Every accepted mutant is decoded along every path — memory-mapped file, in-memory buffer,
 HTTP-style byte ranges, full/view/batched-block/single-block/torch decoders, every level —
 and the paths must agree bit for bit (or all raise a typed :class:`~formats.errors.LfcError`).
+Every accepted mutant is then decoded again by a reference reader written from docs/FORMAT.md
+alone, at every level, and must give the same pixels: :mod:`tools.refdecode` (slow Python;
+profiles bise and dcp bit for bit, LFN within one grey level) or, for profile tx version 2, the
+browser viewer's JavaScript decoder under Node (``tools/web_decode.mjs``; its int32 planes must
+equal the library's). A reference that refuses a file the library accepted is a mismatch too.
 Mutants run in a worker process under an address-space limit with a per-mutant deadline, so a
 huge allocation, a crash or a hang is counted, not suffered.
 
-Outcomes: ``typed`` (an LfcError), ``exact`` (accepted, all paths agree), and the defects
-``untyped`` (any other exception), ``mismatch`` (paths disagree), ``crash`` (the worker died,
-e.g. out of memory), ``hang`` (over the deadline).
+Outcomes: ``typed`` (an LfcError), ``exact`` (accepted, all paths agree; ``referenced`` counts
+those a reference decoder also reproduced), and the defects ``untyped`` (any other exception),
+``mismatch`` (paths disagree, or disagree with the reference), ``crash`` (the worker died, e.g.
+out of memory), ``hang`` (over the deadline).
 
 Usage::
 
@@ -35,12 +41,17 @@ import traceback
 import zlib
 from pathlib import Path
 
+import shutil
+import subprocess
+
 import numpy as np
 
 from formats.container import ByteRangeSource, Container, build_container
 
-CORPUS = Path(__file__).resolve().parent.parent / "tests" / "data" / "golden"
+ROOT = Path(__file__).resolve().parent.parent
+CORPUS = ROOT / "tests" / "data" / "golden"
 DEFECTS = ("untyped", "mismatch", "crash", "hang")
+COUNTS = ("tried", "typed", "exact", "referenced") + DEFECTS
 HOSTILE = [0, -1, 1, 2, 3, 7, 8, 255, 256, 65535, 65536, 2 ** 31 - 1, 2 ** 31, 2 ** 32, 2 ** 40, 2 ** 63,
            -2 ** 63, 10 ** 30, 0.5, -0.0, 1e308, 16.0, "", "x", "tx", "bise", "uint8", "float64", None, True,
            False, [], {}, [0], [[]], [1, 2, 3], {"a": 1}]
@@ -251,9 +262,14 @@ def _sample_blocks(d, rng, k=12):
     return (rng.integers(0, n, k), rng.integers(0, d.nby, k), rng.integers(0, d.nbx, k))
 
 
-def decode_everything(blob: bytes, path: str, seed: int) -> None:
+def decode_everything(blob: bytes, path: str, seed: int) -> dict:
     """Decode a file along every path; raises LfcError (typed), AssertionError (paths
-    disagree) or anything else (a defect)."""
+    disagree) or anything else (a defect).
+
+    Returns:
+        {"levels": {level: full decode (rows, cols, H, W, C)}, "planes": {level: (N0, H, W, P)
+        int32 planes} (tx files, for the JavaScript reference), "tx_version": int or None}.
+    """
     from formats.lfcfile import open_lfc
     from formats.registry import open_decoder
     rng = np.random.default_rng(seed)
@@ -263,17 +279,22 @@ def decode_everything(blob: bytes, path: str, seed: int) -> None:
         files[0].container.verify_all()
         decs = [open_decoder(f) for f in files]
         d = decs[0]
+        out = {"levels": {}, "planes": {}, "tx_version": None}
         if f"{d.info().get('codec')}" == "lfn" or not hasattr(d, "nby"):
             for level in sorted({0, d.levels}):
-                ref = d.decode_all(level)
+                ref = out["levels"][level] = d.decode_all(level)
                 assert np.array_equal(ref, decs[1].decode_all(level)), "lfn mmap != buffer"
                 r, c = int(rng.integers(d.rows)), int(rng.integers(d.cols))
                 assert np.array_equal(ref[r, c], decs[2].decode_view(r, c, level)), "lfn view != all"
-            return
+            return out
+        if d.profile == "tx":
+            out["tx_version"] = files[0].meta["config"]["tx"]["version"]
         from rlfc.torch_decode import TorchBlockDecoder
         B = d.block_size
         for level in sorted({0, d.levels}):
-            full = d.decode_all(level)
+            full = out["levels"][level] = d.decode_all(level)
+            if out["tx_version"] is not None:
+                out["planes"][level] = d.decode_views(level=level, planes=True)
             assert full.shape == (d.rows, d.cols, d.height, d.width, d.channels) and full.dtype == d.dtype
             assert np.array_equal(full, decs[1].decode_all(level)), "mmap != buffer (full)"
             v, by, bx = _sample_blocks(d, rng)
@@ -290,29 +311,87 @@ def decode_everything(blob: bytes, path: str, seed: int) -> None:
                 assert np.array_equal(got["mmap"][i, :h, :w], crop), "batched block != full"
             r, c = int(rng.integers(d.rows)), int(rng.integers(d.cols))
             assert np.array_equal(decs[2].decode_view(r, c, level), full[r, c]), "view != full"
+        return out
     finally:
         for f in files:
             f.close()
 
 
-def run_one(blob: bytes, seed: int, workdir: str) -> tuple[str, str]:
-    """(outcome, detail) of decoding one mutant in this process."""
+def check_reference(blob: bytes, decoded: dict) -> bool:
+    """Compare the library's decodes with :mod:`tools.refdecode` where it covers the file;
+    raises AssertionError on any difference (or a reference refusal). True when compared."""
+    from tools import refdecode
+    if not refdecode.covers(blob):
+        return False
+    for level, got in decoded["levels"].items():
+        try:
+            ref = refdecode.ref_decode(blob, int(level))
+        except refdecode.RefError as e:
+            raise AssertionError(f"reference refuses level {level}: {e}") from None
+        except Exception as e:  # noqa: BLE001 - a reference bug is still a disagreement to look at
+            raise AssertionError(f"reference failed at level {level}: {type(e).__name__}: {e}") from None
+        assert ref.shape == got.shape and ref.dtype == got.dtype, f"reference shape {ref.shape} != {got.shape}"
+        diff = np.abs(ref.astype(np.int64) - got.astype(np.int64))
+        tol = 1 if json.loads(bytes(Container(blob).read("meta")))["codec"] == "lfn" else 0
+        assert diff.max(initial=0) <= tol, f"reference differs at level {level}: {int((diff > tol).sum())} samples, " \
+                                           f"up to {int(diff.max())}"
+    return True
+
+
+def run_one(blob: bytes, seed: int, workdir: str) -> tuple[str, str, dict | None]:
+    """(outcome, detail, tx planes for the JavaScript reference or None) of decoding one mutant
+    in this process."""
     from formats.errors import LfcError
     path = os.path.join(workdir, "mutant.lfc")
     with open(path, "wb") as fh:
         fh.write(blob)
     try:
-        decode_everything(blob, path, seed)
-        return "exact", ""
+        out = decode_everything(blob, path, seed)
+        if check_reference(blob, out):
+            return "referenced", "", None
+        return "exact", "", out["planes"] if out["tx_version"] == 2 else None
     except LfcError as e:
-        return "typed", type(e).__name__
+        return "typed", type(e).__name__, None
     except AssertionError as e:
-        return "mismatch", str(e)
+        return "mismatch", str(e), None
     except MemoryError:
-        return "crash", "MemoryError"
+        return "crash", "MemoryError", None
     except Exception as e:  # noqa: BLE001 - counting defects is the point
         tb = traceback.extract_tb(e.__traceback__)[-1]
-        return "untyped", f"{type(e).__name__}: {e} at {Path(tb.filename).name}:{tb.lineno}"
+        return "untyped", f"{type(e).__name__}: {e} at {Path(tb.filename).name}:{tb.lineno}", None
+
+
+NODE = shutil.which("node")
+WEB_DECODE = ROOT / "tools" / "web_decode.mjs"
+
+
+def check_js(blob: bytes, planes: dict, workdir: str, timeout_s: float = 120.0) -> tuple[str, str]:
+    """Decode a tx (version 2) file with the JavaScript reader at every level and compare its
+    int32 planes with the library's → ("referenced", "") or ("mismatch", why)."""
+    path = os.path.join(workdir, "js.lfc")
+    out = os.path.join(workdir, "js")
+    shutil.rmtree(out, ignore_errors=True)
+    with open(path, "wb") as fh:
+        fh.write(blob)
+    env = dict(os.environ, LFC_LEVELS=",".join(str(level) for level in sorted(planes)))
+    try:
+        got = subprocess.run([NODE, str(WEB_DECODE), path, out], capture_output=True, text=True, timeout=timeout_s,
+                             env=env)
+    except subprocess.TimeoutExpired:
+        return "mismatch", f"JavaScript reader over {timeout_s:.0f} s"
+    if got.returncode != 0:
+        return "mismatch", "JavaScript reader crashed: " + got.stderr.strip().splitlines()[-1][:300]
+    info = json.loads(got.stdout.strip().splitlines()[-1])
+    if not info["ok"]:
+        return "mismatch", f"JavaScript reader refuses: {info['name']}: {info['message'][:300]}"
+    for level, py in planes.items():
+        n, h, w, p = py.shape
+        for v in range(n):
+            name = f"view_{v}.bin" if level == 0 else f"view_{v}_L{level}.bin"
+            js = np.fromfile(os.path.join(out, name), np.int32).reshape(info["Hp"], info["Wp"], info["P"])[:h, :w]
+            if not np.array_equal(js, py[v]):
+                return "mismatch", f"JavaScript reader differs: level {level} view {v}, {int((js != py[v]).sum())} samples"
+    return "referenced", ""
 
 
 # -- worker process --------------------------------------------------------------------------
@@ -326,8 +405,8 @@ def _worker(conn, mem_bytes: int, workdir: str) -> None:
         if job is None:
             return
         blob, seed = job
-        outcome, detail = run_one(blob, seed, workdir)
-        conn.send((outcome, detail, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
+        outcome, detail, planes = run_one(blob, seed, workdir)
+        conn.send((outcome, detail, planes, resource.getrusage(resource.RUSAGE_SELF).ru_maxrss))
 
 
 class Runner:
@@ -348,6 +427,12 @@ class Runner:
         self.proc.start()
 
     def run(self, blob: bytes, seed: int) -> tuple[str, str]:
+        outcome, detail, planes = self._run(blob, seed)
+        if planes and NODE:
+            return check_js(blob, planes, self.tmp.name)
+        return outcome, detail
+
+    def _run(self, blob: bytes, seed: int) -> tuple[str, str, dict | None]:
         if self.proc is None or not self.proc.is_alive():
             self._start()
         self.conn.send((blob, seed))
@@ -355,16 +440,16 @@ class Runner:
             self.proc.kill()
             self.proc.join()
             self.proc = None
-            return "hang", f"over {self.deadline:.0f} s"
+            return "hang", f"over {self.deadline:.0f} s", None
         try:
-            outcome, detail, rss = self.conn.recv()
+            outcome, detail, planes, rss = self.conn.recv()
         except EOFError:
             self.proc.join()
             code = self.proc.exitcode
             self.proc = None
-            return "crash", f"worker exit code {code}"
+            return "crash", f"worker exit code {code}", None
         self.peak_kib = max(self.peak_kib, rss)
-        return outcome, detail
+        return outcome, detail, planes
 
     def close(self):
         if self.proc is not None and self.proc.is_alive():
@@ -378,13 +463,13 @@ def fuzz(n: int | None = None, minutes: float | None = None, seed: int = 0, mem_
     """Run ``n`` mutants (or as many as fit in ``minutes``), cycling over the corpus files.
 
     Returns:
-        {"tried", "typed", "exact", "untyped", "mismatch", "crash", "hang", "peak_rss_mib",
+        {"tried", "typed", "exact", "referenced", "untyped", "mismatch", "crash", "hang", "peak_rss_mib",
         "per_file": {...}, "defects": [{"file", "seed", "what", "outcome", "detail"}]}.
     """
     files = files or corpus_files()
     blobs = [(p.name, p.read_bytes()) for p in files]
-    counts = dict.fromkeys(("tried", "typed", "exact") + DEFECTS, 0)
-    per_file = {name: dict.fromkeys(("tried", "typed", "exact") + DEFECTS, 0) for name, _ in blobs}
+    counts = dict.fromkeys(COUNTS, 0)
+    per_file = {name: dict.fromkeys(COUNTS, 0) for name, _ in blobs}
     defects = []
     runner = Runner(mem_mib, deadline_s)
     t_end = time.monotonic() + 60 * minutes if minutes else None
@@ -397,7 +482,8 @@ def fuzz(n: int | None = None, minutes: float | None = None, seed: int = 0, mem_
             outcome, detail = runner.run(mutant, s)
             for c in (counts, per_file[name]):
                 c["tried"] += 1
-                c[outcome] += 1
+                c["exact" if outcome == "referenced" else outcome] += 1
+                c["referenced"] += outcome == "referenced"
             if outcome in DEFECTS:
                 defects.append({"file": name, "seed": s, "what": what, "outcome": outcome, "detail": detail})
                 if log:
@@ -418,7 +504,7 @@ def main(argv=None) -> int:
     a = ap.parse_args(argv)
     count = a.count if a.count is not None or a.minutes else 500
     rep = fuzz(n=count, minutes=a.minutes, seed=a.seed, mem_mib=a.mem_mib, log=print)
-    summary = {k: rep[k] for k in ("tried", "typed", "exact") + DEFECTS + ("peak_rss_mib",)}
+    summary = {k: rep[k] for k in COUNTS + ("peak_rss_mib",)}
     print(json.dumps(summary))
     if a.out:
         Path(a.out).write_text(json.dumps(rep, indent=1))

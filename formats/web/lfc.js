@@ -571,6 +571,9 @@ export class TxDecoder {
   async init(file, keyImage) {
     const name = file.name, meta = file.meta;
     if (meta.codec !== "rlfc") throw new UnsupportedError(`${name}: codec '${meta.codec}' is not supported here (only rlfc)`);
+    const cv = meta.codec_version;
+    if (!Number.isInteger(cv) || cv < 1) throw new FormatError(`${name}: metadata codec_version must be an integer >= 1, got ${JSON.stringify(cv)}`);
+    if (cv > 1) throw new UnsupportedError(`${name}: rlfc codec version ${cv} is newer than this reader (1)`);
     const cfg = need(meta, "config", name);
     if (cfg.profile !== "tx") throw new UnsupportedError(`${name}: RLFC profile '${cfg.profile}' is not supported here (only tx); decode it with the Python library`);
     const scene = need(meta, "scene", name);

@@ -25,7 +25,9 @@ function floats(bytes, dtype) {
   const out = new Float64Array(n);
   if (dtype === "fp16") for (let i = 0; i < n; i++) out[i] = HALF[dv.getUint16(2 * i, true)];
   else for (let i = 0; i < n; i++) out[i] = dv.getFloat32(4 * i, true);
-  for (let i = 0; i < n; i++) if (!Number.isFinite(out[i])) throw new FormatError("lfn network weights hold NaN or infinite values");
+  for (let i = 0; i < n; i++) {                  // FORMAT.md: finite and within fp16's range, fp32 files too
+    if (!(Math.abs(out[i]) <= 65504)) throw new FormatError("lfn network weights hold NaN, infinite or values beyond ±65504");
+  }
   return out;
 }
 
@@ -108,17 +110,18 @@ export class LfnDecoder {
     const d = new LfnDecoder();
     const name = file.name, meta = file.meta;
     if (meta.codec !== "lfn") throw new UnsupportedError(`${name}: codec '${meta.codec}' is not a light field network`);
-    const version = meta.codec_version === undefined ? 1 : meta.codec_version;
-    if (version !== 1 && version !== 2) throw new UnsupportedError(`${name}: lfn codec version ${version} is not supported (this reader knows 1 and 2)`);
+    const version = meta.codec_version;
+    if (!Number.isInteger(version) || version < 1) throw new FormatError(`${name}: metadata codec_version must be an integer >= 1, got ${JSON.stringify(version)}`);
+    if (version > 2) throw new UnsupportedError(`${name}: lfn codec version ${version} is not supported (this reader knows 1 and 2)`);
     const conf = meta.config;
     if (!conf || typeof conf !== "object" || Array.isArray(conf)) throw new FormatError(`${name}: config is not an object`);
     const net = conf.network, where = `${name}: config.network`;
     if (!net || typeof net !== "object" || Array.isArray(net)) throw new FormatError(`${where} is not an object`);
     const k = version < 2 ? { min: "min_width", max: "max_width", occ: "occupancy_width" } : { min: "min_neurons", max: "max_neurons", occ: "occupancy_neurons" };
-    d.depth = intIn(net, "depth", 1, 32, where, 6);
-    d.minN = intIn(net, k.min, 1, 4096, where, 16);
-    d.maxN = intIn(net, k.max, d.minN, 4096, where, 128);
-    d.occN = intIn(net, k.occ, 0, 4096, where, 32);
+    d.depth = intIn(net, "depth", 1, 32, where);          // the sizes are required (FORMAT.md)
+    d.minN = intIn(net, k.min, 1, 4096, where);
+    d.maxN = intIn(net, k.max, d.minN, 4096, where);
+    d.occN = intIn(net, k.occ, 0, 4096, where);
     intIn(net, "in_features", 6, 6, where, 6);
     intIn(net, "out_features", 4, 4, where, 4);
     d.minScale = net.min_scale === undefined ? 0.125 : net.min_scale;
@@ -178,6 +181,15 @@ export class LfnDecoder {
         for (let r = 0; r < this.rows; r++) for (let c = 0; c < this.cols; c++) pos.push(c * bx, -r * by, 0);
       }
       for (let v = 0; v < n; v++) this.poses[v] = [1, 0, 0, pos[3 * v], 0, 1, 0, pos[3 * v + 1], 0, 0, 1, pos[3 * v + 2], 0, 0, 0, 1];
+    }
+    for (const P of this.poses) {                // FORMAT.md: usable cameras (rays finite in float32)
+      const R = [[P[0], P[1], P[2]], [P[4], P[5], P[6]], [P[8], P[9], P[10]]];
+      const det = R[0][0] * (R[1][1] * R[2][2] - R[1][2] * R[2][1]) - R[0][1] * (R[1][0] * R[2][2] - R[1][2] * R[2][0])
+        + R[0][2] * (R[1][0] * R[2][1] - R[1][1] * R[2][0]);
+      const far = [3, 7, 11].some((i, k) => Math.abs((P[i] - this.centre[k]) / this.radius) > 2 ** 20);
+      if (R.flat().some((x) => Math.abs(x) > 2 ** 20) || !(Math.abs(det) >= 1e-9) || far) {
+        throw new FormatError(`${where}: a captured camera is unusable (rotation beyond ±2^20 or singular, or more than 2^20 radii from the centre)`);
+      }
     }
     this._pivot();
   }
@@ -457,7 +469,7 @@ export class LfnDecoder {
     };
     for (let i = 0; i < h * w; i++) {
       const a = rgba.subarray(4 * i, 4 * i + 4).map((v) => Math.min(Math.max(v, 0), 1));
-      const al = a[3], un = (v) => (al > 0 ? v / Math.max(al, 1e-6) : 0);
+      const al = a[3], un = (v) => (al >= 2 ** -20 ? v / al : 0);      // FORMAT.md: colour 0 below α = 2^-20
       if (C === 4) { out[4 * i] = q(un(a[0])); out[4 * i + 1] = q(un(a[1])); out[4 * i + 2] = q(un(a[2])); out[4 * i + 3] = q(al); }
       else if (C === 2) { out[2 * i] = q(un(a[0])); out[2 * i + 1] = q(al); }
       else if (C === 1) out[i] = q(a[0]);

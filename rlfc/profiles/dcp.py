@@ -81,9 +81,10 @@ class DisparityPrediction(DecodeStrategy):
         rows, cols = dec.hdr.rows, dec.hdr.cols
         if len(offs) != n0 or any(not isinstance(o, list) or len(o) != 2 or
                                   not all(isinstance(x, int) and not isinstance(x, bool) for x in o) or
-                                  abs(o[0]) >= rows or abs(o[1]) >= cols for o in offs):
-            raise FormatError(f"{name}: config.dcp.offsets must hold {n0} integer pairs, view-to-key steps within "
-                              f"the {rows}x{cols} grid")
+                                  not (0 <= v // cols - o[0] < rows and 0 <= v % cols - o[1] < cols)
+                                  for v, o in enumerate(offs)):
+            raise FormatError(f"{name}: config.dcp.offsets must hold {n0} integer pairs, view-to-key steps to a key "
+                              f"view inside the {rows}x{cols} grid")
         self.offsets = np.asarray(offs, dtype=np.int64).reshape(n0, 2)
         self.F = dcp.int("frac_bits", 0, 4)
         dcp.str("disp_coding", choices=("zlib-delta",))

@@ -28,7 +28,7 @@ def run_js(path: Path, out: Path, cams=(), chunk_budget=None) -> dict:
     import os
 
     env = dict(os.environ, LFC_CHUNK_BUDGET=str(chunk_budget)) if chunk_budget is not None else None
-    got = subprocess.run([NODE, str(HERE / "web_decode.mjs"), str(path), str(out), *cams], capture_output=True,
+    got = subprocess.run([NODE, str(ROOT / "tools" / "web_decode.mjs"), str(path), str(out), *cams], capture_output=True,
                          text=True, timeout=600, env=env)
     assert got.returncode == 0, got.stderr[-3000:]
     return json.loads(got.stdout.strip().splitlines()[-1])

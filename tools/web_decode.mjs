@@ -1,6 +1,8 @@
-// Test helper: decode an .lfc file with the browser viewer's JavaScript decoder under Node.
-// node web_decode.mjs FILE OUTDIR [S,T,FOCUS,APERTURE ...]
-// Writes OUTDIR/view_V.bin (Int32 planes, Hp·Wp·P) for every view, OUTDIR/render_I.bin (pixels of
+// Decode an .lfc file with the browser viewer's JavaScript decoder under Node (the tests' and the
+// fuzzer's second reader of the format, tools/fuzz.py).
+// node tools/web_decode.mjs FILE OUTDIR [S,T,FOCUS,APERTURE ...]   (env LFC_LEVELS="0,1": levels)
+// Writes OUTDIR/view_V.bin (Int32 planes, Hp·Wp·P) for every view (view_V_L1.bin at level 1),
+// OUTDIR/render_I.bin (pixels of
 // the file's dtype) for every camera (FOCUS "nan" = the file's maps), and prints one JSON line:
 // {ok: true, Hp, Wp, P, n} or {ok: false, name, message} for an error the decoder raised.
 import fs from "fs";
@@ -8,7 +10,7 @@ import path from "path";
 import { createRequire } from "module";
 import { fileURLToPath } from "url";
 
-const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../../formats/web");
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
 const { openDecoder, BufferSource, LfcError } = await import(path.join(web, "lfc.js"));
 const { makeKeyImage } = await import(path.join(web, "openjpeg.js"));
 const { Renderer } = await import(path.join(web, "render.js"));
@@ -22,9 +24,12 @@ try {
   const chunkBudget = Number(process.env.LFC_CHUNK_BUDGET || Infinity);      // bytes of file chunks kept
   const dec = await openDecoder(new BufferSource(fs.readFileSync(file)), { name: path.basename(file), keyImage, chunkBudget });
   fs.mkdirSync(out, { recursive: true });
-  for (let v = 0; v < dec.n0; v++) {
-    const p = await dec.decodeView(v, 0);
-    fs.writeFileSync(path.join(out, `view_${v}.bin`), Buffer.from(p.buffer, p.byteOffset, p.byteLength));
+  for (const level of (process.env.LFC_LEVELS || "0").split(",").map(Number)) {
+    for (let v = 0; v < dec.n0; v++) {
+      const p = await dec.decodeView(v, level);
+      const name = level ? `view_${v}_L${level}.bin` : `view_${v}.bin`;
+      fs.writeFileSync(path.join(out, name), Buffer.from(p.buffer, p.byteOffset, p.byteLength));
+    }
   }
   const r = new Renderer(dec);
   for (let i = 0; i < cams.length; i++) {
