@@ -442,7 +442,7 @@ def _open(blob: bytes):
         if meta.get("codec") == "lfn":
             from tools.reflfn import RefLfn
             return RefLfn(meta, secs)
-    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as e:
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError, OverflowError) as e:
         raise RefError(f"metadata: {type(e).__name__}: {e}") from None
     raise RefError(f"codec {meta.get('codec')!r} not covered here")
 
@@ -453,7 +453,7 @@ def ref_decode(blob: bytes, level: int = 0) -> np.ndarray:
     dec = _open(blob)
     try:
         return dec.decode(level)
-    except (KeyError, TypeError, ValueError, IndexError) as e:
+    except (KeyError, TypeError, ValueError, IndexError, OverflowError) as e:
         raise RefError(f"{type(e).__name__}: {e}") from None
 
 

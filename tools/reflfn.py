@@ -8,14 +8,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from tools.refdecode import need, pint
+from tools.refdecode import RefError, need, pint
 
 DT = {"fp16": "<f2", "fp32": "<f4"}
 
 
 def fnum(v) -> float:
-    need(type(v) in (int, float) and np.isfinite(v), f"number {v!r}")
-    return float(v)
+    need(type(v) in (int, float), f"number {v!r}")
+    try:
+        x = float(v)
+    except OverflowError:
+        raise RefError(f"number {v!r} beyond float64") from None
+    need(np.isfinite(x), f"finite number {v!r}")
+    return x
 
 
 class RefLfn:
