@@ -199,6 +199,7 @@ _VMAX[MODE_PLAIN + 1:MODE_PLAIN + 32] = (1 << np.arange(1, 32)) - 1
 #: the largest dequantized residual a block may carry (FORMAT.md); keeps every sum of a
 #: residual chain (≤ 16 levels) exact in int32
 MAX_RESIDUAL = 1 << 24
+_VMAX_LIST = _VMAX.tolist()
 
 
 def check_blocks(modes: np.ndarray, mins: np.ndarray, q16, bitmaps_high=None) -> None:
@@ -245,6 +246,7 @@ class BlockStore:
                  layout: dict, verify=None, verify_span=None, n_nodes: int | None = None, q16=None):
         self.index = index.astype(np.int64)
         self.n_nodes, self.q16 = n_nodes, None if q16 is None else np.asarray(q16, np.int64)
+        self._q16s = None if q16 is None else [int(q) for q in q16]
         self._high = 0 if n_nodes is None else (0xFF << (n_nodes - 8 * (layout["bitmap_bytes"] - 1))) & 0xFF
         self.buf = buf
         self.P, self.B, self.C, self.bps = planes, block, channels, bps
@@ -342,7 +344,11 @@ class BlockStore:
             mb = self.off_bytes + P
             mins = [int.from_bytes(hb[mb + c * self.min_bytes:mb + (c + 1) * self.min_bytes], "little", signed=True)
                     for c in range(P)]
-            check_blocks(np.frombuffer(modes, np.uint8)[None], np.asarray(mins, np.int64)[None], self.q16)
+            check_modes(np.frombuffer(modes, np.uint8)[None])
+            if self._q16s is not None and modes[0] != MODE_RAW and any(     # check_blocks' rule, Python ints
+                    (max(abs(mn), abs(mn + _VMAX_LIST[m])) * q + 8) >> 4 > MAX_RESIDUAL
+                    for m, mn, q in zip(modes, mins, self._q16s)):
+                raise FormatError(f"rlfc block header allows residuals beyond ±{MAX_RESIDUAL} (corrupt file)")
             if pos < heads_end:
                 raise FormatError("rlfc block payload lies outside its run (corrupt file)")
             if modes[0] == MODE_RAW:

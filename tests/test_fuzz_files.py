@@ -118,8 +118,15 @@ def test_residuals_beyond_the_stated_range_are_refused():
     b = bytearray(dict(secs)["rlfc.blocks"])
     b[at:at + 4] = (2 ** 31 - 1).to_bytes(4, "little")
     secs = [(n, bytes(b) if n == "rlfc.blocks" else d) for n, d in secs]
+    blob = _rebuild(meta, secs)
     with pytest.raises(FormatError, match="residuals beyond"):
-        _decode_all_paths(_rebuild(meta, secs))
+        _decode_all_paths(blob)
+    d = open_decoder(open_lfc(blob))                  # the scalar single-block path on its own
+    with pytest.raises(FormatError, match="residuals beyond"):
+        for v in range(d.rows * d.cols):
+            for by in range(d.nby):
+                for bx in range(d.nbx):
+                    d.decode_block(v // d.cols, v % d.cols, by, bx)
 
 
 def test_dcp_key_view_must_lie_in_the_grid():
