@@ -275,7 +275,7 @@ def cmd_render(a) -> int:
         if not hasattr(d, "renderer"):
             raise ParameterError(f"{a.input}: novel views are rendered from RLFC grids (this is {f.codec}); "
                                  f"an LFN renders any ray: decode --view")
-        ren = d.renderer(robust=not a.fast)
+        ren = d.renderer(robust=not a.fast, device=a.device)
         t0 = time.perf_counter()
         if a.quilt:
             cols, rows = _grid(a.quilt)
@@ -302,7 +302,7 @@ def _render_path(a, out: Path) -> int:
         d = open_decoder(f)
         if not hasattr(d, "renderer"):
             raise ParameterError(f"{a.input}: novel views are rendered from RLFC grids (this is {f.codec})")
-        ren = d.renderer(robust=not a.fast)
+        ren = d.renderer(robust=not a.fast, device=a.device)
         cams = read_path(a.path, d.rows, d.cols)
         for s_, t_ in cams[:, :2]:                      # every camera checked before any frame is written
             ren.check_camera(float(s_), float(t_))
@@ -546,6 +546,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--fast", action="store_true",
                    help="use the file's disparity maps as they are (about 3x faster; the default also tries "
                         "smoother disparities where the maps make the views disagree, e.g. on noisy captures)")
+    r.add_argument("--device", default="auto",
+                   help="where the pixels are computed: auto (a CUDA GPU through torch when present, else numpy; "
+                        "default), numpy, or a torch device (cuda, cuda:1, cpu); the frames agree within rounding")
     r.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     r.set_defaults(func=cmd_render)
 

@@ -2,10 +2,16 @@
 columns) is encoded, the views in between are rendered from the file and compared with the
 captured ones, beside the nearest encoded view and plain bilinear blending (no disparity), for
 the default renderer (robust disparity choice) and ``robust=False`` (the file's maps as they
-are, "fast"); then frame times of both along a camera path with a warm block cache.
+are, "fast"); then frame times of both along a camera path with a warm block cache, on each
+``--device`` (numpy = numpy + OpenCV on the CPU; a torch device such as cuda or cpu), with the
+largest difference of that device's planes from numpy's on the first camera.
+
+``--midview`` instead checks, on the original views, whether a captured in-between view is a
+geometric interpolation of its neighbours at all (see :func:`midview_check`).
 
 Usage:
-    python -m tools.bench_render SCENE [SCENE ...] [--target-psnr 40] [--out DIR]
+    python -m tools.bench_render SCENE [SCENE ...] [--target-psnr 40] [--device numpy cuda] [--out DIR]
+    python -m tools.bench_render SCENE [SCENE ...] --midview
 """
 from __future__ import annotations
 
@@ -23,7 +29,7 @@ from rlfc import encode
 from tools.common import log, machine, open_encoded
 
 
-def bench_scene(path: str, target: float) -> dict:
+def bench_scene(path: str, target: float, devices=("numpy",)) -> dict:
     lf = read_scene(path)
     full = lf.views
     lf.views = np.ascontiguousarray(full[::2, ::2])
@@ -54,8 +60,14 @@ def bench_scene(path: str, target: float) -> dict:
     rad = min(d.rows, d.cols) / 3
     ang = np.linspace(0, 2 * np.pi, 60, endpoint=False)
     speed = {}
-    for label, robust in (("", True), ("_fast", False)):
-        ren2 = d.renderer(cache_mib=1024, robust=robust)
+    for dev, (label, robust) in ((dv, lr) for dv in devices for lr in (("", True), ("_fast", False))):
+        label = label if dev == "numpy" else f"{label}_{dev}"
+        ren2 = d.renderer(cache_mib=1024, robust=robust, device=dev)
+        if dev != "numpy":
+            ref = d.renderer(cache_mib=1024, robust=robust).render_planes(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
+            got = ren2.render_planes(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
+            speed[f"max_plane_diff{label}"] = float(np.abs(ref - got.cpu().numpy()).max())
+            ren2 = d.renderer(cache_mib=1024, robust=robust, device=dev)
         t = time.perf_counter()
         ren2.render(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
         first = time.perf_counter() - t
@@ -78,13 +90,54 @@ def bench_scene(path: str, target: float) -> dict:
             "frame": f"{d.height}x{d.width}", **speed}
 
 
+def midview_check(path: str) -> dict:
+    """Is an in-between captured view a geometric interpolation of its neighbours? On the
+    original views of the middle row: the horizontal shift per view step that best aligns a view
+    with the next (one disparity for the frame, 0.05 px steps; 20-px border left out), then the
+    PSNR of the middle view predicted by the mean of its two neighbours shifted by ±that disparity
+    (bilinear, bicubic, Lanczos-4), against the mean without a shift (blending)."""
+    import cv2
+
+    v = read_scene(path).views
+    r, c = v.shape[0] // 2, v.shape[1] // 2
+    a, m, b = (v[r, c + k].astype(np.float32) for k in (-1, 0, 1))
+    H, W = a.shape[:2]
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    inner = (slice(20, -20), slice(20, -20))
+
+    def shift(img, dx, interp=cv2.INTER_LINEAR):
+        out = cv2.remap(img, xx + np.float32(dx), yy, interp, borderMode=cv2.BORDER_REPLICATE)
+        return out.reshape(img.shape)
+
+    steps = np.round(np.arange(-2.0, 2.0001, 0.05), 2)
+    err = [float(np.mean(np.square(shift(a, dx) - m)[inner])) for dx in steps]
+    disp = float(steps[int(np.argmin(err))])
+
+    def mid(dx, interp):
+        est = 0.5 * (shift(a, dx, interp) + shift(b, -dx, interp))
+        est = np.clip(np.rint(est[inner]), 0, float(np.iinfo(v.dtype).max)).astype(v.dtype)
+        return round(psnr_rgb(m[inner].astype(v.dtype), est), 2)
+
+    kernels = {"bilinear": cv2.INTER_LINEAR, "bicubic": cv2.INTER_CUBIC, "lanczos4": cv2.INTER_LANCZOS4}
+    return {"scene": Path(path).name, "disparity_per_step": disp, "blend_no_shift": mid(0.0, cv2.INTER_LINEAR),
+            **{f"shifted_{k}": mid(disp, it) for k, it in kernels.items()}}
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(prog="python -m tools.bench_render", description=__doc__.split("\n\n")[0])
     ap.add_argument("scenes", nargs="+")
     ap.add_argument("--target-psnr", type=float, default=40.0)
+    ap.add_argument("--device", nargs="+", default=["numpy"],
+                    help="where frames are timed: numpy and/or torch devices (cuda, cpu)")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--midview", action="store_true",
+                    help="instead: check whether each scene's in-between views are geometric interpolations "
+                         "of their neighbours (original views, no codec)")
     a = ap.parse_args(argv)
-    res = {"machine": machine(), "scenes": [bench_scene(s, a.target_psnr) for s in a.scenes]}
+    if a.midview:
+        res = {"machine": machine(), "midview": [midview_check(s) for s in a.scenes]}
+    else:
+        res = {"machine": machine(), "scenes": [bench_scene(s, a.target_psnr, a.device) for s in a.scenes]}
     log(json.dumps(res, indent=1))
     if a.out:
         Path(a.out).mkdir(parents=True, exist_ok=True)

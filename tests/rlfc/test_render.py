@@ -79,3 +79,59 @@ def test_render_cli(leave_out, tmp_path, capsys):
     assert main(["render", str(f), str(tmp_path / "v.png"), "--at", "1", "--quiet"]) == 2
     assert main(["render", str(f), str(tmp_path / "v.jpg"), "--quiet"]) == 2
     assert "outside the grid" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("robust", [True, False])
+def test_torch_renderer_agrees_with_numpy(leave_out, robust):
+    """The torch path (here on the CPU; the same code runs on a GPU) gives the numpy frames within
+    float rounding: planes within 1e-3, pixels within one rounding step per plane."""
+    _, d, _ = leave_out
+    a = d.renderer(robust=robust)
+    b = d.renderer(robust=robust, device="cpu")
+    assert b.ops.name == "torch" and a.ops.name == "numpy"
+    for cam in ((0.5, 0.5), (0.25, 1.7), (1.9, 0.1), (-0.4, 2.3), (1.0, 1.0)):
+        pa, pb = a.render_planes(*cam), b.render_planes(*cam).numpy()
+        assert pa.shape == pb.shape and np.abs(pa - pb).max() < 1e-3, cam
+        assert np.abs(a.render(*cam).astype(int) - b.render(*cam)).max() <= 3      # ±1 per plane, mixed
+    assert a.blocks_decoded == b.blocks_decoded and a.blocks_requested == b.blocks_requested
+    pa = a.render_planes(1, 1, focus=3.0, aperture=1.5)
+    assert np.abs(pa - b.render_planes(1, 1, focus=3.0, aperture=1.5).numpy()).max() < 1e-3
+
+
+def test_render_device_choice_and_errors(leave_out, tmp_path, capsys):
+    from formats.imageio import read_image
+
+    _, d, blob = leave_out
+    assert d.renderer(device="numpy").ops.name == "numpy"
+    assert d.renderer(device="auto").ops.name in ("numpy", "torch")
+    for bad in ("abc", "", "cuda:99" if __import__("torch").cuda.is_available() else "cuda", 3):
+        with pytest.raises(ParameterError):
+            d.renderer(device=bad)
+    f = tmp_path / "g.lfc"
+    f.write_bytes(blob)
+    assert main(["render", str(f), str(tmp_path / "n.png"), "--at", "0.5,1.5", "--device", "numpy", "--quiet"]) == 0
+    assert main(["render", str(f), str(tmp_path / "t.png"), "--at", "0.5,1.5", "--device", "cpu", "--quiet"]) == 0
+    n, t = read_image(tmp_path / "n.png").astype(int), read_image(tmp_path / "t.png")
+    assert np.abs(n - t).max() <= 3
+    assert main(["render", str(f), str(tmp_path / "x.png"), "--device", "abc", "--quiet"]) == 2
+    assert "device 'abc' is not usable" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("device", [None, "cpu"])
+def test_blocks_touched_cover_the_bicubic_taps(leave_out, device):
+    """The blocks decoded for a set of positions cover every tap the sampling reads: bilinear
+    floor … floor + 1, bicubic floor − 1 … floor + 2 (a whole frame touches nearly every block of
+    its sources, so this is checked on the positions directly)."""
+    _, d, _ = leave_out
+    B = d.block_size
+    ren = d.renderer(device=device)
+    yy, xx = ren.ops.grid(d.height, d.width)
+    Y, X = yy * 0 + (B + 0.3), xx * 0 + (B + 0.5)     # every position just past block row/col 1's start
+    lin, cub = ren._blocks_touched(Y, X), ren._blocks_touched(Y, X, cubic=True)
+    assert np.argwhere(lin).tolist() == [[1, 1]]
+    assert np.argwhere(cub).tolist() == [[0, 0], [0, 1], [1, 0], [1, 1]]
+    img = ren._sample(0, Y, X, cubic=True)               # a cold cache: only those blocks decoded
+    assert ren.blocks_decoded == 4 and np.isfinite(ren.ops.to_numpy(img)).all()
+    ref = d.renderer(device=device)
+    ref._sample(0, *ref.ops.grid(d.height, d.width))     # every block of view 0 decoded
+    assert (ren.ops.to_numpy(ref._sample(0, Y, X, cubic=True)) == ren.ops.to_numpy(img)).all()

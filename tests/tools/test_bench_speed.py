@@ -42,3 +42,17 @@ def test_bench_remote_renders_frames_over_http(tmp_path):
     # (a tiny file is fetched whole at open: its blocks share one checksum chunk)
     assert res["open_and_first_frame_s"] > 0 and 0 < res["render_wire_bytes"] <= res["bytes"] + 512
     json.dumps(res)
+
+
+def test_bench_render_reports_quality_and_speed_on_each_device(tmp_path):
+    from tools import bench_render
+
+    lf = smooth_lf(rows=5, cols=5, h=32, w=40)
+    write_views(tmp_path / "tiny", lf.views)
+    (tmp_path / "tiny" / "scene.json").write_text(json.dumps(
+        {"layout": "grid", "rows": 5, "cols": 5, "views": "r{row:02d}_c{col:02d}.png"}))
+    r = bench_render.bench_scene(str(tmp_path / "tiny"), 36.0, ("numpy", "cpu"))
+    assert r["encoded_views"] == "3x3" and set(r["psnr"]) == {"render", "render_fast", "nearest", "blend"}
+    for k in ("warm_fps", "warm_fps_fast", "warm_fps_cpu", "warm_fps_fast_cpu"):
+        assert r[k] > 0, k
+    assert r["max_plane_diff_cpu"] < 1e-3 and r["max_plane_diff_fast_cpu"] < 1e-3

@@ -1,0 +1,237 @@
+"""The pixel operations of the novel-view renderer, for numpy (OpenCV) and torch alike.
+
+:class:`rlfc.render.Renderer` writes each frame once against this interface; Python operators
+(``+ - * <``, slicing) behave the same on numpy arrays and torch tensors, the rest is here.
+``NumpyOps`` samples with OpenCV's ``remap``; ``TorchOps`` with ``grid_sample`` on a torch device
+(a GPU when present); both interpolate at the exact float positions (OpenCV 5's remap of float32
+images does not round them to 1/32 pixel as OpenCV 4 did), so both give the same frames within
+float rounding.
+
+Shapes: positions and scalar planes (H, W) float32; sampled pixels (H, W, P) float32, P planes
+of the file (YCoCg-R [+ alpha] or grey [+ alpha]); a view buffer holds a view's decoded blocks,
+(nby·B, nbx·B) pixels, zero where a block is not decoded yet.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+TILE = 8               # the geometry's block: tile extents and block maps are per 8×8 pixels
+
+
+class NumpyOps:
+    """numpy + OpenCV, on the CPU (the default)."""
+
+    name = "numpy"
+
+    def grid(self, H: int, W: int):
+        yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+        return yy, xx
+
+    def const(self, H: int, W: int, v: float):
+        return np.full((H, W), v, np.float32)
+
+    def from_blocks(self, m: np.ndarray, H: int, W: int):
+        """(H, W) float32: a per-8×8-block map (ny, nx) repeated over its blocks' pixels."""
+        return np.repeat(np.repeat(np.asarray(m, np.float32), TILE, 0), TILE, 1)[:H, :W]
+
+    def zeros(self, *shape):
+        return np.zeros(shape, np.float32)
+
+    def buffer(self, h: int, w: int, P: int):
+        return np.zeros((h, w, P), np.float32)
+
+    def put_blocks(self, buf, by, bx, got: np.ndarray, B: int) -> None:
+        """Write decoded blocks ``got`` (n, B, B, P) at block rows ``by`` / columns ``bx``."""
+        h, w, P = buf.shape
+        buf.reshape(h // B, B, w // B, B, P)[by, :, bx, :, :] = got.reshape(-1, B, B, P)
+
+    def clamp(self, a, hi: float):
+        return np.minimum(np.maximum(a, 0, out=a), hi, out=a)
+
+    def tile_range(self, a):
+        """(min, max) over each 8×8 tile of ``a`` (H, W), numpy (ceil(H/8), ceil(W/8)); edge
+        tiles cover what they hold."""
+        import cv2
+
+        k = np.ones((TILE, TILE), np.uint8)
+        lo = cv2.erode(a, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)[::TILE, ::TILE]
+        hi = cv2.dilate(a, k, anchor=(0, 0), borderType=cv2.BORDER_REPLICATE)[::TILE, ::TILE]
+        return lo, hi
+
+    def remap(self, buf, X, Y, cubic: bool = False):
+        """(H, W, P) samples of ``buf`` at positions (Y, X) (inside the buffer): bilinear, or
+        bicubic (Keys, a = −0.75; taps past the buffer repeat its edge)."""
+        import cv2
+
+        out = cv2.remap(buf, X, Y, cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        return out.reshape(*Y.shape, buf.shape[2])
+
+    def blur(self, a, k: int):
+        """Box mean over k×k pixels (anchor k//2, mirrored edges without repeating the edge)."""
+        import cv2
+
+        return cv2.blur(a, (k, k))
+
+    def less(self, a, b):
+        return a < b
+
+    def where(self, c, a, b):
+        return np.where(c, a, b)
+
+    def zeros_int(self, shape):
+        return np.zeros(shape, np.int64)
+
+    def set_where(self, a, c, v) -> None:
+        a[c] = v
+
+    def choose(self, sel, S: int, H: int, W: int, cands):
+        """(H, W): per pixel ``cands[k]``, k from ``sel`` (every S-th pixel) repeated S×S."""
+        k = np.repeat(np.repeat(sel, S, 0), S, 1)[:H, :W]
+        return np.choose(k, cands).astype(np.float32)
+
+    def sub(self, a, S: int):
+        return np.ascontiguousarray(a[::S, ::S])
+
+    def to_numpy(self, a) -> np.ndarray:
+        return a
+
+
+class TorchOps:
+    """torch on a device ("cuda" when available, else "cpu"): bilinear taps by gather."""
+
+    name = "torch"
+
+    def __init__(self, device: str | None = None):
+        import torch
+
+        from formats.errors import ParameterError
+
+        self.torch = torch
+        self.F = torch.nn.functional
+        try:
+            self.dev = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if device is None else device)
+            torch.zeros(1, device=self.dev)
+        except (RuntimeError, AssertionError, ValueError) as e:
+            raise ParameterError(f"device {device!r} is not usable here ({str(e).splitlines()[0][:120]})") from None
+
+    def grid(self, H: int, W: int):
+        t = self.torch
+        yy = t.arange(H, device=self.dev, dtype=t.float32)[:, None].expand(H, W).contiguous()
+        xx = t.arange(W, device=self.dev, dtype=t.float32)[None, :].expand(H, W).contiguous()
+        return yy, xx
+
+    def const(self, H: int, W: int, v: float):
+        return self.torch.full((H, W), float(v), dtype=self.torch.float32, device=self.dev)
+
+    def from_blocks(self, m: np.ndarray, H: int, W: int):
+        t = self.torch.as_tensor(np.asarray(m, np.float32), device=self.dev)
+        return t.repeat_interleave(TILE, 0).repeat_interleave(TILE, 1)[:H, :W]
+
+    def zeros(self, *shape):
+        return self.torch.zeros(shape, dtype=self.torch.float32, device=self.dev)
+
+    def buffer(self, h: int, w: int, P: int):
+        return self.torch.zeros((1, P, h, w), dtype=self.torch.float32, device=self.dev)
+
+    def put_blocks(self, buf, by, bx, got: np.ndarray, B: int) -> None:
+        _, P, h, w = buf.shape
+        g = self.torch.as_tensor(got.reshape(-1, B, B, P), device=self.dev).to(self.torch.float32)
+        iy = self.torch.as_tensor(by, device=self.dev)
+        ix = self.torch.as_tensor(bx, device=self.dev)
+        buf.view(P, h // B, B, w // B, B)[:, iy, :, ix, :] = g.permute(0, 3, 1, 2)
+
+    def clamp(self, a, hi: float):
+        return a.clamp_(0, hi)
+
+    def tile_range(self, a):
+        F = self.F
+        x = a[None, None]
+        lo = -F.max_pool2d(-x, TILE, TILE, ceil_mode=True)
+        hi = F.max_pool2d(x, TILE, TILE, ceil_mode=True)
+        return lo[0, 0].cpu().numpy(), hi[0, 0].cpu().numpy()
+
+    def remap(self, buf, X, Y, cubic: bool = False):
+        """Taps gathered from the flattened buffer with weights at the exact float positions
+        (as OpenCV 5 computes them; not ``grid_sample``, whose normalized coordinates lose ~1e-5
+        pixel): bilinear, or bicubic (Keys, a = −0.75, edge taps repeated)."""
+        t = self.torch
+        _, P, h, w = buf.shape
+        flat = buf.view(P, h * w)
+        x0, y0 = t.floor(X), t.floor(Y)
+        fx, fy = X - x0, Y - y0
+        x0, y0 = x0.to(t.int64), y0.to(t.int64)
+        if cubic:
+            xs = [(x0 + k).clamp_(0, w - 1) for k in (-1, 0, 1, 2)]
+            ys = [(y0 + k).clamp_(0, h - 1) * w for k in (-1, 0, 1, 2)]
+            wx, wy = keys_weights(fx), keys_weights(fy)
+        else:
+            xs = [x0, (x0 + 1).clamp_(max=w - 1)]
+            ys = [y0 * w, (y0 + 1).clamp_(max=h - 1) * w]
+            wx, wy = (1 - fx, fx), (1 - fy, fy)
+        out = 0
+        for yi, wyi in zip(ys, wy):
+            row = 0
+            for xi, wxi in zip(xs, wx):
+                row = row + flat[:, (yi + xi).reshape(-1)].reshape(P, *X.shape) * wxi
+            out = out + row * wyi
+        return out.permute(1, 2, 0)
+
+    def blur(self, a, k: int):
+        F = self.F
+        a0 = k // 2                                        # OpenCV's anchor, reflect-101 edges
+        mode = "reflect" if min(a.shape) > a0 else "replicate"     # (reflect needs a wider plane)
+        x = F.pad(a[None, None], (a0, k - 1 - a0, a0, k - 1 - a0), mode=mode)
+        return F.avg_pool2d(x, k, stride=1)[0, 0]
+
+    def less(self, a, b):
+        return a < b
+
+    def where(self, c, a, b):
+        return self.torch.where(c, a, b)
+
+    def zeros_int(self, shape):
+        return self.torch.zeros(shape, dtype=self.torch.int64, device=self.dev)
+
+    def set_where(self, a, c, v) -> None:
+        a[c] = v
+
+    def choose(self, sel, S: int, H: int, W: int, cands):
+        k = sel.repeat_interleave(S, 0).repeat_interleave(S, 1)[:H, :W]
+        out = cands[0].clone()
+        for i, c in enumerate(cands[1:], 1):
+            out = self.torch.where(k == i, c, out)
+        return out
+
+    def sub(self, a, S: int):
+        return a[::S, ::S].contiguous()
+
+    def to_numpy(self, a) -> np.ndarray:
+        return a.cpu().numpy()
+
+
+def keys_weights(f):
+    """The four cubic-convolution weights (taps at −1, 0, +1, +2) at fractions ``f``, Keys' kernel
+    with a = −0.75 written as OpenCV writes it (the fourth is one minus the others)."""
+    A = -0.75
+    f1, g = f + 1, 1 - f
+    w0 = ((A * f1 - 5 * A) * f1 + 8 * A) * f1 - 4 * A
+    w1 = ((A + 2) * f - (A + 3)) * f * f + 1
+    w2 = ((A + 2) * g - (A + 3)) * g * g + 1
+    return w0, w1, w2, 1 - w0 - w1 - w2
+
+
+def make_ops(device: str | None):
+    """The ops for ``device``: None or "numpy" → numpy + OpenCV; "auto" → torch on a CUDA GPU when
+    one is present, else numpy; "cpu", "cuda", "cuda:1", "mps" … → torch there (ParameterError
+    when that device is not usable)."""
+    if device == "auto":
+        import torch
+
+        device = "cuda" if torch.cuda.is_available() else None
+    if device is None or device == "numpy":
+        return NumpyOps()
+    if not isinstance(device, str):
+        from formats.errors import ParameterError
+
+        raise ParameterError(f"device must be a string such as 'cuda' or 'cpu', got {device!r}")
+    return TorchOps(device)
