@@ -264,9 +264,9 @@ class Renderer:
             if best is None:
                 best, choice = cost, ops.zeros_int(tuple(cost.shape))
             else:
-                win = ops.less(cost, best * ROBUST_MARGIN)
+                win = cost < best * ROBUST_MARGIN
                 best = ops.where(win, cost, best)
-                ops.set_where(choice, win, k)
+                choice[win] = k
         return ops.choose(choice, S, H, W, full)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:

@@ -72,17 +72,11 @@ class NumpyOps:
 
         return cv2.blur(a, (k, k))
 
-    def less(self, a, b):
-        return a < b
-
     def where(self, c, a, b):
         return np.where(c, a, b)
 
     def zeros_int(self, shape):
         return np.zeros(shape, np.int64)
-
-    def set_where(self, a, c, v) -> None:
-        a[c] = v
 
     def choose(self, sel, S: int, H: int, W: int, cands):
         """(H, W): per pixel ``cands[k]``, k from ``sel`` (every S-th pixel) repeated S×S."""
@@ -183,17 +177,11 @@ class TorchOps:
         x = F.pad(a[None, None], (a0, k - 1 - a0, a0, k - 1 - a0), mode=mode)
         return F.avg_pool2d(x, k, stride=1)[0, 0]
 
-    def less(self, a, b):
-        return a < b
-
     def where(self, c, a, b):
         return self.torch.where(c, a, b)
 
     def zeros_int(self, shape):
         return self.torch.zeros(shape, dtype=self.torch.int64, device=self.dev)
-
-    def set_where(self, a, c, v) -> None:
-        a[c] = v
 
     def choose(self, sel, S: int, H: int, W: int, cands):
         k = sel.repeat_interleave(S, 0).repeat_interleave(S, 1)[:H, :W]
