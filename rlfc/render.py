@@ -133,8 +133,8 @@ class Renderer:
 
     def _sample(self, view: int, Y, X, cubic: bool = False):
         """Samples (H, W, P) float32 of one view's planes at pixel positions Y, X (float32,
-        clamped to the image; bilinear, or bicubic), decoding the blocks they touch that are not decoded yet
-        (one batched call); OpenCV's remap, or torch's grid_sample on a device."""
+        clamped to the image; bilinear, or bicubic), decoding the blocks they touch that are not
+        decoded yet (one batched call); OpenCV's remap, or :class:`rlfc.render_ops.TorchOps`."""
         d = self.d
         B, ops = d.block_size, self.ops
         Y = ops.clamp(Y, d.height - 1)

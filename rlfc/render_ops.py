@@ -2,8 +2,8 @@
 
 :class:`rlfc.render.Renderer` writes each frame once against this interface; Python operators
 (``+ - * <``, slicing) behave the same on numpy arrays and torch tensors, the rest is here.
-``NumpyOps`` samples with OpenCV's ``remap``; ``TorchOps`` with ``grid_sample`` on a torch device
-(a GPU when present); both interpolate at the exact float positions (OpenCV 5's remap of float32
+``NumpyOps`` samples with OpenCV's ``remap``; ``TorchOps`` gathers the taps itself on a torch
+device (a GPU when present); both interpolate at the exact float positions (OpenCV 5's remap of float32
 images does not round them to 1/32 pixel as OpenCV 4 did), so both give the same frames within
 float rounding.
 
