@@ -66,6 +66,30 @@ class NumpyOps:
         out = cv2.remap(buf, X, Y, cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         return out.reshape(*Y.shape, buf.shape[2])
 
+    def tile_ranges(self, planes):
+        """:meth:`tile_range` of each plane of a list: [(lo, hi), ...] (numpy)."""
+        return [self.tile_range(a) for a in planes]
+
+    def remap_many(self, bufs, Xs, Ys, cubic: bool = False):
+        """:meth:`remap` of each (buffer, X, Y): a list of (H, W, P) samples (``wsum`` reads it)."""
+        return [self.remap(b, X, Y, cubic) for b, X, Y in zip(bufs, Xs, Ys)]
+
+    def plane(self, samples, p: int):
+        """Plane p of each sample of :meth:`remap_many`."""
+        return [x[..., p] for x in samples]
+
+    def wsum(self, samples, ws, acc=None):
+        """acc + Σ w_i · samples_i (scalar weights), accumulated in order (from zero when
+        ``acc`` is None) in float32."""
+        acc = np.zeros(samples[0].shape, np.float32) if acc is None else acc
+        for w, x in zip(ws, samples):
+            acc += np.float32(w) * x
+        return acc
+
+    def sq_dev(self, samples, mean):
+        """(x_i − mean)² of each sample."""
+        return [(x - mean) ** 2 for x in samples]
+
     def blur(self, a, k: int):
         """Box mean over k×k pixels (anchor k//2, mirrored edges without repeating the edge)."""
         import cv2
@@ -88,6 +112,13 @@ class NumpyOps:
 
     def to_numpy(self, a) -> np.ndarray:
         return a
+
+    def to_pixels(self, planes, dtype) -> np.ndarray:
+        """(H, W, C) pixels of ``dtype``: planes rounded half to even, colour transform inverted,
+        clipped."""
+        from formats.pixels import from_planes
+
+        return from_planes(np.rint(planes).astype(np.int32), dtype)
 
 
 class TorchOps:
@@ -125,50 +156,70 @@ class TorchOps:
         return self.torch.zeros(shape, dtype=self.torch.float32, device=self.dev)
 
     def buffer(self, h: int, w: int, P: int):
-        return self.torch.zeros((1, P, h, w), dtype=self.torch.float32, device=self.dev)
+        return self.torch.zeros((h, w, P), dtype=self.torch.float32, device=self.dev)
 
     def put_blocks(self, buf, by, bx, got: np.ndarray, B: int) -> None:
-        _, P, h, w = buf.shape
+        h, w, P = buf.shape
         g = self.torch.as_tensor(got.reshape(-1, B, B, P), device=self.dev).to(self.torch.float32)
         iy = self.torch.as_tensor(by, device=self.dev)
         ix = self.torch.as_tensor(bx, device=self.dev)
-        buf.view(P, h // B, B, w // B, B)[:, iy, :, ix, :] = g.permute(0, 3, 1, 2)
+        buf.view(h // B, B, w // B, B, P)[iy, :, ix, :, :] = g
 
     def clamp(self, a, hi: float):
         return a.clamp_(0, hi)
 
     def tile_range(self, a):
-        F = self.F
-        x = a[None, None]
-        lo = -F.max_pool2d(-x, TILE, TILE, ceil_mode=True)
-        hi = F.max_pool2d(x, TILE, TILE, ceil_mode=True)
-        return lo[0, 0].cpu().numpy(), hi[0, 0].cpu().numpy()
+        return self.tile_ranges([a])[0]
+
+    def tile_ranges(self, planes):
+        """Tile minima and maxima of all planes in two pooling calls and one device-to-host copy."""
+        F, t = self.F, self.torch
+        x = t.stack(planes)[:, None]
+        both = t.stack([-F.max_pool2d(-x, TILE, TILE, ceil_mode=True), F.max_pool2d(x, TILE, TILE, ceil_mode=True)])
+        both = both[:, :, 0].cpu().numpy()
+        return [(both[0, i], both[1, i]) for i in range(len(planes))]
 
     def remap(self, buf, X, Y, cubic: bool = False):
-        """Taps gathered from the flattened buffer with weights at the exact float positions
-        (as OpenCV 5 computes them; not ``grid_sample``, whose normalized coordinates lose ~1e-5
-        pixel): bilinear, or bicubic (Keys, a = −0.75, edge taps repeated)."""
+        return self.remap_many([buf], [X], [Y], cubic)[0]
+
+    def remap_many(self, bufs, Xs, Ys, cubic: bool = False):
+        """(S, H, W, P) samples of S buffers at their positions, all taps of all of them gathered
+        in one indexing call from the stacked buffers (few kernel launches per frame), with
+        weights at the exact float positions (as OpenCV 5 computes them; not ``grid_sample``,
+        whose normalized coordinates lose ~1e-5 pixel): bilinear, or bicubic (Keys, a = −0.75,
+        edge taps repeated)."""
         t = self.torch
-        _, P, h, w = buf.shape
-        flat = buf.view(P, h * w)
+        h, w, P = bufs[0].shape
+        S = len(bufs)
+        src = (t.stack(bufs) if S > 1 else bufs[0][None]).view(S * h * w, P)
+        X, Y = t.stack(Xs), t.stack(Ys)                                      # (S, H, W)
         x0, y0 = t.floor(X), t.floor(Y)
         fx, fy = X - x0, Y - y0
         x0, y0 = x0.to(t.int64), y0.to(t.int64)
         if cubic:
-            xs = [(x0 + k).clamp_(0, w - 1) for k in (-1, 0, 1, 2)]
-            ys = [(y0 + k).clamp_(0, h - 1) * w for k in (-1, 0, 1, 2)]
-            wx, wy = keys_weights(fx), keys_weights(fy)
+            k = t.arange(-1, 3, device=self.dev).view(4, 1, 1, 1)
+            xs = (x0[None] + k).clamp_(0, w - 1)
+            ys = (y0[None] + k).clamp_(0, h - 1) * w
+            wx, wy = t.stack(keys_weights(fx)), t.stack(keys_weights(fy))    # (4, S, H, W)
         else:
-            xs = [x0, (x0 + 1).clamp_(max=w - 1)]
-            ys = [y0 * w, (y0 + 1).clamp_(max=h - 1) * w]
-            wx, wy = (1 - fx, fx), (1 - fy, fy)
-        out = 0
-        for yi, wyi in zip(ys, wy):
-            row = 0
-            for xi, wxi in zip(xs, wx):
-                row = row + flat[:, (yi + xi).reshape(-1)].reshape(P, *X.shape) * wxi
-            out = out + row * wyi
-        return out.permute(1, 2, 0)
+            xs = t.stack([x0, (x0 + 1).clamp_(max=w - 1)])
+            ys = t.stack([y0, (y0 + 1).clamp_(max=h - 1)]) * w
+            wx, wy = t.stack([1 - fx, fx]), t.stack([1 - fy, fy])
+        ys = ys + (t.arange(S, device=self.dev) * (h * w)).view(1, S, 1, 1)
+        taps = src[(ys[:, None] + xs[None]).reshape(-1)].view(*ys.shape[:1], *xs.shape, P)  # (ty, tx, S, H, W, P)
+        rows = (taps * wx[None, ..., None]).sum(1)
+        return (rows * wy[..., None]).sum(0)
+
+    def plane(self, samples, p: int):
+        return samples[..., p]
+
+    def wsum(self, samples, ws, acc=None):
+        w = self.torch.as_tensor(np.asarray(ws, np.float32), device=self.dev)
+        out = (samples * w.view(-1, *([1] * (samples.dim() - 1)))).sum(0)
+        return out if acc is None else acc + out
+
+    def sq_dev(self, samples, mean):
+        return (samples - mean[None]) ** 2
 
     def blur(self, a, k: int):
         F = self.F
@@ -195,6 +246,15 @@ class TorchOps:
 
     def to_numpy(self, a) -> np.ndarray:
         return a.cpu().numpy()
+
+    def to_pixels(self, planes, dtype) -> np.ndarray:
+        """As :meth:`NumpyOps.to_pixels`, on the device (one small copy back)."""
+        from formats.pixels import inverse_int
+
+        t = self.torch
+        peak = int(np.iinfo(dtype).max)
+        x = inverse_int(t.round(planes).to(t.int32)).clamp_(0, peak)
+        return (x.to(t.uint8) if peak == 255 else x).cpu().numpy().astype(dtype, copy=False)
 
 
 def keys_weights(f):

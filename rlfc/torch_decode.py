@@ -11,6 +11,8 @@ import torch
 
 from formats.pixels import inverse_int
 
+CHUNK = 1 << 17         # requests decoded together: the device's temporaries grow with them
+
 
 class TorchBlockDecoder:
     """Batched block decoder on a torch device, over an :class:`~rlfc.decoder.RlfcDecoder`.
@@ -32,6 +34,15 @@ class TorchBlockDecoder:
         level = d.check_level(level)
         views, by, bx = d.requests(views, by, bx)
         B = d.block_size
-        acc = self.core.blocks(views, by, bx, level).reshape(views.size, B, B, d.P)
-        out = torch.clamp(inverse_int(acc), 0, self.peak)
+        out = None
+        for i in range(0, max(views.size, 1), CHUNK):  # bounded temporaries (~6 GB per chunk on tx)
+            sl = slice(i, i + CHUNK)
+            acc = self.core.blocks(views[sl], by[sl], bx[sl], level).reshape(-1, B, B, d.P)
+            got = torch.clamp(inverse_int(acc), 0, self.peak)
+            if views.size <= CHUNK:
+                out = got
+                break
+            if out is None:
+                out = torch.empty((views.size, B, B, d.P), dtype=got.dtype, device=got.device)
+            out[sl] = got
         return out.cpu().numpy().astype(d.dtype) if to_numpy else out

@@ -12,6 +12,7 @@ geometric interpolation of its neighbours at all (see :func:`midview_check`).
 Usage:
     python -m tools.bench_render SCENE [SCENE ...] [--target-psnr 40] [--device numpy cuda] [--out DIR]
     python -m tools.bench_render SCENE [SCENE ...] --midview
+    python -m tools.bench_render FILE.lfc [...] [--device numpy cuda]   (frame times only)
 """
 from __future__ import annotations
 
@@ -55,6 +56,19 @@ def bench_scene(path: str, target: float, devices=("numpy",)) -> dict:
             for name, x in (("render", img), ("render_fast", fast.render(s, t)), ("nearest", near), ("blend", blend)):
                 rows[name].append(psnr_rgb(full[r, c], x))
                 ss[name].append(ssim(full[r, c][None], x[None]))
+    speed = time_path(d, devices)
+    return {"scene": Path(path).name, "encoded_views": f"{lf.rows}x{lf.cols}", "target_psnr": target,
+            "file_bytes": len(blob), "encode_s": round(t_enc, 1),
+            "psnr": {k: round(float(np.mean(v)), 2) for k, v in rows.items()},
+            "psnr_worst": {k: round(float(np.min(v)), 2) for k, v in rows.items()},
+            "ssim": {k: round(float(np.mean(v)), 4) for k, v in ss.items()},
+            "frame": f"{d.height}x{d.width}", **speed}
+
+
+def time_path(d, devices=("numpy",)) -> dict:
+    """Frame times along a smooth camera path on each device, warm cache: first frame (ms),
+    warm fps, cache hit rate and blocks per frame, for the robust and the fast renderer; for a
+    torch device also the largest difference of its planes from numpy's on the first camera."""
     # a smooth path: a circle of radius 1/3 of the grid around the centre, 60 frames, twice
     cs, ct = (d.rows - 1) / 2, (d.cols - 1) / 2
     rad = min(d.rows, d.cols) / 3
@@ -82,12 +96,17 @@ def bench_scene(path: str, target: float, devices=("numpy",)) -> dict:
                       f"warm_hit_rate{label}": round(1 - (ren2.blocks_decoded - dec0)
                                                      / max(1, ren2.blocks_requested - req0), 3),
                       f"blocks_per_frame{label}": round((ren2.blocks_requested - req0) / len(ang), 1)})
-    return {"scene": Path(path).name, "encoded_views": f"{lf.rows}x{lf.cols}", "target_psnr": target,
-            "file_bytes": len(blob), "encode_s": round(t_enc, 1),
-            "psnr": {k: round(float(np.mean(v)), 2) for k, v in rows.items()},
-            "psnr_worst": {k: round(float(np.min(v)), 2) for k, v in rows.items()},
-            "ssim": {k: round(float(np.mean(v)), 4) for k, v in ss.items()},
-            "frame": f"{d.height}x{d.width}", **speed}
+    return speed
+
+
+def speed_file(path: str, devices=("numpy",)) -> dict:
+    """Frame times only, on an encoded file (no leave-views-out quality): :func:`time_path`."""
+    from formats.lfcfile import open_lfc
+    from rlfc import RlfcDecoder
+
+    d = RlfcDecoder(open_lfc(path))
+    return {"file": Path(path).name, "views": f"{d.rows}x{d.cols}", "frame": f"{d.height}x{d.width}",
+            **time_path(d, devices)}
 
 
 def midview_check(path: str) -> dict:
@@ -137,7 +156,8 @@ def main(argv=None) -> int:
     if a.midview:
         res = {"machine": machine(), "midview": [midview_check(s) for s in a.scenes]}
     else:
-        res = {"machine": machine(), "scenes": [bench_scene(s, a.target_psnr, a.device) for s in a.scenes]}
+        res = {"machine": machine(), "scenes": [speed_file(s, a.device) if s.endswith(".lfc")
+                                                else bench_scene(s, a.target_psnr, a.device) for s in a.scenes]}
     log(json.dumps(res, indent=1))
     if a.out:
         Path(a.out).mkdir(parents=True, exist_ok=True)

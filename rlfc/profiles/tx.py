@@ -498,9 +498,8 @@ class TorchTx:
             kk = np.flatnonzero(key)
             ys = xp.asarray(by[kk][:, None] * B + np.arange(B))
             xs = xp.asarray(bx[kk][:, None] * B + np.arange(B))
-            img = self.keyplanes[xp.asarray(d.key_slot[views[kk]])]
-            out[xp.asarray(kk)] = img[torch.arange(kk.size, device=xp.device)[:, None, None], ys[:, :, None],
-                                      xs[:, None, :]]
+            slot = xp.asarray(d.key_slot[views[kk]])[:, None, None]     # gather the blocks, not whole planes
+            out[xp.asarray(kk)] = self.keyplanes[slot, ys[:, :, None], xs[:, None, :]]
         nk = np.flatnonzero(~key)
         if nk.size:
             v, locs = views[nk], by[nk] * d.nbx + bx[nk]

@@ -50,6 +50,19 @@ def test_lossy_decode_is_the_closed_loop_and_torch_agrees(kw, rng):
         assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level) == d.decode_blocks(v, by, bx, level)).all()
 
 
+def test_torch_decoder_in_chunks_equals_one_call(rng, monkeypatch):
+    """Large torch calls are decoded in chunks of requests (bounded device memory): same blocks,
+    keys and predicted views mixed, chunk edges anywhere."""
+    import rlfc.torch_decode as td
+
+    d, _ = open_encoded(smooth_lf(), tx(smooth_lf(), step=6.0))
+    v, by, bx = rng.integers(0, d.rows * d.cols, 500), rng.integers(0, d.nby, 500), rng.integers(0, d.nbx, 500)
+    whole = td.TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx)
+    monkeypatch.setattr(td, "CHUNK", 37)
+    assert (td.TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == whole).all()
+    assert (whole == d.decode_blocks(v, by, bx)).all()
+
+
 def test_byte_range_source_equals_memory_and_fetches_one_stream():
     lf = smooth_lf(rows=5, cols=5, h=40, w=48)
     e = tx(lf, step=3.0)
