@@ -119,18 +119,26 @@ class Renderer:
         return self._need(ylo, yhi, xlo, xhi, cubic)
 
     def _need(self, ylo, yhi, xlo, xhi, cubic: bool) -> np.ndarray:
+        return self._need_many(ylo[None], yhi[None], xlo[None], xhi[None], cubic)[0]
+
+    def _need_many(self, ylo, yhi, xlo, xhi, cubic: bool) -> np.ndarray:
+        """(n, nby, nbx) bool from the tile ranges (n, ty, tx) of n position planes."""
         d = self.d
         B, H, W = d.block_size, d.height, d.width
         lo, hi = (1, 2) if cubic else (0, 1)
-        y_lo = np.maximum(np.floor(ylo).astype(np.int64) - lo, 0) // B
-        y_hi = np.minimum(np.floor(yhi).astype(np.int64) + hi, H - 1) // B
-        x_lo = np.maximum(np.floor(xlo).astype(np.int64) - lo, 0) // B
-        x_hi = np.minimum(np.floor(xhi).astype(np.int64) + hi, W - 1) // B
-        need = np.zeros((d.nby, d.nbx), bool)
-        for dy in range(int((y_hi - y_lo).max(initial=0)) + 1):
-            for dx in range(int((x_hi - x_lo).max(initial=0)) + 1):
-                need[np.minimum(y_lo + dy, y_hi), np.minimum(x_lo + dx, x_hi)] = True
-        return need
+        y0 = np.maximum(np.floor(ylo).astype(np.int64) - lo, 0) // B
+        y1 = np.minimum(np.floor(yhi).astype(np.int64) + hi, H - 1) // B + 1
+        x0 = np.maximum(np.floor(xlo).astype(np.int64) - lo, 0) // B
+        x1 = np.minimum(np.floor(xhi).astype(np.int64) + hi, W - 1) // B + 1
+        # each tile needs the rectangle of blocks [y0, y1) × [x0, x1): mark the rectangles'
+        # corners ±1 in a difference array, then its 2-D prefix sum is > 0 exactly on their union
+        n, n1, cell = ylo.shape[0], d.nbx + 1, (d.nby + 1) * (d.nbx + 1)
+        base = (np.arange(n) * cell)[:, None, None]
+        idx = np.concatenate([(base + y0 * n1 + x0).ravel(), (base + y1 * n1 + x1).ravel(),
+                              (base + y0 * n1 + x1).ravel(), (base + y1 * n1 + x0).ravel()])
+        sign = np.repeat(np.array([1, 1, -1, -1], np.int32), y0.size)
+        diff = np.bincount(idx, sign, n * cell).reshape(n, d.nby + 1, n1)
+        return (diff.cumsum(1).cumsum(2) > 0.5)[:, :d.nby, :d.nbx]
 
     def _sample(self, view: int, Y, X, cubic: bool = False):
         """Samples (H, W, P) float32 of one view's planes at pixel positions Y, X (float32,
@@ -149,11 +157,12 @@ class Renderer:
         Xs = [ops.clamp(X, d.width - 1) for X in Xs]
         ranges = ops.tile_ranges(list(Ys) + list(Xs))
         n = len(views)
+        lo, hi = np.stack([r[0] for r in ranges]), np.stack([r[1] for r in ranges])
+        needs = self._need_many(lo[:n], hi[:n], lo[n:], hi[n:], cubic)
+        self.blocks_requested += int(needs.sum())
         bufs, union = [], {}
-        for i, v in enumerate(views):                  # a view may come several times (candidates)
+        for v, need in zip(views, needs):              # a view may come several times (candidates)
             img, filled = self._view_buffer(v)
-            need = self._need(*ranges[i], *ranges[n + i], cubic)
-            self.blocks_requested += int(need.sum())
             bufs.append(img)
             union[v] = (img, filled, need | union[v][2]) if v in union else (img, filled, need)
         want = [(v, img, filled, *np.nonzero(need & ~filled)) for v, (img, filled, need) in union.items()
@@ -230,13 +239,20 @@ class Renderer:
         if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
             raise ParameterError("aperture must be >= 0 and focus finite")
         blk = self._block_map(s, t) if focus is None and aperture == 0 else None
-        disp = ops.const(d.height, d.width, float(focus or 0.0)) if blk is None else \
-            ops.from_blocks(blk, d.height, d.width)
+        src = self._sources(s, t, aperture)
+        robust = blk is not None and len(src) > 1 and self.robust
+        if blk is None:
+            disp = ops.const(d.height, d.width, float(focus or 0.0))
+        else:                                       # host maps go to the device together, first
+            import cv2
+
+            blk = blk.astype(np.float32)
+            maps = ops.from_blocks_many([blk] + ([cv2.medianBlur(blk, 5)] if robust else []), d.height, d.width)
+            disp = maps[0]
         if self._grid is None:
             self._grid = ops.grid(d.height, d.width)
-        src = self._sources(s, t, aperture)
-        if blk is not None and len(src) > 1 and self.robust:
-            disp = self._consistent(s, t, src, blk, disp)
+        if robust:
+            disp = self._consistent(s, t, src, blk, disp, maps[1])
         return self._blend(s, t, src, disp)
 
     def _blend(self, s, t, src, disp):
@@ -255,24 +271,20 @@ class Renderer:
             acc = self.ops.wsum(smp, [w for _, _, w in part], acc)
         return acc
 
-    def _consistent(self, s, t, src, blk, disp):
+    def _consistent(self, s, t, src, blk, disp, med):
         """(H, W) disparities: per pixel the most photo-consistent of three candidates,
-        smoothest first: the frame's median disparity, the map's median over 5×5 blocks, the
-        file's map (``blk`` per 8×8 block, ``disp`` per pixel). The choice is made on a grid of
+        smoothest first: the frame's median disparity, the map's median over 5×5 blocks (``med``
+        per pixel), the file's map (``blk`` per 8×8 block, ``disp`` per pixel). The choice is made on a grid of
         every ROBUST_STEP-th pixel: disagreement = the weighted variance of the sources' luma
         around their blend there, averaged over ROBUST_WINDOW² pixels; a later candidate replaces
         an earlier one where it has less than ROBUST_MARGIN times its disagreement (the maps are
         chosen for prediction bits, so on noisy captures some blocks carry disparities that fit
         the noise). The caller renders the frame once with them."""
-        import cv2
-
         d, ops = self.d, self.ops
         yy, xx = self._grid
         H, W = d.height, d.width
         S = ROBUST_STEP
-        blk = blk.astype(np.float32)
-        med = cv2.medianBlur(blk, 5)
-        full = [ops.const(H, W, float(np.median(blk))), ops.from_blocks(med, H, W), disp]
+        full = [ops.const(H, W, float(np.median(blk))), med, disp]
         ys, xs = ops.sub(yy, S), ops.sub(xx, S)
         best = None
         choice = None

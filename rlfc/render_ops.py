@@ -34,6 +34,10 @@ class NumpyOps:
         """(H, W) float32: a per-8×8-block map (ny, nx) repeated over its blocks' pixels."""
         return np.repeat(np.repeat(np.asarray(m, np.float32), TILE, 0), TILE, 1)[:H, :W]
 
+    def from_blocks_many(self, maps, H: int, W: int):
+        """:meth:`from_blocks` of each map of a list."""
+        return [self.from_blocks(m, H, W) for m in maps]
+
     def zeros(self, *shape):
         return np.zeros(shape, np.float32)
 
@@ -152,6 +156,12 @@ class TorchOps:
         t = self.torch.as_tensor(np.asarray(m, np.float32), device=self.dev)
         return t.repeat_interleave(TILE, 0).repeat_interleave(TILE, 1)[:H, :W]
 
+    def from_blocks_many(self, maps, H: int, W: int):
+        """All maps in one host-to-device copy (each copy from pageable memory waits for the
+        device's queue: a frame makes its copies before any kernel)."""
+        t = self.torch.as_tensor(np.stack([np.asarray(m, np.float32) for m in maps]), device=self.dev)
+        return list(t.repeat_interleave(TILE, 1).repeat_interleave(TILE, 2)[:, :H, :W])
+
     def zeros(self, *shape):
         return self.torch.zeros(shape, dtype=self.torch.float32, device=self.dev)
 
@@ -214,9 +224,14 @@ class TorchOps:
         return samples[..., p]
 
     def wsum(self, samples, ws, acc=None):
-        w = self.torch.as_tensor(np.asarray(ws, np.float32), device=self.dev)
-        out = (samples * w.view(-1, *([1] * (samples.dim() - 1)))).sum(0)
-        return out if acc is None else acc + out
+        # weights as Python scalars: a weight tensor would be a host-to-device copy, which waits
+        # for the device's queue in the middle of a frame
+        if acc is None:
+            acc = samples[0] * float(ws[0])
+            samples, ws = samples[1:], ws[1:]
+        for x, w in zip(samples, ws):
+            acc.add_(x, alpha=float(w))
+        return acc
 
     def sq_dev(self, samples, mean):
         return (samples - mean[None]) ** 2
