@@ -135,3 +135,28 @@ def test_blocks_touched_cover_the_bicubic_taps(leave_out, device):
     ref = d.renderer(device=device)
     ref._sample(0, *ref.ops.grid(d.height, d.width))     # every block of view 0 decoded
     assert (ren.ops.to_numpy(ref._sample(0, Y, X, cubic=True)) == ren.ops.to_numpy(img)).all()
+
+
+def test_blocks_needed_are_the_union_of_each_tiles_rectangle(leave_out):
+    """The vectorized bookkeeping (a difference array over all planes of a call) marks exactly
+    the blocks of every tile's rectangle [floor(lo) − m, floor(hi) + m'] // B, clipped."""
+    _, d, _ = leave_out
+    ren = d.renderer()
+    rng = np.random.default_rng(3)
+    B = d.block_size
+    for cubic in (False, True):
+        lo_m, hi_m = (1, 2) if cubic else (0, 1)
+        n, ty, tx = 3, 5, 6
+        ylo = rng.uniform(0, d.height - 1, (n, ty, tx)).astype(np.float32)
+        xlo = rng.uniform(0, d.width - 1, (n, ty, tx)).astype(np.float32)
+        yhi = np.minimum(ylo + rng.exponential(6, ylo.shape), d.height - 1).astype(np.float32)
+        xhi = np.minimum(xlo + rng.exponential(6, xlo.shape), d.width - 1).astype(np.float32)
+        got = ren._need_many(ylo, yhi, xlo, xhi, cubic)
+        want = np.zeros((n, d.nby, d.nbx), bool)
+        for k, i, j in np.ndindex(n, ty, tx):
+            y0 = max(int(np.floor(ylo[k, i, j])) - lo_m, 0) // B
+            y1 = min(int(np.floor(yhi[k, i, j])) + hi_m, d.height - 1) // B
+            x0 = max(int(np.floor(xlo[k, i, j])) - lo_m, 0) // B
+            x1 = min(int(np.floor(xhi[k, i, j])) + hi_m, d.width - 1) // B
+            want[k, y0:y1 + 1, x0:x1 + 1] = True
+        assert (got == want).all()
