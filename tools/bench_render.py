@@ -109,26 +109,29 @@ def speed_file(path: str, devices=("numpy",)) -> dict:
             **time_path(d, devices)}
 
 
-def midview_check(path: str) -> dict:
+def midview_check(path: str, step: int = 1) -> dict:
     """Is an in-between captured view a geometric interpolation of its neighbours? On the
-    original views of the middle row: the horizontal shift per view step that best aligns a view
-    with the next (one disparity for the frame, 0.05 px steps; 20-px border left out), then the
-    PSNR of the middle view predicted by the mean of its two neighbours shifted by ±that disparity
-    (bilinear, bicubic, Lanczos-4), against the mean without a shift (blending)."""
+    original views of the middle row (every ``step``-th view: step 2 is the baseline of a
+    leave-views-out file): the horizontal shift per view step that best aligns a view with the
+    next (one disparity for the frame, 0.05 px steps; 20-px border left out), then the PSNR of
+    the middle view predicted by the mean of its two neighbours shifted by ±that disparity
+    (bilinear, bicubic, Lanczos-4), against the mean without a shift (blending); and, bicubic,
+    by ±a fraction of it (0, ¼, ½, ¾, 1: does any amount of shifting beat blending?)."""
     import cv2
 
-    v = read_scene(path).views
+    v = read_scene(path).views[::step, ::step]
     r, c = v.shape[0] // 2, v.shape[1] // 2
     a, m, b = (v[r, c + k].astype(np.float32) for k in (-1, 0, 1))
     H, W = a.shape[:2]
     yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
-    inner = (slice(20, -20), slice(20, -20))
+    e = min(20, H // 4, W // 4)                     # border left out (20 px; less on tiny views)
+    inner = (slice(e, H - e), slice(e, W - e))
 
     def shift(img, dx, interp=cv2.INTER_LINEAR):
         out = cv2.remap(img, xx + np.float32(dx), yy, interp, borderMode=cv2.BORDER_REPLICATE)
         return out.reshape(img.shape)
 
-    steps = np.round(np.arange(-2.0, 2.0001, 0.05), 2)
+    steps = np.round(np.arange(-2.0 * step, 2.0 * step + 1e-4, 0.05), 2)
     err = [float(np.mean(np.square(shift(a, dx) - m)[inner])) for dx in steps]
     disp = float(steps[int(np.argmin(err))])
 
@@ -138,8 +141,10 @@ def midview_check(path: str) -> dict:
         return round(psnr_rgb(m[inner].astype(v.dtype), est), 2)
 
     kernels = {"bilinear": cv2.INTER_LINEAR, "bicubic": cv2.INTER_CUBIC, "lanczos4": cv2.INTER_LANCZOS4}
-    return {"scene": Path(path).name, "disparity_per_step": disp, "blend_no_shift": mid(0.0, cv2.INTER_LINEAR),
-            **{f"shifted_{k}": mid(disp, it) for k, it in kernels.items()}}
+    return {"scene": Path(path).name, "view_step": step, "disparity_per_step": disp,
+            "blend_no_shift": mid(0.0, cv2.INTER_LINEAR),
+            **{f"shifted_{k}": mid(disp, it) for k, it in kernels.items()},
+            "bicubic_fraction_of_shift": {str(f): mid(f * disp, cv2.INTER_CUBIC) for f in (0.0, 0.25, 0.5, 0.75, 1.0)}}
 
 
 def main(argv=None) -> int:
@@ -152,9 +157,11 @@ def main(argv=None) -> int:
     ap.add_argument("--midview", action="store_true",
                     help="instead: check whether each scene's in-between views are geometric interpolations "
                          "of their neighbours (original views, no codec)")
+    ap.add_argument("--view-step", type=int, nargs="+", default=[1],
+                    help="--midview: use every k-th view (2 = the baseline of a leave-views-out file)")
     a = ap.parse_args(argv)
     if a.midview:
-        res = {"machine": machine(), "midview": [midview_check(s) for s in a.scenes]}
+        res = {"machine": machine(), "midview": [midview_check(s, st) for st in a.view_step for s in a.scenes]}
     else:
         res = {"machine": machine(), "scenes": [speed_file(s, a.device) if s.endswith(".lfc")
                                                 else bench_scene(s, a.target_psnr, a.device) for s in a.scenes]}

@@ -56,3 +56,15 @@ def test_bench_render_reports_quality_and_speed_on_each_device(tmp_path):
     for k in ("warm_fps", "warm_fps_fast", "warm_fps_cpu", "warm_fps_fast_cpu"):
         assert r[k] > 0, k
     assert r["max_plane_diff_cpu"] < 1e-3 and r["max_plane_diff_fast_cpu"] < 1e-3
+    # frame times of an encoded file, and the mid-view check (a shifted scene: shifting must win)
+    from rlfc import encode
+    from tools.common import open_encoded
+
+    (tmp_path / "f.lfc").write_bytes(open_encoded(lf, encode(lf, profile="tx", step=2.0))[1])
+    s = bench_render.speed_file(str(tmp_path / "f.lfc"), ("numpy",))
+    assert s["views"] == "5x5" and s["warm_fps"] > 0 and s["blocks_per_frame"] > 0
+    m = bench_render.midview_check(str(tmp_path / "tiny"), 1)
+    fr = m["bicubic_fraction_of_shift"]
+    assert m["view_step"] == 1 and set(fr) == {"0.0", "0.25", "0.5", "0.75", "1.0"}
+    assert fr["1.0"] == m["shifted_bicubic"] and fr["0.0"] == m["blend_no_shift"]   # integer taps: exact
+    assert fr["1.0"] > fr["0.5"] > fr["0.0"]        # a scene of integer shifts: the full shift is exact
