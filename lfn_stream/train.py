@@ -1,8 +1,8 @@
 """Training a nested-width light field network with continuous levels of detail.
 
 Each step trains the full width on full-resolution targets plus one random fractional width
-w whose target is the summed-area-table box filter of the image at w's scale (1/8 at
-min_neurons … 1 at max_neurons). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
+w whose target is the summed-area-table box filter of the image at w's exact scale (1/8 at
+min_neurons … 1 at max_neurons; a box of fractional side, see :mod:`lfn_stream.sat`). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
 occupancy net learns which rays hit the object (alpha > 0) when the scene has alpha.
 Checkpoints hold raw arrays (``.npz`` without pickle) and training resumes from them.
 """
@@ -23,7 +23,7 @@ from .config import LfnConfig
 from .model import NestedLFN, OccupancyNet
 from .rays import normalization, view_rays
 from .sampling import RaySampler, TorchRaySampler
-from .sat import box_mean_torch, summed_area_table
+from .sat import box_mean_frac_torch, summed_area_table
 
 
 @dataclass
@@ -179,10 +179,11 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
         xr = rays[v, y, x]
         loss = ((model(xr) - tgt) ** 2).mean()
         # one random fractional level against the box-filtered target at its scale
+        # (the box's side is the exact reciprocal of the level's scale: a fractional box, so
+        # targets change continuously with the level, as the widths do)
         wlev = float(rng.uniform(cfg.min_neurons, cfg.max_neurons))
-        k = max(1, int(round(1.0 / cfg.scale_of(wlev))))
         v2, y2, x2 = tsampler.sample(opts.batch, gen)
-        tgt2 = (box_mean_torch(sat_t, v2, y2, x2, k) / peak).float()
+        tgt2 = (box_mean_frac_torch(sat_t, v2, y2, x2, 1.0 / cfg.scale_of(wlev)) / peak).float()
         loss = loss + opts.lod_weight * ((model(rays[v2, y2, x2], wlev) - tgt2) ** 2).mean()
         if occ is not None:
             lab = (tgt[:, 3] > 0).float()

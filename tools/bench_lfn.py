@@ -3,8 +3,8 @@ then report per level: width, bytes needed, held-out PSNR/SSIM at the level's sc
 area-downsampled reference), render time per 256² view, and the trivial baselines.
 
 Usage:
-    python -m tools.bench_lfn SCENE --out DIR [--resolution 128] [--depth 6] [--min-width 16]
-        [--max-width 128] [--steps 2000] [--device cpu|cuda] [--no-single-scale]
+    python -m tools.bench_lfn SCENE --out DIR [--resolution 128] [--depth 6] [--min-neurons 16]
+        [--max-neurons 128] [--steps 2000] [--device cpu|cuda] [--no-single-scale]
 
 SCENE is a scene folder, or an .npz written by ``--export`` (views + geometry; lets the
 benchmark run where OpenImageIO is not installed, e.g. the GPU machine).
@@ -50,8 +50,10 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--depth", type=int, default=6)
-    ap.add_argument("--min-width", type=int, default=16)
-    ap.add_argument("--max-width", type=int, default=128)
+    ap.add_argument("--min-neurons", "--min-width", dest="min_neurons", type=int, default=16,
+                    help="neurons of the base network (hidden width)")
+    ap.add_argument("--max-neurons", "--max-width", dest="max_neurons", type=int, default=128,
+                    help="neurons of the full network")
     ap.add_argument("--steps", type=int, default=2000)
     ap.add_argument("--batch", type=int, default=4096)
     ap.add_argument("--lr", type=float, default=3e-3)

@@ -12,7 +12,7 @@ from formats.lfcfile import encode_meta, open_lfc
 from lfn_stream import LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, TrainOptions, to_sections, train
 from lfn_stream.pack import pack_network, step_bytes, step_name, unpack_network
 from lfn_stream.sampling import RaySampler, TorchRaySampler
-from lfn_stream.sat import box_mean, box_mean_torch, summed_area_table
+from lfn_stream.sat import box_mean, box_mean_frac, box_mean_frac_torch, box_mean_torch, summed_area_table
 from tests.conftest import ROOT
 from tests.rlfc.helpers import smooth_lf
 
@@ -124,6 +124,33 @@ def test_sat_box_mean_is_exact_on_large_16bit_images():
         tt = box_mean_torch(torch.from_numpy(sat.astype(np.float64)), torch.from_numpy(v), torch.from_numpy(y),
                             torch.from_numpy(x), k)
         assert np.array_equal(tt.numpy(), got)
+
+
+def test_fractional_box_is_the_exact_area_mean_and_continuous():
+    """Boxes of real side k (the exact scale of a fractional width): the mean over the centred,
+    clipped box equals brute force on a 4× nearest-upsampled image (k on the ½-pixel grid), k = 1
+    is the pixel, odd integers match the integer box inside the image, and the mean moves
+    continuously with k (what the integer boxes of the old targets did not)."""
+    rng = np.random.default_rng(1)
+    img = rng.integers(0, 65536, (2, 37, 45, 3)).astype(np.uint16)
+    sat = summed_area_table(img)
+    M = 300
+    v, y, x = rng.integers(0, 2, M), rng.integers(0, 37, M), rng.integers(0, 45, M)
+    up = img.repeat(4, 1).repeat(4, 2).astype(np.float64)
+    sat_t = torch.from_numpy(sat.astype(np.float64))
+    for k in (1.0, 1.5, 2.5, 5.5, 7.0):
+        got = box_mean_frac(sat, v, y, x, np.full(M, k))
+        ref = np.stack([up[v[i], max(4 * y[i] + 2 - int(2 * k), 0):4 * y[i] + 2 + int(2 * k),
+                           max(4 * x[i] + 2 - int(2 * k), 0):4 * x[i] + 2 + int(2 * k)].reshape(-1, 3).mean(0)
+                        for i in range(M)])
+        assert np.abs(got - ref).max() < 1e-6 * 65535
+        tt = box_mean_frac_torch(sat_t, torch.from_numpy(v), torch.from_numpy(y), torch.from_numpy(x), k)
+        assert np.abs(tt.numpy() - got).max() < 1e-6 * 65535
+    assert np.array_equal(box_mean_frac(sat, v, y, x, np.ones(M)), img[v, y, x].astype(np.float64))
+    inside = (y >= 2) & (y < 35) & (x >= 2) & (x < 43)
+    assert np.abs(box_mean_frac(sat, v, y, x, np.full(M, 5.0)) - box_mean(sat, v, y, x, np.full(M, 5)))[inside].max() < 1e-6
+    a, b = box_mean_frac(sat, v, y, x, np.full(M, 3.3)), box_mean_frac(sat, v, y, x, np.full(M, 3.3001))
+    assert np.abs(a - b).max() < 65535 * 1e-3
 
 
 def test_sampler_foreground_split_and_saliency():

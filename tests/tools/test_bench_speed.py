@@ -68,3 +68,21 @@ def test_bench_render_reports_quality_and_speed_on_each_device(tmp_path):
     assert m["view_step"] == 1 and set(fr) == {"0.0", "0.25", "0.5", "0.75", "1.0"}
     assert fr["1.0"] == m["shifted_bicubic"] and fr["0.0"] == m["blend_no_shift"]   # integer taps: exact
     assert fr["1.0"] > fr["0.5"] > fr["0.0"]        # a scene of integer shifts: the full shift is exact
+
+
+def test_bench_lfn_runs_end_to_end(tmp_path):
+    """The LFN benchmark's command line (options, training, file, prefix check, table) on a tiny
+    grid: every level is reported with finite PSNR and the bytes it needs rise with the level."""
+    from tools import bench_lfn
+
+    lf = smooth_lf(rows=3, cols=3, h=16, w=16)
+    write_views(tmp_path / "tiny", lf.views)
+    (tmp_path / "tiny" / "scene.json").write_text(json.dumps(
+        {"layout": "grid", "rows": 3, "cols": 3, "views": "r{row:02d}_c{col:02d}.png"}))
+    assert bench_lfn.main([str(tmp_path / "tiny"), "--out", str(tmp_path / "o"), "--resolution", "0", "--depth", "2",
+                           "--min-neurons", "4", "--max-neurons", "8", "--steps", "5", "--batch", "64",
+                           "--no-single-scale"]) == 0
+    r = json.loads((tmp_path / "o" / "lfn_results.json").read_text())
+    assert r["config"]["min_neurons"] == 4 and r["config"]["max_neurons"] == 8
+    assert all(np.isfinite(x["psnr"]) for x in r["lod"])
+    assert [x["bytes"] for x in r["lod"]] == sorted(x["bytes"] for x in r["lod"])
