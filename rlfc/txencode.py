@@ -59,6 +59,9 @@ class TxParams:
         lossless: every plane coded exactly (no transform).
         intra_codec: intra key views as "j2k" (JPEG 2000 at the quality the transform path
             reaches), "tx" (thumbnail + transform), or "auto" (j2k without alpha, lossy).
+        search_sample: a PSNR target's search codes the key views and every SEARCH_STRIDE-th
+            other view (grids with at least SEARCH_MIN_VIEWS other views), then checks the
+            chosen step on every view (False: every search pass codes every view).
     """
 
     block_size: int = 16
@@ -69,10 +72,13 @@ class TxParams:
     step: float | None = None
     lossless: bool = False
     intra_codec: str = "auto"
+    search_sample: bool = True
 
     def __post_init__(self):
         if self.intra_codec not in ("auto", "tx", "j2k"):
             raise ParameterError(f"intra codec must be auto, tx or j2k, got {self.intra_codec!r}")
+        if not isinstance(self.search_sample, bool):
+            raise ParameterError(f"search_sample must be true or false, got {self.search_sample!r}")
         if self.block_size not in (8, 16, 32):
             raise ParameterError(f"tx block size must be 8, 16 or 32, got {self.block_size}")
         if not 0 <= self.key_spacing <= 64:
@@ -281,13 +287,16 @@ class TxEncoder:
         clipped to [1.2, 2.5] (measured on the six dense grids: BENCHMARKS.md)."""
         s = self.s
         nk = len(s.keys)
-        acc = 0.0
+        acc, seen = 0.0, 0
         for v in range(len(res["codes"])):
             if self.is_key[v] or res["codes"][v] is None:
                 continue
             kappa = float((res["codes"][v].modes == 0).mean())
             w = s.weights[v][s.refs[v] >= 0] / 64.0
             acc += kappa * float((w ** 2).sum())
+            seen += 1
+        if seen:                         # a run over a sample of the other views stands for all
+            acc *= int((~self.is_key).sum()) / seen
         return float(np.clip(np.sqrt(1.0 + acc / max(nk, 1)), 1.2, 2.5))
 
     def key_ratio(self) -> float:
@@ -499,7 +508,7 @@ class TxEncoder:
         return ty * self.nbx8 + tx
 
     # -- the closed loop -------------------------------------------------------------------------
-    def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False) -> dict:
+    def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False, views=None) -> dict:
         """Code every view at luma step Δ = ``step``: key views in order, then the others.
 
         Returns:
@@ -543,7 +552,10 @@ class TxEncoder:
                 kp = planar(keyplanes)
             if progress:
                 progress("code views", i + 1, n0)
-        others = [v for v in range(n0) if not self.is_key[v]]
+        others = all_others = [v for v in range(n0) if not self.is_key[v]]
+        if views is not None:            # a sample of the other views (rate control's search)
+            keep = set(int(v) for v in views)
+            others = [v for v in others if v in keep]
         runner = self.runner
         if runner is None or runner.workers == 1 or len(others) < 2:
             done = len(self.s.keys)
@@ -555,7 +567,7 @@ class TxEncoder:
         else:               # the other views are independent given the decoded key views
             if self._shared is None:
                 self._shared = runner.share(self)
-                self._view_handles = dict(zip(others, runner.scatter([self.view_pixels(v) for v in others])))
+                self._view_handles = dict(zip(all_others, runner.scatter([self.view_pixels(v) for v in all_others])))
             keys_h, model_h = runner.share(kp), runner.share(model)
             done = [len(self.s.keys)]
 
@@ -615,9 +627,18 @@ class TxEncoder:
         return out.reshape(self.lf.views.shape)
 
     def psnr(self, res: dict) -> float:
-        """Colour PSNR of a run over all views (exactly :func:`formats.metrics.psnr_rgb`)."""
+        """Colour PSNR of a run over all views (exactly :func:`formats.metrics.psnr_rgb`); of a
+        run over a sample of the other views (``run(views=...)``), the estimate that counts each
+        sampled view for the other views it stands for (key views exactly)."""
         c = res["codes"]
-        return psnr_from_sq_error(np.array([x.sse for x in c]), np.array([x.cnt for x in c]), float(self.peak))
+        done = [v for v, x in enumerate(c) if x is not None]
+        w = np.ones(len(done))
+        sampled = [i for i, v in enumerate(done) if not self.is_key[v]]
+        n_other = int((~self.is_key).sum())
+        if len(done) < len(c) and sampled:
+            w[sampled] = n_other / len(sampled)
+        return psnr_from_sq_error(w * np.array([c[v].sse for v in done]), w * np.array([c[v].cnt for v in done]),
+                                  float(self.peak))
 
     # -- symbols and packing -----------------------------------------------------------------
     SYMBOL_CHUNK = 1024        # random-access blocks turned into symbols at a time (bounds memory)
@@ -627,7 +648,7 @@ class TxEncoder:
         have a stream."""
         coded = np.zeros((self.n0, self.nby * self.nbx), bool)
         for v, c in enumerate(res["codes"]):
-            if not self.is_key[v]:
+            if not self.is_key[v] and c is not None:
                 coded[v] = c.coded
         return coded
 
@@ -739,6 +760,8 @@ def _params_from(options: EncodeOptions) -> TxParams:
     return TxParams(**p)
 
 
+SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key view …
+SEARCH_MIN_VIEWS = 16  # … where there are at least this many
 PSNR_SLOPE = -2.5    # dB per octave of the step around 40 dB (dense grids: 2.2-2.8), the search's prior
 BPP_SLOPE = -1.0     # log2 bpp per octave of the step, the same for a bpp target
 
@@ -808,8 +831,15 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     else:
         step0 = 8.0 * scale
     probe = None
+    # a PSNR target on a grid with many views: the probe and the search code the key views and a
+    # sample of the others (their errors stand for the rest; every view is independent given the
+    # keys), and the chosen step is then checked on every view (below: corrected if it misses)
+    others = np.flatnonzero(~enc.is_key)
+    sample = others[::SEARCH_STRIDE] if (options.target_psnr is not None and params.search_sample
+                                         and not params.lossless and params.step is None
+                                         and others.size >= SEARCH_MIN_VIEWS) else None
     if params.key_ratio == 0 and not params.lossless and (~enc.is_key).any():
-        probe = run(step0)
+        probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
 
     if params.lossless:
@@ -825,16 +855,16 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         def evaluate(logq):
             step = 2.0 ** logq
             near = min(models, key=lambda k: abs(math.log2(k) - logq)) if models else None
-            r = enc.run(step, models[near] if near is not None else model, progress)
+            r = enc.run(step, models[near] if near is not None else model, progress, views=sample)
             if near is None or abs(math.log2(near) - logq) > 0.25:
-                r = enc.run(step, enc.model_of(r), progress)       # far from any model: measure first
+                r = enc.run(step, enc.model_of(r), progress, views=sample)   # far from any model: measure first
             models[step] = enc.model_of(r)
             ps = enc.psnr(r)
             b = None
             if options.target_bpp is not None:
                 cfg, secs = enc.pack(r)
                 b = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
-            trace.append({"step": step, "psnr_rgb": ps, "bpp": b})
+            trace.append({"step": step, "psnr_rgb": ps, "bpp": b, **({"views": "sample"} if sample is not None else {})})
             ok = ps >= options.target_psnr if options.target_psnr is not None else b <= options.target_bpp
             return ok, r
 
@@ -874,12 +904,23 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         ps = enc.psnr(again)
         if options.target_psnr is not None:
             keep = ps >= options.target_psnr
-            b = None
+            trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": None, "refined": True})
+            if sample is not None:       # the search saw a sample: the full pass decides
+                tries = 0
+                while found and ps < options.target_psnr and tries < 3:
+                    tries += 1           # below the target on all views: a finer step, by the slope
+                    step = res["step"] * 2.0 ** ((options.target_psnr + 0.02 - ps) / PSNR_SLOPE)
+                    again = enc.run(step, enc.model_of(again), progress, keep_pixels=True)
+                    ps = enc.psnr(again)
+                    trace.append({"step": step, "psnr_rgb": ps, "bpp": None, "refined": True})
+                    res = again
+                found = found and ps >= options.target_psnr
+                keep = True              # (the search's own run covered a sample only)
         else:
             cfg, secs = enc.pack(again)
             b = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
             keep = b <= options.target_bpp and ps >= enc.psnr(res)
-        trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
+            trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
         if keep:
             res = again
     cfg, sections = enc.pack(res)

@@ -205,3 +205,43 @@ def test_bad_thread_counts_are_parameter_errors(bad):
         d.decode_all(threads=bad)
     with pytest.raises(ParameterError):
         RlfcDecoder(open_lfc(blob), threads=bad)
+
+
+def _noisy_grid():
+    lf = smooth_lf(rows=5, cols=5, h=24, w=32)
+    rng = np.random.default_rng(5)
+    lf.views = np.clip(lf.views.astype(int) + rng.integers(-6, 7, lf.views.shape), 0, 255).astype(np.uint8)
+    return lf
+
+
+def test_psnr_search_on_a_sample_of_views_then_every_view():
+    """A PSNR target on a grid with many views: the probe and the search code the key views and a
+    sample of the others, the last pass codes every view; the file meets the target like the
+    search over every view does, with nearly the same bytes."""
+    lf = _noisy_grid()
+    got = {}
+    for flag in (True, False):
+        e = encode(lf, EncodeOptions(profile="tx", target_psnr=36, params={"search_sample": flag}))
+        d, blob = open_encoded(lf, e)
+        assert e.target_met and psnr_rgb(lf.views, d.decode_all()) >= 36
+        got[flag] = (len(blob), [t.get("views", "all") for t in e.trace])
+    assert "sample" in got[True][1] and got[True][1][-1] == "all" and "sample" not in got[False][1]
+    assert abs(got[True][0] / got[False][0] - 1) < 0.05
+
+
+def test_psnr_search_corrects_a_sample_that_overestimates(monkeypatch):
+    """Where the sample's estimate is optimistic, the pass over every view misses the target and
+    the step is made finer until it is met (never a file below the target reported as met)."""
+    import rlfc.txencode as T
+
+    real = T.TxEncoder.psnr
+
+    def biased(self, res):
+        return real(self, res) + (0.6 if any(c is None for c in res["codes"]) else 0.0)
+
+    monkeypatch.setattr(T.TxEncoder, "psnr", biased)
+    lf = _noisy_grid()
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
+    d, _ = open_encoded(lf, e)
+    assert e.target_met and psnr_rgb(lf.views, d.decode_all()) >= 36
+    assert sum(1 for t in e.trace if t.get("refined")) >= 2         # the check, then a correction
