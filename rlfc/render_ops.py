@@ -38,9 +38,6 @@ class NumpyOps:
         """:meth:`from_blocks` of each map of a list."""
         return [self.from_blocks(m, H, W) for m in maps]
 
-    def zeros(self, *shape):
-        return np.zeros(shape, np.float32)
-
     def buffer(self, h: int, w: int, P: int):
         return np.zeros((h, w, P), np.float32)
 
@@ -152,18 +149,11 @@ class TorchOps:
     def const(self, H: int, W: int, v: float):
         return self.torch.full((H, W), float(v), dtype=self.torch.float32, device=self.dev)
 
-    def from_blocks(self, m: np.ndarray, H: int, W: int):
-        t = self.torch.as_tensor(np.asarray(m, np.float32), device=self.dev)
-        return t.repeat_interleave(TILE, 0).repeat_interleave(TILE, 1)[:H, :W]
-
     def from_blocks_many(self, maps, H: int, W: int):
         """All maps in one host-to-device copy (each copy from pageable memory waits for the
         device's queue: a frame makes its copies before any kernel)."""
         t = self.torch.as_tensor(np.stack([np.asarray(m, np.float32) for m in maps]), device=self.dev)
         return list(t.repeat_interleave(TILE, 1).repeat_interleave(TILE, 2)[:, :H, :W])
-
-    def zeros(self, *shape):
-        return self.torch.zeros(shape, dtype=self.torch.float32, device=self.dev)
 
     def buffer(self, h: int, w: int, P: int):
         return self.torch.zeros((h, w, P), dtype=self.torch.float32, device=self.dev)
@@ -178,9 +168,6 @@ class TorchOps:
     def clamp(self, a, hi: float):
         return a.clamp_(0, hi)
 
-    def tile_range(self, a):
-        return self.tile_ranges([a])[0]
-
     def tile_ranges(self, planes):
         """Tile minima and maxima of all planes in two pooling calls and one device-to-host copy."""
         F, t = self.F, self.torch
@@ -188,9 +175,6 @@ class TorchOps:
         both = t.stack([-F.max_pool2d(-x, TILE, TILE, ceil_mode=True), F.max_pool2d(x, TILE, TILE, ceil_mode=True)])
         both = both[:, :, 0].cpu().numpy()
         return [(both[0, i], both[1, i]) for i in range(len(planes))]
-
-    def remap(self, buf, X, Y, cubic: bool = False):
-        return self.remap_many([buf], [X], [Y], cubic)[0]
 
     def remap_many(self, bufs, Xs, Ys, cubic: bool = False):
         """(S, H, W, P) samples of S buffers at their positions, all taps of all of them gathered
