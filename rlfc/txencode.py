@@ -509,7 +509,8 @@ class TxEncoder:
 
     # -- the closed loop -------------------------------------------------------------------------
     def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False, views=None) -> dict:
-        """Code every view at luma step Δ = ``step``: key views in order, then the others.
+        """Code every view at luma step Δ = ``step``: key views in order, then the others (only
+        those in ``views`` where given: a sample for rate control; the others' codes are None).
 
         Returns:
             dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), rec
@@ -838,7 +839,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     sample = others[::SEARCH_STRIDE] if (options.target_psnr is not None and params.search_sample
                                          and not params.lossless and params.step is None
                                          and others.size >= SEARCH_MIN_VIEWS) else None
-    if params.key_ratio == 0 and not params.lossless and (~enc.is_key).any():
+    if params.key_ratio == 0 and not params.lossless and others.size:
         probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
 
