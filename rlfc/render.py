@@ -115,11 +115,8 @@ class Renderer:
         """(nby, nbx) bool: the blocks that the taps at clamped positions (Y, X) read (bilinear:
         floor and floor + 1; bicubic: floor − 1 … floor + 2), from the extent of each 8×8 tile
         of positions (a superset when a tile's positions spread over more than two blocks)."""
-        (ylo, yhi), (xlo, xhi) = self.ops.tile_ranges([Y, X])
-        return self._need(ylo, yhi, xlo, xhi, cubic)
-
-    def _need(self, ylo, yhi, xlo, xhi, cubic: bool) -> np.ndarray:
-        return self._need_many(ylo[None], yhi[None], xlo[None], xhi[None], cubic)[0]
+        lo, hi = self.ops.tile_ranges([Y, X])
+        return self._need_many(lo[:1], hi[:1], lo[1:], hi[1:], cubic)[0]
 
     def _need_many(self, ylo, yhi, xlo, xhi, cubic: bool) -> np.ndarray:
         """(n, nby, nbx) bool from the tile ranges (n, ty, tx) of n position planes."""
@@ -155,9 +152,8 @@ class Renderer:
         B, ops = d.block_size, self.ops
         Ys = [ops.clamp(Y, d.height - 1) for Y in Ys]
         Xs = [ops.clamp(X, d.width - 1) for X in Xs]
-        ranges = ops.tile_ranges(list(Ys) + list(Xs))
+        lo, hi = ops.tile_ranges(list(Ys) + list(Xs))
         n = len(views)
-        lo, hi = np.stack([r[0] for r in ranges]), np.stack([r[1] for r in ranges])
         needs = self._need_many(lo[:n], hi[:n], lo[n:], hi[n:], cubic)
         self.blocks_requested += int(needs.sum())
         bufs, union = [], {}

@@ -68,8 +68,9 @@ class NumpyOps:
         return out.reshape(*Y.shape, buf.shape[2])
 
     def tile_ranges(self, planes):
-        """:meth:`tile_range` of each plane of a list: [(lo, hi), ...] (numpy)."""
-        return [self.tile_range(a) for a in planes]
+        """:meth:`tile_range` of each plane of a list, stacked: numpy (lo, hi), each (n, ty, tx)."""
+        got = [self.tile_range(a) for a in planes]
+        return np.stack([g[0] for g in got]), np.stack([g[1] for g in got])
 
     def remap_many(self, bufs, Xs, Ys, cubic: bool = False):
         """:meth:`remap` of each (buffer, X, Y): a list of (H, W, P) samples (``wsum`` reads it)."""
@@ -169,12 +170,12 @@ class TorchOps:
         return a.clamp_(0, hi)
 
     def tile_ranges(self, planes):
-        """Tile minima and maxima of all planes in two pooling calls and one device-to-host copy."""
+        """As :meth:`NumpyOps.tile_ranges`: two pooling calls and one device-to-host copy."""
         F, t = self.F, self.torch
         x = t.stack(planes)[:, None]
         both = t.stack([-F.max_pool2d(-x, TILE, TILE, ceil_mode=True), F.max_pool2d(x, TILE, TILE, ceil_mode=True)])
         both = both[:, :, 0].cpu().numpy()
-        return [(both[0, i], both[1, i]) for i in range(len(planes))]
+        return both[0], both[1]
 
     def remap_many(self, bufs, Xs, Ys, cubic: bool = False):
         """(S, H, W, P) samples of S buffers at their positions, all taps of all of them gathered
