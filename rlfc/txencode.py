@@ -18,7 +18,7 @@ import numpy as np
 
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
-from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb
+from formats.metrics import colour_sq_error, psnr_from_sq_error
 from formats.parallel import make_runner
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
@@ -26,6 +26,7 @@ from formats.pixels import from_planes, rgb_mse_weights, to_planes
 from .header import RlfcHeader
 from .kernels import dequantize
 from .transform import COEF_MAX, UNZIG, ZIGZAG, forward, inverse
+from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
 from .ratesearch import secant_search
@@ -525,6 +526,8 @@ class TxEncoder:
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
+        promoted: list = []           # views coded alone as JPEG 2000 that the structure predicts
+        j2k_ref = None                # (bytes, PSNR) of the first intra key as JPEG 2000
         thumb16 = None
         for i, k in enumerate(self.s.keys):
             if self.intra[k]:
@@ -542,9 +545,18 @@ class TxEncoder:
             else:
                 codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=keep_pixels)
             if self.intra[k] and self.intra_codec == "j2k":
-                img, codes[k] = self._j2k_key(k, codes[k], len(pack_thumbs(thumbs[k][None])))
+                img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
+                                                     self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None)
                 if img is not None:
                     keyimg[k] = img
+                if j2k_ref is None and size is not None:
+                    j2k_ref = (size, self._code_psnr(codes[k]))
+            elif not self.intra[k] and self.intra_codec == "j2k" and self._j2k_worth_trying(codes[k], j2k_ref):
+                # a predicted key that costs more than coding it alone becomes an intra key
+                img, codes[k], _ = self._j2k_view(k, codes[k], 0.0, self.J2K_KEY_SLACK_DB)
+                if img is not None:
+                    keyimg[k] = img
+                    promoted.append(k)
             keyplanes[i] = codes[k].planes
             codes[k].planes = None              # (kept once, in keyplanes, for this pass only)
             if isinstance(kp, KeyAtlas):
@@ -582,39 +594,83 @@ class TxEncoder:
             for v, c in zip(others, out):
                 codes[v] = c
         return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
-                "keyimg": keyimg, "model": model}
+                "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref}
 
-    def _j2k_key(self, k: int, tx_code: ViewCode, thumb_bytes: int) -> tuple[bytes | None, ViewCode]:
-        """An intra key view as JPEG 2000 at the colour PSNR its transform coding reached, where
-        that is smaller than the transform path (thumbnail + the model's estimate of its stream)
-        and at least as close to the original; else (None, the transform coding)."""
-        import imagecodecs
+    #: a JPEG 2000 intra key may land this much (dB) below its transform coding's PSNR (the
+    #: rate control measures the decoded views, whichever codec made them)
+    J2K_KEY_SLACK_DB = 0.05
+    #: a view is tried as JPEG 2000 only where its transform coding costs at least this share of
+    #: the JPEG 2000 size the run's intra key predicts for it (a gate, so that grids whose views
+    #: predict well spend no JPEG 2000 encodes)
+    J2K_TRY_SHARE = 0.85
 
-        from .topcodec import decode_image
+    def _j2k_view(self, v: int, tx_code: ViewCode, extra_bytes: float, slack_db: float,
+                  give_up: bool = True) -> tuple[bytes | None, ViewCode, float | None]:
+        """View v as JPEG 2000 (its padded Hp×Wp image) with colour error at most its transform
+        coding's (less ``slack_db``), where that is smaller than the transform path (the model's
+        estimate of its streams + ``extra_bytes``); else (None, the transform coding).
 
+        Returns:
+            (codestream or None, the view's code, bytes of the smallest JPEG 2000 that met the
+            budget where the search found one, else None; with ``give_up=False`` the search
+            does not stop at the transform path's size, so the size is there for reference).
+        """
         dt = self.dtype
-        px = from_planes(self.planes(k), dt)
-        target = psnr_rgb(px, from_planes(tx_code.planes, dt))
-        a = px[..., 0] if self.P == 1 else px
-        # OpenJPEG's PSNR "level" lands 0.3-0.45 dB below the level asked (llff_statue): ask more,
-        # and accept -0.05 dB (the rate control measures the decoded views, whichever codec made them)
-        # grids: one intra key whose quality every other view inherits, asked close to the target;
-        # posed captures (every view intra): a finer ladder so that JPEG 2000 is not refused for
-        # landing 0.1 dB short (then the transform path, often larger, was used)
-        ladder = (0.35, 0.5, 0.7, 1.0, 2.0) if self.intra.all() else (0.1, 0.4)
-        for ask in (target + x for x in ladder):
-            data = bytes(imagecodecs.jpeg2k_encode(a, level=float(min(ask, 99.0)), codecformat="J2K"))
-            dec = decode_image("j2k", data, px.shape, dt)
-            if psnr_rgb(px, dec) >= target - 0.05:
-                break
-        if len(data) * 8 >= tx_code.bits + 8 * thumb_bytes or psnr_rgb(px, dec) < target - 0.05:
-            return None, tx_code
-        z = np.zeros_like(tx_code.modes)
+        planes = self.planes(v)
+        orig = self._pixels(planes)
+        budget = tx_code.sse * 10 ** (slack_db / 10)
+        target = self._code_psnr(tx_code)
+        tx_bytes = tx_code.bits / 8 + extra_bytes
+
+        def err(dec):
+            return colour_sq_error(orig, self._pixels(to_planes(dec)))[0]
+
+        found = smallest_j2k(from_planes(planes, dt), budget, err, target, tx_bytes if give_up else math.inf)
+        if found is None or len(found[0]) >= tx_bytes:
+            return None, tx_code, (len(found[0]) if found is not None else None)
+        data, dec = found
         rec = to_planes(dec)
         crop = self._pixels(rec)                      # the view's own size (the image coded is padded)
-        sse, cnt = colour_sq_error(self._pixels(self.planes(k)), crop)
-        return data, ViewCode(z, np.zeros(0, np.int64), np.zeros((0,) + tx_code.lv.shape[1:], np.int16),
-                              np.zeros_like(tx_code.coded), crop, rec, 0.0, sse, cnt)
+        sse, cnt = colour_sq_error(orig, crop)
+        return data, ViewCode(np.zeros_like(tx_code.modes), np.zeros(0, np.int64),
+                              np.zeros((0,) + tx_code.lv.shape[1:], np.int16), np.zeros_like(tx_code.coded), crop,
+                              rec, 0.0, sse, cnt), len(data)
+
+    def _code_psnr(self, code: ViewCode) -> float:
+        """Colour PSNR (dB) of one coded view."""
+        return 10 * math.log10(float(self.peak) ** 2 * code.cnt / max(code.sse, 1e-30))
+
+    def _j2k_worth_trying(self, code: ViewCode, ref: tuple | None) -> bool:
+        """Whether a view coded as ``code`` might be smaller as JPEG 2000, from ``ref`` = (bytes,
+        PSNR) of the run's intra key as JPEG 2000: about twice the bytes per 6 dB."""
+        if ref is None or code.sse <= 0:
+            return False
+        return code.bits / 8 >= self.J2K_TRY_SHARE * ref[0] * 2.0 ** ((self._code_psnr(code) - ref[1]) / 6.0)
+
+    def promote_views(self, res: dict, limits=None) -> list:
+        """Code as JPEG 2000 every view that is not a key view whose transform coding is larger
+        than JPEG 2000 at no more error (noise-dominated captures at high rates): it becomes an
+        intra key view (decoded when the file is opened, no stream, no map), appended to the key
+        order; nothing else changes (no view is predicted from it). Keeps the key views within
+        the open-time pixel limit. Changes ``res`` in place; returns the views promoted."""
+        from formats.limits import DEFAULT
+
+        ref = res.get("j2k_ref")
+        if ref is None or self.intra_codec != "j2k":
+            return []
+        cap = (limits or DEFAULT).max_open_pixels // (self.Hp * self.Wp) - len(self.s.keys)
+        done = []
+        for v in range(self.n0):
+            c = res["codes"][v]
+            if len(done) >= cap or self.is_key[v] or c is None or c.px is None or not self._j2k_worth_trying(c, ref):
+                continue
+            img, code, _ = self._j2k_view(v, c, 1.5 * float(c.coded.sum()), 0.0)
+            if img is not None:
+                res["codes"][v] = code
+                res["keyimg"][v] = img
+                done.append(v)
+        res["promoted"] = res.get("promoted", []) + done
+        return done
 
     def decoded(self, res: dict) -> np.ndarray:
         """(R, C, H, W, Ch) pixels of a run (the run again, keeping pixels, where it kept none:
@@ -692,6 +748,16 @@ class TxEncoder:
         """Key views coded as row streams (not JPEG 2000), in key order."""
         return [k for k in self.s.keys if k not in res["keyimg"]]
 
+    def structure_of(self, res: dict):
+        """(keys, refs, weights, cell, intra) of a run: the plan with the views it coded alone
+        as JPEG 2000 (``res["promoted"]``) made intra keys (no references, no map); promoted
+        views that were not keys come after the planned keys, in view order."""
+        promoted = [int(v) for v in res.get("promoted", ())]
+        refs, weights, cell = self.s.refs.copy(), self.s.weights.copy(), self.s.cell.copy()
+        refs[promoted], weights[promoted], cell[promoted] = -1, 0, -1
+        keys = list(self.s.keys) + sorted(v for v in promoted if not self.is_key[v])
+        return keys, refs, weights, cell, (refs < 0).all(axis=1)
+
     def model_of(self, res: dict) -> Model:
         return Model(self.counts_of(res) + default_counts() * 1e-3)
 
@@ -705,26 +771,35 @@ class TxEncoder:
             streams += pack_streams(n, lane, ctx, sym, rl, rb, tables)
         coded = self.coded_blocks(res)
         ck = self.coded_keys(res)
+        keys, refs, weights, cell, intra = self.structure_of(res)
         nk = len(ck) * self.nby
         key_lengths = np.array([len(b) for b in streams[:nk]], np.int64).reshape(len(ck), self.nby)
         lengths = np.array([len(b) for b in streams[nk:]], np.int64)
         ordered = streams
-        intra_keys = [k for k in ck if self.intra[k]]
-        imgs = [res["keyimg"][k] for k in self.s.keys if k in res["keyimg"]]
+        intra_keys = [k for k in ck if intra[k]]
+        imgs = [res["keyimg"][k] for k in keys if k in res["keyimg"]]
         # one entry per intra key (0 = that view is transform-coded) when any is JPEG 2000
         key_images = tuple(len(res["keyimg"][k]) if k in res["keyimg"] else 0
-                           for k in self.s.keys if self.intra[k]) if imgs else ()
+                           for k in keys if intra[k]) if imgs else ()
         thumbs = np.stack([res["thumbs"][k] for k in intra_keys]) if intra_keys else \
             np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
-        lay = TxLayout(self.s.positions, tuple(self.s.keys), self.s.refs, self.s.weights, self.s.cell,
+        lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
                        "j2k" if imgs else "tx", key_images)
         lay.check("tx encoder")
+        # maps no view uses any more (every view of the cell coded alone): the shared map, no modes
+        disp, modes = self.disp, self.modes
+        unused = np.setdiff1d(np.arange(len(self.s.cell_views)), cell[cell >= 0])
+        if unused.size:
+            disp, modes = disp.copy(), modes.copy()
+            disp[unused], modes[unused] = self.base[None, :], 0
         cfg = {**self.hdr.to_config(), "tx": lay.to_config(),
                "params": {**asdict(self.p), "step": res["step"]},
-               "n_blocks": int(coded.sum()), "n_key_views": len(self.s.keys)}
-        sections = [("tx.layout", lay.to_bytes()), ("tx.tables", tables_to_bytes(q)), ("tx.maps", pack_maps(self.base, self.disp, self.modes, (self.nby8, self.nbx8))),
-                    ("tx.thumbs", pack_thumbs(thumbs)), ("tx.keyimg", b"".join(imgs)), ("tx.index", pack_index(key_lengths, coded, lengths)),
+               "n_blocks": int(coded.sum()), "n_key_views": len(keys)}
+        sections = [("tx.layout", lay.to_bytes()), ("tx.tables", tables_to_bytes(q)),
+                    ("tx.maps", pack_maps(self.base, disp, modes, (self.nby8, self.nbx8))),
+                    ("tx.thumbs", pack_thumbs(thumbs)), ("tx.keyimg", b"".join(imgs)),
+                    ("tx.index", pack_index(key_lengths, coded, lengths)),
                     ("tx.blocks", b"".join(ordered) + bytes(PAD))]
         return cfg, sections
 
@@ -924,6 +999,12 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
         if keep:
             res = again
+    if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid":
+        if any(c.px is None for c in res["codes"]):
+            res = enc.run(res["step"], res["model"], keep_pixels=True)      # (the same integers)
+        if enc.promote_views(res):
+            notes.append(f"{sum(1 for v in res['promoted'] if not enc.is_key[v])} views that are not key views "
+                         f"cost less coded alone (JPEG 2000) than predicted; they are key views of this file")
     cfg, sections = enc.pack(res)
     if lf.layout != "grid":
         notes.append("posed capture: every view is coded on its own (no inter-view prediction), so this file is "
@@ -931,7 +1012,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
                    summary={"profile": "tx", "params": {**asdict(params), "step": res["step"],
                                                         "key_ratio": enc.key_ratio()},
-                            "key_views": len(enc.s.keys), **runner.describe()})
+                            "key_views": len(enc.structure_of(res)[0]),
+                            "views_coded_alone": len(res.get("promoted", ())), **runner.describe()})
 
 
 __all__ = ["TxParams", "TxEncoder", "encode_tx", "Model", "default_counts"]

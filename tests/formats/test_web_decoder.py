@@ -125,3 +125,22 @@ def test_bad_files_get_typed_errors(tmp_path):
     for name, words in (("rlfc_dcp_lossy_rgb8", "dcp"), ("rlfc_tx_lossy_rgb8", "version 1"), ("lfn_tiny_rgba8", "lfn")):
         info = run_js(GOLDEN / f"{name}.lfc", tmp_path / name)
         assert info["name"] == "UnsupportedError" and words in info["message"], info
+
+
+def test_views_coded_alone_as_jpeg2000_agree(tmp_path):
+    """A file whose predicted views were cheaper coded alone: they are JPEG 2000 intra key views
+    appended to the key order (and predicted keys made intra); the JavaScript decoder reads them
+    like the Python one (JPEG 2000's float inverse: within 1)."""
+    from formats.codec_api import EncodeOptions
+    from rlfc import encode
+    from tests.rlfc.helpers import open_encoded
+    from tests.rlfc.test_tx import _unrelated_grid
+
+    lf = _unrelated_grid(rows=3, cols=3)
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=48))
+    d, blob = open_encoded(lf, e)
+    assert len(d.core.img_of) > 1 and len(d.core.lay.keys) > 4       # views past the 2×2 planned keys
+    path = tmp_path / "alone.lfc"
+    path.write_bytes(blob)
+    differ = assert_same_planes(path, tmp_path / "out", exact=False)
+    assert differ <= 0.001 * d.rows * d.cols * d.height * d.width * d.P

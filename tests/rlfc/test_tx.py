@@ -245,3 +245,66 @@ def test_psnr_search_corrects_a_sample_that_overestimates(monkeypatch):
     d, _ = open_encoded(lf, e)
     assert e.target_met and psnr_rgb(lf.views, d.decode_all()) >= 36
     assert sum(1 for t in e.trace if t.get("refined")) >= 2         # the check, then a correction
+
+
+def _unrelated_grid(rows=5, cols=5, h=48, w=64):
+    """A grid whose views share nothing (a different smooth texture each): no view predicts
+    another, like the wide-baseline, reflective or noisy captures at high rates."""
+    views = np.stack([smooth_lf(rows=1, cols=1, h=h, w=w, seed=100 + i).views[0, 0] for i in range(rows * cols)])
+    return make_lf(views.reshape(rows, cols, h, w, 3))
+
+
+def test_views_cheaper_coded_alone_become_jpeg2000_key_views():
+    """Views that share nothing, at a high target: predicting a view costs more than coding it
+    alone, so such views are JPEG 2000 intra key views of the file (no stream, no map);
+    the file decodes to the encoder's pixels by every path, meets the target, and is no larger
+    than coding every view with JPEG 2000 at the PSNR each reached."""
+    import imagecodecs
+
+    lf = _unrelated_grid()
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=48))
+    d, blob = open_encoded(lf, e)
+    n = lf.rows * lf.cols
+    promoted = e.summary["views_coded_alone"]
+    assert promoted > 0 and any("coded alone" in x for x in e.notes)
+    lay = d.core.lay
+    assert len(d.core.img_of) > 1 and all(lay.intra[k] for k in d.core.img_of)
+    assert (lay.cell[list(d.core.img_of)] == -1).all() and len(lay.keys) == e.summary["key_views"]
+    full = d.decode_all()
+    assert (full == e.decoded).all() and e.target_met and psnr_rgb(lf.views, full) >= 48
+    check_agreement(d, lf.views.shape)
+    v, by, bx = np.arange(n).repeat(4), np.tile([0, 1, 2, 0], n), np.tile([0, 3, 1, 2], n)
+    assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
+    views = lf.views.reshape(n, *lf.views.shape[2:])
+    dec = full.reshape(views.shape)
+    alone = 0
+    for i in range(n):                  # JPEG 2000 per view at no lower PSNR than the file's
+        want = psnr_rgb(views[i], dec[i])
+        lvl = want
+        while True:
+            data = imagecodecs.jpeg2k_encode(views[i], level=lvl, codecformat="J2K")
+            if psnr_rgb(views[i], imagecodecs.jpeg2k_decode(data)) >= want:
+                break
+            lvl += 0.25
+        alone += len(data)
+    assert len(blob) <= 1.05 * alone, (len(blob), alone)
+
+
+def test_views_that_predict_well_stay_predicted():
+    lf = smooth_lf(rows=5, cols=5, h=48, w=64)
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=42))
+    assert e.summary["views_coded_alone"] == 0 and e.summary["key_views"] == 9
+    assert not any("coded alone" in x for x in e.notes)
+
+
+def test_smallest_jpeg2000_within_a_budget():
+    from formats.metrics import colour_sq_error
+    from rlfc.j2ksearch import smallest_j2k
+
+    img = smooth_lf(rows=1, cols=1, h=64, w=80, seed=7).views[0, 0]
+    for db in (30.0, 38.0, 46.0):
+        budget = 255.0 ** 2 * img.size / 10 ** (db / 10)
+        got = smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db)
+        assert got is not None and colour_sq_error(img, got[1])[0] <= budget
+        assert psnr_rgb(img, got[1]) < db + 0.5              # not far better than asked (not wasteful)
+        assert smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db, len(got[0]) // 2) is None
