@@ -509,17 +509,19 @@ class TxEncoder:
         return ty * self.nbx8 + tx
 
     # -- the closed loop -------------------------------------------------------------------------
-    def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False, views=None) -> dict:
+    def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False, views=None,
+            lam_scale: float = 1.0) -> dict:
         """Code every view at luma step Δ = ``step``: key views in order, then the others (only
-        those in ``views`` where given: a sample for rate control; the others' codes are None).
+        those in ``views`` where given: a sample for rate control; the others' codes are None);
+        ``lam_scale`` multiplies λ (rate control's trim between two quantizer steps).
 
         Returns:
             dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), rec
             (N0, Hp, Wp, P) int32 decoded planes.
         """
         s16 = self.steps16(step)
-        lam_k = self.p.lam * (s16[0, 0] / 16.0) ** 2
-        lam_n = self.p.lam * (s16[1, 0] / 16.0) ** 2
+        lam_k = self.p.lam * lam_scale * (s16[0, 0] / 16.0) ** 2
+        lam_n = self.p.lam * lam_scale * (s16[1, 0] / 16.0) ** 2
         n0 = self.n0
         keyplanes = np.zeros((len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
         kp = self.key_source(keyplanes)
@@ -594,7 +596,8 @@ class TxEncoder:
             for v, c in zip(others, out):
                 codes[v] = c
         return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
-                "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref}
+                "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
+                "lam_scale": lam_scale}
 
     #: a JPEG 2000 intra key may land this much (dB) below its transform coding's PSNR (the
     #: rate control measures the decoded views, whichever codec made them)
@@ -676,7 +679,7 @@ class TxEncoder:
         """(R, C, H, W, Ch) pixels of a run (the run again, keeping pixels, where it kept none:
         the same integers)."""
         if any(c.px is None for c in res["codes"]):
-            res = self.run(res["step"], res["model"], keep_pixels=True)
+            res = self.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
         out = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
         for i, c in enumerate(res["codes"]):
             out[i] = c.px
@@ -794,7 +797,7 @@ class TxEncoder:
             disp, modes = disp.copy(), modes.copy()
             disp[unused], modes[unused] = self.base[None, :], 0
         cfg = {**self.hdr.to_config(), "tx": lay.to_config(),
-               "params": {**asdict(self.p), "step": res["step"]},
+               "params": {**asdict(self.p), "step": res["step"], "lam_scale": res.get("lam_scale", 1.0)},
                "n_blocks": int(coded.sum()), "n_key_views": len(keys)}
         sections = [("tx.layout", lay.to_bytes()), ("tx.tables", tables_to_bytes(q)),
                     ("tx.maps", pack_maps(self.base, disp, modes, (self.nby8, self.nbx8))),
@@ -872,6 +875,40 @@ def file_bytes(lf, cfg: dict, sections: list) -> int:
     meta = len(encode_meta("rlfc", 1, cfg, lf.geometry())) + 1024
     data = [meta] + [len(x) for _, x in sections]
     return HEADER_SIZE + ENTRY_SIZE * len(data) + 4 * sum(-(-n // DEFAULT_CHUNK) for n in data) + sum(data)
+
+
+TRIM_DB = 0.08         # a file this far above its PSNR target has λ trimmed at the chosen step
+TRIM_SLOPE = -1.0      # dB per octave of λ at a fixed step, the trim's prior (dino 48 dB: -1.0)
+TRIM_TRIES = 3
+
+
+def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list) -> dict:
+    """The quantizer steps are integers in 1/16 units: at high rates one unit moves the PSNR by
+    0.2–0.5 dB, so the search may end well above its target. Between two steps, a larger λ
+    (more skipped blocks, fewer coefficients) spends the margin: a secant search over log2 of
+    λ's multiplier on full passes, keeping the largest multiplier that still meets the target."""
+    ps = enc.psnr(res)
+    if ps - target <= TRIM_DB or any(c is None or c.px is None for c in res["codes"]):
+        return res
+    best, lo = res, (0.0, ps)
+    q = (target + 0.03 - ps) / TRIM_SLOPE
+    for _ in range(TRIM_TRIES):
+        q = min(max(q, 0.1), 4.0)
+        r = enc.run(res["step"], res["model"], progress, keep_pixels=True, lam_scale=2.0 ** q)
+        p = enc.psnr(r)
+        trace.append({"step": res["step"], "lam_scale": 2.0 ** q, "psnr_rgb": p, "bpp": None, "refined": True})
+        if p >= target:
+            if q > math.log2(best.get("lam_scale", 1.0)):
+                best = r
+            if p - target <= TRIM_DB:
+                break
+            slope = (p - lo[1]) / (q - lo[0]) if q != lo[0] else TRIM_SLOPE
+            lo = (q, p)
+        else:
+            slope = (p - lo[1]) / (q - lo[0]) if q != lo[0] else TRIM_SLOPE
+        slope = min(slope, -0.05)
+        q = lo[0] + (target + 0.03 - lo[1]) / slope
+    return best
 
 
 def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
@@ -999,9 +1036,11 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
         if keep:
             res = again
+        if options.target_psnr is not None and found:
+            res = _trim_lambda(enc, res, options.target_psnr, progress, trace)
     if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid":
         if any(c.px is None for c in res["codes"]):
-            res = enc.run(res["step"], res["model"], keep_pixels=True)      # (the same integers)
+            res = enc.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
         if enc.promote_views(res):
             notes.append(f"{sum(1 for v in res['promoted'] if not enc.is_key[v])} views that are not key views "
                          f"cost less coded alone (JPEG 2000) than predicted; they are key views of this file")
@@ -1011,6 +1050,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                      "no smaller than per-view coding (JPEG 2000 or the transform path, whichever is smaller per view)")
     return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
                    summary={"profile": "tx", "params": {**asdict(params), "step": res["step"],
+                                                        "lam_scale": res.get("lam_scale", 1.0),
                                                         "key_ratio": enc.key_ratio()},
                             "key_views": len(enc.structure_of(res)[0]),
                             "views_coded_alone": len(res.get("promoted", ())), **runner.describe()})

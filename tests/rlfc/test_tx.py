@@ -308,3 +308,26 @@ def test_smallest_jpeg2000_within_a_budget():
         assert got is not None and colour_sq_error(img, got[1])[0] <= budget
         assert psnr_rgb(img, got[1]) < db + 0.5              # not far better than asked (not wasteful)
         assert smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db, len(got[0]) // 2) is None
+
+
+def test_lambda_trim_spends_a_psnr_margin_between_quantizer_steps():
+    """A file above its target by more than TRIM_DB (the integer steps jump past it) has λ raised
+    at the same step: still at or above the target, closer to it, fewer bytes; within TRIM_DB
+    nothing changes."""
+    import rlfc.txencode as T
+
+    lf = _noisy_grid()
+    opts = EncodeOptions(profile="tx", params={"step": 3.0})
+    enc = T.TxEncoder(lf, T._params_from(opts), None, 10.0, None)
+    model = T.Model(T.default_counts())
+    res = enc.run(3.0, enc.model_of(enc.run(3.0, model)), keep_pixels=True)
+    ps = enc.psnr(res)
+    trace = []
+    trimmed = T._trim_lambda(enc, res, ps - 0.6, None, trace)
+    assert trimmed["lam_scale"] > 1 and trace and all(t["lam_scale"] > 1 for t in trace)
+    assert ps - 0.6 <= enc.psnr(trimmed) < ps
+
+    def size(r):
+        return sum(len(b) for _, b in enc.pack(r)[1])
+    assert size(trimmed) < size(res)
+    assert T._trim_lambda(enc, res, ps - 0.5 * T.TRIM_DB, None, []) is res
