@@ -626,7 +626,7 @@ class TxEncoder:
         tx_bytes = tx_code.bits / 8 + extra_bytes
 
         def err(dec):
-            return colour_sq_error(orig, self._pixels(to_planes(dec)))[0]
+            return colour_sq_error(orig, dec[:self.h, :self.w_px])[0]
 
         found = smallest_j2k(from_planes(planes, dt), budget, err, target, tx_bytes if give_up else math.inf)
         if found is None or len(found[0]) >= tx_bytes:
