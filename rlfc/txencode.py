@@ -678,13 +678,19 @@ class TxEncoder:
     def decoded(self, res: dict) -> np.ndarray:
         """(R, C, H, W, Ch) pixels of a run (the run again, keeping pixels, where it kept none:
         the same integers)."""
-        if any(c.px is None for c in res["codes"]):
-            res = self.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
+        res = self.with_pixels(res)
         out = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
         for i, c in enumerate(res["codes"]):
             out[i] = c.px
             c.px = None                       # one copy of the decoded views, not two
         return out.reshape(self.lf.views.shape)
+
+    def with_pixels(self, res: dict) -> dict:
+        """``res``, or the same run again keeping the decoded pixels where it kept none (the
+        same integers)."""
+        if any(c.px is None for c in res["codes"]):
+            return self.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
+        return res
 
     def psnr(self, res: dict) -> float:
         """Colour PSNR of a run over all views (exactly :func:`formats.metrics.psnr_rgb`); of a
@@ -897,16 +903,13 @@ def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list
         r = enc.run(res["step"], res["model"], progress, keep_pixels=True, lam_scale=2.0 ** q)
         p = enc.psnr(r)
         trace.append({"step": res["step"], "lam_scale": 2.0 ** q, "psnr_rgb": p, "bpp": None, "refined": True})
+        slope = min((p - lo[1]) / (q - lo[0]) if q != lo[0] else TRIM_SLOPE, -0.05)
         if p >= target:
             if q > math.log2(best.get("lam_scale", 1.0)):
                 best = r
             if p - target <= TRIM_DB:
                 break
-            slope = (p - lo[1]) / (q - lo[0]) if q != lo[0] else TRIM_SLOPE
             lo = (q, p)
-        else:
-            slope = (p - lo[1]) / (q - lo[0]) if q != lo[0] else TRIM_SLOPE
-        slope = min(slope, -0.05)
         q = lo[0] + (target + 0.03 - lo[1]) / slope
     return best
 
@@ -1039,11 +1042,11 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         if options.target_psnr is not None and found:
             res = _trim_lambda(enc, res, options.target_psnr, progress, trace)
     if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid":
-        if any(c.px is None for c in res["codes"]):
-            res = enc.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
-        if enc.promote_views(res):
-            notes.append(f"{sum(1 for v in res['promoted'] if not enc.is_key[v])} views that are not key views "
-                         f"cost less coded alone (JPEG 2000) than predicted; they are key views of this file")
+        res = enc.with_pixels(res)
+        n_alone = len(enc.promote_views(res))
+        if n_alone:
+            notes.append(f"{n_alone} views that are not key views cost less coded alone (JPEG 2000) than "
+                         f"predicted; they are key views of this file")
     cfg, sections = enc.pack(res)
     if lf.layout != "grid":
         notes.append("posed capture: every view is coded on its own (no inter-view prediction), so this file is "
