@@ -181,7 +181,7 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
         enc = codec.encode(lf, opts, prog)
     finally:
         prog.close()
-    nbytes = write_lfc(out, codec.codec_id, codec.version, enc.config, lf.geometry(), enc.sections,
+    nbytes = write_lfc(out, codec.codec_id, codec.version, enc.config, lf.geometry(), enc.sections, more=enc.more,
                        extra={"source": {k: v for k, v in lf.meta.items()
                                          if k in ("reader", "assumed", "source", "license")}})
     enc_s = time.perf_counter() - t0
@@ -414,7 +414,7 @@ def cmd_decode(a) -> int:
         layout = None
         name = view_filename
         if a.names == "original":
-            scene = f.meta.get("scene")
+            scene = f.scene
             if not isinstance(scene, dict) or "names_z" not in scene:
                 raise ParameterError(f"{a.input}: the file does not record its views' original names (encoded "
                                      f"from an array or by an older lfcodec); decode without --names original")
@@ -435,7 +435,7 @@ def cmd_decode(a) -> int:
                 prog("write views", r + 1, d.rows)
             prog.close()
             # the layout file, so that the folder encodes again as the same scene
-            layout = write_layout(outdir, f.meta["scene"], name)
+            layout = write_layout(outdir, f.scene, name)
         if not a.quiet:
             lname = layout.name if layout is None or not layout.name.startswith("transforms_") else "transforms_*.json"
             print(f"wrote {len(paths)} view(s){f' and {lname}' if layout else ''} to {outdir} (level "

@@ -63,6 +63,8 @@ class Encoded:
         notes: one-line warnings for the user (e.g. a target that was not met and why).
         target_met: whether every requested target was reached (None: no target).
         summary: JSON-able facts for reports (profile, chosen parameters, ...).
+        more: metadata keys ("scene.KEY", "config.KEY") to store after the sections, in
+            ``meta.more`` (:func:`formats.lfcfile.split_meta`), not in ``meta``.
     """
 
     config: dict
@@ -72,6 +74,7 @@ class Encoded:
     notes: list = field(default_factory=list)
     target_met: bool | None = None
     summary: dict = field(default_factory=dict)
+    more: tuple = ()
 
 
 Progress = Callable[[str, int, int | None], None]

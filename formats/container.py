@@ -98,33 +98,38 @@ class _BufferSource:
         return self._buf[start:stop]
 
 
-def build_container(meta_json: bytes, sections: Iterable[tuple[str, bytes]], chunk_size: int = DEFAULT_CHUNK) -> list:
+def build_container(meta_json: bytes, sections: Iterable[tuple], chunk_size: int = DEFAULT_CHUNK) -> list:
     """Assemble a container; returns the list of byte pieces to write in order.
 
     Args:
         meta_json: UTF-8 JSON of the file's metadata; stored as the first section, "meta".
-        sections: (name, data) pairs in the order they should appear (put what a progressive
-            reader needs first at the front).
-        chunk_size: checksum granularity in bytes.
+        sections: (name, data) or (name, data, chunk_size) tuples in the order they should
+            appear (put what a progressive reader needs first at the front); a third item sets
+            that section's checksum granularity (e.g. small chunks where a reader takes
+            prefixes of a section).
+        chunk_size: checksum granularity in bytes of the other sections.
     """
-    items = [("meta", bytes(meta_json))] + [(n, d) for n, d in sections]
-    names = [n for n, _ in items]
+    items = [("meta", bytes(meta_json), chunk_size)] + [(s[0], s[1], s[2] if len(s) > 2 else chunk_size)
+                                                        for s in sections]
+    names = [n for n, _, _ in items]
     if len(set(names)) != len(names):
         raise FormatError(f"duplicate section names: {names}")
     if len(items) > MAX_SECTIONS:
         raise FormatError(f"too many sections ({len(items)} > {MAX_SECTIONS})")
-    for n, _ in items:
+    for n, _, ch in items:
         if not n or len(n.encode("ascii")) > 16:
             raise FormatError(f"section name {n!r} must be 1-16 ASCII characters")
+        if not 0 < ch < 2 ** 32:
+            raise FormatError(f"section {n!r}: chunk size {ch} outside 1..2^32-1")
     crcs: list[int] = []
     entries = []
-    views = [memoryview(d).cast("B") for _, d in items]
-    n_crcs = sum(-(-len(v) // chunk_size) for v in views)
+    views = [memoryview(d).cast("B") for _, d, _ in items]
+    n_crcs = sum(-(-len(v) // ch) for v, (_, _, ch) in zip(views, items))
     offset = HEADER_SIZE + ENTRY_SIZE * len(items) + 4 * n_crcs
-    for (name, _), v in zip(items, views):
+    for (name, _, ch), v in zip(items, views):
         first = len(crcs)
-        crcs.extend(crc32(v[i:i + chunk_size]) for i in range(0, len(v), chunk_size))
-        entries.append(_ENTRY.pack(name.encode("ascii"), offset, len(v), chunk_size, first, 0, bytes(4)))
+        crcs.extend(crc32(v[i:i + ch]) for i in range(0, len(v), ch))
+        entries.append(_ENTRY.pack(name.encode("ascii"), offset, len(v), ch, first, 0, bytes(4)))
         offset += len(v)
     table = b"".join(entries) + np.asarray(crcs, dtype="<u4").tobytes()
     head = struct.pack("<8sHHII", MAGIC, MAJOR, MINOR, len(items), len(crcs))
@@ -293,6 +298,15 @@ class Container:
         """The section exists and lies wholly inside the bytes we have (prefix reads)."""
         s = self.sections.get(name)
         return s is not None and s.offset + s.length <= self.size
+
+    def available_bytes(self, name: str) -> int:
+        """How many leading bytes of a section can be read and verified from the bytes we have:
+        the whole section, or (a byte prefix of the file) up to its last complete chunk."""
+        s = self.info(name)
+        have = self.size - s.offset
+        if have >= s.length:
+            return s.length
+        return max(have, 0) // s.chunk_size * s.chunk_size
 
     def _verify(self, info: SectionInfo, c0: int, c1: int, data, base: int) -> None:
         """Check chunks [c0, c1) of a section; ``data`` holds bytes from section offset ``base``."""

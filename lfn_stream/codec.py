@@ -7,14 +7,15 @@ from formats.errors import ParameterError
 
 from .config import LfnConfig
 from .model import NestedLFN, OccupancyNet
-from .pack import pack_network, step_bytes
-from .render import CODEC_ID, CODEC_VERSION, LfnRenderer
+from .pack import step_bytes, stream_sections
+from .render import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnRenderer
 
 
 def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: str = "fp16"):
-    """(config, sections) of a trained network for :func:`formats.lfcfile.write_lfc`."""
+    """(config, sections) of a trained network for :func:`formats.lfcfile.write_lfc` (with
+    ``more=MOVED_KEYS``: the cameras and evaluation lists go after the network)."""
     cfg: LfnConfig = model.cfg
-    sections = pack_network(model, occ, dtype)
+    sections = stream_sections(model, occ, dtype)
     config = {"network": cfg.to_dict(), "norm": info["norm"], "weights": dtype, "train": {
         k: info[k] for k in ("train_views", "test_views", "steps", "train_s") if k in info},
         "step_bytes": [step_bytes(cfg, j, dtype) for j in (cfg.min_neurons, cfg.max_neurons - 1)]}
@@ -26,13 +27,11 @@ def heldout_report(lf, config: dict, sections, info: dict) -> dict:
     the full network renders every held-out view at the scene's resolution, scored against the
     views (RGB premultiplied on black, plus alpha when present; :mod:`lfn_stream.evaluate`) beside
     the nearest training view (camera distance)."""
-    from formats.container import build_container
-    from formats.lfcfile import encode_meta, open_lfc
+    from formats.lfcfile import lfc_bytes, open_lfc
 
     from .evaluate import evaluate
 
-    blob = b"".join(bytes(p) for p in build_container(encode_meta(CODEC_ID, CODEC_VERSION, config, lf.geometry()),
-                                                      sections))
+    blob = lfc_bytes(CODEC_ID, CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
     r = LfnRenderer(open_lfc(blob), device="cpu")
     row = evaluate(r, lf, info["test_views"], info["train_views"], [float(r.cfg.max_neurons)])[0]
     return {"heldout_views": len(info["test_views"]), "psnr_heldout": round(row["psnr"], 3),
@@ -99,7 +98,7 @@ class LfnCodec(Codec):
             notes.append(f"held-out views: the network ({summary['psnr_heldout']:.2f} dB) is below the nearest "
                          f"training view ({summary['psnr_heldout_nearest_view']:.2f} dB); train longer (--steps) "
                          f"or larger (--max-neurons)")
-        return Encoded(config, sections, None, notes=notes, summary=summary)
+        return Encoded(config, sections, None, notes=notes, summary=summary, more=MOVED_KEYS)
 
     def open(self, f, **kw) -> LfnRenderer:
         return LfnRenderer(f, **kw)
@@ -126,4 +125,4 @@ class LfnCodec(Codec):
         return {k: getattr(a, k) for k in OPTIONS if getattr(a, k, None) is not None}
 
 
-__all__ = ["to_sections", "heldout_report", "LfnCodec", "CODEC_ID", "CODEC_VERSION"]
+__all__ = ["to_sections", "heldout_report", "LfnCodec", "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from formats.lightfield import LightField
 
-from .pack import step_name
+from .pack import step_name, step_offsets
 from .render import LfnRenderer
 from .sat import area_downsample
 from .train import targets_of
@@ -32,11 +32,19 @@ def _ssim(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def prefix_bytes(r: LfnRenderer, level: float) -> int:
-    """Bytes of the file prefix holding everything a level needs (meta, base, occupancy, steps)."""
+    """Bytes of the file prefix holding the network a level needs (header, meta, base,
+    occupancy, steps; version 3: up to the end of the checksum chunk holding the last step)."""
     c = r.file.container
     n = int(math.ceil(level - 1e-9)) - r.cfg.min_neurons
-    names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else []) + [step_name(j) for j in range(n)]
-    return max(c.info(nm).offset + c.info(nm).length for nm in names)
+    names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else [])
+    end = max(c.info(nm).offset + c.info(nm).length for nm in names)
+    if n <= 0:
+        return end
+    if c.has("lfn.steps"):
+        s = c.info("lfn.steps")
+        stop = int(step_offsets(r.cfg, r.dtype_w)[n])
+        return s.offset + min(-(-stop // s.chunk_size) * s.chunk_size, s.length)
+    return max(end, *(c.info(step_name(j)).offset + c.info(step_name(j)).length for j in range(n)))
 
 
 def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, baselines: bool = True) -> list[dict]:

@@ -1,6 +1,10 @@
 """Stream format of a nested-width network: base network + one delta per width step.
 
-Sections (in file order, so any prefix that ends on a section boundary is a complete network):
+Codec version 3 (what :func:`stream_sections` writes): ``lfn.base``, ``lfn.occ``, then every
+step in one section ``lfn.steps`` (step j's bytes at the offset the config implies,
+:func:`step_offsets`; checksummed in chunks of :data:`STEP_CHUNK` bytes), so that the header
+holds 4 section entries instead of one per neuron and a byte prefix ending past a step's last
+chunk is a complete network. Version 2 stored each step as its own section:
 
 - ``lfn.base``: the network at min_neurons m, little-endian floats (fp16 by default), in order:
   for each hidden layer i: W_i[:m, :k_i] (row-major; k_0 = 6, else m), b_i[:m], γ_i[:m], β_i[:m];
@@ -21,6 +25,8 @@ from .config import LfnConfig
 from .model import NestedLFN, OccupancyNet
 
 DTYPES = {"fp16": "<f2", "fp32": "<f4"}
+#: checksum granularity of ``lfn.steps`` (bytes): a prefix is usable up to its last whole chunk
+STEP_CHUNK = 2048
 #: largest weight magnitude a file may hold (fp16's range, for fp32 files too: float32
 #: arithmetic then cannot overflow in a network of the sizes the config allows)
 MAX_WEIGHT = 65504.0
@@ -56,6 +62,21 @@ def pack_network(model: NestedLFN, occ: OccupancyNet | None, dtype: str = "fp16"
         parts.append(ow[:, j])
         out.append((step_name(j - m), np.concatenate(parts).astype(dt).tobytes()))
     return out
+
+
+def stream_sections(model: NestedLFN, occ: OccupancyNet | None, dtype: str = "fp16") -> list[tuple]:
+    """Codec version 3 sections: ``lfn.base``, ``lfn.occ`` (if any), then ``lfn.steps`` (all
+    steps in order, with :data:`STEP_CHUNK`-byte checksum chunks)."""
+    secs = pack_network(model, occ, dtype)
+    steps = [d for n, d in secs if n.startswith("lfn.step.")]
+    return [s for s in secs if not s[0].startswith("lfn.step.")] + [("lfn.steps", b"".join(steps), STEP_CHUNK)]
+
+
+def step_offsets(cfg: LfnConfig, dtype: str = "fp16") -> np.ndarray:
+    """(max_neurons − min_neurons + 1,) int64 byte offsets of the steps in ``lfn.steps``: step
+    s (adding neuron min_neurons + s) is bytes [off[s], off[s + 1])."""
+    sizes = [step_bytes(cfg, j, dtype) for j in range(cfg.min_neurons, cfg.max_neurons)]
+    return np.concatenate([[0], np.cumsum(sizes, dtype=np.int64)]).astype(np.int64)
 
 
 def step_bytes(cfg: LfnConfig, j: int, dtype: str = "fp16") -> int:

@@ -16,13 +16,15 @@ from formats.limits import DEFAULT
 from formats.schema import Fields, read_vector
 
 from .config import LfnConfig
-from .pack import base_values, occ_values, step_bytes, step_name, unpack_network
+from .pack import base_values, occ_values, step_bytes, step_name, step_offsets, unpack_network
 from .cameras import captured_poses, grid_pose, orbit_pose, scene_pivot, stereo_poses
 from .rays import camera_rays, view_rays
 
 CODEC_ID = "lfn"
 ALPHA_MIN = 2.0 ** -20   # below it a pixel's colour is 0 (invisible at 16 bits; exact in float32 and float64)
-CODEC_VERSION = 2          # 2: network sizes named *_neurons on the wire (1: *_width)
+CODEC_VERSION = 3          # 3: steps in one section, cameras in meta.more; 2: sizes named *_neurons (1: *_width)
+#: metadata a renderer of the first bytes does not need, stored after the network (meta.more)
+MOVED_KEYS = ("scene.c2w", "scene.positions", "scene.names_z", "config.train")
 
 # 4×4 ordered-dither (Bayer) thresholds in (0, 1): a pixel takes the upper size where its
 # fractional part exceeds the threshold, so two sizes mix without a visible seam.
@@ -55,15 +57,9 @@ class LfnRenderer(Decoder):
         scene = read_geometry(f.meta.get("scene"), f"{c.name}: scene", lim)
         if not c.available("lfn.base"):
             raise FormatError(f"{c.name}: the stream prefix does not hold the base network")
-        shape = (scene["rows"], scene["cols"], scene["height"], scene["width"], 1)
-        # geometry only: a zero-stride placeholder of the views' shape (no pixel memory)
-        self.geom = LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), f.meta["scene"])
-        self.poses = captured_poses(self.geom.positions, self.geom.c2w)      # (R, C, 4, 4) camera-to-world
-        for pose in self.poses.reshape(-1, 4, 4):
-            try:
-                self._check_pose(pose, self.norm)
-            except ParameterError as e:
-                raise FormatError(f"{c.name}: a captured camera is unusable ({e})") from None
+        # the intrinsics (in meta); the captured cameras may lie at the end of the file (meta.more)
+        self._intr = self._geometry(f.meta["scene"])
+        self._geom = None
         self.rows, self.cols = scene["rows"], scene["cols"]
         self.height, self.width, self.channels = scene["height"], scene["width"], scene["channels"]
         if scene["dtype"] not in ("uint8", "uint16"):
@@ -75,6 +71,12 @@ class LfnRenderer(Decoder):
             raise FormatError(f"{c.name}: section 'lfn.base' has {c.info('lfn.base').length} bytes, the network "
                               f"config needs {base_values(self.cfg) * itemsize}")
         self._steps: list[bytes] = []
+        self._packed = int(f.meta["codec_version"]) >= 3          # one lfn.steps section (version 3)
+        if self._packed:
+            self._offsets = step_offsets(self.cfg, self.dtype_w)
+            if c.has("lfn.steps") and c.info("lfn.steps").length != self._offsets[-1]:
+                raise FormatError(f"{c.name}: section 'lfn.steps' has {c.info('lfn.steps').length} bytes, the "
+                                  f"network config needs {int(self._offsets[-1])}")
         self._read_steps(self.cfg.max_neurons if max_neurons is None else int(np.ceil(max_neurons)))
         occ = None
         if c.available("lfn.occ") and self.cfg.occupancy_neurons:
@@ -87,11 +89,51 @@ class LfnRenderer(Decoder):
         self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
         self.half = self.device.type == "cuda"
         self._build()
+        if not c.is_remote and (not f.moved or c.available("meta.more")):
+            self.geom                  # noqa: B018 -- a local file's cameras are checked when it opens
+
+    def _geometry(self, scene: dict) -> LightField:
+        """Geometry only: a zero-stride placeholder of the views' shape (no pixel memory)."""
+        g = read_geometry(scene, f"{self.file.container.name}: scene")
+        shape = (g["rows"], g["cols"], g["height"], g["width"], 1)
+        return LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene)
+
+    @property
+    def geom(self) -> LightField:
+        """The captured views' geometry, cameras included: read (for a remote file, fetched)
+        from ``meta.more`` on first use in version 3 files, and checked (FORMAT.md)."""
+        if self._geom is None:
+            name = self.file.container.name
+            geom = self._geometry(self.file.scene)
+            poses = captured_poses(geom.positions, geom.c2w)       # (R, C, 4, 4) camera-to-world
+            for pose in poses.reshape(-1, 4, 4):
+                try:
+                    self._check_pose(pose, self.norm)
+                except ParameterError as e:
+                    raise FormatError(f"{name}: a captured camera is unusable ({e})") from None
+            self._geom, self._poses = geom, poses
+        return self._geom
+
+    @property
+    def poses(self) -> np.ndarray:
+        """(R, C, 4, 4) camera-to-world matrices of the captured views (OpenGL axes)."""
+        self.geom                      # noqa: B018
+        return self._poses
 
     def _read_steps(self, limit: int) -> None:
-        """Read (fetch, for a remote file) the step sections after those held, up to a network
-        of ``limit`` neurons or the end of the available bytes; sizes checked first."""
+        """Read (fetch, for a remote file) the steps after those held, up to a network of
+        ``limit`` neurons or the end of the available bytes; sizes checked first."""
         c = self.file.container
+        if self._packed:
+            if not c.has("lfn.steps"):
+                return
+            have, off = c.available_bytes("lfn.steps"), self._offsets
+            k0 = len(self._steps)
+            k1 = min(int(np.searchsorted(off, have, side="right")) - 1, max(limit - self.cfg.min_neurons, 0))
+            if k1 > k0:
+                data = bytes(c.read("lfn.steps", int(off[k0]), int(off[k1])))
+                self._steps += [data[off[k] - off[k0]:off[k + 1] - off[k0]] for k in range(k0, k1)]
+            return
         for j in range(len(self._steps), self.cfg.max_neurons - self.cfg.min_neurons):
             if self.cfg.min_neurons + j >= limit or not c.available(step_name(j)):
                 break
@@ -233,7 +275,7 @@ class LfnRenderer(Decoder):
         c2w = self._check_pose(c2w, self.norm)
         neurons = self.neurons if neurons is None else neurons
         scale = self.cfg.scale_of(neurons) if scale is None else scale
-        g = self.geom
+        g = self._intr
         rays = camera_rays(c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"])
         h, w = rays.shape[:2]
         return self.render_rays(rays.reshape(-1, 6), neurons).reshape(h, w, 4)
@@ -300,5 +342,5 @@ class LfnRenderer(Decoder):
                 "neurons_available": self.neurons,
                 "summary": f"light field network, depth {c.depth}, {c.min_neurons}..{c.max_neurons} neurons per "
                            f"layer ({self.neurons} in the available bytes); levels 0..{self.levels:g} (0 = full "
-                           f"network; any prefix ending on a step section is a complete network), "
+                           f"network; any prefix ending after a step is a complete network), "
                            f"{self.dtype_w} weights"}

@@ -51,7 +51,7 @@ class RlfcDecoder(Decoder):
         self.threads = 1
         self.threads = self._threads(default_threads() if threads is None else threads)
         self.file = f
-        hdr, cfg = RlfcHeader.read(f.meta, f.container.name, limits or DEFAULT)
+        hdr, cfg = RlfcHeader.read(f.full_meta(), f.container.name, limits or DEFAULT)
         self.header, self.profile = hdr, hdr.profile
         self.core = get_profile(hdr.profile).open(f.container, hdr, cfg, limits)
         self.rows, self.cols = hdr.rows, hdr.cols

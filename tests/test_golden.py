@@ -13,6 +13,7 @@ from tests.conftest import ROOT
 GOLDEN = ROOT / "tests" / "data" / "golden"
 INDEX = json.loads((GOLDEN / "golden.json").read_text())
 RLFC = sorted(k for k in INDEX if k.startswith("rlfc_"))
+LFN = sorted(k for k in INDEX if k.startswith("lfn"))
 
 
 def _sha(a):
@@ -44,13 +45,23 @@ def test_rlfc_fixture_decodes_bit_exactly(name):
                 assert (one == full[r, c, by[i] * B:(by[i] + 1) * B, bx[i] * B:(bx[i] + 1) * B]).all()
 
 
-def test_lfn_fixture_renders_within_one_level():
+@pytest.mark.parametrize("name", LFN)
+def test_lfn_fixture_renders_within_one_level(name):
+    """Every LFN codec version kept here (1: a section per step, cameras in meta; 3: one
+    lfn.steps section, cameras in meta.more) renders its stored views; the float64 reference
+    decoder (tools/reflfn.py, from FORMAT.md) agrees within one level."""
     from lfn_stream import LfnRenderer
+    from tools.refdecode import ref_decode
 
-    g = INDEX["lfn_tiny_rgba8"]
+    g = INDEX[name]
     want = np.load(GOLDEN / g["expected"], allow_pickle=False)
+    blob = (GOLDEN / g["file"]).read_bytes()
     with open_lfc(GOLDEN / g["file"]) as f:
+        f.container.verify_all()
+        assert f.meta["codec_version"] == g.get("version", 1)
         r = LfnRenderer(f, device="cpu")
         # stored by network size (neurons); level 0 is the full network, level L has L fewer
         got = np.stack([r.decode_view(*g["view"], r.neurons - n) for n in g["neurons"]])
+        full = r.decode_all(0)
     assert got.shape == want.shape and np.abs(got.astype(int) - want.astype(int)).max() <= 1
+    assert np.abs(ref_decode(blob, 0).astype(int) - full).max() <= 1

@@ -22,9 +22,9 @@ import torch
 from formats.lfcfile import open_lfc, write_lfc
 from formats.lightfield import LightField
 from tools.common import log
-from lfn_stream import CODEC_ID, CODEC_VERSION, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
+from lfn_stream import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
 from lfn_stream.evaluate import evaluate, prefix_bytes
-from lfn_stream.pack import step_name
+from lfn_stream.pack import step_bytes
 from lfn_stream.rays import view_rays
 
 
@@ -102,7 +102,7 @@ def main(argv=None) -> int:
     config, sections = to_sections(model, occ, info)
     path = out / "lfn.lfc"
     ev_lf, test_v, train_v, geom_lf = eval_set(info)
-    write_lfc(path, CODEC_ID, CODEC_VERSION, config, (geom_lf or lf).geometry(), sections)
+    write_lfc(path, CODEC_ID, CODEC_VERSION, config, (geom_lf or lf).geometry(), sections, more=MOVED_KEYS)
     f = open_lfc(path)
     r = LfnRenderer(f, device=a.device)
     levels = sorted({float(cfg.min_neurons), float(cfg.neurons_of(0.25)), float(cfg.neurons_of(0.5)), float(cfg.max_neurons),
@@ -111,7 +111,8 @@ def main(argv=None) -> int:
     results["steps"] = info["steps"]
     results["file_bytes"] = path.stat().st_size
     results["params"] = model.n_params()
-    results["delta_bytes_at_max_neurons"] = f.container.info(step_name(cfg.max_neurons - cfg.min_neurons - 1)).length
+    results["delta_bytes_at_max_neurons"] = step_bytes(cfg, cfg.max_neurons - 1)
+    results["first_renderable_bytes"] = prefix_bytes(r, float(cfg.min_neurons))   # header + meta + base + occ
     results["lod"] = evaluate(r, ev_lf, test_v, train_v, levels)
     # checks: stream == trained model (fp16), prefix == full file at that level
     x = torch.from_numpy(view_rays(ev_lf, int(test_v[0]), 0.5, info["norm"]["centre"], info["norm"]["radius"]).reshape(-1, 6))
@@ -131,7 +132,7 @@ def main(argv=None) -> int:
         m1, o1, info1 = fit(0.0)
         c1, s1 = to_sections(m1, o1, info1)
         p1 = out / "single.lfc"
-        write_lfc(p1, CODEC_ID, CODEC_VERSION, c1, (geom_lf or lf).geometry(), s1)
+        write_lfc(p1, CODEC_ID, CODEC_VERSION, c1, (geom_lf or lf).geometry(), s1, more=MOVED_KEYS)
         r1 = LfnRenderer(open_lfc(p1), device=a.device)
         rows = []
         for lv in levels:   # the full single-scale network rendered at each level's scale

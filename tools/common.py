@@ -10,8 +10,7 @@ import time
 
 import numpy as np
 
-from formats.container import build_container
-from formats.lfcfile import encode_meta, open_lfc
+from formats.lfcfile import lfc_bytes, open_lfc
 
 
 def log(msg: str) -> None:
@@ -54,9 +53,6 @@ def machine() -> str:
     return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}, numpy {np.__version__}"
 
 
-def lfc_bytes(codec: str, version: int, config: dict, geometry: dict, sections) -> bytes:
-    """A whole .lfc file in memory."""
-    return b"".join(bytes(p) for p in build_container(encode_meta(codec, version, config, geometry), sections))
 
 
 def open_encoded(lf, encoded, codec: str = "rlfc", version: int = 1):

@@ -94,28 +94,37 @@ def rlfc_fixtures() -> dict:
     return {name: (encode(lf_of(views), **kw), lf_of(views)) for name, (views, kw) in specs.items()}
 
 
-def lfn_fixture(index: dict, out: Path) -> None:
+#: LFN fixtures this tool writes (name: codec version). ``lfn_tiny_rgba8`` (codec version 1: one
+#: section per step, sizes named *_width, cameras in meta) was written by an earlier version of
+#: this tool and is kept as it is.
+LFN_FIXTURES = {"lfn3_tiny_rgba8": 3}
+
+
+def lfn_fixture(index: dict, out: Path, name: str = "lfn3_tiny_rgba8") -> None:
     """A tiny nested-width LFN (depth 2, widths 4..8) trained briefly on the RGBA crop; the
-    expected renders are stored as .npy (float networks match within 1 LSB, not bit for bit)."""
+    expected renders are stored as .npy (float networks match within 1 LSB, not bit for bit).
+    Version 3: one lfn.steps section (checksum chunks of 64 bytes here, so that prefixes are
+    tested on a tiny file), the cameras in meta.more."""
     import torch
 
-    from lfn_stream import LfnConfig, LfnRenderer, TrainOptions, to_sections, train
+    from lfn_stream import MOVED_KEYS, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
 
     torch.manual_seed(0)
     lf = lf_of(variants()["rgba8"])
     cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=8, occupancy_neurons=4)
     model, occ, info = train(lf, cfg, TrainOptions(steps=30, batch=256, holdout=0, seed=0))
     config, sections = to_sections(model, occ, info, "fp16")
-    path = out / "lfn_tiny_rgba8.lfc"
-    write_lfc(path, "lfn", 2, config, lf.geometry(), sections)
+    version = LFN_FIXTURES[name]
+    path = out / f"{name}.lfc"
+    sections = [(n, d, 64) if n == "lfn.steps" else (n, d) for n, d, *_ in sections]
+    write_lfc(path, "lfn", version, config, lf.geometry(), sections, more=MOVED_KEYS)
     with open_lfc(path) as f:
         r = LfnRenderer(f, device="cpu")
         renders = np.stack([r.decode_view(1, 2, r.neurons - n) for n in (4.0, 6.5, 8.0)])
-    np.save(out / "lfn_tiny_rgba8.expected.npy", renders, allow_pickle=False)
-    index["lfn_tiny_rgba8"] = {"file": path.name, "bytes": path.stat().st_size, "view": [1, 2],
-                               "neurons": [4.0, 6.5, 8.0], "expected": "lfn_tiny_rgba8.expected.npy",
-                               "shape": list(renders.shape)}
-    print("lfn_tiny_rgba8", path.stat().st_size, "bytes")
+    np.save(out / f"{name}.expected.npy", renders, allow_pickle=False)
+    index[name] = {"file": path.name, "bytes": path.stat().st_size, "view": [1, 2], "version": version,
+                   "neurons": [4.0, 6.5, 8.0], "expected": f"{name}.expected.npy", "shape": list(renders.shape)}
+    print(name, path.stat().st_size, "bytes")
 
 
 def main(argv=None) -> int:
@@ -135,8 +144,9 @@ def main(argv=None) -> int:
         write_lfc(path, "rlfc", 1, enc.config, lf.geometry(), enc.sections)
         index[name] = {"file": path.name, "bytes": path.stat().st_size, **decoded_hashes(path)}
         print(name, index[name]["bytes"], "bytes")
-    if not a.only or "lfn_tiny_rgba8" in a.only:
-        lfn_fixture(index, out)
+    for name in LFN_FIXTURES:
+        if not a.only or name in a.only:
+            lfn_fixture(index, out, name)
     index_path.write_text(json.dumps(index, indent=1, sort_keys=True) + "\n")
     return 0
 

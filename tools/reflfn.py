@@ -23,10 +23,46 @@ def fnum(v) -> float:
     return x
 
 
+def merge_more(meta: dict, secs: dict[str, bytes]) -> dict:
+    """FORMAT.md "Moved metadata": put the keys of section meta.more back into scene/config."""
+    import json
+    import zlib
+
+    if "more" not in meta:
+        return meta
+    names = meta["more"]
+    need(type(names) is list and 1 <= len(names) <= 64 and all(type(k) is str for k in names)
+         and len(set(names)) == len(names), "more: list of names")
+    want = {}
+    for k in names:
+        part, _, key = k.partition(".")
+        need(part in ("scene", "config") and key and type(meta.get(part)) is dict and key not in meta[part],
+             f"more: name {k!r}")
+        want.setdefault(part, set()).add(key)
+    need("meta.more" in secs, "meta.more present")
+    d = zlib.decompressobj()
+    try:
+        raw = d.decompress(secs["meta.more"], (64 << 20) + 1)
+    except zlib.error as e:
+        raise RefError(f"meta.more: {e}") from None
+    need(len(raw) <= 64 << 20 and d.eof and not d.unused_data and not d.unconsumed_tail, "meta.more stream")
+    try:
+        more = json.loads(raw.decode("utf-8"), parse_constant=lambda c: (_ for _ in ()).throw(RefError(c)))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise RefError(f"meta.more: {e}") from None
+    need(type(more) is dict and set(more) == set(want)
+         and all(type(more[p]) is dict and set(more[p]) == want[p] for p in more), "meta.more keys")
+    out = dict(meta)
+    for p in more:
+        out[p] = {**meta[p], **more[p]}
+    return out
+
+
 class RefLfn:
     def __init__(self, meta: dict, secs: dict[str, bytes]):
+        need(meta.get("codec_version") in (1, 2, 3), "codec version")
+        meta, secs = merge_more(meta, secs), dict(secs)
         c, s = meta["config"], meta["scene"]
-        need(meta.get("codec_version") in (1, 2), "codec version")
         net = c["network"]
         v1 = meta["codec_version"] == 1          # version 1 named the sizes *_width
 
@@ -78,6 +114,14 @@ class RefLfn:
         m, D = self.m, self.D
         base = vals("lfn.base", 6 * m + 3 * m + (D - 1) * (m * m + 3 * m) + 4 * m + 4)
         steps = []
+        if meta["codec_version"] >= 3:       # one section lfn.steps, the steps one after another
+            sizes = [(6 + 3 + (D - 1) * (2 * j + 4) + 4) * dt.itemsize for j in range(m, self.M)]
+            if "lfn.steps" in secs:
+                need(len(secs["lfn.steps"]) == sum(sizes), "lfn.steps length")
+                a = 0
+                for k, size in enumerate(sizes):
+                    secs[f"lfn.step.{k:04d}"] = secs["lfn.steps"][a:a + size]
+                    a += size
         while m + len(steps) < self.M and f"lfn.step.{len(steps):04d}" in secs:
             j = m + len(steps)
             steps.append(vals(f"lfn.step.{len(steps):04d}", 6 + 3 + (D - 1) * (2 * j + 4) + 4))

@@ -215,6 +215,42 @@ export class LfcFile {
     return f;
   }
 
+  /** The metadata with the keys listed in `meta.more` put back from the deflated `meta.more`
+   *  section (FORMAT.md "Moved metadata"); read and checked once. */
+  async fullMeta() {
+    if (this._full) return this._full;
+    const meta = this.meta, name = this.name;
+    if (meta.more === undefined) return (this._full = meta);
+    const keys = meta.more;
+    if (!Array.isArray(keys) || keys.length < 1 || keys.length > 64 || !keys.every((k) => typeof k === "string") || new Set(keys).size !== keys.length) {
+      throw new FormatError(`${name}: metadata 'more' must be a list of 1..64 distinct key names`);
+    }
+    const want = {};
+    for (const k of keys) {
+      const dot = k.indexOf("."), part = dot < 0 ? k : k.slice(0, dot), key = dot < 0 ? "" : k.slice(dot + 1);
+      const obj = meta[part];
+      if ((part !== "scene" && part !== "config") || !key || !obj || typeof obj !== "object" || Array.isArray(obj) || Object.hasOwn(obj, key)) {
+        throw new FormatError(`${name}: metadata 'more' names '${k}', which is not a scene.KEY/config.KEY missing from meta`);
+      }
+      (want[part] = want[part] || new Set()).add(key);
+    }
+    if (!this.sections.has("meta.more")) throw new FormatError(`${name}: metadata names moved keys but the file has no 'meta.more' section`);
+    const raw = await inflate(await this.read("meta.more"), LIMITS.metaBytes, `${name}: section 'meta.more'`);
+    let more;
+    try {
+      more = JSON.parse(new TextDecoder("utf-8", { fatal: true }).decode(raw));
+    } catch (e) {
+      throw new FormatError(`${name}: section 'meta.more' is not UTF-8 JSON (${e.message})`);
+    }
+    const same = (a, b) => a.size === b.size && [...a].every((x) => b.has(x));
+    const ok = more && typeof more === "object" && !Array.isArray(more) && same(new Set(Object.keys(more)), new Set(Object.keys(want)))
+      && Object.keys(more).every((p) => more[p] && typeof more[p] === "object" && !Array.isArray(more[p]) && same(new Set(Object.keys(more[p])), want[p]));
+    if (!ok) throw new FormatError(`${name}: section 'meta.more' does not hold exactly the keys metadata 'more' names`);
+    const out = { ...meta };
+    for (const p of Object.keys(more)) out[p] = { ...meta[p], ...more[p] };
+    return (this._full = out);
+  }
+
   info(sname) {
     const s = this.sections.get(sname);
     if (!s) throw new FormatError(`${this.name}: missing section '${sname}'`);
@@ -569,7 +605,7 @@ const TB = 8, MAX_REFS = 4;
 /** Decoder of an RLFC file of profile "tx" (FORMAT.md "Profile tx"); open with openDecoder(). */
 export class TxDecoder {
   async init(file, keyImage) {
-    const name = file.name, meta = file.meta;
+    const name = file.name, meta = await file.fullMeta();
     if (meta.codec !== "rlfc") throw new UnsupportedError(`${name}: codec '${meta.codec}' is not supported here (only rlfc)`);
     const cv = meta.codec_version;
     if (!Number.isInteger(cv) || cv < 1) throw new FormatError(`${name}: metadata codec_version must be an integer >= 1, got ${JSON.stringify(cv)}`);

@@ -1,6 +1,7 @@
 // lfn.js — light field networks (codec "lfn", docs/FORMAT.md "LFN codec") in the browser: the
 // network read from an .lfc file (or the prefix fetched so far), grown by fetching further
-// `lfn.step.NNNN` sections as the level rises, and rendered in plain JS (double precision; the
+// steps as the level rises (version 3: byte ranges of `lfn.steps`; versions 1–2: `lfn.step.NNNN`
+// sections), and rendered in plain JS (double precision; the
 // Python renderer computes in float32, so pixels agree within one grey level).
 //
 // Cameras follow lfn_stream/cameras.py: gridPose(s, t) (continuous grid position), orbitPose(v,
@@ -112,7 +113,8 @@ export class LfnDecoder {
     if (meta.codec !== "lfn") throw new UnsupportedError(`${name}: codec '${meta.codec}' is not a light field network`);
     const version = meta.codec_version;
     if (!Number.isInteger(version) || version < 1) throw new FormatError(`${name}: metadata codec_version must be an integer >= 1, got ${JSON.stringify(version)}`);
-    if (version > 2) throw new UnsupportedError(`${name}: lfn codec version ${version} is not supported (this reader knows 1 and 2)`);
+    if (version > 3) throw new UnsupportedError(`${name}: lfn codec version ${version} is not supported (this reader knows 1 to 3)`);
+    d.packed = version >= 3;                 // version 3: every step in one section, lfn.steps
     const conf = meta.config;
     if (!conf || typeof conf !== "object" || Array.isArray(conf)) throw new FormatError(`${name}: config is not an object`);
     const net = conf.network, where = `${name}: config.network`;
@@ -133,8 +135,8 @@ export class LfnDecoder {
     d.dtypeW = conf.weights === undefined ? "fp16" : conf.weights;
     if (d.dtypeW !== "fp16" && d.dtypeW !== "fp32") throw new FormatError(`${name}: config.weights must be fp16 or fp32`);
     d.itemsize = d.dtypeW === "fp16" ? 2 : 4;
-    d._geometry(meta.scene, name);
     d.file = file;
+    d._geometry((await file.fullMeta()).scene, name);     // version 3: the cameras are in meta.more
     const base = file.info("lfn.base");
     if (base.length !== d.valuesBase() * d.itemsize) {
       throw new FormatError(`${name}: section 'lfn.base' has ${base.length} bytes, the network config needs ${d.valuesBase() * d.itemsize}`);
@@ -147,6 +149,12 @@ export class LfnDecoder {
       d.occ = floats(await file.read("lfn.occ"), d.dtypeW);
     }
     d.steps = [];
+    if (d.packed && file.sections.has("lfn.steps")) {
+      d.offsets = [0];
+      for (let j = d.minN; j < d.maxN; j++) d.offsets.push(d.offsets[d.offsets.length - 1] + d.stepValues(j) * d.itemsize);
+      const have = file.info("lfn.steps").length, want = d.offsets[d.offsets.length - 1];
+      if (have !== want) throw new FormatError(`${name}: section 'lfn.steps' has ${have} bytes, the network config needs ${want}`);
+    }
     await d.grow(maxNeurons);
     return d;
   }
@@ -237,6 +245,17 @@ export class LfnDecoder {
     const limit = Math.min(Math.ceil(maxNeurons), this.maxN);
     const before = this.steps.length;
     const f = this.file, names = [];
+    if (this.packed) {                        // one range of lfn.steps (one request for its missing chunks)
+      const k0 = this.steps.length, k1 = f.sections.has("lfn.steps") ? Math.max(limit - this.minN, k0) : k0;
+      if (k1 > k0) {
+        const data = await f.read("lfn.steps", this.offsets[k0], this.offsets[k1]);
+        for (let k = k0; k < k1; k++) {
+          this.steps.push(floats(data.slice(this.offsets[k] - this.offsets[k0], this.offsets[k + 1] - this.offsets[k0]), this.dtypeW));
+        }
+      }
+      if (this.steps.length !== before || !this.Wt) this._build();
+      return this.neurons;
+    }
     for (let j = this.steps.length; this.minN + j < limit && f.sections.has(stepName(j)); j++) names.push(stepName(j));
     await f.prefetch(names);                  // one range request for all the steps this level needs
     for (let j = this.steps.length; this.minN + j < limit; j++) {

@@ -36,6 +36,28 @@ def test_roundtrip_property(secs, chunk, data):
     assert c.size == len(blob)
 
 
+@settings(max_examples=60, deadline=None)
+@given(secs=st.lists(st.tuples(names, st.binary(max_size=2000), st.sampled_from([1, 5, 64, 300, 65536])),
+                     min_size=1, max_size=5, unique_by=lambda t: t[0]), data=st.data())
+def test_per_section_chunks_and_prefixes_property(secs, data):
+    """Sections with their own checksum chunk sizes round trip; in a byte prefix of the file,
+    ``available_bytes`` is the section's longest readable, verifiable prefix (whole chunks)."""
+    blob = _bytes(b"{}", secs, 16)
+    full = Container(blob)
+    assert [full.info(n).chunk_size for n, _, _ in secs] == [ch for _, _, ch in secs]
+    cut = data.draw(st.integers(full.info(secs[0][0]).offset, len(blob)))
+    c = Container(blob[:cut], partial=True)
+    for n, d, ch in secs:
+        k = c.available_bytes(n)
+        info = c.info(n)
+        have = min(max(cut - info.offset, 0), len(d))
+        assert k == (len(d) if have == len(d) else have // ch * ch)
+        assert bytes(c.read(n, 0, k)) == d[:k]
+        if k < len(d):
+            with pytest.raises((TruncatedError, ChecksumError)):
+                c.read(n, 0, k + 1)
+
+
 def test_sections_tile_the_file():
     blob = _bytes()
     c = Container(blob)

@@ -15,10 +15,11 @@ import pytest
 import torch
 
 from formats.container import build_container
-from formats.lfcfile import encode_meta, open_lfc
+from formats.lfcfile import encode_meta, lfc_bytes, open_lfc
 from formats.lightfield import LightField
-from lfn_stream import LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, to_sections
+from lfn_stream import CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, to_sections
 from lfn_stream.cameras import captured_poses, scene_pivot
+from lfn_stream.pack import step_offsets
 
 HERE = Path(__file__).resolve().parent
 GOLDEN = HERE.parents[0] / "data" / "golden"
@@ -76,8 +77,9 @@ def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=Tru
         pos = np.stack([c * 0.3, -r * 0.25, np.zeros_like(r, float)], -1)
         lf = LightField(views=views, positions=pos, focal=(30.0, 30.0))
     config, sections = to_sections(m, o, {"norm": {"centre": [0.1, 0.0, 0.2], "radius": 2.5}}, weights)
+    sections = [(n, d, 96) if n == "lfn.steps" else (n, d) for n, d, *_ in sections]   # steps span chunks
     p = tmp / f"net_{channels}_{np.dtype(dtype).name}_{weights}_{posed}.lfc"
-    p.write_bytes(b"".join(bytes(x) for x in build_container(encode_meta("lfn", 2, config, lf.geometry()), sections)))
+    p.write_bytes(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS))
     return p
 
 
@@ -97,8 +99,9 @@ def compare(path: Path, out: Path, cams, py_poses, first=None):
     return info, r
 
 
-def test_golden_network_matches_python_exactly(tmp_path):
-    path = GOLDEN / "lfn_tiny_rgba8.lfc"
+@pytest.mark.parametrize("name", ["lfn_tiny_rgba8", "lfn3_tiny_rgba8"])     # codec versions 1 and 3
+def test_golden_network_matches_python_exactly(tmp_path, name):
+    path = GOLDEN / f"{name}.lfc"
     r = LfnRenderer(open_lfc(path), device="cpu")
     cams = [("view,5,max,1", 8.0, 1.0), ("grid,1.5,2.25,6.5,1", 6.5, 1.0), ("view,0,4,auto", 4.0, None)]
     poses = [r.pose(1, 1), r.grid_pose(1.5, 2.25), r.pose(0, 0)]
@@ -134,6 +137,10 @@ def test_grown_network_equals_the_whole_one(tmp_path):
         assert (tmp_path / f"render_{i}.bin").read_bytes() == (tmp_path / "whole" / f"render_{i}.bin").read_bytes()
 
 
+def r_cfg(f):
+    return LfnConfig.from_dict(f.meta["config"]["network"], f.meta["codec_version"])
+
+
 def test_bad_networks_get_typed_errors(tmp_path):
     src = lfn_file(tmp_path, 3, posed=False, occ=False)
     f = open_lfc(src)
@@ -142,15 +149,22 @@ def test_bad_networks_get_typed_errors(tmp_path):
 
     def write(name, meta, secs):
         p = tmp_path / f"{name}.lfc"
-        m = encode_meta(meta["codec"], meta["codec_version"], meta["config"], meta["scene"])
+        m = encode_meta(meta["codec"], meta["codec_version"], meta["config"], meta["scene"],
+                        {"more": meta["more"]} if "more" in meta else None)
         p.write_bytes(b"".join(bytes(x) for x in build_container(m, secs)))
         return p
 
+    at = int(step_offsets(r_cfg(f), "fp16")[3])       # step 3 inside lfn.steps
     cases = {
         "depth": ({**meta, "config": {**meta["config"], "network": {**meta["config"]["network"], "depth": 5}}}, secs,
                   "FormatError", "lfn.base"),
-        "nan": (meta, [(n, b"\x00\x7e" + d[2:]) if n == "lfn.step.0003" else (n, d) for n, d in secs],
+        "nan": (meta, [(n, d[:at] + b"\x00\x7e" + d[at + 2:]) if n == "lfn.steps" else (n, d) for n, d in secs],
                 "FormatError", "NaN"),
+        "steps": (meta, [(n, d[:-2]) if n == "lfn.steps" else (n, d) for n, d in secs], "FormatError", "lfn.steps"),
+        "no-more": (meta, [(n, d) for n, d in secs if n != "meta.more"], "FormatError", "meta.more"),
+        "bad-more": (meta, [(n, b"\x78\x9c" + d[2:-3]) if n == "meta.more" else (n, d) for n, d in secs],
+                     "FormatError", "meta.more"),
+        "more-keys": ({**meta, "more": ["scene.rows"]}, secs, "FormatError", "scene.rows"),
         "version": ({**meta, "codec_version": 9}, secs, "UnsupportedError", "version 9"),
         "radius": ({**meta, "config": {**meta["config"], "norm": {"centre": [0, 0, 0], "radius": -1}}}, secs,
                    "FormatError", "radius"),

@@ -7,10 +7,13 @@ import pytest
 import torch
 
 from formats.cli import main
-from formats.container import build_container
-from formats.lfcfile import encode_meta, open_lfc
-from lfn_stream import LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, TrainOptions, to_sections, train
-from lfn_stream.pack import pack_network, step_bytes, step_name, unpack_network
+from formats.errors import TruncatedError
+from formats.lfcfile import lfc_bytes, open_lfc
+from formats.lightfield import LightField
+from lfn_stream import (CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, TrainOptions,
+                        to_sections, train)
+from lfn_stream.evaluate import prefix_bytes
+from lfn_stream.pack import pack_network, step_bytes, step_name, step_offsets, unpack_network
 from lfn_stream.sampling import RaySampler, TorchRaySampler
 from lfn_stream.sat import box_mean, box_mean_frac, box_mean_frac_torch, box_mean_torch, summed_area_table
 from tests.conftest import ROOT
@@ -84,28 +87,107 @@ def test_delta_size_goal_at_width_512():
     assert step_bytes(cfg, 511) <= 16 * 1024
 
 
-def _lfc_bytes(model, occ, lf):
-    config, sections = to_sections(model, occ, {"norm": {"centre": [0, 0, 0], "radius": 1.0}})
-    pieces = build_container(encode_meta("lfn", 1, config, lf.geometry()), sections)
-    return b"".join(bytes(p) for p in pieces)
+def _lfc_bytes(model, occ, lf, step_chunk=None):
+    config, sections = to_sections(model, occ, {"norm": {"centre": [0, 0, 0], "radius": 1.0},
+                                                "train_views": [0], "test_views": []})
+    if step_chunk:                     # smaller checksum chunks in lfn.steps than the tiny network's
+        sections = [(n, d, step_chunk) if n == "lfn.steps" else (n, d, *rest) for n, d, *rest in sections]
+    return lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
 
 
 def test_prefix_is_a_complete_smaller_network():
+    """Version 3: any byte prefix renders the network of the steps that lie wholly inside its
+    last complete checksum chunk of lfn.steps, bit for bit the same as the whole file's."""
     lf = smooth_lf(rows=2, cols=2, h=8, w=10)
     m = _model()
-    blob = _lfc_bytes(m, None, lf)
+    blob = _lfc_bytes(m, None, lf, step_chunk=40)
     full = LfnRenderer(open_lfc(blob), device="cpu")
     c = full.file.container
+    s = c.info("lfn.steps")
+    assert s.chunk_size == 40 and [n for n in c.sections] == ["meta", "lfn.base", "lfn.steps", "meta.more"]
+    off = step_offsets(CFG, "fp16")
     rays = full.view_rays(0, 1).reshape(-1, 6)
+    seen = set()
+    for n in range(s.offset, s.offset + s.length + 1, 7):
+        pre = LfnRenderer(open_lfc(blob[:n], partial=True), device="cpu")
+        usable = s.length if n >= s.offset + s.length else (n - s.offset) // 40 * 40
+        w = CFG.min_neurons + int(np.searchsorted(off, usable, side="right")) - 1
+        assert pre.neurons == w, (n, pre.neurons, w)
+        seen.add(w)
+        if w in (4, 7, 12) or n == s.offset:
+            assert np.array_equal(pre.render_rays(rays, float(w)), full.render_rays(rays, float(w)))
+        if w < 12:
+            with pytest.raises(Exception):
+                pre.render_rays(rays, float(w) + 0.5)   # beyond what the prefix holds
+        # the prefix's bytes (prefix_bytes) hold this network
+        assert prefix_bytes(full, float(w)) <= max(n, s.offset)
+        # the cameras are at the end of the file: a prefix renders free cameras, not captured views
+        with pytest.raises(TruncatedError, match="meta.more"):
+            pre.view_rays(0, 1)
+    assert seen == set(range(4, 12))
+    # grow() on a prefix reads what is there, and the grown network renders as one opened at that size
+    pre = LfnRenderer(open_lfc(blob[:s.offset + 200], partial=True), device="cpu", max_neurons=5)
+    assert pre.neurons == 5 and pre.grow() > 5
+    small = LfnRenderer(open_lfc(blob[:s.offset + 200], partial=True), device="cpu")
+    assert pre.neurons == small.neurons
+    assert np.array_equal(pre.render_rays(rays, pre.neurons), small.render_rays(rays, small.neurons))
+    with pytest.raises(Exception):
+        open_lfc(blob[:-10])                         # not accepted as a whole file
+
+
+def test_version_2_files_still_render_by_step_sections():
+    """Version 2 wrote one section per step and the cameras in meta; such files still open, and
+    a prefix ending on a section boundary is a complete network."""
+    lf = smooth_lf(rows=2, cols=2, h=8, w=10)
+    m = _model()
+    config, _ = to_sections(m, None, {"norm": {"centre": [0, 0, 0], "radius": 1.0}})
+    blob = lfc_bytes("lfn", 2, config, lf.geometry(), pack_network(m, None, "fp16"))
+    full = LfnRenderer(open_lfc(blob), device="cpu")
+    v3 = LfnRenderer(open_lfc(_lfc_bytes(m, None, lf)), device="cpu")
+    c = full.file.container
+    rays = full.view_rays(0, 1).reshape(-1, 6)
+    assert np.array_equal(full.render_rays(rays, 9.5), v3.render_rays(rays, 9.5))
     for w in (4, 7, 12):
         end = c.info("lfn.base") if w == CFG.min_neurons else c.info(step_name(w - CFG.min_neurons - 1))
         pre = LfnRenderer(open_lfc(blob[:end.offset + end.length], partial=True), device="cpu")
-        assert pre.neurons == w
+        assert pre.neurons == w and prefix_bytes(full, float(w)) == end.offset + end.length
         assert np.array_equal(pre.render_rays(rays, float(w)), full.render_rays(rays, float(w)))
-        with pytest.raises(Exception):
-            pre.render_rays(rays, float(w) + 0.5)   # beyond what the prefix holds
-    with pytest.raises(Exception):
-        open_lfc(blob[:-10])                         # not accepted as a whole file
+        assert np.array_equal(pre.view_rays(1, 1), full.view_rays(1, 1))      # cameras in meta
+
+
+def test_first_renderable_prefix_is_small():
+    """Issue 17: meta + base network + occupancy ≤ 8 KB for the default network on a 100-view
+    posed RGBA capture (the 360° captures' shape); its 21 KB of camera JSON, the view names and
+    the evaluation lists come after the network, in meta.more, and load when a captured view
+    is asked for."""
+    rng = np.random.default_rng(0)
+    cfg = LfnConfig()                        # depth 6, 16..128 neurons, occupancy 32
+    assert (cfg.depth, cfg.min_neurons, cfg.max_neurons, cfg.occupancy_neurons) == (6, 16, 128, 32)
+    n = 100
+    ang = rng.uniform(0, 2 * np.pi, n)
+    c2w = np.tile(np.eye(4), (1, n, 1, 1))
+    c2w[0, :, 0, 0], c2w[0, :, 0, 2], c2w[0, :, 2, 0], c2w[0, :, 2, 2] = np.cos(ang), np.sin(ang), -np.sin(ang), \
+        np.cos(ang)
+    c2w[0, :, :3, 3] = 4.0311 * c2w[0, :, :3, 2] + rng.normal(0, 1e-3, (n, 3))
+    c2w[0, :, :3, :3] += rng.normal(0, 1e-6, (n, 3, 3))         # full-precision floats, as real poses
+    lf = LightField(views=np.zeros((1, n, 256, 256, 4), np.uint8), positions=c2w[..., :3, 3], c2w=c2w,
+                    focal=(350.0, 350.0), layout="posed", meta={"names": [f"train/r_{i}.png" for i in range(n)]})
+    torch.manual_seed(0)
+    info = {"norm": {"centre": [0, 0, 0], "radius": 4.0}, "train_views": list(range(0, n, 4)),
+            "test_views": list(range(1, n, 4))}
+    config, sections = to_sections(NestedLFN(cfg), OccupancyNet(32), info)
+    blob = lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
+    whole = LfnRenderer(open_lfc(blob), device="cpu")
+    first = prefix_bytes(whole, 16.0)
+    c = whole.file.container
+    assert first == c.info("lfn.occ").offset + c.info("lfn.occ").length <= 8192, first
+    assert c.info("meta").length < 1024 and "c2w" not in whole.file.meta["scene"]
+    pre = LfnRenderer(open_lfc(blob[:first], partial=True), device="cpu")
+    assert pre.neurons == 16 and pre.occ is not None
+    pose = whole.pose(0, 7)
+    assert np.array_equal(pre.render_pose(pose, 16.0, 0.125), whole.render_pose(pose, 16.0, 0.125))
+    assert whole.file.scene["c2w"] == lf.geometry()["c2w"] and whole.file.full_meta()["config"]["train"][
+        "test_views"] == info["test_views"]
 
 
 def test_sat_box_mean_is_exact_on_large_16bit_images():
@@ -240,8 +322,8 @@ def test_training_learns_the_sample_scene():
     for steps in (1, 400):
         m, o, info = train(lf, cfg, TrainOptions(steps=steps, batch=1024, holdout=4))
         config, sections = to_sections(m, o, info)
-        blob = b"".join(bytes(p) for p in build_container(encode_meta("lfn", 1, config, lf.geometry()), sections))
-        r = LfnRenderer(open_lfc(blob), device="cpu")
+        r = LfnRenderer(open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)),
+                        device="cpu")
         rows = evaluate(r, lf, np.asarray(info["test_views"]), np.asarray(info["train_views"]), [8.0, 32.0])
         psnr.append([row["psnr"] for row in rows])
     assert psnr[1][1] > psnr[0][1] + 8 and psnr[1][1] > 26, psnr
