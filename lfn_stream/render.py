@@ -91,10 +91,10 @@ class LfnRenderer(Decoder):
         if not c.available("lfn.base"):
             raise FormatError(f"{c.name}: the stream prefix does not hold the base network")
         # the intrinsics (in meta); the captured cameras may lie at the end of the file (meta.more)
-        self._intr = self._geometry(f.meta["scene"])
-        self._geom = None
         self.rows, self.cols = scene["rows"], scene["cols"]
         self.height, self.width, self.channels = scene["height"], scene["width"], scene["channels"]
+        self._intr = self._geometry(f.meta["scene"])
+        self._geom = None
         if scene["dtype"] not in ("uint8", "uint16"):
             raise FormatError(f"{c.name}: scene dtype must be uint8 or uint16 for an LFN, got {scene['dtype']}")
         self.dtype = np.dtype(scene["dtype"])
@@ -126,9 +126,9 @@ class LfnRenderer(Decoder):
             self.geom                  # noqa: B018 -- a local file's cameras are checked when it opens
 
     def _geometry(self, scene: dict) -> LightField:
-        """Geometry only: a zero-stride placeholder of the views' shape (no pixel memory)."""
-        g = read_geometry(scene, f"{self.file.container.name}: scene")
-        shape = (g["rows"], g["cols"], g["height"], g["width"], 1)
+        """Geometry only: a zero-stride placeholder of the views' shape (no pixel memory; the
+        shape as validated at open, under the caller's limits)."""
+        shape = (self.rows, self.cols, self.height, self.width, 1)
         return LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene)
 
     @property
