@@ -26,9 +26,32 @@ CODEC_VERSION = 3          # 3: steps in one section, cameras in meta.more; 2: s
 #: metadata a renderer of the first bytes does not need, stored after the network (meta.more)
 MOVED_KEYS = ("scene.c2w", "scene.positions", "scene.names_z", "config.train")
 
-# 4×4 ordered-dither (Bayer) thresholds in (0, 1): a pixel takes the upper size where its
-# fractional part exceeds the threshold, so two sizes mix without a visible seam.
-BAYER4 = (np.array([[0, 8, 2, 10], [12, 4, 14, 6], [3, 11, 1, 9], [15, 7, 13, 5]]) + 0.5) / 16
+OCC_BATCH = 16384   # rays per occupancy-net call: ~2 MiB of activations (one 65536-ray call ran ~4x slower)
+MAX_SIZE_PASSES = 16  # an all-integer size map with at most this many sizes runs one fused pass per size
+
+
+def dither_threshold(height: int, width: int, frame: int = 0) -> np.ndarray:
+    """(height, width) thresholds in [0, 1): interleaved gradient noise (Jimenez 2014), a
+    closed-form low-discrepancy pattern with no low-frequency structure, shifted per ``frame``
+    so that over a few frames every pixel takes each of its two sizes in proportion (temporal
+    dither). float64, the same formula as the browser viewer could use."""
+    y, x = np.mgrid[0:height, 0:width].astype(np.float64)
+    shift = 5.588238 * (int(frame) % 64)
+    return np.modf(52.9829189 * np.modf(0.06711056 * (x + shift) + 0.00583715 * (y + shift))[0])[0]
+
+
+def dither_sizes(lod: np.ndarray, sizes: np.ndarray, threshold: np.ndarray) -> np.ndarray:
+    """Snap fractional sizes ``lod`` to the sorted integer ``sizes`` (K,): a value between
+    sizes[j] and sizes[j+1] takes sizes[j+1] where its position between them exceeds
+    ``threshold`` (same shape as lod, values in [0, 1)), else sizes[j]; values outside the
+    range clip to its ends. The mean over thresholds is the fractional map (in neurons)."""
+    s = np.asarray(sizes, np.float64)
+    lod = np.clip(np.asarray(lod, np.float64), s[0], s[-1])
+    if s.size == 1:
+        return np.full_like(lod, s[0])
+    j = np.clip(np.searchsorted(s, lod, side="right") - 1, 0, s.size - 2)
+    a, b = s[j], s[j + 1]
+    return np.where((lod - a) / (b - a) > threshold, b, a)
 
 
 def plan_passes(top: np.ndarray, passes: int) -> list[tuple[int, int]]:
@@ -325,26 +348,37 @@ class LfnRenderer(Decoder):
         return self.render_rays(rays.reshape(-1, 6), neurons).reshape(h, w, 4)
 
     @torch.no_grad()
-    def render_rays_lod(self, rays: np.ndarray, neurons: np.ndarray, passes: int = 4,
+    def render_rays_lod(self, rays: np.ndarray, neurons: np.ndarray, passes: int | None = None,
                         use_occupancy: bool = True) -> np.ndarray:
         """(N, 6) Plücker rays, each at its own fractional network size ``neurons`` (N,) → (N, 4)
         RGBA (premultiplied). Rays are grouped into at most ``passes`` network passes by size
         (:func:`plan_passes`: the grouping of least cost, a pass of n neurons costing ~ rays·n²);
         within a pass every ray keeps its exact size (:meth:`NestedLFN.forward_lod`), so the
-        result does not depend on the grouping beyond float rounding and has no level steps."""
+        result does not depend on the grouping beyond float rounding and has no level steps.
+        ``passes=None``: one pass per size when every size is an integer and there are at most
+        16 of them (each pass then runs the fused integer-size network, as a dithered map
+        from :meth:`foveation_map` needs), else 4."""
         lo, hi = self.neuron_range
         lod = np.asarray(neurons, np.float64).reshape(-1)
         if lod.shape[0] != rays.shape[0] or not np.isfinite(lod).all():
             raise ParameterError(f"neurons must be {rays.shape[0]} finite sizes, one per ray")
+        if passes is not None and (isinstance(passes, bool) or not isinstance(passes, (int, np.integer))
+                                   or passes < 1):
+            raise ParameterError(f"passes must be a positive integer, got {passes!r}")
         lod = np.clip(lod, lo, hi)
         out = np.zeros((rays.shape[0], 4), np.float32)
         dt = torch.float16 if self.half else torch.float32
         x = torch.from_numpy(np.ascontiguousarray(rays, np.float32)).to(self.device, dt)
         keep = np.arange(rays.shape[0])
         if self.occ is not None and use_occupancy:
-            keep = torch.nonzero(torch.sigmoid(self.occ(x).float()) > 0.1)[:, 0].cpu().numpy()
+            keep = np.concatenate([torch.nonzero(torch.sigmoid(self.occ(x[a:a + OCC_BATCH]).float()) > 0.1)[:, 0]
+                                   .cpu().numpy() + a for a in range(0, x.shape[0], OCC_BATCH)] or [keep[:0]])
         self.rays_evaluated += int(keep.size)
         top = np.minimum(np.ceil(lod[keep] - 1e-9), hi).astype(np.int64)
+        if passes is None:
+            distinct = np.unique(top).size
+            whole = bool(np.all(lod[keep] == top))
+            passes = distinct if whole and distinct <= MAX_SIZE_PASSES else 4
         for a, b in plan_passes(top, passes):
             sel = keep[(top >= a) & (top <= b)]
             step = self._batch(b)
@@ -355,10 +389,11 @@ class LfnRenderer(Decoder):
         return out
 
     def render_lod_map(self, row: int, col: int, lod: np.ndarray, quantum: float | None = None,
-                       passes: int = 4) -> np.ndarray:
+                       passes: int | None = None) -> np.ndarray:
         """A full-size view where pixel (y, x) is rendered with ``lod[y, x]`` (fractional) neurons,
-        in at most ``passes`` network passes (:meth:`render_rays_lod`); ``quantum`` rounds the
-        sizes first (None: exact). Returns (H, W, 4) float32 RGBA (premultiplied)."""
+        in at most ``passes`` network passes (:meth:`render_rays_lod`; None: its default);
+        ``quantum`` rounds the sizes first (None: exact). Returns (H, W, 4) float32 RGBA
+        (premultiplied)."""
         rays = self.view_rays(row, col, 1.0).reshape(-1, 6)
         lod = np.asarray(lod, np.float64).reshape(-1)
         if quantum:
@@ -366,24 +401,33 @@ class LfnRenderer(Decoder):
         return self.render_rays_lod(rays, lod, passes).reshape(self.height, self.width, 4)
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
-                      dither: bool = False) -> np.ndarray:
-        """Per-pixel network sizes around a gaze point (x, y in pixels): the full network inside
-        ``inner``·diag, falling log-linearly to the base network at ``outer``·diag. Sizes are
-        fractional and rendered exactly (:meth:`render_lod_map`), so transitions are continuous
-        without dithering; ``dither`` (for renderers limited to integer sizes) turns the
-        fractional part into an ordered-dither choice between the two neighbouring sizes."""
+                      dither: bool = True, sizes: int = 8, frame: int = 0) -> np.ndarray:
+        """Per-pixel network sizes (H, W) around a gaze point (x, y in pixels): the full network
+        inside ``inner``·diag, falling linearly to the base network at ``outer``·diag.
+
+        - ``dither=True`` (default): each pixel takes one of ``sizes`` integer sizes (evenly
+          spaced from the base to the full network): between two of them, the upper where the
+          pixel's position between them exceeds an interleaved-gradient-noise threshold
+          (:func:`dither_threshold`, shifted by ``frame``: advance it per frame and the noise
+          averages out). :meth:`render_lod_map` runs one fused pass per size: the fast form
+          (0.56-0.69x a full render on 2 CPU cores, BENCHMARKS.md), and the one without arcs.
+        - ``dither=False``: fractional sizes, rendered exactly: no pixel noise, but the nested
+          networks' differences from one size to the next show as faint arcs around the gaze,
+          and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.
+        """
         h, w = self.height, self.width
         ys, xs = np.mgrid[0:h, 0:w] + 0.5
         diag = float(np.hypot(h, w))
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / diag
         t = np.clip((e - inner) / max(outer - inner, 1e-9), 0, 1)
         lo, hi = self.neuron_range
-        lod = hi - t * (hi - lo)
-        if dither:
-            frac = lod - np.floor(lod)
-            thr = np.tile(BAYER4, (h // 4 + 1, w // 4 + 1))[:h, :w]
-            lod = np.floor(lod) + (frac > thr)
-        return np.clip(lod, lo, hi)
+        lod = np.clip(hi - t * (hi - lo), lo, hi)
+        if not dither:
+            return lod
+        if isinstance(sizes, bool) or not isinstance(sizes, (int, np.integer)) or not 1 <= sizes <= MAX_SIZE_PASSES:
+            raise ParameterError(f"sizes must be an integer in 1..{MAX_SIZE_PASSES}, got {sizes!r}")
+        levels = np.unique(np.round(np.linspace(np.ceil(lo), np.floor(hi), int(sizes))))
+        return dither_sizes(lod, levels, dither_threshold(h, w, frame))
 
     # -- the Decoder interface ---------------------------------------------------------------
     def to_pixels(self, rgba: np.ndarray) -> np.ndarray:

@@ -2,19 +2,22 @@
 
 For an LFN file and a few captured views, renders each view (at the scene's resolution) with
 - the full network (every pixel at max neurons): the reference time and image;
-- ``per-level``: the earlier method, sizes rounded to 1/8 neuron and ordered-dithered, one
-  network pass per distinct size (what ``render_lod_map`` did before);
-- ``exact, P passes``: every pixel at its own fractional size, grouped into at most P passes
-  (:meth:`lfn_stream.LfnRenderer.render_rays_lod`), no dithering.
+- ``exact``: every pixel at its own fractional size, in 4 grouped passes
+  (:meth:`lfn_stream.LfnRenderer.render_rays_lod`), no dithering: the reference transition;
+- ``dither K``: each pixel at one of K integer sizes, interleaved-gradient-noise dither between
+  neighbouring sizes (``foveation_map(dither=True, sizes=K)``), one fused pass per size;
+- ``snap K``: the same K sizes, each pixel rounded to the nearest (no dither): level steps.
 
-Reports ms per view, the ratio to the full-width render (issue 17: ≤ 0.6×), network passes,
-and two image measures against the full-width render: PSNR inside the fovea (must be exact up
-to rounding) and the *transition roughness* — the mean absolute Laplacian of (foveated − full)
-over the pixels between the inner and outer radius, in grey levels: ordered dither and level
-steps show up there as pixel-scale patterns and rings, a continuous size map does not.
+Reports ms per view and the ratio to the full-width render (issue 17: ≤ 0.6×), and, against
+the full render over the band between the inner and outer radius (grey levels of 255): PSNR
+of one frame, of one frame seen through a 1-pixel Gaussian blur (what a display or an eye
+integrates), and of the mean of 4 frames with the dither advancing (temporal dither); the
+*ring error* (:func:`ring_error`: arcs and level steps around the gaze, the smooth loss of
+detail with distance taken out); the transition roughness (mean |Laplacian| of (render −
+full): pixel-scale noise); and the fovea's PSNR (the full network up to rounding).
 
 Usage:
-    python -m tools.bench_foveation FILE.lfc [--views 0 7 33] [--rounds 3] [--out JSON]
+    python -m tools.bench_foveation FILE.lfc [--views 0 7 33] [--rounds 3] [--sizes 4 8 16] [--out JSON]
 """
 from __future__ import annotations
 
@@ -30,17 +33,6 @@ from lfn_stream import LfnRenderer
 from tools.common import log, machine
 
 
-def per_level(r: LfnRenderer, row: int, col: int, lod: np.ndarray) -> tuple[np.ndarray, int]:
-    """The earlier method: one network pass per distinct size (sizes already quantized)."""
-    rays = r.view_rays(row, col, 1.0).reshape(-1, 6)
-    out = np.zeros((rays.shape[0], 4), np.float32)
-    levels = np.unique(lod.reshape(-1))
-    for lv in levels:
-        sel = np.flatnonzero(lod.reshape(-1) == lv)
-        out[sel] = r.render_rays(rays[sel], float(lv))
-    return out.reshape(r.height, r.width, 4), int(levels.size)
-
-
 def roughness(img: np.ndarray, ref: np.ndarray, band: np.ndarray) -> float:
     """Mean |4-neighbour Laplacian| of (img − ref) (RGB, grey levels of 255) over ``band``."""
     d = (img[..., :3].astype(np.float64) - ref[..., :3]) * 255
@@ -51,6 +43,43 @@ def roughness(img: np.ndarray, ref: np.ndarray, band: np.ndarray) -> float:
 def psnr_in(img: np.ndarray, ref: np.ndarray, mask: np.ndarray) -> float:
     mse = float(np.mean((img[mask][:, :3] - ref[mask][:, :3]) ** 2))
     return float("inf") if mse == 0 else 10 * np.log10(1 / mse)
+
+
+def blur(img: np.ndarray, sigma: float = 1.0) -> np.ndarray:
+    """RGB channels through a separable Gaussian of ``sigma`` pixels (edges reflected)."""
+    r = int(np.ceil(3 * sigma))
+    k = np.exp(-0.5 * (np.arange(-r, r + 1) / sigma) ** 2)
+    k /= k.sum()
+    out = img[..., :3].astype(np.float64)
+    for axis in (0, 1):
+        pad = [(r, r) if i == axis else (0, 0) for i in range(3)]
+        p = np.pad(out, pad, mode="reflect")
+        out = sum(k[i] * np.take(p, np.arange(i, i + out.shape[axis]), axis=axis) for i in range(k.size))
+    return out
+
+
+def ring_error(img: np.ndarray, ref: np.ndarray, radius: np.ndarray, angle: np.ndarray, band: np.ndarray,
+               sectors: int = 16, window: int = 9) -> float:
+    """Rings: the mean signed RGB difference (grey levels of 255) in cells of 1 pixel of radius
+    × 1/``sectors`` of a turn around the gaze, minus its ``window``-pixel moving average along
+    the radius (the smooth fall of detail with distance is what foveation is for), RMS over
+    the cells (inside ``band``) with at least 8 pixels. Level steps and arcs show up here;
+    dither noise averages out within a cell."""
+    d = ((img[..., :3].astype(np.float64) - ref[..., :3]) * 255).mean(-1)[band]
+    rb = np.floor(radius[band]).astype(np.int64)
+    ab = np.floor((angle[band] + np.pi) / (2 * np.pi) * sectors).astype(np.int64) % sectors
+    R = int(rb.max()) + 1
+    cell = ab * R + rb
+    n = np.bincount(cell, minlength=sectors * R).reshape(sectors, R)
+    mean = np.bincount(cell, d, minlength=sectors * R).reshape(sectors, R) / np.maximum(n, 1)
+    k = np.ones(window) / window
+    res = []
+    for a in range(sectors):
+        ok = n[a] > 0
+        p = np.interp(np.arange(R), np.flatnonzero(ok), mean[a][ok])
+        smooth = np.convolve(np.pad(p, window // 2, mode="edge"), k, "valid")
+        res.append((p - smooth)[n[a] >= 8])
+    return float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
 
 
 def timed(fn, rounds: int):
@@ -69,6 +98,7 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--inner", type=float, default=0.1)
     ap.add_argument("--outer", type=float, default=0.5)
+    ap.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 16])
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
@@ -81,19 +111,33 @@ def main(argv=None) -> int:
         ys, xs = np.mgrid[0:r.height, 0:r.width] + 0.5
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / float(np.hypot(r.height, r.width))
         fovea, band = e < a.inner, (e >= a.inner) & (e <= a.outer)
+        radius, angle = np.hypot(xs - gaze[0], ys - gaze[1]), np.arctan2(ys - gaze[1], xs - gaze[0])
         t_full, full = timed(lambda: r.render(row, col, r.neurons, 1.0), a.rounds)
-        old_map = np.clip(np.round(r.foveation_map(gaze, a.inner, a.outer, dither=True) * 8) / 8, *r.neuron_range)
-        t_old, (old, n_old) = timed(lambda: per_level(r, row, col, old_map), a.rounds)
-        exact_map = r.foveation_map(gaze, a.inner, a.outer)
+        exact_map = r.foveation_map(gaze, a.inner, a.outer, dither=False)
+        t_ex, exact = timed(lambda: r.render_lod_map(row, col, exact_map), a.rounds)
+
+        def measures(img, ms, frames=None):
+            m = {"ms": round(ms, 1), "ratio": round(ms / t_full, 3),
+                 "psnr": round(psnr_in(img, full, band), 2), "blur1_psnr": round(psnr_in(blur(img), blur(full), band), 2),
+                 "ring_error": round(ring_error(img, full, radius, angle, band), 3),
+                 "roughness": round(roughness(img, full, band), 3), "fovea_psnr": psnr_in(img, full, fovea)}
+            if frames is not None:
+                m["frames4_psnr"] = round(psnr_in(np.mean(frames, 0), full, band), 2)
+            return m
+
         res = {"view": v, "pixels": r.height * r.width, "full_ms": round(t_full, 1),
-               "mean_neurons": round(float(exact_map.mean()), 2),
-               "per_level": {"ms": round(t_old, 1), "ratio": round(t_old / t_full, 3), "passes": n_old,
-                             "fovea_psnr": psnr_in(old, full, fovea), "roughness": round(roughness(old, full, band), 3)}}
-        for p in (1, 2, 4):
-            t_new, new = timed(lambda: r.render_lod_map(row, col, exact_map, passes=p), a.rounds)
-            res[f"exact_{p}"] = {"ms": round(t_new, 1), "ratio": round(t_new / t_full, 3), "passes": p,
-                                 "fovea_psnr": psnr_in(new, full, fovea),
-                                 "roughness": round(roughness(new, full, band), 3)}
+               "mean_neurons": round(float(exact_map.mean()), 2), "exact": measures(exact, t_ex)}
+        lo, hi = r.neuron_range
+        for k in a.sizes:
+            dmap = r.foveation_map(gaze, a.inner, a.outer, dither=True, sizes=k)
+            t_d, img = timed(lambda: r.render_lod_map(row, col, dmap), a.rounds)
+            frames = [img] + [r.render_lod_map(row, col, r.foveation_map(gaze, a.inner, a.outer, dither=True,
+                                                                         sizes=k, frame=f)) for f in (1, 2, 3)]
+            res[f"dither_{k}"] = measures(img, t_d, frames)
+            levels = np.unique(np.round(np.linspace(np.ceil(lo), np.floor(hi), k)))
+            smap = levels[np.abs(exact_map[..., None] - levels).argmin(-1)]
+            t_s, img = timed(lambda: r.render_lod_map(row, col, smap), a.rounds)
+            res[f"snap_{k}"] = measures(img, t_s)
         log(json.dumps(res))
         rows.append(res)
     out = {"file": a.file, "machine": machine(), "threads": a.threads, "inner": a.inner, "outer": a.outer,

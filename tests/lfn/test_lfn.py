@@ -273,12 +273,21 @@ def test_occupancy_really_skips_rays_and_lod_maps():
     # a constant per-pixel level map equals rendering the view at that level
     lod = np.full((16, 16), 7.5)
     assert np.allclose(r.render_lod_map(0, 0, lod), r.render(0, 0, 7.5, scale=1.0), atol=1e-6)
-    fov = r.foveation_map((8, 8), inner=0.05, outer=0.6, dither=True)
-    assert fov.max() == 12 and fov.min() >= 4 and np.all(fov == np.round(fov))   # dithered: integer levels
-    assert fov[8, 8] == 12
+    fov = r.foveation_map((8, 8), inner=0.05, outer=0.6, dither=True, sizes=3)
+    assert set(np.unique(fov)) <= {4.0, 8.0, 12.0} and fov[8, 8] == 12   # dithered: 3 integer sizes
+    # a dithered map runs one fused pass per size: each pixel as rendered alone at its size
+    masked = r.model._masked
+    r.model._masked = None                   # the weighted (fractional-size) path must not run
+    img = r.render_lod_map(0, 0, fov).reshape(-1, 4)
+    r.model._masked = masked
+    for n in (4.0, 8.0, 12.0):
+        sel = fov.reshape(-1) == n
+        assert np.allclose(img[sel], r.render_rays(rays[sel], n), atol=2e-6), n
+    with pytest.raises(ParameterError):
+        r.foveation_map((8, 8), dither=True, sizes=0)
     # continuous sizes (the default): every pixel at its own fractional size, in at most `passes`
     # passes, equal to rendering that pixel alone at that size, whatever the grouping
-    fov = r.foveation_map((3, 12), inner=0.05, outer=0.6)
+    fov = r.foveation_map((3, 12), inner=0.05, outer=0.6, dither=False)
     assert fov.max() == 12 and fov.min() == 4 and not np.all(fov == np.round(fov))
     one = [r.render_rays(rays[i:i + 1], float(fov.reshape(-1)[i]))[0] for i in range(0, rays.shape[0], 5)]
     for p in (1, 2, 4, 99):
@@ -289,6 +298,26 @@ def test_occupancy_really_skips_rays_and_lod_maps():
     assert 0 < r.rays_evaluated - n0 < rays.shape[0]        # the occupancy net skips rays here too
     with pytest.raises(ParameterError):
         r.render_rays_lod(rays, np.full(rays.shape[0] - 1, 8.0))
+
+
+def test_dither_sizes_mix_neighbouring_sizes_in_proportion():
+    """Dithered sizes take only the two sizes around each value, keep a constant field's mean
+    (to the threshold grid's resolution) and, over frames, each pixel's own value."""
+    from lfn_stream.render import dither_sizes, dither_threshold
+
+    sizes = np.array([16.0, 32.0, 64.0, 128.0])
+    t = dither_threshold(64, 64)
+    assert t.shape == (64, 64) and t.min() >= 0 and t.max() < 1
+    assert not np.array_equal(t, dither_threshold(64, 64, frame=1))
+    for v in (16.0, 20.0, 40.5, 64.0, 127.9, 128.0):
+        d = dither_sizes(np.full((64, 64), v), sizes, t)
+        j = min(np.searchsorted(sizes, v, side="right") - 1, 2)
+        assert set(np.unique(d)) <= {sizes[j], sizes[j + 1]}
+        assert abs(d.mean() - v) < 0.01 * (sizes[j + 1] - sizes[j])
+    assert np.array_equal(dither_sizes(np.array([[3.0, 500.0]]), sizes, np.zeros((1, 2))), [[16.0, 128.0]])
+    lod = np.random.default_rng(1).uniform(16, 128, (64, 64))
+    mean = np.mean([dither_sizes(lod, sizes, dither_threshold(64, 64, f)) for f in range(64)], 0)
+    assert np.abs(mean - lod).mean() < 1.0      # temporal dither: frames average to the exact sizes
 
 
 def test_plan_passes_is_the_cheapest_grouping():

@@ -20,3 +20,22 @@ def test_quick_bench_writes_everything(tmp_path, monkeypatch, capsys):
         assert (tmp_path / f).stat().st_size > 0
     out = capsys.readouterr().out
     assert "bpp @ 40 dB" in out and "Bit budget" in out
+
+
+def test_bench_foveation_measures_every_mode(tmp_path, capsys):
+    """The foveation benchmark on the tiny golden LFN: every mode timed and measured, the
+    fovea rendered by the full network, the exact mode free of dither noise."""
+    import json
+
+    from tests.conftest import ROOT
+    from tools import bench_foveation
+
+    out = tmp_path / "fov.json"
+    assert bench_foveation.main([str(ROOT / "tests/data/golden/lfn3_tiny_rgba8.lfc"), "--rounds", "1",
+                                 "--sizes", "2", "4", "--inner", "0.05", "--out", str(out)]) == 0
+    view = json.loads(out.read_text())["views"][0]
+    assert {"exact", "dither_2", "snap_2", "dither_4", "snap_4"} <= set(view)
+    for mode in ("exact", "dither_2", "dither_4", "snap_4"):
+        m = view[mode]
+        assert m["ms"] > 0 and m["ring_error"] >= 0 and m["fovea_psnr"] > 100, mode
+    assert view["dither_4"]["roughness"] > view["exact"]["roughness"]   # dither noise is measured
