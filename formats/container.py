@@ -345,6 +345,18 @@ class Container:
             return data[start - a:stop - a]
         return self._src.read(info.offset + start, info.offset + stop)
 
+    def prefetch(self, name: str, start: int = 0, stop: int | None = None) -> int:
+        """Ask a remote source to fetch the checksum chunks of section bytes [start, stop) in
+        the background (verified when read); the part past the available bytes is left out.
+        Returns the bytes asked for: 0 where the source is local or holds them already."""
+        info = self.info(name)
+        stop = min(info.length if stop is None else stop, self.available_bytes(name))
+        if not hasattr(self._src, "prefetch") or not 0 <= start < stop:
+            return 0
+        a = start // info.chunk_size * info.chunk_size
+        b = min(-(-stop // info.chunk_size) * info.chunk_size, info.length)
+        return self._src.prefetch(info.offset + a, info.offset + b)
+
     def array(self, name: str, *, verify: bool = True) -> np.ndarray:
         """A whole section as a read-only uint8 array (zero-copy for memory-mapped files)."""
         return np.frombuffer(self.read(name, verify=verify), dtype=np.uint8)
@@ -414,6 +426,8 @@ class Container:
         if self._file is not None:
             self._file.close()
             self._file = None
+        if hasattr(self._src, "close"):
+            self._src.close()
 
     def __enter__(self):
         return self

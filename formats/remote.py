@@ -17,11 +17,16 @@ against its CRC before use.
 
 Fetched pages live in an LRU cache of at most ``cache_bytes`` bytes, so a session that sweeps
 a whole file never holds more than that (plus the pages of the request being served).
+:meth:`RemoteSource.prefetch` fetches a byte range into that cache on a background thread (a
+reader that needs a page being prefetched waits for it instead of asking again); prefetched
+bytes are verified when they are read, like any other.
 """
 from __future__ import annotations
 
 import collections
+import threading
 import time
+from concurrent.futures import Future, ThreadPoolExecutor
 import urllib.error
 import urllib.request
 
@@ -130,8 +135,10 @@ class RemoteSource(ByteRangeSource):
         timeout: seconds per HTTP request.
 
     Attributes:
-        wire_bytes, wire_requests: what went over the wire; bytes_fetched, requests: what the
-        reader asked for (cache hits included); cached_bytes: what the cache holds.
+        wire_bytes, wire_requests: what went over the wire (prefetches included); read_requests:
+        the requests reads made and waited for; prefetched_bytes: bytes fetched ahead;
+        bytes_fetched, requests: what the reader asked for (cache hits included); cached_bytes:
+        what the cache holds.
     """
 
     def __init__(self, url: str, *, cache_bytes: int = DEFAULT_CACHE, page: int | None = None,
@@ -143,17 +150,49 @@ class RemoteSource(ByteRangeSource):
         super().__init__(self._read_pages, self.backend.size)
         self.url, self.page, self.cache_bytes, self.latency_s = url, page, cache_bytes, latency_s
         self._pages: collections.OrderedDict[int, bytes] = collections.OrderedDict()
+        self._inflight: dict[int, Future] = {}         # page -> the prefetch fetching it
+        self._lock = threading.Lock()
+        self._pool: ThreadPoolExecutor | None = None
         self.cached_bytes = 0
         self.wire_bytes = 0
         self.wire_requests = 0
+        self.prefetched_bytes = 0
+        self.read_requests = 0
 
     def _get(self, a: int, b: int) -> bytes:
         if self.latency_s:
             time.sleep(self.latency_s)
         data = self.backend.fetch(a, b)
-        self.wire_bytes += len(data)
-        self.wire_requests += 1
+        with self._lock:
+            self.wire_bytes += len(data)
+            self.wire_requests += 1
         return data
+
+    def _runs(self, pages: list[int]) -> list[tuple[int, int]]:
+        """Runs [first, last] of consecutive page numbers."""
+        runs, i = [], 0
+        while i < len(pages):
+            j = i
+            while j + 1 < len(pages) and pages[j + 1] == pages[j] + 1:
+                j += 1
+            runs.append((pages[i], pages[j]))
+            i = j + 1
+        return runs
+
+    def _fetch_run(self, first: int, last: int) -> dict[int, bytes]:
+        P = self.page
+        data = self._get(first * P, min((last + 1) * P, self.size))
+        return {p: data[(p - first) * P:(p - first + 1) * P] for p in range(first, last + 1)}
+
+    def _store(self, got: dict[int, bytes]) -> None:
+        """Cache pages (lock held), evicting the least recently used beyond the budget."""
+        for p, data in got.items():
+            if p not in self._pages:
+                self._pages[p] = data
+                self.cached_bytes += len(data)
+        while self.cached_bytes > self.cache_bytes and self._pages:
+            _, old = self._pages.popitem(last=False)
+            self.cached_bytes -= len(old)
 
     def _read_pages(self, start: int, stop: int) -> bytes:
         if not 0 <= start <= stop <= self.size:
@@ -163,32 +202,74 @@ class RemoteSource(ByteRangeSource):
         P = self.page
         p0, p1 = start // P, (stop - 1) // P + 1
         got: dict[int, bytes] = {}
-        missing = [p for p in range(p0, p1) if p not in self._pages]
-        i = 0
-        while i < len(missing):                        # one request per run of missing pages
-            j = i
-            while j + 1 < len(missing) and missing[j + 1] == missing[j] + 1:
-                j += 1
-            a, b = missing[i] * P, min((missing[j] + 1) * P, self.size)
-            data = self._get(a, b)
-            for k, p in enumerate(range(missing[i], missing[j] + 1)):
-                got[p] = data[k * P:(k + 1) * P]
-            i = j + 1
-        parts = []
-        for p in range(p0, p1):
-            if p in got:
-                parts.append(got[p])
-            else:
-                self._pages.move_to_end(p)
-                parts.append(self._pages[p])
-        for p, data in got.items():                     # then cache, evicting the least recently used
-            self._pages[p] = data
-            self.cached_bytes += len(data)
-        while self.cached_bytes > self.cache_bytes and self._pages:
-            _, old = self._pages.popitem(last=False)
-            self.cached_bytes -= len(old)
-        out = b"".join(parts)
+        with self._lock:
+            for p in range(p0, p1):
+                if p in self._pages:
+                    self._pages.move_to_end(p)
+                    got[p] = self._pages[p]
+            waits = {p: self._inflight[p] for p in range(p0, p1) if p not in got and p in self._inflight}
+        for p, fut in waits.items():                   # pages a prefetch is fetching: wait for it
+            try:
+                got[p] = fut.result()[p]
+            except Exception:                          # noqa: BLE001 -- fetched again below, where an
+                pass                                   # error is raised as this read's own
+        missing = [p for p in range(p0, p1) if p not in got]
+        for first, last in self._runs(missing):        # one request per run of missing pages
+            got.update(self._fetch_run(first, last))
+            self.read_requests += 1
+        with self._lock:
+            self._store({p: got[p] for p in missing})
+        out = b"".join(got[p] for p in range(p0, p1))
         return out[start - p0 * P:stop - p0 * P]
+
+    def prefetch(self, start: int, stop: int) -> int:
+        """Fetch the pages of bytes [start, stop) that are neither cached nor being fetched, on a
+        background thread, one request per run; at most half the cache budget is prefetched at
+        once (the rest is cut). Returns the bytes asked for (0: nothing to do). Errors surface
+        when a read needs those pages."""
+        start, stop = max(0, int(start)), min(int(stop), self.size, int(start) + self.cache_bytes // 2)
+        if stop <= start:
+            return 0
+        P = self.page
+        with self._lock:
+            pages = [p for p in range(start // P, (stop - 1) // P + 1) if p not in self._pages and p not in self._inflight]
+            if not pages:
+                return 0
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lfc-prefetch")
+            for first, last in self._runs(pages):
+                fut = self._pool.submit(self._prefetch_run, first, last)
+                for p in range(first, last + 1):
+                    self._inflight[p] = fut
+        return len(pages) * P
+
+    def wait_prefetch(self, timeout: float | None = None) -> None:
+        """Block until the prefetches under way have finished (benchmarks, tests)."""
+        with self._lock:
+            futs = set(self._inflight.values())
+        for fut in futs:
+            try:
+                fut.result(timeout)
+            except Exception:                          # noqa: BLE001 -- a read raises it, if it needs the bytes
+                pass
+
+    def _prefetch_run(self, first: int, last: int) -> dict[int, bytes]:
+        try:
+            got = self._fetch_run(first, last)
+            with self._lock:
+                self._store(got)
+                self.prefetched_bytes += sum(len(v) for v in got.values())
+            return got
+        finally:
+            with self._lock:
+                for p in range(first, last + 1):
+                    self._inflight.pop(p, None)
+
+    def close(self) -> None:
+        """Stop prefetching (waits for a request under way)."""
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
 
 
 def open_remote(url: str, **kw) -> RemoteSource:

@@ -94,10 +94,17 @@ class LfnRenderer(Decoder):
         cfg: the full network's config; neurons: the largest network the available bytes give.
         rows, cols, height, width, channels, dtype: the light field's geometry (pixels).
         levels: the coarsest level (neurons − min_neurons; levels are fractional).
+        prefetch: over a network (a URL), after each read of steps the next ``prefetch``
+            neurons' steps are fetched in the background (version 3 files), so that
+            :meth:`grow` finds them local; 0 turns it off.
     """
 
-    def __init__(self, f: LfcFile, device: str | None = None, max_neurons: float | None = None, *, limits=None):
+    def __init__(self, f: LfcFile, device: str | None = None, max_neurons: float | None = None, *, limits=None,
+                 prefetch: int = 16):
         check_codec_version(f, CODEC_ID, CODEC_VERSION)
+        if isinstance(prefetch, bool) or not isinstance(prefetch, (int, np.integer)) or prefetch < 0:
+            raise ParameterError(f"prefetch must be a number of neurons >= 0, got {prefetch!r}")
+        self.prefetch = int(prefetch)
         self.file = f
         c = f.container
         lim = limits or DEFAULT
@@ -185,10 +192,13 @@ class LfnRenderer(Decoder):
                 return
             have, off = c.available_bytes("lfn.steps"), self._offsets
             k0 = len(self._steps)
-            k1 = min(int(np.searchsorted(off, have, side="right")) - 1, max(limit - self.cfg.min_neurons, 0))
+            last = int(np.searchsorted(off, have, side="right")) - 1      # steps the available bytes hold
+            k1 = min(last, max(limit - self.cfg.min_neurons, 0))
             if k1 > k0:
                 data = bytes(c.read("lfn.steps", int(off[k0]), int(off[k1])))
                 self._steps += [data[off[k] - off[k0]:off[k + 1] - off[k0]] for k in range(k0, k1)]
+            if self.prefetch and k1 < last:               # the next steps, in the background
+                c.prefetch("lfn.steps", int(off[k1]), int(off[min(k1 + self.prefetch, last)]))
             return
         for j in range(len(self._steps), self.cfg.max_neurons - self.cfg.min_neurons):
             if self.cfg.min_neurons + j >= limit or not c.available(step_name(j)):

@@ -74,6 +74,27 @@ def test_file_changed_on_the_server_is_a_typed_error(served):
             d.decode_view(v // d.cols, v % d.cols)
 
 
+def test_prefetch_fills_the_cache_within_budget_and_errors_reach_the_read(served):
+    """Prefetched pages serve later reads without a request of their own, stay within the page
+    budget, and a file changed on the server while prefetching is the read's typed error."""
+    srv, root = served
+    data = (root / NAME).read_bytes()
+    src = RemoteSource(srv.url_of(NAME), cache_bytes=4096, page=512)
+    assert src.prefetch(0, 10 ** 9) == 2048                  # at most half the budget at once
+    src.wait_prefetch()
+    assert src.prefetched_bytes == 2048 and src.prefetch(0, 2048) == 0 and src.cached_bytes <= 4096
+    n = src.read_requests
+    assert src.read(100, 2000) == data[100:2000] and src.read_requests == n      # served from the cache
+    assert src.read(1000, 3000) == data[1000:3000] and src.read_requests == n + 1
+    time.sleep(0.01)
+    (root / NAME).write_bytes(data[:-1] + bytes([data[-1] ^ 1]))   # same size, new content and mtime
+    assert src.prefetch(len(data) - 600, len(data)) > 0
+    src.wait_prefetch()                                      # the prefetch failed in the background
+    with pytest.raises(FormatError, match="changed"):
+        src.read(len(data) - 600, len(data))
+    src.close()
+
+
 def test_fsspec_file_url(tmp_path):
     shutil.copy(GOLDEN / NAME, tmp_path / NAME)
     d = open_decoder(open_lfc((tmp_path / NAME).as_uri()))
@@ -109,7 +130,7 @@ def test_lfn_streams_progressively_over_http(tmp_path):
     with FileServer(tmp_path) as srv:
         f = open_lfc(srv.url_of(lfn), cache_bytes=4096)           # 4 KiB pages, one page cached
         src = f.container._src
-        r = LfnRenderer(f, device="cpu", max_neurons=18)
+        r = LfnRenderer(f, device="cpu", max_neurons=18, prefetch=0)
         assert r.neurons == 18
         small = src.wire_bytes
         assert small < size / 2                                 # the later steps were not fetched
@@ -121,3 +142,20 @@ def test_lfn_streams_progressively_over_http(tmp_path):
         assert np.array_equal(r40.render(0, 1, neurons=33.5), ref.render(0, 1, neurons=33.5))
         with pytest.raises(ParameterError):
             r.grow(float("nan"))
+        # prefetch: after each read the next steps come in the background, so growing into
+        # them makes no request of its own; the pixels are those of a local file
+        for ahead, free in ((0, False), (8, True)):
+            src = RemoteSource(srv.url_of(lfn), cache_bytes=1 << 20, page=512)
+            r = LfnRenderer(open_lfc(src, name=lfn), device="cpu", max_neurons=18, prefetch=ahead)
+            src.wait_prefetch()
+            n0 = src.read_requests
+            assert r.grow(26) == 26 and (src.read_requests == n0) == free, ahead
+            ref = LfnRenderer(open_lfc(tmp_path / lfn), device="cpu", max_neurons=26)
+            assert np.array_equal(r.render(1, 0, neurons=25.25), ref.render(1, 0, neurons=25.25))
+            src.wait_prefetch()
+            assert (src.prefetched_bytes > 0) == free and src.cached_bytes <= src.cache_bytes
+            n0 = src.read_requests
+            assert r.grow() == 64 and src.read_requests > n0       # beyond what was prefetched
+            src.close()
+        with pytest.raises(ParameterError):
+            LfnRenderer(open_lfc(tmp_path / lfn), device="cpu", prefetch=-1)
