@@ -40,6 +40,12 @@ def dither_threshold(height: int, width: int, frame: int = 0) -> np.ndarray:
     return np.modf(52.9829189 * np.modf(0.06711056 * (x + shift) + 0.00583715 * (y + shift))[0])[0]
 
 
+def size_levels(lo: float, hi: float, count: int) -> np.ndarray:
+    """``count`` integer network sizes evenly spaced over [lo, hi] (rounded, distinct; float64):
+    the sizes a dithered foveation map uses."""
+    return np.unique(np.round(np.linspace(np.ceil(lo), np.floor(hi), count)))
+
+
 def dither_sizes(lod: np.ndarray, sizes: np.ndarray, threshold: np.ndarray) -> np.ndarray:
     """Snap fractional sizes ``lod`` to the sorted integer ``sizes`` (K,): a value between
     sizes[j] and sizes[j+1] takes sizes[j+1] where its position between them exceeds
@@ -217,6 +223,12 @@ class LfnRenderer(Decoder):
             return 65536
         return int(np.clip(2 ** 18 // max(int(np.ceil(neurons)), 1), 2048, 65536))
 
+    def _occupied(self, x: torch.Tensor) -> torch.Tensor:
+        """Indices (M,) of the rays x (N, 6) that the occupancy net lets through (sigmoid > 0.1),
+        in calls of OCC_BATCH rays."""
+        return torch.cat([torch.nonzero(torch.sigmoid(self.occ(x[a:a + OCC_BATCH]).float()) > 0.1)[:, 0] + a
+                          for a in range(0, x.shape[0], OCC_BATCH)] or [torch.zeros(0, dtype=torch.long, device=x.device)])
+
     def _build(self) -> None:
         self.model, self.occ = unpack_network(self.cfg, self._base, self._steps, self._occ_bytes, self.dtype_w)
         self.neurons = self.model.cfg.max_neurons
@@ -275,8 +287,7 @@ class LfnRenderer(Decoder):
         for a in range(0, rays.shape[0], batch):
             x = torch.from_numpy(rays[a:a + batch]).to(self.device, dt)
             if self.occ is not None and use_occupancy:
-                hit = torch.sigmoid(self.occ(x).float()) > 0.1
-                idx = torch.nonzero(hit)[:, 0]        # the occupancy net really skips rays
+                idx = self._occupied(x)               # the occupancy net really skips rays
                 self.rays_evaluated += int(idx.numel())
                 if idx.numel():
                     out[a + idx.cpu().numpy()] = self.model(x[idx], neurons).float().cpu().numpy()
@@ -381,8 +392,7 @@ class LfnRenderer(Decoder):
         x = torch.from_numpy(np.ascontiguousarray(rays, np.float32)).to(self.device, dt)
         keep = np.arange(rays.shape[0])
         if self.occ is not None and use_occupancy:
-            keep = np.concatenate([torch.nonzero(torch.sigmoid(self.occ(x[a:a + OCC_BATCH]).float()) > 0.1)[:, 0]
-                                   .cpu().numpy() + a for a in range(0, x.shape[0], OCC_BATCH)] or [keep[:0]])
+            keep = self._occupied(x).cpu().numpy()
         self.rays_evaluated += int(keep.size)
         top = np.minimum(np.ceil(lod[keep] - 1e-9), hi).astype(np.int64)
         if passes is None:
@@ -436,8 +446,7 @@ class LfnRenderer(Decoder):
             return lod
         if isinstance(sizes, bool) or not isinstance(sizes, (int, np.integer)) or not 1 <= sizes <= MAX_SIZE_PASSES:
             raise ParameterError(f"sizes must be an integer in 1..{MAX_SIZE_PASSES}, got {sizes!r}")
-        levels = np.unique(np.round(np.linspace(np.ceil(lo), np.floor(hi), int(sizes))))
-        return dither_sizes(lod, levels, dither_threshold(h, w, frame))
+        return dither_sizes(lod, size_levels(lo, hi, int(sizes)), dither_threshold(h, w, frame))
 
     # -- the Decoder interface ---------------------------------------------------------------
     def to_pixels(self, rgba: np.ndarray) -> np.ndarray:

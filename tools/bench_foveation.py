@@ -30,6 +30,7 @@ import torch
 
 from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
+from lfn_stream.render import size_levels
 from tools.common import log, machine
 
 
@@ -134,7 +135,7 @@ def main(argv=None) -> int:
             frames = [img] + [r.render_lod_map(row, col, r.foveation_map(gaze, a.inner, a.outer, dither=True,
                                                                          sizes=k, frame=f)) for f in (1, 2, 3)]
             res[f"dither_{k}"] = measures(img, t_d, frames)
-            levels = np.unique(np.round(np.linspace(np.ceil(lo), np.floor(hi), k)))
+            levels = size_levels(lo, hi, k)
             smap = levels[np.abs(exact_map[..., None] - levels).argmin(-1)]
             t_s, img = timed(lambda: r.render_lod_map(row, col, smap), a.rounds)
             res[f"snap_{k}"] = measures(img, t_s)
