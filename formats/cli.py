@@ -437,8 +437,8 @@ def cmd_decode(a) -> int:
             # the layout file, so that the folder encodes again as the same scene
             layout = write_layout(outdir, f.scene, name)
         if not a.quiet:
-            lname = layout.name if layout is None or not layout.name.startswith("transforms_") else "transforms_*.json"
-            print(f"wrote {len(paths)} view(s){f' and {lname}' if layout else ''} to {outdir} (level "
+            lname = "" if layout is None else f" and {'transforms_*.json' if layout.name.startswith('transforms_') else layout.name}"
+            print(f"wrote {len(paths)} view(s){lname} to {outdir} (level "
                   f"{a.level:g}) in {time.perf_counter() - t0:.2f} s")
     return 0
 

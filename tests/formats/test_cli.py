@@ -75,13 +75,19 @@ def test_info(encoded, capsys):
     assert "tx.blocks" in capsys.readouterr().out
 
 
-def test_decode_views_view_and_block(encoded, tmp_path):
+def test_decode_views_view_and_block(encoded, tmp_path, capsys):
     assert main(["decode", str(encoded), str(tmp_path / "all"), "--quiet"]) == 0
     files = sorted(p.name for p in (tmp_path / "all").iterdir() if p.suffix == ".png")
     assert len(files) == 81 and files[0] == "r00_c00.png" and files[-1] == "r08_c08.png"
     assert (tmp_path / "all" / "scene.json").is_file()
     assert main(["decode", str(encoded), str(tmp_path / "one"), "--view", "3,5", "--quiet"]) == 0
     one = read_image(tmp_path / "one" / "r03_c05.png")
+    # without --quiet: one line saying what was written (one view, no layout file)
+    assert main(["decode", str(encoded), str(tmp_path / "one_v"), "--view", "3,5"]) == 0
+    said = capsys.readouterr().out
+    assert "wrote 1 view(s) to" in said and "scene.json" not in said
+    assert main(["decode", str(encoded), str(tmp_path / "all_v")]) == 0
+    assert "wrote 81 view(s) and scene.json to" in capsys.readouterr().out
     assert (one == read_image(tmp_path / "all" / "r03_c05.png")).all()
     # --block ROW,COL,BY,BX: view (3,5), block row 2, block column 4 → pixels [32,48) x [64,80) (16-px blocks)
     assert main(["decode", str(encoded), "--block", "3,5,2,4", "--out", str(tmp_path / "b.npy"), "--quiet"]) == 0
