@@ -430,7 +430,7 @@ class LfnRenderer(Decoder):
           pixel's position between them exceeds an interleaved-gradient-noise threshold
           (:func:`dither_threshold`, shifted by ``frame``: advance it per frame and the noise
           averages out). :meth:`render_lod_map` runs one fused pass per size: the fast form
-          (0.56-0.69x a full render on 2 CPU cores, BENCHMARKS.md), and the one without arcs.
+          (0.54-0.73x a full render on one CPU thread, BENCHMARKS.md), and the one without arcs.
         - ``dither=False``: fractional sizes, rendered exactly: no pixel noise, but the nested
           networks' differences from one size to the next show as faint arcs around the gaze,
           and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.

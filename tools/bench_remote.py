@@ -92,7 +92,7 @@ def run(path: Path, latency_ms: float, n_blocks: int, cache_mib: float, page: in
     return out
 
 
-def lfn_session(url: str, latency_ms: float, page: int | None, cache_mib: float, frames: int, grow: float,
+def lfn_session(url: str, page: int | None, cache_mib: float, frames: int, grow: float,
                 scale: float, prefetch: int) -> dict:
     """One streaming session of an LFN file (see the module doc)."""
     from lfn_stream import LfnRenderer
@@ -136,7 +136,7 @@ def run_lfn(path: Path, latency_ms: float, page: int | None, cache_mib: float, f
         url = srv.url_of(path.name)
         for _ in range(rounds):
             for ahead in (0, prefetch):
-                res = lfn_session(url, latency_ms, page, cache_mib, frames, grow, scale, ahead)
+                res = lfn_session(url, page, cache_mib, frames, grow, scale, ahead)
                 log(json.dumps(res))
                 out["sessions"].append(res)
     return out
