@@ -11,6 +11,10 @@ Path specs (``lfcodec render --path SPEC``):
     FILE            a text file with one camera per line, ``s,t[,focus[,aperture]]`` (``#``
                     comments and blank lines ignored; an empty focus field = the file's maps), or
                     a JSON list of such lists.
+
+A light field network renders any camera pose: :func:`read_pose` reads one 4×4 camera-to-world
+matrix from a file, and :func:`quilt_positions` / :func:`assemble_quilt` lay out the views of a
+quilt for light-field displays whatever renders them.
 """
 from __future__ import annotations
 
@@ -25,7 +29,9 @@ from formats.errors import ParameterError
 
 MAX_FRAMES = 100_000
 MAX_PATH_FILE = 16 << 20
+MAX_POSE_FILE = 1 << 20
 DEFAULT_FRAMES = 60
+MAX_QUILT = 256
 
 
 def orbit(rows: int, cols: int, frames: int = DEFAULT_FRAMES, radius: float = 0.8) -> np.ndarray:
@@ -123,3 +129,64 @@ def _parse_json(text: str, p: Path) -> list:
         raise ParameterError(f"{p}: a JSON camera path is a list of [s, t, focus, aperture] lists")
     _check_frames(len(data)) if data else None
     return [_camera(c, f"{p}[{i}]") for i, c in enumerate(data)]
+
+
+def read_pose(spec: str) -> np.ndarray:
+    """One camera-to-world matrix (OpenGL axes: x right, y up, looking down −z; scene units) from
+    a file: a JSON 4×4 list of lists (or a ``{"transform_matrix": ...}`` frame of a
+    transforms.json), or 16 numbers in row-major order separated by spaces, commas or newlines.
+
+    Returns:
+        (4, 4) float64 array (finite; the renderer checks that it is a usable camera).
+
+    Raises:
+        ParameterError: a missing or over-large file, or one that does not hold 16 finite numbers.
+    """
+    p = Path(spec)
+    if not p.is_file():
+        raise ParameterError(f"--pose {spec!r}: no such file (a 4x4 camera-to-world matrix, JSON or 16 numbers)")
+    if p.stat().st_size > MAX_POSE_FILE:
+        raise ParameterError(f"{p}: a pose file is at most {MAX_POSE_FILE >> 20} MiB")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise ParameterError(f"{p}: cannot read the pose ({e})") from None
+    if text.lstrip().startswith(("[", "{")):
+        try:
+            data = json.loads(text)
+        except (ValueError, RecursionError) as e:
+            raise ParameterError(f"{p}: not valid JSON ({e})") from None
+        if isinstance(data, dict):
+            data = data.get("transform_matrix")
+        ok = isinstance(data, list) and len(data) == 4 and all(isinstance(r, list) and len(r) == 4 for r in data) \
+            and all(isinstance(v, (int, float)) and not isinstance(v, bool) for r in data for v in r)
+        vals = [float(v) for r in data for v in r] if ok else []
+    else:
+        try:
+            vals = [float(v) for v in re.split(r"[\s,]+", text.strip()) if v]
+        except ValueError:
+            vals = []
+    if len(vals) != 16 or not all(math.isfinite(v) for v in vals):
+        raise ParameterError(f"{p}: a pose is a 4x4 camera-to-world matrix of 16 finite numbers")
+    return np.array(vals, np.float64).reshape(4, 4)
+
+
+def quilt_positions(rows: int, cols: int, qcols: int, qrows: int) -> np.ndarray:
+    """(qcols·qrows, 2) grid positions (s, t) of a quilt's views: along the grid's middle row from
+    the first column to the last (the centre alone for a one-view quilt)."""
+    n = qrows * qcols
+    if isinstance(n, bool) or not 1 <= n <= MAX_QUILT:
+        raise ParameterError(f"a quilt has 1..{MAX_QUILT} views")
+    ts = np.linspace(0, cols - 1, n) if n > 1 else np.array([(cols - 1) / 2])
+    return np.stack([np.full(n, (rows - 1) / 2), ts], axis=1)
+
+
+def assemble_quilt(views: list, qcols: int, qrows: int) -> np.ndarray:
+    """One (qrows·H, qcols·W, C) image of ``qcols·qrows`` equal-sized (H, W, C) views, left to
+    right from the bottom-left (as Looking Glass quilts are laid out)."""
+    h, w = views[0].shape[:2]
+    out = np.zeros((qrows * h, qcols * w) + views[0].shape[2:], views[0].dtype)
+    for i, v in enumerate(views):
+        qr, qc = qrows - 1 - i // qcols, i % qcols
+        out[qr * h:(qr + 1) * h, qc * w:(qc + 1) * w] = v
+    return out

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
-from .errors import LfcError, ParameterError
+from .errors import LfcError, ParameterError, TruncatedError
 
 
 def _ints(text: str, n: int, what: str) -> tuple[int, ...]:
@@ -101,7 +101,7 @@ def cmd_info(a) -> int:
     from .lfcfile import open_lfc
     from .registry import open_decoder
 
-    with open_lfc(a.file) as f:
+    with open_lfc(a.file, partial=a.partial) as f:
         if a.verify:
             f.container.verify_all()
         c = f.container
@@ -112,8 +112,8 @@ def cmd_info(a) -> int:
             "codec_version": meta.get("codec_version"), "encoder": meta.get("encoder"),
             "scene": {k: scene.get(k) for k in ("rows", "cols", "height", "width", "channels", "dtype", "layout",
                                                 "focal")},
-            "sections": [{"name": s.name, "offset": s.offset, "bytes": s.length, "chunks": s.n_chunks}
-                         for s in c.sections.values()],
+            "sections": [{"name": s.name, "offset": s.offset, "bytes": s.length, "chunks": s.n_chunks,
+                          "available": c.available_bytes(s.name)} for s in c.sections.values()],
             "verified": bool(a.verify),
         }
         if all(isinstance(scene.get(k), int) and scene[k] > 0 for k in ("rows", "cols", "height", "width")):
@@ -130,7 +130,9 @@ def cmd_info(a) -> int:
     print(out["decoder"].get("summary", ""))
     print("sections:")
     for sec in out["sections"]:
-        print(f"  {sec['name']:<16} offset {sec['offset']:>10}  {sec['bytes']:>10} bytes  {sec['chunks']} chunk(s)")
+        have = "" if sec["available"] == sec["bytes"] else f"  ({sec['available']} in this prefix)"
+        print(f"  {sec['name']:<16} offset {sec['offset']:>10}  {sec['bytes']:>10} bytes  {sec['chunks']} chunk(s)"
+              f"{have}")
     if a.verify:
         print("all checksums OK")
     return 0
@@ -255,14 +257,17 @@ def _floats(text: str, n: int, what: str) -> tuple:
 
 
 def cmd_render(a) -> int:
+    from .campath import assemble_quilt
     from .imageio import write_image
     from .lfcfile import open_lfc
     from .registry import open_decoder
 
     out = Path(a.out)
     if a.path is not None:
-        if a.at is not None or a.quilt:
-            raise ParameterError("--path renders a sequence: it does not go with --at or --quilt")
+        turn = re.fullmatch(r"\s*turn(?::\d{1,7})?\s*", a.path) is not None
+        if a.quilt or a.turn is not None or (not turn and (a.at is not None or a.pose is not None)):
+            raise ParameterError("--path renders a sequence: it does not go with --quilt or --turn, nor with --at or "
+                                 "--pose (except --path turn, which turns that camera)")
         return _render_path(a, out)
     if not (math.isfinite(a.fps) and 0 < a.fps <= 1000):
         raise ParameterError(f"--fps must be within (0, 1000], got {a.fps}")
@@ -270,12 +275,30 @@ def cmd_render(a) -> int:
         raise ParameterError(f"{out}: render writes PNG files (name it .png; a folder or .mp4 with --path)")
     if not out.parent.exists():
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
-    with open_lfc(a.input) as f:
+    with open_lfc(a.input, partial=a.partial) as f:
+        lfn = _render_kind(a, f)
+        if lfn:
+            d = open_decoder(f, device=_lfn_device(a.device))
+            t0 = time.perf_counter()
+            if a.quilt:
+                cols, rows = _grid(a.quilt)
+                if a.stereo is not None:
+                    raise ParameterError("--quilt and --stereo are two different layouts: give one")
+                base, n = _lfn_camera(a, d), cols * rows
+                if not 1 <= n <= 256:
+                    raise ParameterError("a quilt has 1..256 views")
+                yaws = np.linspace(-QUILT_CONE / 2, QUILT_CONE / 2, n) if n > 1 else np.zeros(1)
+                img = assemble_quilt([_lfn_frame(a, d, d.turn_pose(base, float(y))) for y in yaws], cols, rows)
+            else:
+                img = _lfn_frame(a, d, _lfn_camera(a, d))
+            write_image(out, img)
+            if not a.quiet:
+                print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
+                      f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes), "
+                      f"{d.rays_evaluated} rays evaluated")
+            return 0
         d = open_decoder(f)
-        if not hasattr(d, "renderer"):
-            raise ParameterError(f"{a.input}: novel views are rendered from RLFC grids (this is {f.codec}); "
-                                 f"an LFN renders any ray: decode --view")
-        ren = d.renderer(robust=not a.fast, device=a.device)
+        ren = _grid_renderer(a, d)
         t0 = time.perf_counter()
         if a.quilt:
             cols, rows = _grid(a.quilt)
@@ -290,6 +313,102 @@ def cmd_render(a) -> int:
     return 0
 
 
+QUILT_CONE = 35.0   # degrees: a light field network's quilt turns the camera across this view cone
+
+
+def _render_kind(a, f) -> bool:
+    """True for a light field network file (rendered from camera poses), False for an RLFC grid
+    (rendered from decoded views); options that do not apply to the file's kind are refused."""
+    lfn = f.codec == "lfn"
+    if lfn:
+        used = [o for o, v in (("--focus", a.focus is not None), ("--aperture", a.aperture != 0), ("--fast", a.fast))
+                if v]
+        if used:
+            raise ParameterError(f"{a.input}: {', '.join(used)} refocus an RLFC grid from its disparity maps; a light "
+                                 f"field network renders pinhole cameras (--at, --pose, --turn, --stereo)")
+    else:
+        used = [o for o, v in (("--pose", a.pose), ("--turn", a.turn), ("--stereo", a.stereo), ("--level", a.level),
+                               ("--scale", a.scale)) if v is not None]
+        if used:
+            raise ParameterError(f"{a.input}: {', '.join(used)} are options for light field network files (this is "
+                                 f"{f.codec}); an RLFC grid renders positions on its camera plane (--at)")
+        if a.path is not None and re.fullmatch(r"\s*turn(?::\d{1,7})?\s*", a.path):
+            raise ParameterError(f"{a.input}: --path turn turns a free camera about the scene, which light field "
+                                 f"network files render; an RLFC grid takes orbit, sweep or a file of cameras")
+    return lfn
+
+
+def _grid_renderer(a, d):
+    """The novel-view renderer of an opened grid decoder (ParameterError for codecs without one)."""
+    if not hasattr(d, "renderer"):
+        raise ParameterError(f"{a.input}: this codec ({d.info().get('codec')}) cannot render novel views")
+    return d.renderer(robust=not a.fast, device=a.device)
+
+
+def _lfn_device(device: str) -> str | None:
+    """--device for a light field network: a torch device (auto = CUDA when present; numpy = cpu)."""
+    if device == "auto":
+        return None
+    if device == "numpy":
+        return "cpu"
+    import torch
+
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError, ValueError):
+        raise ParameterError(f"--device {device!r}: not a device (auto, numpy, cpu, cuda, cuda:1)") from None
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ParameterError(f"--device {device}: no CUDA GPU is usable here")
+    if dev.type not in ("cpu", "cuda"):
+        raise ParameterError(f"--device {device}: light field networks render on cpu or cuda")
+    return device
+
+
+def _lfn_neurons(a, d) -> float:
+    """Neurons per layer of the network --level asks for (0 or absent = the largest available)."""
+    level = 0.0 if a.level is None else a.level
+    if not math.isfinite(level):
+        raise ParameterError(f"--level must be a finite number, got {level}")
+    return d.neurons_at(level)
+
+
+def _lfn_camera(a, d) -> np.ndarray:
+    """The camera of --at / --pose (default the grid centre), turned by --turn."""
+    from .campath import read_pose
+
+    if a.at is not None and a.pose is not None:
+        raise ParameterError("--at and --pose both place the camera: give one")
+    turn = None
+    if a.turn is not None:
+        turn = _floats(a.turn, a.turn.count(",") + 1, "--turn")
+        if len(turn) > 2:
+            raise ParameterError(f"--turn is YAW[,PITCH] in degrees, got {a.turn!r}")
+    try:                                    # the captured cameras (and the pivot) may lie past a prefix
+        if a.pose is not None:
+            pose = read_pose(a.pose)
+        elif a.at is not None:
+            pose = d.grid_pose(*_floats(a.at, 2, "--at"))
+        else:                               # a captured camera: posed captures need not be in spatial order
+            pose = d.pose(d.rows // 2, d.cols // 2)
+        return pose if turn is None else d.turn_pose(pose, *turn)
+    except TruncatedError as e:
+        raise TruncatedError(f"{e}: a prefix renders the camera given by --pose FILE, without --turn") from None
+
+
+def _lfn_frame(a, d, pose: np.ndarray) -> np.ndarray:
+    """Pixels of one camera (a side-by-side left|right pair with --stereo) at --level and --scale."""
+    scale = 1.0 if a.scale is None else a.scale
+    if not (math.isfinite(scale) and 0 < scale <= 4):
+        raise ParameterError(f"--scale must be within (0, 4], got {scale}")
+    neurons = _lfn_neurons(a, d)
+    if a.stereo is None:
+        return d.to_pixels(d.render_pose(pose, neurons, scale))
+    if not (math.isfinite(a.stereo) and 0 <= a.stereo <= 1e6):
+        raise ParameterError(f"--stereo is a finite eye distance >= 0 in scene units, got {a.stereo}")
+    return np.concatenate([d.to_pixels(d.render_pose(p, neurons, scale)) for p in d.stereo_poses(pose, a.stereo)],
+                          axis=1)
+
+
 def _render_path(a, out: Path) -> int:
     """``render --path``: a sequence of frames along a camera path, to PNG frames or an MP4."""
     from formats.campath import read_path
@@ -298,11 +417,11 @@ def _render_path(a, out: Path) -> int:
     from .registry import open_decoder
     from .video import SequenceWriter
 
-    with open_lfc(a.input) as f:
+    with open_lfc(a.input, partial=a.partial) as f:
+        if _render_kind(a, f):
+            return _render_lfn_path(a, f, out)
         d = open_decoder(f)
-        if not hasattr(d, "renderer"):
-            raise ParameterError(f"{a.input}: novel views are rendered from RLFC grids (this is {f.codec})")
-        ren = d.renderer(robust=not a.fast, device=a.device)
+        ren = _grid_renderer(a, d)
         cams = read_path(a.path, d.rows, d.cols)
         for s_, t_ in cams[:, :2]:                      # every camera checked before any frame is written
             ren.check_camera(float(s_), float(t_))
@@ -325,6 +444,45 @@ def _render_path(a, out: Path) -> int:
             print(f"\rwrote {out}: {n} frames of {d.height}x{d.width}; render {1e3 * times[0]:.0f} ms first frame, "
                   f"{1e3 * float(np.median(times[1:] or times)):.0f} ms median ({1 / float(np.median(times)):.1f} fps), "
                   f"{ren.blocks_decoded / n:.0f} blocks decoded per frame, cache hit rate {hit:.0%}")
+    return 0
+
+
+def _render_lfn_path(a, f, out: Path) -> int:
+    """``render --path`` on a light field network: grid positions of orbit / sweep / a camera file
+    through :meth:`grid_pose`, or ``turn[:N]``: the --at / --pose camera turned a full circle
+    about the scene's pivot in N frames."""
+    from formats.campath import DEFAULT_FRAMES, read_path
+
+    from .registry import open_decoder
+    from .video import SequenceWriter
+
+    d = open_decoder(f, device=_lfn_device(a.device))
+    m = re.fullmatch(r"\s*turn(?::(\d{1,7}))?\s*", a.path)
+    if m:
+        n = int(m.group(1)) if m.group(1) else DEFAULT_FRAMES
+        if not 1 <= n <= 100_000:
+            raise ParameterError(f"a camera path has 1..100000 frames, got {n}")
+        base = _lfn_camera(a, d)
+        poses = [d.turn_pose(base, 360.0 * i / n) for i in range(n)]
+    else:
+        cams = read_path(a.path, d.rows, d.cols)
+        if not np.isnan(cams[:, 2]).all() or (cams[:, 3] != 0).any():
+            raise ParameterError(f"{a.path}: focus and aperture refocus RLFC grids; a light field network path "
+                                 f"gives positions only")
+        poses = [d.grid_pose(s_, t_) for s_, t_ in cams[:, :2].tolist()]   # every camera checked first
+    times = []
+    with SequenceWriter(out, a.fps) as w:
+        for i, pose in enumerate(poses):
+            t0 = time.perf_counter()
+            img = _lfn_frame(a, d, pose)
+            times.append(time.perf_counter() - t0)
+            w.write(img)
+            if not a.quiet and (i + 1) % 10 == 0:
+                print(f"\r{i + 1}/{len(poses)} frames", end="", file=sys.stderr, flush=True)
+    if not a.quiet:
+        print(f"\rwrote {out}: {len(times)} frames of {img.shape[0]}x{img.shape[1]}; render "
+              f"{1e3 * times[0]:.0f} ms first frame, {1e3 * float(np.median(times[1:] or times)):.0f} ms median, "
+              f"network of {_lfn_neurons(a, d):g} neurons per layer")
     return 0
 
 
@@ -392,7 +550,7 @@ def cmd_decode(a) -> int:
         raise ParameterError(f"--level must be a finite number >= 0, got {level}")
     if level == int(level):
         level = int(level)
-    with open_lfc(a.input) as f:
+    with open_lfc(a.input, partial=a.partial) as f:
         d = open_decoder(f)
         t0 = time.perf_counter()
         if a.block is not None:
@@ -483,6 +641,7 @@ def build_parser() -> argparse.ArgumentParser:
     i.add_argument("file")
     i.add_argument("--json", action="store_true", help="print one JSON object")
     i.add_argument("--verify", action="store_true", help="check every checksum of every section")
+    i.add_argument("--partial", action="store_true", help="accept a byte prefix of a file and show what it holds")
     i.set_defaults(func=cmd_info)
 
     e = sub.add_parser("encode", help="encode a scene folder to an .lfc file",
@@ -520,28 +679,37 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--names", choices=("grid", "original"), default="grid",
                    help="file names of decoded views: grid = rRR_cCC.png (default); original = the names the "
                         "views had when encoded, as PNG (subfolders kept, e.g. images/IMG_0001.png)")
+    d.add_argument("--partial", action="store_true",
+                   help="accept a byte prefix of a file (a progressive download): use what its bytes hold (a light field "
+                        "network's prefix is a smaller network; its captured cameras are at the end, so give --pose)")
     d.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     d.set_defaults(func=cmd_decode)
 
-    r = sub.add_parser("render", help="render a novel view (or a refocused view, or a quilt) from an .lfc grid",
-                       description="Render the view at a continuous grid position by disparity-compensated "
-                                   "interpolation of the decoded views around it, decoding only the blocks the "
-                                   "frame needs. IN.lfc may be a URL.")
+    r = sub.add_parser("render", help="render a novel view (or a refocused view, or a quilt) from an .lfc file",
+                       description="RLFC grids: render the view at a continuous grid position by disparity-"
+                                   "compensated interpolation of the decoded views around it, decoding only the "
+                                   "blocks the frame needs. Light field networks: render any camera (--at, --pose, "
+                                   "--turn, --stereo) at any level, from the whole file or a prefix of it. IN.lfc "
+                                   "may be a URL.")
     r.add_argument("input")
     r.add_argument("out", help="output PNG")
     r.add_argument("--at", metavar="S,T", default=None,
                    help="camera position: row S and column T in view units (view (r,c) is at r,c); default the "
-                        "grid centre")
+                        "grid centre (for a light field network the captured view nearest it; between views, the "
+                        "network's camera centres are blended: meaningful on grids and ordered camera paths)")
     r.add_argument("--focus", type=float, default=None,
                    help="disparity in px per view step to focus on (default: the file's disparity maps)")
     r.add_argument("--aperture", type=float, default=0.0,
                    help="synthetic-aperture radius in view steps (0 = pinhole; >0 refocuses at --focus)")
     r.add_argument("--quilt", metavar="COLSxROWS", default=None,
-                   help="write a quilt of COLS*ROWS views along the middle row (light-field displays)")
+                   help="write a quilt of COLS*ROWS views for light-field displays, bottom-left first: an RLFC "
+                        "grid's views along its middle row; a light field network's camera (--at, --pose) turned "
+                        "across a 35 degree view cone about the scene")
     r.add_argument("--path", metavar="SPEC", default=None,
                    help="render a sequence along a camera path: orbit[:N], sweep[:N] (N frames, default 60) or a "
-                        "file of cameras 's,t[,focus[,aperture]]' per line; OUT is then a folder (PNG frames) or "
-                        "an .mp4 (ffmpeg)")
+                        "file of cameras 's,t[,focus[,aperture]]' per line; for light field networks also turn[:N] "
+                        "(the --at/--pose camera turned a full circle about the scene); OUT is then a folder (PNG "
+                        "frames) or an .mp4 (ffmpeg)")
     r.add_argument("--fps", type=float, default=30.0, help="frame rate of an --path MP4 (default 30)")
     r.add_argument("--fast", action="store_true",
                    help="use the file's disparity maps as they are (about 3x faster; the default also tries "
@@ -549,6 +717,22 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--device", default="auto",
                    help="where the pixels are computed: auto (a CUDA GPU through torch when present, else numpy; "
                         "default), numpy, or a torch device (cuda, cuda:1, cpu); the frames agree within rounding")
+    r.add_argument("--pose", metavar="FILE", default=None,
+                   help="light field networks: the camera as a 4x4 camera-to-world matrix (OpenGL axes, scene "
+                        "units) in a file: JSON (a list of 4 rows, or a transforms.json frame) or 16 numbers")
+    r.add_argument("--turn", metavar="YAW[,PITCH]", default=None,
+                   help="light field networks: turn the camera (--at, --pose) about the scene's pivot by YAW "
+                        "degrees about the up axis and PITCH about its right axis")
+    r.add_argument("--stereo", metavar="IPD", type=float, default=None,
+                   help="light field networks: a side-by-side left|right pair, eyes IPD scene units apart")
+    r.add_argument("--level", type=float, default=None,
+                   help="light field networks: 0 = the largest network in the file's bytes (default); larger = "
+                        "fewer neurons, up to the file's levels (lfcodec info)")
+    r.add_argument("--scale", type=float, default=None,
+                   help="light field networks: output size relative to the captured views, (0, 4] (default 1)")
+    r.add_argument("--partial", action="store_true",
+                   help="accept a byte prefix of a file (a progressive download): use what its bytes hold (a light field "
+                        "network's prefix is a smaller network; its captured cameras are at the end, so give --pose)")
     r.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     r.set_defaults(func=cmd_render)
 

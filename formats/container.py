@@ -278,7 +278,8 @@ class Container:
         elif expect > self.size:
             cut = next(s for s in self.sections.values() if s.offset + s.length > self.size)
             raise TruncatedError(f"{self.name}: truncated: section {cut.name!r} ends at byte "
-                                 f"{cut.offset + cut.length}, file has {self.size} bytes")
+                                 f"{cut.offset + cut.length}, file has {self.size} bytes (a byte prefix of a "
+                                 f"progressive file opens with partial=True, or lfcodec's --partial)")
         if expect < self.size:
             raise FormatError(f"{self.name}: {self.size - expect} unexpected bytes after the last section")
         if "meta" not in self.sections:

@@ -334,6 +334,11 @@ class LfnRenderer(Decoder):
         pivot, up = scene_pivot(self.poses, self.norm["centre"])
         return orbit_pose(self.pose(row, col), pivot, up, float(yaw), float(pitch))
 
+    def turn_pose(self, pose: np.ndarray, yaw: float, pitch: float = 0.0) -> np.ndarray:
+        """Any camera turned about the scene's pivot, as :meth:`orbit_pose` turns a captured view."""
+        pivot, up = scene_pivot(self.poses, self.norm["centre"])
+        return orbit_pose(self._check_pose(pose), pivot, up, float(yaw), float(pitch))
+
     def stereo_poses(self, pose: np.ndarray, ipd: float) -> tuple[np.ndarray, np.ndarray]:
         """(left, right) poses ``ipd`` scene units apart along ``pose``'s x axis."""
         return stereo_poses(self._check_pose(pose), float(ipd))

@@ -21,6 +21,7 @@ import collections
 
 import numpy as np
 
+from formats.campath import assemble_quilt, quilt_positions
 from formats.errors import ParameterError
 
 from .render_ops import make_ops
@@ -307,14 +308,6 @@ class Renderer:
         """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row
         from left to right (bottom-left first, as Looking Glass quilts are laid out), as one
         (rows·H, cols·W, C) image."""
-        n = rows * cols
-        if not 1 <= n <= 256:
-            raise ParameterError("a quilt has 1..256 views")
         d = self.d
-        ts = np.linspace(0, d.cols - 1, n) if n > 1 else np.array([(d.cols - 1) / 2])
-        views = [self.render((d.rows - 1) / 2, float(t), focus) for t in ts]
-        out = np.zeros((rows * d.height, cols * d.width, d.channels), d.dtype)
-        for i, v in enumerate(views):
-            qr, qc = rows - 1 - i // cols, i % cols
-            out[qr * d.height:(qr + 1) * d.height, qc * d.width:(qc + 1) * d.width] = v
-        return out
+        return assemble_quilt([self.render(float(s), float(t), focus) for s, t in quilt_positions(d.rows, d.cols, cols, rows)],
+                              cols, rows)

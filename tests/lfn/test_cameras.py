@@ -1,6 +1,8 @@
 """Free cameras for LFN files (lfn_stream.cameras through LfnRenderer): captured poses render the
 captured views, grid positions blend centres, orbits turn about the cameras' common target,
 stereo pairs sit ipd apart; bad poses are ParameterErrors."""
+import json
+
 import numpy as np
 import pytest
 
@@ -42,3 +44,119 @@ def test_orbit_turns_about_the_pivot_and_stereo_pairs(r):
 def test_bad_poses(r, bad):
     with pytest.raises(ParameterError):
         r.render_pose(bad)
+
+
+# -- lfcodec render on LFN files ------------------------------------------------------------
+GOLDEN3 = ROOT / "tests" / "data" / "golden" / "lfn3_tiny_rgba8.lfc"
+
+
+def _render_cli(tmp_path, *args, src=GOLDEN3):
+    from formats.cli import main
+    from formats.imageio import read_image
+
+    out = tmp_path / "out.png"
+    assert main(["render", str(src), str(out), "--quiet", "--device", "cpu", *args]) == 0
+    return read_image(out)
+
+
+def test_cli_renders_lfn_cameras(tmp_path):
+    """lfcodec render on a light field network: the default camera is the captured view nearest
+    the grid centre; --at, --pose (JSON, a transforms.json frame, 16 numbers), --turn, --level,
+    --scale and --stereo give the pixels the library gives for the same camera."""
+    r3 = LfnRenderer(open_lfc(GOLDEN3), device="cpu")
+    full = r3.neurons
+
+    def px(pose, neurons=full, scale=1.0):
+        return r3.to_pixels(r3.render_pose(pose, neurons, scale))
+
+    assert np.array_equal(_render_cli(tmp_path), px(r3.pose(2, 2)))
+    assert np.array_equal(_render_cli(tmp_path, "--at", "1.5,0.25"), px(r3.grid_pose(1.5, 0.25)))
+    pose = r3.orbit_pose(1, 3, 20, -5)
+    (tmp_path / "p.json").write_text(json.dumps(pose.tolist()))
+    (tmp_path / "frame.json").write_text(json.dumps({"file_path": "x", "transform_matrix": pose.tolist()}))
+    (tmp_path / "p.txt").write_text("\n".join(" ".join(repr(v) for v in row) for row in pose.tolist()))
+    for f in ("p.json", "frame.json", "p.txt"):
+        assert np.array_equal(_render_cli(tmp_path, "--pose", str(tmp_path / f)), px(pose))
+    turned = r3.turn_pose(r3.pose(0, 1), 30, 10)
+    assert np.allclose(turned, r3.orbit_pose(0, 1, 30, 10))
+    got = _render_cli(tmp_path, "--at", "0,1", "--turn", "30,10", "--level", "2.5", "--scale", "0.5")
+    assert np.array_equal(got, px(turned, full - 2.5, 0.5)) and got.shape[:2] == (14, 18)
+    left, right = r3.stereo_poses(r3.pose(2, 2), 0.25)
+    pair = _render_cli(tmp_path, "--stereo", "0.25")
+    assert pair.shape == (29, 74, 4) and np.array_equal(pair, np.concatenate([px(left), px(right)], 1))
+    assert not np.array_equal(pair[:, :37], pair[:, 37:])
+
+
+def test_cli_lfn_quilt_path_and_partial_prefix(tmp_path):
+    """A quilt turns the camera across a 35° cone (bottom-left first); --path turn:N turns it a
+    full circle; a byte prefix renders with --partial and --pose, as the smaller network."""
+    from formats.cli import main
+    from formats.imageio import read_image
+
+    r3 = LfnRenderer(open_lfc(GOLDEN3), device="cpu")
+    q = _render_cli(tmp_path, "--quilt", "3x2", "--scale", "0.5")
+    assert q.shape == (2 * 14, 3 * 18, 4)
+    first = r3.to_pixels(r3.render_pose(r3.turn_pose(r3.pose(2, 2), -17.5), r3.neurons, 0.5))
+    assert np.array_equal(q[14:, :18], first)                        # bottom-left: the first view
+    seq = tmp_path / "seq"
+    assert main(["render", str(GOLDEN3), str(seq), "--path", "turn:4", "--at", "1,1", "--quiet"]) == 0
+    frames = sorted(seq.iterdir())
+    assert len(frames) == 4
+    assert np.array_equal(read_image(frames[0]), r3.to_pixels(r3.render_pose(r3.pose(1, 1), r3.neurons, 1.0)))
+    assert np.array_equal(read_image(frames[2]), r3.to_pixels(r3.render_pose(r3.turn_pose(r3.pose(1, 1), 180),
+                                                                               r3.neurons, 1.0)))
+    # a prefix ending inside lfn.steps: the smaller network, the camera from --pose
+    c = r3.file.container
+    cut = c.info("lfn.steps").offset + 2 * c.info("lfn.steps").chunk_size
+    pre = tmp_path / "prefix.lfc"
+    pre.write_bytes(GOLDEN3.read_bytes()[:cut])
+    small = LfnRenderer(open_lfc(pre, partial=True), device="cpu")
+    assert small.neurons < r3.neurons
+    (tmp_path / "p.json").write_text(json.dumps(r3.pose(3, 0).tolist()))
+    got = _render_cli(tmp_path, "--partial", "--pose", str(tmp_path / "p.json"), src=pre)
+    assert np.array_equal(got, r3.to_pixels(r3.render_pose(r3.pose(3, 0), small.neurons, 1.0)))
+
+
+@pytest.mark.parametrize("args,needle", [
+    (["--focus", "1"], "refocus an RLFC grid"),
+    (["--fast"], "refocus an RLFC grid"),
+    (["--at", "1,1", "--pose", "P"], "give one"),
+    (["--turn", "1,2,3"], "YAW[,PITCH]"),
+    (["--scale", "0"], "--scale"),
+    (["--stereo", "-1"], "eye distance"),
+    (["--level", "9"], "level must be within"),
+    (["--pose", "P", "--path", "orbit:3"], "does not go with"),
+    (["--quilt", "2x1", "--stereo", "0.1"], "give one"),
+    (["--device", "nonsense"], "not a device"),
+    (["--pose", "BAD"], "16 finite numbers"),
+    (["--at", "9,9"], "outside"),
+])
+def test_cli_lfn_render_errors_are_one_line(tmp_path, capsys, args, needle):
+    from formats.cli import main
+
+    (tmp_path / "P").write_text(json.dumps(np.eye(4).tolist()))
+    (tmp_path / "BAD").write_text("1 2 3")
+    args = [str(tmp_path / a) if a in ("P", "BAD") else a for a in args]
+    assert main(["render", str(GOLDEN3), str(tmp_path / "o.png"), *args]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_cli_lfn_options_on_rlfc_files_and_prefix_without_partial(tmp_path, capsys):
+    from formats.cli import main
+
+    rl = ROOT / "tests" / "data" / "golden" / "rlfc_dcp_lossy_rgb8.lfc"
+    for args, needle in ((["--level", "1"], "light field network files"), (["--stereo", "0.1"], "network files"),
+                         (["--path", "turn:3"], "--path turn")):
+        out = tmp_path / ("seq" if "--path" in args else "o.png")
+        assert main(["render", str(rl), str(out), *args]) == 2
+        err = capsys.readouterr().err
+        assert needle in err and err.count("\n") == 1
+    pre = tmp_path / "prefix.lfc"
+    pre.write_bytes(GOLDEN3.read_bytes()[:1200])
+    assert main(["render", str(pre), str(tmp_path / "o.png")]) == 2
+    assert "--partial" in capsys.readouterr().err
+    assert main(["render", str(pre), str(tmp_path / "o.png"), "--partial"]) == 2     # cameras are past the prefix
+    assert "--pose FILE" in capsys.readouterr().err
+    assert main(["info", str(pre), "--partial"]) == 0
+    assert "in this prefix" in capsys.readouterr().out
