@@ -24,9 +24,10 @@ bytes are verified when they are read, like any other.
 from __future__ import annotations
 
 import collections
+import queue
 import threading
 import time
-from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import Future
 import urllib.error
 import urllib.request
 
@@ -152,7 +153,8 @@ class RemoteSource(ByteRangeSource):
         self._pages: collections.OrderedDict[int, bytes] = collections.OrderedDict()
         self._inflight: dict[int, Future] = {}         # page -> the prefetch fetching it
         self._lock = threading.Lock()
-        self._pool: ThreadPoolExecutor | None = None
+        self._jobs: queue.SimpleQueue | None = None     # (future, first page, last page) for the worker
+        self._worker: threading.Thread | None = None
         self.cached_bytes = 0
         self.wire_bytes = 0
         self.wire_requests = 0
@@ -235,12 +237,17 @@ class RemoteSource(ByteRangeSource):
             pages = [p for p in range(start // P, (stop - 1) // P + 1) if p not in self._pages and p not in self._inflight]
             if not pages:
                 return 0
-            if self._pool is None:
-                self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="lfc-prefetch")
+            if self._worker is None:
+                # a daemon thread: an interpreter that exits during a slow request does not wait for it
+                self._jobs = queue.SimpleQueue()
+                self._worker = threading.Thread(target=self._work, args=(self._jobs,), name="lfc-prefetch",
+                                                daemon=True)
+                self._worker.start()
             for first, last in self._runs(pages):
-                fut = self._pool.submit(self._prefetch_run, first, last)
+                fut: Future = Future()
                 for p in range(first, last + 1):
                     self._inflight[p] = fut
+                self._jobs.put((fut, first, last))
         return len(pages) * P
 
     def wait_prefetch(self, timeout: float | None = None) -> None:
@@ -252,6 +259,24 @@ class RemoteSource(ByteRangeSource):
                 fut.result(timeout)
             except Exception:                          # noqa: BLE001 -- a read raises it, if it needs the bytes
                 pass
+
+    def _work(self, jobs: queue.SimpleQueue) -> None:
+        """The prefetch worker: runs jobs in order until a None."""
+        while (job := jobs.get()) is not None:
+            fut, first, last = job
+            if fut.set_running_or_notify_cancel():
+                try:
+                    fut.set_result(self._prefetch_run(first, last))
+                except BaseException as e:             # noqa: BLE001 -- handed to whoever waits on it
+                    fut.set_exception(e)
+            else:                                      # cancelled by close()
+                self._forget(fut, first, last)
+
+    def _forget(self, fut: Future, first: int, last: int) -> None:
+        with self._lock:
+            for p in range(first, last + 1):
+                if self._inflight.get(p) is fut:
+                    del self._inflight[p]
 
     def _prefetch_run(self, first: int, last: int) -> dict[int, bytes]:
         try:
@@ -266,10 +291,14 @@ class RemoteSource(ByteRangeSource):
                     self._inflight.pop(p, None)
 
     def close(self) -> None:
-        """Stop prefetching (waits for a request under way)."""
-        if self._pool is not None:
-            self._pool.shutdown(wait=True, cancel_futures=True)
-            self._pool = None
+        """Stop prefetching: prefetches not started are dropped; waits for a request under way."""
+        if self._worker is not None:
+            with self._lock:
+                for fut in set(self._inflight.values()):
+                    fut.cancel()
+            self._jobs.put(None)
+            self._worker.join()
+            self._worker = self._jobs = None
 
 
 def open_remote(url: str, **kw) -> RemoteSource:

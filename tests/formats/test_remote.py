@@ -95,6 +95,25 @@ def test_prefetch_fills_the_cache_within_budget_and_errors_reach_the_read(served
     src.close()
 
 
+def test_prefetch_worker_is_a_daemon_and_close_drops_queued_runs(served):
+    """The prefetch thread does not hold the interpreter open at exit (a daemon); close() waits
+    for the request under way and drops the runs not started; reads still work after it."""
+    srv, root = served
+    data = (root / NAME).read_bytes()
+    src = RemoteSource(srv.url_of(NAME), cache_bytes=8192, page=512, latency_s=0.2)
+    assert src.prefetch(0, 512) == 512 and src.prefetch(2048, 2560) == 512      # two runs, two jobs
+    assert src._worker.daemon
+    time.sleep(0.05)                                          # the first run is under way
+    src.close()
+    assert src.prefetched_bytes == 512 and not src._inflight and src._worker is None
+    n = src.read_requests
+    assert src.read(2048, 2560) == data[2048:2560] and src.read_requests == n + 1  # fetched by the read itself
+    assert src.prefetch(4096, 4608) == 512
+    src.wait_prefetch()
+    assert src.prefetched_bytes == 1024
+    src.close()
+
+
 def test_fsspec_file_url(tmp_path):
     shutil.copy(GOLDEN / NAME, tmp_path / NAME)
     d = open_decoder(open_lfc((tmp_path / NAME).as_uri()))
