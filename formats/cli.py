@@ -365,8 +365,11 @@ def _lfn_device(device: str) -> str | None:
 
 
 def _lfn_neurons(a, d) -> float:
-    """Neurons per layer of the network --level asks for (0 or absent = the largest available)."""
-    level = 0.0 if a.level is None else a.level
+    """Neurons per layer of the network --level asks for (absent: the file's display size for
+    the bytes held, see LfnRenderer.display_neurons; 0 = the largest available)."""
+    if a.level is None:
+        return d.display_neurons
+    level = a.level
     if not math.isfinite(level):
         raise ParameterError(f"--level must be a finite number, got {level}")
     return d.neurons_at(level)
@@ -726,8 +729,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--stereo", metavar="IPD", type=float, default=None,
                    help="light field networks: a side-by-side left|right pair, eyes IPD scene units apart")
     r.add_argument("--level", type=float, default=None,
-                   help="light field networks: 0 = the largest network in the file's bytes (default); larger = "
-                        "fewer neurons, up to the file's levels (lfcodec info)")
+                   help="light field networks: 0 = the largest network in the file's bytes; larger = fewer "
+                        "neurons, up to the file's levels (lfcodec info); default: the largest size of the file's "
+                        "display ladder within its bytes (sizes the encoder measured to beat every smaller one)")
     r.add_argument("--scale", type=float, default=None,
                    help="light field networks: output size relative to the captured views, (0, 4] (default 1)")
     r.add_argument("--partial", action="store_true",

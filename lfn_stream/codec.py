@@ -6,6 +6,7 @@ from formats.codec_api import Codec, EncodeOptions, Encoded
 from formats.errors import ParameterError
 
 from .config import LfnConfig
+from .evaluate import display_ladder, sample_rays, size_psnr
 from .model import NestedLFN, OccupancyNet
 from .pack import step_bytes, stream_sections
 from .render import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnRenderer
@@ -19,6 +20,8 @@ def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: s
     config = {"network": cfg.to_dict(), "norm": info["norm"], "weights": dtype, "train": {
         k: info[k] for k in ("train_views", "test_views", "steps", "train_s") if k in info},
         "step_bytes": [step_bytes(cfg, j, dtype) for j in (cfg.min_neurons, cfg.max_neurons - 1)]}
+    if info.get("display"):
+        config["display"] = [int(w) for w in info["display"]]
     return config, sections
 
 
@@ -40,10 +43,10 @@ def heldout_report(lf, config: dict, sections, info: dict) -> dict:
 
 
 NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
-TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s")
+TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s", "lod_levels")
 OPTIONS = {"depth": int, "min_neurons": int, "max_neurons": int, "occupancy_neurons": int, "steps": int,
            "batch": int, "lr": float, "holdout": int, "device": str, "checkpoint": str, "weights": str,
-           "resolution": int}
+           "resolution": int, "lod_levels": int}
 
 
 class LfnCodec(Codec):
@@ -86,8 +89,15 @@ class LfnCodec(Codec):
                 progress("train", step + 1, opts.steps)
 
         model, occ, info = train(lf, cfg, opts, progress=prog)
+        if progress:
+            progress("display ladder", 0, 1)
+        # measured on training rays: held-out views stay unseen for evaluation (measuring on half of them
+        # instead gave no fewer drops on the other half; BENCHMARKS.md)
+        rays, targets = sample_rays(lf, info["train_views"], info["norm"], seed=opts.seed)
+        info["display"] = display_ladder(size_psnr(model, rays, targets, cfg), cfg)
         config, sections = to_sections(model, occ, info, weights)
         summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
+                   "display_sizes": len(info["display"]),
                    "final_loss": opts.history[-1][1] if opts.history else None}
         if info["test_views"]:
             if progress:
@@ -114,6 +124,8 @@ class LfnCodec(Codec):
         g.add_argument("--steps", type=int, default=None, help="lfn: optimizer steps (default 2000)")
         g.add_argument("--batch", type=int, default=None, help="lfn: rays per step (default 4096)")
         g.add_argument("--lr", type=float, default=None, help="lfn: Adam learning rate (default 0.003)")
+        g.add_argument("--lod-levels", type=int, default=None,
+                       help="lfn: levels trained per step, one from each slice of the width range (default 8; 1 = one random level)")
         g.add_argument("--resolution", type=int, default=None,
                        help="lfn: train at this many pixels on the long side (default 128; 0 = full)")
         g.add_argument("--holdout", type=int, default=None, help="lfn: hold out every k-th view (default 4; 0 = none)")

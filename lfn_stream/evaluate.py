@@ -15,7 +15,9 @@ import numpy as np
 
 from formats.lightfield import LightField
 
+from .config import LfnConfig
 from .pack import step_name, step_offsets
+from .rays import view_rays
 from .render import LfnRenderer
 from .sat import area_downsample
 from .train import targets_of
@@ -83,3 +85,61 @@ def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, ba
             row["psnr_mean_view"] = 10 * math.log10(1 / float(np.mean(base_mean)))
         rows.append(row)
     return rows
+
+
+DISPLAY_RAYS = 16384       # rays the display ladder is measured on
+DISPLAY_MARGIN_DB = 0.1    # a size joins the ladder when it beats every smaller one by this much
+
+
+def size_psnr(model, rays, targets, cfg: LfnConfig) -> np.ndarray:
+    """PSNR (dB) of every integer size min_neurons..max_neurons on the same rays.
+
+    Args:
+        model: a :class:`~lfn_stream.model.NestedLFN`; rays: (N, 6) float32 Plücker rays;
+            targets: (N, 4) float32 premultiplied RGBA in [0, 1].
+    Returns:
+        (max_neurons − min_neurons + 1,) float64.
+    """
+    import torch
+
+    model.eval()
+    out = []
+    with torch.no_grad():
+        x, t = torch.as_tensor(rays), torch.as_tensor(targets)
+        for w in range(cfg.min_neurons, cfg.max_neurons + 1):
+            mse = float(((model(x, float(w)) - t) ** 2).mean())
+            out.append(10 * math.log10(1 / max(mse, 1e-12)))
+    return np.asarray(out)
+
+
+def display_ladder(psnr: np.ndarray, cfg: LfnConfig, margin_db: float = DISPLAY_MARGIN_DB) -> list[int]:
+    """The sizes worth displaying: the base size, then each size whose PSNR beats every smaller
+    listed size's by ``margin_db``, and the full size (the whole file shows the whole network).
+    A renderer holding the steps up to size j shows the largest listed size ≤ j, so quality
+    (where ``psnr`` was measured) never falls as bytes arrive, up to the full size."""
+    sizes, best = [cfg.min_neurons], float(psnr[0])
+    for i in range(1, len(psnr)):
+        if psnr[i] >= best + margin_db:
+            sizes.append(cfg.min_neurons + i)
+            best = float(psnr[i])
+    if sizes[-1] != cfg.max_neurons:
+        sizes.append(cfg.max_neurons)
+    return sizes
+
+
+def sample_rays(lf: LightField, views, norm: dict, count: int = DISPLAY_RAYS, seed: int = 0):
+    """(rays (N, 6) float32, targets (N, 4) float32): ``count`` pixels drawn uniformly from the
+    given views at the scene's resolution (with replacement), as the network sees them."""
+    rng = np.random.default_rng(seed)
+    views = np.asarray(views)
+    v = views[rng.integers(0, len(views), count)]
+    y, x = rng.integers(0, lf.height, count), rng.integers(0, lf.width, count)
+    flat = lf.views.reshape(-1, lf.height, lf.width, lf.channels)
+    peak = float(np.iinfo(lf.views.dtype).max)
+    rays, tg = np.empty((count, 6), np.float32), np.empty((count, 4), np.float32)
+    for u in np.unique(v):                      # one view's rays at a time (bounded memory)
+        sel = v == u
+        r = view_rays(lf, int(u), 1.0, norm["centre"], norm["radius"])
+        rays[sel] = r[y[sel], x[sel]]
+        tg[sel] = targets_of(flat[u][y[sel], x[sel]][None], lf.has_alpha)[0] / peak
+    return rays, tg

@@ -121,6 +121,7 @@ class LfnRenderer(Decoder):
             self.norm = {"centre": read_vector(norm.obj.get("centre"), 3, f"{c.name}: config.norm.centre"),
                          "radius": norm.float("radius", 1e-12, 1e12)}
             self.dtype_w = conf.str("weights", choices=("fp16", "fp32"), default="fp16")
+            self.display = self._read_display(conf.obj.get("display"))
         except ParameterError as e:
             raise FormatError(f"{c.name}: lfn network config is invalid ({e})") from None
         scene = read_geometry(f.meta.get("scene"), f"{c.name}: scene", lim)
@@ -160,6 +161,30 @@ class LfnRenderer(Decoder):
         self._build()
         if not c.is_remote and (not f.moved or c.available("meta.more")):
             self.geom                  # noqa: B018 -- a local file's cameras are checked when it opens
+
+    def _read_display(self, val) -> list[int] | None:
+        """``config.display`` (FORMAT.md): strictly increasing integer sizes from min_neurons to
+        max_neurons, or absent (None: every size is shown)."""
+        if val is None:
+            return None
+        c = self.cfg
+        if not isinstance(val, list) or not 1 <= len(val) <= c.max_neurons - c.min_neurons + 1 \
+                or not all(isinstance(w, int) and not isinstance(w, bool) for w in val) \
+                or val[0] != c.min_neurons or val[-1] != c.max_neurons \
+                or any(b <= a for a, b in zip(val, val[1:])):
+            raise ParameterError(f"display must be increasing integer sizes from {c.min_neurons} to "
+                                 f"{c.max_neurons}")
+        return val
+
+    @property
+    def display_neurons(self) -> float:
+        """The size to show from the bytes held: the largest size of the file's display ladder
+        (``config.display``: sizes the encoder measured to beat every smaller one) that the
+        held steps reach, so quality does not fall as bytes arrive; without a ladder, every
+        held neuron. What :meth:`render` and :meth:`render_pose` use when no size is given."""
+        if self.display is None:
+            return float(self.neurons)
+        return float(max(w for w in self.display if w <= self.neurons))
 
     def _geometry(self, scene: dict) -> LightField:
         """Geometry only: a zero-stride placeholder of the views' shape (no pixel memory; the
@@ -305,12 +330,13 @@ class LfnRenderer(Decoder):
             raise FormatError(f"{self.file.container.name}: view ({row},{col}): {e}") from None
 
     def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
-        """One view with a (fractional) network size; scale defaults to the size's own (1/8 … 1).
+        """One view with a (fractional) network size (default :attr:`display_neurons`); scale
+        defaults to the size's own (1/8 … 1).
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
-        neurons = self.neurons if neurons is None else neurons
+        neurons = self.display_neurons if neurons is None else neurons
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         rays = self.view_rays(row, col, scale)
         h, w = rays.shape[:2]
@@ -366,7 +392,7 @@ class LfnRenderer(Decoder):
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
         c2w = self._check_pose(c2w, self.norm)
-        neurons = self.neurons if neurons is None else neurons
+        neurons = self.display_neurons if neurons is None else neurons
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         g = self._intr
         rays = camera_rays(c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"])
@@ -480,8 +506,11 @@ class LfnRenderer(Decoder):
     def info(self) -> dict:
         c = self.cfg
         return {"codec": CODEC_ID, "levels": self.levels, "network": c.to_dict(), "weights": self.dtype_w,
-                "neurons_available": self.neurons,
+                "neurons_available": self.neurons, "display": self.display,
                 "summary": f"light field network, depth {c.depth}, {c.min_neurons}..{c.max_neurons} neurons per "
                            f"layer ({self.neurons} in the available bytes); levels 0..{self.levels:g} (0 = full "
                            f"network; any prefix ending after a step is a complete network), "
-                           f"{self.dtype_w} weights"}
+                           f"{self.dtype_w} weights" + (
+                               "" if self.display is None else
+                               f"; display ladder of {len(self.display)} sizes (shown from these bytes: "
+                               f"{self.display_neurons:g})")}

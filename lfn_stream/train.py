@@ -37,6 +37,9 @@ class TrainOptions:
         device: "cpu" or "cuda"; seed: RNG seed; checkpoint: path of a .npz to save/resume.
         checkpoint_every: steps between checkpoints.
         lod_weight: weight of the random-level term.
+        lod_levels: the random-level term's rays are split into this many groups, each at its
+            own level drawn from one of as many equal slices of the width range (stratified), so
+            that every step trains levels across the whole range.
     """
 
     steps: int = 2000
@@ -48,13 +51,14 @@ class TrainOptions:
     checkpoint: str | None = None
     checkpoint_every: int = 500
     lod_weight: float = 1.0
+    lod_levels: int = 8
     train_views: list | None = None
     time_limit_s: float | None = None
     history: list = field(default_factory=list)
 
     def __post_init__(self):
         for k, lo, hi in (("steps", 1, 10 ** 8), ("batch", 1, 1 << 22), ("holdout", 0, 1 << 16),
-                          ("checkpoint_every", 1, 10 ** 8)):
+                          ("checkpoint_every", 1, 10 ** 8), ("lod_levels", 1, 64)):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
                 raise ParameterError(f"--{k.replace('_', '-')} must be an integer within {lo}..{hi}, got {v!r}")
@@ -181,10 +185,16 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
         # one random fractional level against the box-filtered target at its scale
         # (the box's side is the exact reciprocal of the level's scale: a fractional box, so
         # targets change continuously with the level, as the widths do)
-        wlev = float(rng.uniform(cfg.min_neurons, cfg.max_neurons))
+        K = opts.lod_levels
+        u = (np.arange(K) + rng.uniform(size=K)) / K if K > 1 else rng.uniform(size=1)
         v2, y2, x2 = tsampler.sample(opts.batch, gen)
-        tgt2 = (box_mean_frac_torch(sat_t, v2, y2, x2, 1.0 / cfg.scale_of(wlev)) / peak).float()
-        loss = loss + opts.lod_weight * ((model(rays[v2, y2, x2], wlev) - tgt2) ** 2).mean()
+        lod = 0.0
+        for k in range(K):      # strided groups: the sampler returns foreground rays first, then background
+            wlev = float(cfg.min_neurons + u[k] * (cfg.max_neurons - cfg.min_neurons))
+            vk, yk, xk = v2[k::K], y2[k::K], x2[k::K]
+            tgt2 = (box_mean_frac_torch(sat_t, vk, yk, xk, 1.0 / cfg.scale_of(wlev)) / peak).float()
+            lod = lod + ((model(rays[vk, yk, xk], wlev) - tgt2) ** 2).sum() * (1.0 / opts.batch / 4)
+        loss = loss + opts.lod_weight * lod
         if occ is not None:
             lab = (tgt[:, 3] > 0).float()
             loss = loss + 0.1 * torch.nn.functional.binary_cross_entropy_with_logits(occ(xr), lab)

@@ -421,3 +421,64 @@ def test_train_refuses_a_file_that_is_not_a_checkpoint_and_cuda_without_gpu(tmp_
     if not torch.cuda.is_available():
         assert main(args + ["--device", "cuda"]) == 2
         assert "CUDA" in capsys.readouterr().err
+
+
+def _half_transparent_lf():
+    """RGBA views whose left half is empty (alpha 0): the sampler's background rays."""
+    from tests.rlfc.helpers import make_lf
+
+    v = smooth_lf(rows=2, cols=3, h=16, w=16, c=4).views.copy()
+    v[..., :8, :] = 0
+    v[..., 8:, 3] = 255
+    return make_lf(v)
+
+
+def test_stratified_levels_see_foreground_and_background_at_every_size():
+    """lod_levels groups take strided rays of one batch (the sampler returns foreground rays
+    first): each size learns where the object is not, so the mean alpha at every size is near
+    the views' 0.5 (contiguous groups gave the low sizes foreground only: alpha ~0.9 everywhere)."""
+    lf = _half_transparent_lf()
+    cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=12, occupancy_neurons=0)
+    m, _, info = train(lf, cfg, TrainOptions(steps=150, batch=1024, holdout=0, lod_levels=4))
+    from lfn_stream.rays import view_rays
+
+    rays = torch.from_numpy(view_rays(lf, 0, 1.0, info["norm"]["centre"], info["norm"]["radius"]).reshape(-1, 6))
+    m.eval()
+    with torch.no_grad():
+        alpha = [float(m(rays, float(w))[:, 3].mean()) for w in range(4, 13)]
+    assert all(abs(a - 0.5) < 0.15 for a in alpha), alpha
+
+
+def test_display_ladder_and_display_neurons():
+    """config.display: sizes that beat every smaller one by the margin (base and full always);
+    a renderer shows the largest listed size its bytes reach; a bad ladder is a FormatError."""
+    from formats.errors import FormatError
+    from lfn_stream.evaluate import display_ladder
+
+    cfg = LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=0)
+    psnr = np.array([10, 11, 10.95, 11.05, 11.2, 10, 12, 12.05, 11.5])     # sizes 4..12
+    assert display_ladder(psnr, cfg) == [4, 5, 8, 10, 12]
+    assert display_ladder(psnr, cfg, margin_db=2.0) == [4, 10, 12]
+    lf = smooth_lf(rows=2, cols=2, h=8, w=10)
+    m = _model(cfg=LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=8))
+    config, sections = to_sections(m, None, {"norm": {"centre": [0, 0, 0], "radius": 1.0},
+                                             "display": [4, 5, 8, 10, 12]})
+    chunked = [(n, d, 40) if n == "lfn.steps" else (n, d, *rest) for n, d, *rest in sections]
+    blob = lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), chunked)
+    full = LfnRenderer(open_lfc(blob), device="cpu")
+    assert full.display == [4, 5, 8, 10, 12] and full.display_neurons == 12.0
+    assert "display ladder of 5 sizes" in full.info()["summary"]
+    s = full.file.container.info("lfn.steps")
+    off = step_offsets(full.cfg, "fp16")
+    seen = {}
+    for n in range(s.offset, s.offset + s.length, 40):
+        pre = LfnRenderer(open_lfc(blob[:n], partial=True), device="cpu")
+        seen[pre.neurons] = pre.display_neurons
+        pose = full.pose(1, 0)
+        assert np.array_equal(pre.render_pose(pose, scale=1.0), pre.render_pose(pose, pre.display_neurons, 1.0))
+    assert off[-1] == s.length and all(d == max(w for w in (4, 5, 8, 10, 12) if w <= n) for n, d in seen.items())
+    assert any(d < n for n, d in seen.items())
+    for bad in ([4, 12, 8], [5, 12], [4, 11], [4.0, 12], "4,12", [4, 4, 12], [True, 12]):
+        config["display"] = bad
+        with pytest.raises(FormatError, match="display"):
+            LfnRenderer(open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections)), device="cpu")

@@ -39,3 +39,16 @@ def test_bench_foveation_measures_every_mode(tmp_path, capsys):
         m = view[mode]
         assert m["ms"] > 0 and m["ring_error"] >= 0 and m["fovea_psnr"] > 100, mode
     assert view["dither_4"]["roughness"] > view["exact"]["roughness"]   # dither noise is measured
+
+
+def test_bench_lfn_curve_display_and_summary():
+    """tools.bench_lfn_curve: the displayed curve holds each ladder size until the next one."""
+    import numpy as np
+
+    from tools.bench_lfn_curve import displayed, summary
+
+    p = np.array([10.0, 11.0, 10.5, 12.0, 11.0])          # sizes 4..8
+    assert displayed(p, None, 4).tolist() == p.tolist()
+    assert displayed(p, [4, 5, 7, 8], 4).tolist() == [10.0, 11.0, 11.0, 12.0, 11.0]
+    s = summary(displayed(p, [4, 5, 7, 8], 4))
+    assert s["drops_over_0.1dB"] == 1 and s["worst_drop_db"] == -1.0 and s["last_psnr"] == 11.0
