@@ -67,12 +67,7 @@ def read_path(spec: str, rows: int, cols: int) -> np.ndarray:
     p = Path(spec)
     if not spec or not p.is_file():
         raise ParameterError(f"--path {spec!r}: not a preset (orbit[:N], sweep[:N]) nor a file of cameras")
-    if p.stat().st_size > MAX_PATH_FILE:
-        raise ParameterError(f"{p}: a camera path file is at most {MAX_PATH_FILE >> 20} MiB")
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise ParameterError(f"{p}: cannot read the camera path ({e})") from None
+    text = _read_text(p, MAX_PATH_FILE, "camera path")
     rows_ = _parse_json(text, p) if text.lstrip().startswith("[") else _parse_lines(text, p)
     if not rows_:
         raise ParameterError(f"{p}: no cameras in the path file")
@@ -82,6 +77,16 @@ def read_path(spec: str, rows: int, cols: int) -> np.ndarray:
             or np.isinf(cams[:, 2]).any():
         raise ParameterError(f"{p}: positions must be finite, focus finite or empty, aperture finite and >= 0")
     return cams
+
+
+def _read_text(p: Path, limit: int, what: str) -> str:
+    """A UTF-8 text file of at most ``limit`` bytes (ParameterError otherwise)."""
+    if p.stat().st_size > limit:
+        raise ParameterError(f"{p}: a {what} file is at most {limit >> 20} MiB")
+    try:
+        return p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as e:
+        raise ParameterError(f"{p}: cannot read the {what} ({e})") from None
 
 
 def _check_frames(n) -> None:
@@ -145,12 +150,7 @@ def read_pose(spec: str) -> np.ndarray:
     p = Path(spec)
     if not p.is_file():
         raise ParameterError(f"--pose {spec!r}: no such file (a 4x4 camera-to-world matrix, JSON or 16 numbers)")
-    if p.stat().st_size > MAX_POSE_FILE:
-        raise ParameterError(f"{p}: a pose file is at most {MAX_POSE_FILE >> 20} MiB")
-    try:
-        text = p.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise ParameterError(f"{p}: cannot read the pose ({e})") from None
+    text = _read_text(p, MAX_POSE_FILE, "pose")
     if text.lstrip().startswith(("[", "{")):
         try:
             data = json.loads(text)
