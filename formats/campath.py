@@ -171,12 +171,29 @@ def read_pose(spec: str) -> np.ndarray:
     return np.array(vals, np.float64).reshape(4, 4)
 
 
-def quilt_positions(rows: int, cols: int, qcols: int, qrows: int) -> np.ndarray:
-    """(qcols·qrows, 2) grid positions (s, t) of a quilt's views: along the grid's middle row from
-    the first column to the last (the centre alone for a one-view quilt)."""
+def turn_frames(spec: str) -> int | None:
+    """Frames of a ``turn[:N]`` path spec (a free camera turned a full circle about the scene,
+    which light field networks render; default 60 frames), or None for any other spec."""
+    m = re.fullmatch(r"\s*turn(?::(\d{1,7}))?\s*", spec or "")
+    if not m:
+        return None
+    n = int(m.group(1)) if m.group(1) else DEFAULT_FRAMES
+    _check_frames(n)
+    return n
+
+
+def quilt_views(qcols: int, qrows: int) -> int:
+    """Views of a qcols × qrows quilt, checked to be 1..MAX_QUILT."""
     n = qrows * qcols
     if isinstance(n, bool) or not 1 <= n <= MAX_QUILT:
         raise ParameterError(f"a quilt has 1..{MAX_QUILT} views")
+    return n
+
+
+def quilt_positions(rows: int, cols: int, qcols: int, qrows: int) -> np.ndarray:
+    """(qcols·qrows, 2) grid positions (s, t) of a quilt's views: along the grid's middle row from
+    the first column to the last (the centre alone for a one-view quilt)."""
+    n = quilt_views(qcols, qrows)
     ts = np.linspace(0, cols - 1, n) if n > 1 else np.array([(cols - 1) / 2])
     return np.stack([np.full(n, (rows - 1) / 2), ts], axis=1)
 

@@ -257,14 +257,14 @@ def _floats(text: str, n: int, what: str) -> tuple:
 
 
 def cmd_render(a) -> int:
-    from .campath import assemble_quilt
+    from .campath import assemble_quilt, quilt_views, turn_frames
     from .imageio import write_image
     from .lfcfile import open_lfc
     from .registry import open_decoder
 
     out = Path(a.out)
     if a.path is not None:
-        turn = re.fullmatch(r"\s*turn(?::\d{1,7})?\s*", a.path) is not None
+        turn = turn_frames(a.path) is not None
         if a.quilt or a.turn is not None or (not turn and (a.at is not None or a.pose is not None)):
             raise ParameterError("--path renders a sequence: it does not go with --quilt or --turn, nor with --at or "
                                  "--pose (except --path turn, which turns that camera)")
@@ -284,9 +284,7 @@ def cmd_render(a) -> int:
                 cols, rows = _grid(a.quilt)
                 if a.stereo is not None:
                     raise ParameterError("--quilt and --stereo are two different layouts: give one")
-                base, n = _lfn_camera(a, d), cols * rows
-                if not 1 <= n <= 256:
-                    raise ParameterError("a quilt has 1..256 views")
+                base, n = _lfn_camera(a, d), quilt_views(cols, rows)
                 yaws = np.linspace(-QUILT_CONE / 2, QUILT_CONE / 2, n) if n > 1 else np.zeros(1)
                 img = assemble_quilt([_lfn_frame(a, d, d.turn_pose(base, float(y))) for y in yaws], cols, rows)
             else:
@@ -319,6 +317,8 @@ QUILT_CONE = 35.0   # degrees: a light field network's quilt turns the camera ac
 def _render_kind(a, f) -> bool:
     """True for a light field network file (rendered from camera poses), False for an RLFC grid
     (rendered from decoded views); options that do not apply to the file's kind are refused."""
+    from .campath import turn_frames
+
     lfn = f.codec == "lfn"
     if lfn:
         used = [o for o, v in (("--focus", a.focus is not None), ("--aperture", a.aperture != 0), ("--fast", a.fast))
@@ -332,7 +332,7 @@ def _render_kind(a, f) -> bool:
         if used:
             raise ParameterError(f"{a.input}: {', '.join(used)} are options for light field network files (this is "
                                  f"{f.codec}); an RLFC grid renders positions on its camera plane (--at)")
-        if a.path is not None and re.fullmatch(r"\s*turn(?::\d{1,7})?\s*", a.path):
+        if a.path is not None and turn_frames(a.path) is not None:
             raise ParameterError(f"{a.input}: --path turn turns a free camera about the scene, which light field "
                                  f"network files render; an RLFC grid takes orbit, sweep or a file of cameras")
     return lfn
@@ -454,17 +454,14 @@ def _render_lfn_path(a, f, out: Path) -> int:
     """``render --path`` on a light field network: grid positions of orbit / sweep / a camera file
     through :meth:`grid_pose`, or ``turn[:N]``: the --at / --pose camera turned a full circle
     about the scene's pivot in N frames."""
-    from formats.campath import DEFAULT_FRAMES, read_path
+    from formats.campath import read_path, turn_frames
 
     from .registry import open_decoder
     from .video import SequenceWriter
 
     d = open_decoder(f, device=_lfn_device(a.device))
-    m = re.fullmatch(r"\s*turn(?::(\d{1,7}))?\s*", a.path)
-    if m:
-        n = int(m.group(1)) if m.group(1) else DEFAULT_FRAMES
-        if not 1 <= n <= 100_000:
-            raise ParameterError(f"a camera path has 1..100000 frames, got {n}")
+    n = turn_frames(a.path)
+    if n is not None:
         base = _lfn_camera(a, d)
         poses = [d.turn_pose(base, 360.0 * i / n) for i in range(n)]
     else:

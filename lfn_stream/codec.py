@@ -125,7 +125,8 @@ class LfnCodec(Codec):
         g.add_argument("--batch", type=int, default=None, help="lfn: rays per step (default 4096)")
         g.add_argument("--lr", type=float, default=None, help="lfn: Adam learning rate (default 0.003)")
         g.add_argument("--lod-levels", type=int, default=None,
-                       help="lfn: levels trained per step, one from each slice of the width range (default 8; 1 = one random level)")
+                       help="lfn: levels trained per step, one from each slice of the width range (default 8; "
+                            "1 = one random level)")
         g.add_argument("--resolution", type=int, default=None,
                        help="lfn: train at this many pixels on the long side (default 128; 0 = full)")
         g.add_argument("--holdout", type=int, default=None, help="lfn: hold out every k-th view (default 4; 0 = none)")

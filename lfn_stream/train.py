@@ -1,8 +1,10 @@
 """Training a nested-width light field network with continuous levels of detail.
 
-Each step trains the full width on full-resolution targets plus one random fractional width
-w whose target is the summed-area-table box filter of the image at w's exact scale (1/8 at
-min_neurons … 1 at max_neurons; a box of fractional side, see :mod:`lfn_stream.sat`). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
+Each step trains the full width on full-resolution targets plus random fractional widths
+(``lod_levels`` of them, one from each equal slice of the width range, each on its share of a
+second batch of rays), each width w against the summed-area-table box filter of the image at
+w's exact scale (1/8 at min_neurons … 1 at max_neurons; a box of fractional side, see
+:mod:`lfn_stream.sat`). Rays are drawn by :class:`~lfn_stream.sampling.RaySampler`. An
 occupancy net learns which rays hit the object (alpha > 0) when the scene has alpha.
 Checkpoints hold raw arrays (``.npz`` without pickle) and training resumes from them.
 """
@@ -182,19 +184,19 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
         tgt = tgt_all[v, y, x]
         xr = rays[v, y, x]
         loss = ((model(xr) - tgt) ** 2).mean()
-        # one random fractional level against the box-filtered target at its scale
-        # (the box's side is the exact reciprocal of the level's scale: a fractional box, so
-        # targets change continuously with the level, as the widths do)
+        # random fractional levels against the box-filtered target at each one's scale (the box's
+        # side is the exact reciprocal of the level's scale: a fractional box, so targets change
+        # continuously with the level, as the widths do); K levels, one per K-th of the range
         K = opts.lod_levels
-        u = (np.arange(K) + rng.uniform(size=K)) / K if K > 1 else rng.uniform(size=1)
+        u = (np.arange(K) + rng.uniform(size=K)) / K
         v2, y2, x2 = tsampler.sample(opts.batch, gen)
-        lod = 0.0
+        sq = 0.0
         for k in range(K):      # strided groups: the sampler returns foreground rays first, then background
             wlev = float(cfg.min_neurons + u[k] * (cfg.max_neurons - cfg.min_neurons))
             vk, yk, xk = v2[k::K], y2[k::K], x2[k::K]
             tgt2 = (box_mean_frac_torch(sat_t, vk, yk, xk, 1.0 / cfg.scale_of(wlev)) / peak).float()
-            lod = lod + ((model(rays[vk, yk, xk], wlev) - tgt2) ** 2).sum() * (1.0 / opts.batch / 4)
-        loss = loss + opts.lod_weight * lod
+            sq = sq + ((model(rays[vk, yk, xk], wlev) - tgt2) ** 2).sum()
+        loss = loss + opts.lod_weight * sq / (opts.batch * cfg.out_features)
         if occ is not None:
             lab = (tgt[:, 3] > 0).float()
             loss = loss + 0.1 * torch.nn.functional.binary_cross_entropy_with_logits(occ(xr), lab)
