@@ -135,6 +135,14 @@ export class LfnDecoder {
     d.dtypeW = conf.weights === undefined ? "fp16" : conf.weights;
     if (d.dtypeW !== "fp16" && d.dtypeW !== "fp32") throw new FormatError(`${name}: config.weights must be fp16 or fp32`);
     d.itemsize = d.dtypeW === "fp16" ? 2 : 4;
+    d.display = null;                          // the display ladder (FORMAT.md), when the file has one
+    if (conf.display !== undefined) {
+      const v = conf.display;
+      const ok = Array.isArray(v) && v.length >= 1 && v.length <= d.maxN - d.minN + 1 && v.every(Number.isInteger)
+        && v[0] === d.minN && v[v.length - 1] === d.maxN && v.every((w, i) => i === 0 || w > v[i - 1]);
+      if (!ok) throw new FormatError(`${name}: config.display must be increasing integer sizes from ${d.minN} to ${d.maxN}`);
+      d.display = v;
+    }
     d.file = file;
     d._geometry((await file.fullMeta()).scene, name);     // version 3: the cameras are in meta.more
     const base = file.info("lfn.base");
@@ -228,6 +236,12 @@ export class LfnDecoder {
   }
 
   stepValues(j) { return 6 + 3 + (this.depth - 1) * (2 * j + 1 + 3) + 4; }
+
+  /** The size to show from the steps held: the largest size of the display ladder they reach
+   *  (every held neuron without a ladder), so the picture does not get worse as bytes arrive. */
+  displayNeurons() {
+    return this.display ? Math.max(...this.display.filter((w) => w <= this.neurons)) : this.neurons;
+  }
 
   /** Network size a level stands for (0 = the largest available network). */
   neuronsAt(level) { return this.neurons - level; }

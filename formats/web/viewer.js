@@ -165,7 +165,8 @@ async function mainLfn(file, source, t0) {
 
   const draw = async (neurons = state.neurons) => {
     await dec.grow(neurons);                 // fetches the step sections this level needs
-    const n = Math.min(neurons, dec.neurons), p = pose();
+    // beyond what the file holds: the best size of its display ladder that the held steps reach
+    const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(), p = pose();
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
     const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc);      // a quarter-scale preview while dragging

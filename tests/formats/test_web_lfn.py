@@ -54,7 +54,8 @@ def orbit_c2w(n: int, radius: float = 4.0) -> np.ndarray:
     return out
 
 
-def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=True, occ=True, seed=0) -> Path:
+def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=True, occ=True, seed=0,
+             display=None) -> Path:
     torch.manual_seed(seed)
     cfg = LfnConfig(depth=4, min_neurons=6, max_neurons=20, occupancy_neurons=8 if occ else 0)
     m = NestedLFN(cfg)
@@ -76,7 +77,8 @@ def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=Tru
         r, c = np.meshgrid(np.arange(3), np.arange(4), indexing="ij")
         pos = np.stack([c * 0.3, -r * 0.25, np.zeros_like(r, float)], -1)
         lf = LightField(views=views, positions=pos, focal=(30.0, 30.0))
-    config, sections = to_sections(m, o, {"norm": {"centre": [0.1, 0.0, 0.2], "radius": 2.5}}, weights)
+    config, sections = to_sections(m, o, {"norm": {"centre": [0.1, 0.0, 0.2], "radius": 2.5}, "display": display},
+                                   weights)
     sections = [(n, d, 96) if n == "lfn.steps" else (n, d) for n, d, *_ in sections]   # steps span chunks
     p = tmp / f"net_{channels}_{np.dtype(dtype).name}_{weights}_{posed}.lfc"
     p.write_bytes(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS))
@@ -137,6 +139,19 @@ def test_grown_network_equals_the_whole_one(tmp_path):
         assert (tmp_path / f"render_{i}.bin").read_bytes() == (tmp_path / "whole" / f"render_{i}.bin").read_bytes()
 
 
+def test_display_ladder_shows_the_same_size_as_python(tmp_path):
+    """config.display: opened with the steps up to N neurons, the JS reader shows the largest
+    ladder size ≤ N, as LfnRenderer.display_neurons does for a prefix holding N neurons."""
+    ladder = [6, 7, 10, 11, 15, 20]
+    path = lfn_file(tmp_path, 3, posed=False, occ=False, display=ladder)
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    assert r.display == ladder
+    for first, shown in ((9, 7.0), (14, 11.0), (20, 20.0)):
+        info, _ = compare(path, tmp_path / str(first), [("grid,1,2,display,1", shown, 1.0)], [r.grid_pose(1, 2)],
+                          first=first)
+        assert info["renders"][0]["shown"] == shown and info["opened"] == first
+
+
 def r_cfg(f):
     return LfnConfig.from_dict(f.meta["config"]["network"], f.meta["codec_version"])
 
@@ -166,6 +181,8 @@ def test_bad_networks_get_typed_errors(tmp_path):
                      "FormatError", "meta.more"),
         "more-keys": ({**meta, "more": ["scene.rows"]}, secs, "FormatError", "scene.rows"),
         "version": ({**meta, "codec_version": 9}, secs, "UnsupportedError", "version 9"),
+        "display": ({**meta, "config": {**meta["config"], "display": [6, 12, 9, 20]}}, secs, "FormatError",
+                    "config.display"),
         "radius": ({**meta, "config": {**meta["config"], "norm": {"centre": [0, 0, 0], "radius": -1}}}, secs,
                    "FormatError", "radius"),
     }

@@ -1,7 +1,7 @@
 // Test helper: render views of an LFN .lfc file with the browser viewer's JavaScript renderer
 // (formats/web/lfn.js) under Node.
 // node web_lfn.mjs FILE OUTDIR CAM...   CAM = view,V,N,S | grid,S,T,N,S | orbit,V,YAW,PITCH,N,S
-// (N neurons, "max" = all; S image scale, "auto" = the size's own). Writes OUTDIR/render_I.bin
+// (N neurons, "max" = all, "display" = the display ladder's size for what is held; S image scale, "auto" = the size's own). Writes OUTDIR/render_I.bin
 // (pixels of the file's dtype, h·w·C) per camera and prints one JSON line: {ok: true, renders:
 // [{h, w, pose, evaluated}], neurons, bytesRead} or {ok: false, name, message}.
 import fs from "fs";
@@ -27,12 +27,13 @@ try {
     if (a[0] === "view") { pose = dec.pose(Number(a[1])); rest = a.slice(2); }
     else if (a[0] === "grid") { pose = dec.gridPose(Number(a[1]), Number(a[2])); rest = a.slice(3); }
     else { pose = dec.orbitPose(Number(a[1]), Number(a[2]), Number(a[3])); rest = a.slice(4); }
-    const n = rest[0] === "max" ? Infinity : Number(rest[0]);
-    await dec.grow(n);
-    const r = dec.render(pose, Math.min(n, dec.neurons), rest[1] === "auto" ? null : Number(rest[1]));
+    const n = rest[0] === "max" || rest[0] === "display" ? Infinity : Number(rest[0]);
+    if (rest[0] !== "display") await dec.grow(n);            // display: what the opened steps show
+    const use = rest[0] === "display" ? dec.displayNeurons() : Math.min(n, dec.neurons);
+    const r = dec.render(pose, use, rest[1] === "auto" ? null : Number(rest[1]));
     const px = dec.toPixels(r.rgba, r.h, r.w);
     fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
-    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, neurons: dec.neurons });
+    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, neurons: dec.neurons, shown: use });
   }
   console.log(JSON.stringify({ ok: true, renders, opened, pivot: dec.pivot, up: dec.up }));
 } catch (e) {
