@@ -105,10 +105,10 @@ class LightField:
         return g
 
     @staticmethod
-    def from_geometry(views: np.ndarray, g: dict, meta: dict | None = None) -> "LightField":
+    def from_geometry(views: np.ndarray, g: dict, meta: dict | None = None, limits: Limits = DEFAULT) -> "LightField":
         """Rebuild a light field from decoded views and :meth:`geometry` output (checked by
-        :func:`read_geometry`)."""
-        g = read_geometry(g, "scene", rows=views.shape[0], cols=views.shape[1])
+        :func:`read_geometry` under ``limits``)."""
+        g = read_geometry(g, "scene", limits, rows=views.shape[0], cols=views.shape[1])
         c2w = g.get("c2w")
         if "positions" in g:
             pos = g["positions"]

@@ -12,7 +12,6 @@ from formats.codec_api import Decoder
 from formats.errors import FormatError, ParameterError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
 from formats.lightfield import LightField, read_geometry
-from formats.limits import DEFAULT
 from formats.schema import Fields, read_vector
 
 from .config import LfnConfig
@@ -113,7 +112,7 @@ class LfnRenderer(Decoder):
         self.prefetch = int(prefetch)
         self.file = f
         c = f.container
-        lim = limits or DEFAULT
+        lim = self._limits = limits or f.limits     # the caller's, else those the file was opened with
         try:
             conf = Fields(f.meta, f"{c.name}: metadata").sub("config")
             self.cfg = LfnConfig.from_dict(conf.obj.get("network"), int(f.meta.get("codec_version", 1)))
@@ -190,7 +189,8 @@ class LfnRenderer(Decoder):
         """Geometry only: a zero-stride placeholder of the views' shape (no pixel memory; the
         shape as validated at open, under the caller's limits)."""
         shape = (self.rows, self.cols, self.height, self.width, 1)
-        return LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene)
+        return LightField.from_geometry(np.broadcast_to(np.zeros((1,) * 5, np.uint8), shape), scene,
+                                        limits=self._limits)
 
     @property
     def geom(self) -> LightField:

@@ -482,3 +482,27 @@ def test_display_ladder_and_display_neurons():
         config["display"] = bad
         with pytest.raises(FormatError, match="display"):
             LfnRenderer(open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections)), device="cpu")
+
+
+def test_lfn_files_honour_the_limits_they_are_opened_with():
+    """A grid of 65 537 views (one more than the default limit) opens with larger limits, given
+    to open_lfc or to the renderer, and is refused under the defaults."""
+    import dataclasses
+
+    from formats.errors import FormatError
+    from formats.limits import DEFAULT
+
+    n = DEFAULT.max_views + 1
+    lf = LightField(views=np.broadcast_to(np.zeros((1,) * 5, np.uint8), (1, n, 2, 2, 3)),
+                    positions=np.stack([np.arange(n, dtype=float), np.zeros(n), np.zeros(n)], -1)[None],
+                    focal=(2.0, 2.0))
+    g = lf.geometry()
+    assert "baseline" in g                                   # a regular grid: no per-view JSON
+    config, sections = to_sections(_model(), None, {"norm": {"centre": [0, 0, 0], "radius": 1.0}})
+    blob = lfc_bytes("lfn", CODEC_VERSION, config, g, sections)
+    big = dataclasses.replace(DEFAULT, max_views=n)
+    with pytest.raises(FormatError, match="cols"):
+        LfnRenderer(open_lfc(blob), device="cpu")
+    for r in (LfnRenderer(open_lfc(blob, limits=big), device="cpu"), LfnRenderer(open_lfc(blob), device="cpu",
+                                                                                   limits=big)):
+        assert r.cols == n and r.render(0, n - 1, 4.0, 1.0).shape == (2, 2, 4)
