@@ -9,7 +9,7 @@ import numpy as np
 import torch
 
 from formats.codec_api import Decoder
-from formats.errors import FormatError, ParameterError, UnsupportedError
+from formats.errors import FormatError, ParameterError, TruncatedError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
 from formats.lightfield import LightField, read_geometry
 from formats.schema import Fields, read_vector
@@ -148,7 +148,12 @@ class LfnRenderer(Decoder):
                                   f"network config needs {int(self._offsets[-1])}")
         self._read_steps(self.cfg.max_neurons if max_neurons is None else int(np.ceil(max_neurons)))
         occ = None
-        if c.available("lfn.occ") and self.cfg.occupancy_neurons:
+        if c.has("lfn.occ") and not c.available("lfn.occ"):
+            # the occupancy net zeroes the rays it rejects: without it the pixels would differ from
+            # the whole file's, so a prefix is renderable from the end of lfn.occ on (FORMAT.md)
+            raise TruncatedError(f"{c.name}: the stream prefix ends inside the occupancy net (lfn.occ); the first "
+                                 f"renderable prefix ends at byte {c.info('lfn.occ').offset + c.info('lfn.occ').length}")
+        if c.has("lfn.occ") and self.cfg.occupancy_neurons:
             if c.info("lfn.occ").length != occ_values(self.cfg) * itemsize:
                 raise FormatError(f"{c.name}: section 'lfn.occ' has {c.info('lfn.occ').length} bytes, the network "
                                   f"config needs {occ_values(self.cfg) * itemsize}")

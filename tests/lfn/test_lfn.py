@@ -184,6 +184,8 @@ def test_first_renderable_prefix_is_small():
     assert c.info("meta").length < 1024 and "c2w" not in whole.file.meta["scene"]
     pre = LfnRenderer(open_lfc(blob[:first], partial=True), device="cpu")
     assert pre.neurons == 16 and pre.occ is not None
+    with pytest.raises(TruncatedError, match=f"occupancy net.*byte {first}"):     # would render other pixels
+        LfnRenderer(open_lfc(blob[:first - 1], partial=True), device="cpu")
     pose = whole.pose(0, 7)
     assert np.array_equal(pre.render_pose(pose, 16.0, 0.125), whole.render_pose(pose, 16.0, 0.125))
     assert whole.file.scene["c2w"] == lf.geometry()["c2w"] and whole.file.full_meta()["config"]["train"][
