@@ -362,8 +362,7 @@ class LfnRenderer(Decoder):
     def orbit_pose(self, row: int, col: int, yaw: float, pitch: float = 0.0) -> np.ndarray:
         """A captured view turned about the scene's pivot (the point nearest every optical axis):
         ``yaw`` degrees about the mean up vector, ``pitch`` degrees about the camera's right axis."""
-        pivot, up = scene_pivot(self.poses, self.norm["centre"])
-        return orbit_pose(self.pose(row, col), pivot, up, float(yaw), float(pitch))
+        return self.turn_pose(self.pose(row, col), yaw, pitch)
 
     def turn_pose(self, pose: np.ndarray, yaw: float, pitch: float = 0.0) -> np.ndarray:
         """Any camera turned about the scene's pivot, as :meth:`orbit_pose` turns a captured view."""
