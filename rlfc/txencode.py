@@ -40,6 +40,8 @@ from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_C
                        tables_from_quantized, tables_to_bytes)
 from .xp import NUMPY
 
+#: encoder decisions :attr:`TxParams.ablate` may turn off
+ABLATE = ("intra_tbs", "lambda_trim", "promote", "rdoq", "ref_modes")
 INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be beaten by intra coding
 FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
 PAD = 8
@@ -63,6 +65,12 @@ class TxParams:
         search_sample: a PSNR target's search codes the key views and every SEARCH_STRIDE-th
             other view (grids with at least SEARCH_MIN_VIEWS other views), then checks the
             chosen step on every view (False: every search pass codes every view).
+        ablate: encoder decisions turned off, to measure what each buys (``tools/ablation_tx.py``;
+            the decoder is the same): any of :data:`ABLATE` — "ref_modes" (every 8×8 block blends
+            its references; no single-reference modes), "rdoq" (levels rounded to nearest, the
+            last position is the last nonzero: no rate-distortion quantization), "intra_tbs" (no
+            intra 8×8 blocks), "promote" (no view coded alone as a JPEG 2000 key), "lambda_trim"
+            (no λ trim between two quantizer steps).
     """
 
     block_size: int = 16
@@ -74,8 +82,13 @@ class TxParams:
     lossless: bool = False
     intra_codec: str = "auto"
     search_sample: bool = True
+    ablate: tuple = ()
 
     def __post_init__(self):
+        ab = self.ablate
+        if isinstance(ab, str) or not isinstance(ab, (tuple, list)) or not set(ab) <= set(ABLATE):
+            raise ParameterError(f"ablate must be a list of {', '.join(ABLATE)}, got {ab!r}")
+        object.__setattr__(self, "ablate", tuple(sorted(set(ab))))
         if self.intra_codec not in ("auto", "tx", "j2k"):
             raise ParameterError(f"intra codec must be auto, tx or j2k, got {self.intra_codec!r}")
         if not isinstance(self.search_sample, bool):
@@ -92,6 +105,16 @@ class TxParams:
             raise ParameterError(f"max disparity must be within 0..256, got {self.max_disparity}")
         if self.step is not None and not 1 <= self.step <= 1 << 16:
             raise ParameterError(f"step must be within 1..65536, got {self.step}")
+
+
+def params_info(p: TxParams) -> dict:
+    """The parameters as the file's configuration records them (``ablate`` only when set)."""
+    d = asdict(p)
+    if d["ablate"]:
+        d["ablate"] = list(d["ablate"])
+    else:
+        del d["ablate"]
+    return d
 
 
 def auto_spacing(rows: int, cols: int) -> int:
@@ -247,7 +270,7 @@ class TxEncoder:
             luma = np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])   # Y in [0, peak]
             self.base, self.disp, self.modes = estimate_maps(
                 luma, self.s, max_disparity=params.max_disparity, runner=runner,
-                side_lambda=side_lambda, progress=progress)
+                side_lambda=side_lambda, progress=progress, ref_modes="ref_modes" not in params.ablate)
         else:
             self.base = np.zeros(nloc8, np.int64)
             self.disp = np.zeros((n_maps, nloc8), np.int64)
@@ -413,9 +436,11 @@ class TxEncoder:
             j_lo = wgt * (ax - lo * d) ** 2 + lam * _level_bits(model, lo, pc, key)
             j_0 = wgt * ax ** 2 + lam * zero_bits[None, :]
             use_lo = j_lo < j_ln
+            z = j_0 <= np.where(use_lo, j_lo, j_ln)
+            if "rdoq" in self.p.ablate:                           # plain rounding (ablation)
+                use_lo, z = np.zeros_like(use_lo), ln == 0
             lv = np.where(use_lo, lo, ln)
             jc = np.where(use_lo, j_lo, j_ln)
-            z = j_0 <= jc
             lv = np.where(z, 0, lv)
             jc = np.where(z, j_0, jc)                             # cost of each coefficient as chosen
             jz = j_0                                              # cost as a coded zero
@@ -427,7 +452,10 @@ class TxEncoder:
             JL = c1 + c0 + lam * lastb[None, :]
             valid = np.concatenate([np.ones((Ta, 1), bool), lv > 0], axis=1)                     # L-1 nonzero
             JL = np.where(valid, JL, np.inf)
-            L = JL.argmin(1)
+            if "rdoq" in self.p.ablate:                           # the last nonzero, whatever it costs
+                L = np.where(lv.any(1), 64 - np.argmax(lv[:, ::-1] > 0, axis=1), 0)
+            else:
+                L = JL.argmin(1)
             lv = np.where(np.arange(64)[None, :] < L[:, None], lv, 0)
             levels[act, p] = np.where(X < 0, -lv, lv)
             J[act] += JL[np.arange(Ta), L]
@@ -465,6 +493,8 @@ class TxEncoder:
         J_res = J_r + lam * mb[MODE_RES]
         # intra only where prediction is expensive: coding even a DC costs more than INTRA_MIN_BITS
         cand = np.flatnonzero(np.minimum(J_skip, J_res) > lam * INTRA_MIN_BITS)
+        if "intra_tbs" in self.p.ablate:
+            cand = cand[:0]
         lv_i = np.zeros_like(lv_r)
         J_int, R_i = np.full(T, np.inf), np.zeros(T)
         if cand.size:
@@ -803,7 +833,7 @@ class TxEncoder:
             disp, modes = disp.copy(), modes.copy()
             disp[unused], modes[unused] = self.base[None, :], 0
         cfg = {**self.hdr.to_config(), "tx": lay.to_config(),
-               "params": {**asdict(self.p), "step": res["step"], "lam_scale": res.get("lam_scale", 1.0)},
+               "params": {**params_info(self.p), "step": res["step"], "lam_scale": res.get("lam_scale", 1.0)},
                "n_blocks": int(coded.sum()), "n_key_views": len(keys)}
         sections = [("tx.layout", lay.to_bytes()), ("tx.tables", tables_to_bytes(q)),
                     ("tx.maps", pack_maps(self.base, disp, modes, (self.nby8, self.nbx8))),
@@ -1039,9 +1069,9 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
         if keep:
             res = again
-        if options.target_psnr is not None and found:
+        if options.target_psnr is not None and found and "lambda_trim" not in params.ablate:
             res = _trim_lambda(enc, res, options.target_psnr, progress, trace)
-    if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid":
+    if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid" and "promote" not in params.ablate:
         res = enc.with_pixels(res)
         n_alone = len(enc.promote_views(res))
         if n_alone:
@@ -1052,7 +1082,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         notes.append("posed capture: every view is coded on its own (no inter-view prediction), so this file is "
                      "no smaller than per-view coding (JPEG 2000 or the transform path, whichever is smaller per view)")
     return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
-                   summary={"profile": "tx", "params": {**asdict(params), "step": res["step"],
+                   summary={"profile": "tx", "params": {**params_info(params), "step": res["step"],
                                                         "lam_scale": res.get("lam_scale", 1.0),
                                                         "key_ratio": enc.key_ratio()},
                             "key_views": len(enc.structure_of(res)[0]),

@@ -153,7 +153,7 @@ def _maps_task(est: Estimator, m: int, d16m: np.ndarray) -> np.ndarray:
 
 
 def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, start: float = 4.0,
-                  side_lambda: float = 10.0, progress=None, runner=None):
+                  side_lambda: float = 10.0, progress=None, runner=None, ref_modes: bool = True):
     """One shared disparity map plus per-cell corrections and prediction modes.
 
     Returns:
@@ -165,6 +165,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     where its error drops by more than the bits that costs (about 6 each); the shared map takes
     its neighbours' median where that costs less than about 2 bits. ``runner``: where the cells'
     costs are computed (:class:`formats.parallel.Runner`; the maps do not depend on it).
+    ``ref_modes=False``: every block blends its references (mode 0; an ablation).
     """
     est = Estimator(luma, struct, list(struct.keys))
     n_maps = len(est.cells)
@@ -174,7 +175,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
         return np.zeros(nloc8, np.int64), z, z
     pen_mode = pen_delta = 6.0 * side_lambda
     pen = np.zeros((1, 1 + MAX_REFS, 1))
-    pen[0, 1:] = pen_mode
+    pen[0, 1:] = pen_mode if ref_modes else np.inf
 
     def best_mode(c):                       # (n_maps, modes, nloc8) → (n_maps, nloc8) cost with the best mode
         return (c + pen).min(axis=1)

@@ -331,3 +331,33 @@ def test_lambda_trim_spends_a_psnr_margin_between_quantizer_steps():
         return sum(len(b) for _, b in enc.pack(r)[1])
     assert size(trimmed) < size(res)
     assert T._trim_lambda(enc, res, ps - 0.5 * T.TRIM_DB, None, []) is res
+
+
+def test_ablate_switches_decode_the_closed_loop_and_are_recorded():
+    """Each lever ``tools/ablation_tx.py`` turns off gives a valid file: it decodes to the
+    encoder's closed loop, records what was turned off, and changes what the lever decides."""
+    from rlfc.txencode import ABLATE
+
+    lf = smooth_lf(rows=5, cols=5, h=24, w=32, seed=3)
+    noisy = lf.views.astype(np.int32) + np.random.default_rng(1).integers(-6, 7, lf.views.shape)
+    lf = make_lf(noisy.clip(0, 255).astype(np.uint8))
+    base = tx(lf, step=5.0)
+    assert "ablate" not in base.config["params"]                  # default files do not mention it
+    d0, _ = open_encoded(lf, base)
+    assert (d0.core.modes != 0).any()                             # single-reference modes are used here
+    for lever in ABLATE:
+        e = tx(lf, step=5.0, ablate=[lever])
+        assert e.config["params"]["ablate"] == [lever]
+        d, _ = open_encoded(lf, e)
+        assert (d.decode_all() == e.decoded).all(), lever
+        if lever == "ref_modes":
+            assert (d.core.modes == 0).all()
+    r = tx(lf, step=5.0, ablate=["rdoq"])
+    assert [s for n, s in r.sections if n == "tx.blocks"] != [s for n, s in base.sections if n == "tx.blocks"]
+
+
+@pytest.mark.parametrize("bad", ["rdoq", ["rdoq", "nope"], 3])
+def test_ablate_rejects_unknown_levers(bad):
+    with pytest.raises(LfcError, match="ablate"):
+        tx(smooth_lf(), step=6.0, ablate=bad)
+
