@@ -14,7 +14,7 @@ class Limits:
     """Attributes:
         max_views: views in a light field (rows × cols).
         max_view_pixels: pixels in one view (H × W).
-        max_open_pixels: pixels a decoder may decode when a file is opened (key views,
+        max_open_pixels: pixels a decoder may hold decoded for the life of a file (key views,
             summed over all of them).
         max_tree_height: levels of a key-view hierarchy.
         max_scene_pixels: pixels of all views of a scene read from files (views × H × W).

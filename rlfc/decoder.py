@@ -115,6 +115,7 @@ class RlfcDecoder(Decoder):
         self.file.container.check_unchanged()
         B, M = self.block_size, views.size
         out = np.empty((M, B, B, self.P if planes else self.channels), np.int32 if planes else self.dtype)
+        self.core.prepare(views, by)
         order = np.lexsort((bx, by, views))           # requests of one view together: shared references
         step = max(1, DECODE_CHUNK // (B * B))
 

@@ -683,7 +683,7 @@ class TxEncoder:
     def promote_views(self, res: dict, limits=None) -> list:
         """Code as JPEG 2000 every view that is not a key view whose transform coding is larger
         than JPEG 2000 at no more error (noise-dominated captures at high rates): it becomes an
-        intra key view (decoded when the file is opened, no stream, no map), appended to the key
+        intra key view (decoded whole when a request first needs it, no stream, no map), appended to the key
         order; nothing else changes (no view is predicted from it). Keeps the key views within
         the open-time pixel limit. Changes ``res`` in place; returns the views promoted."""
         from formats.limits import DEFAULT

@@ -66,6 +66,14 @@ class KeyAtlas:
         dst[...] = planes
         dst += 0.5
 
+    def set_rows(self, slot: int, rows: np.ndarray, b: int, planes: np.ndarray) -> None:
+        """Store block rows ``rows`` (n,) of ``b`` pixels of key view ``slot``: planes
+        (n, b, Wp, P) integers (plus 0.5, as :meth:`set`)."""
+        g, i = divmod(slot, self.per_group)
+        dst = self.groups[g][i * self.hp:(i + 1) * self.hp].reshape(self.hp // b, b, self.wp, self.P)
+        dst[rows] = planes
+        dst[rows] += 0.5
+
     def nbytes(self) -> int:
         return sum(g.nbytes for g in self.groups)
 

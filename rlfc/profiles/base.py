@@ -40,6 +40,11 @@ class ProfileDecoder(abc.ABC):
     def views(self, views: np.ndarray, level: int) -> np.ndarray:
         """(n,) validated view indices → (n, Hp, Wp, P) int32 planes."""
 
+    def prepare(self, views: np.ndarray, by: np.ndarray) -> None:
+        """Called once before a batch of validated requests is decoded in chunks (possibly on
+        several threads): a profile that decodes shared data on demand (the ``tx`` key-view
+        rows) does it here, in one pass, instead of once per chunk. Default: nothing."""
+
     def view_groups(self, views: np.ndarray) -> list:
         """How :meth:`views` is best called for many views (a list of index arrays); default: all
         at once (profiles that share work across views)."""

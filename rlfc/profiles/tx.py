@@ -22,7 +22,7 @@ from formats.errors import FormatError, UnsupportedError
 from ..kernels import dequantize
 from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
-from ..txpredict import TB, planar, predict_tbs, upsample_thumb
+from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict
@@ -33,9 +33,13 @@ from .base import Profile, ProfileDecoder
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
 PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their streams step together)
-ONE_BY_ONE = 64         # up to this many streams, parse_one per stream (measured faster than lanes below ~100)
+#: streams are parsed one by one (plain Python, ~1.5 µs per byte) rather than as numpy lanes
+#: stepping together (~85 µs per byte of the longest stream, whatever the number of lanes) while
+#: their bytes sum to less than this many times the longest one's (measured on the dense grids'
+#: key rows: one key's 19-27 rows parse 3-9× faster one by one)
+ONE_BY_ONE_RATIO = 48
 GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
-KEY_PARSE_TBS = 1 << 20  # tbs of key views parsed together at open (bounds the parsed coefficients held)
+KEY_PARSE_TBS = 1 << 20  # tbs of key-view rows parsed together (bounds the parsed coefficients held)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
 
 
@@ -133,33 +137,181 @@ class TxDecoder(ProfileDecoder):
         fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
         self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P)) \
             if fits else None
-        self._decode_keys(keys.tolist())
+        # key views are decoded by block rows when a request first needs them (lazy: opening a
+        # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
+        self._key_done = np.zeros((keys.size, self.nby), bool)
+        self._rows_ok = np.zeros((N0, self.nby), bool)            # (view, block row): its key rows are decoded
+        self._keys_all = keys.size == 0
+        self._key_lock = threading.RLock()
+        self._thumb_up: dict = {}
+        self._reach = self._reach_rows()
 
-    def _decode_keys(self, keys: list) -> None:
-        """Decode the key views once, in order (a key is predicted from keys before it). The
-        block rows of every transform-coded key are parsed together, in groups of at most
-        KEY_PARSE_TBS tbs: the rANS lanes step together, so the parse costs the longest row's
-        symbols, not their sum."""
-        coded = [k for k in keys if k not in self.img_of]
-        per_key = self.nby * self.nbx * self.nt
-        group = max(1, KEY_PARSE_TBS // per_key)
-        parsed = {}
-        for i, k in enumerate(keys):
-            if k in coded and k not in parsed:
-                todo = [c for c in coded if c not in parsed][:group]
-                parsed.update(zip(todo, self._parse_key_rows(todo)))
-            self._decode_key(k, parsed.pop(k, None))
+    # -- key views, by block rows, on demand ------------------------------------------------------
+    def _reach_rows(self) -> np.ndarray:
+        """(N0, nby) int64: how far (pixels, up or down) the prediction of a block row of each
+        view with references samples its key views: ⌈max |disparity·Δrow| / 16⌉ + 1 (bilinear's
+        second tap) over the block row's 8×8 blocks and the view's references; 0 for views
+        without references."""
+        lay = self.lay
+        out = np.zeros((self.n_views, self.nby), np.int64)
+        users = np.flatnonzero(lay.cell >= 0)
+        if users.size == 0 or self.disp.shape[0] == 0:
+            return out
+        dmax = np.abs(self.disp).reshape(-1, self.nby, self.tpb * self.nbx8).max(axis=2)      # (n_maps, nby)
+        refs = lay.refs[users]
+        dy = np.abs(lay.positions[users][:, None, 0] - lay.positions[refs.clip(0), 0])
+        dy = np.where(refs >= 0, dy, 0).max(axis=1)                                            # (U,)
+        out[users] = -(-(dmax[lay.cell[users]] * dy[:, None]) // (1 << DISP_BITS)) + 1
+        return out
 
-    def _parse_key_rows(self, keys: list) -> list:
-        """Parsed (nloc lanes of nt tbs) of each key's block rows."""
-        nloc, nby = self.nby * self.nbx, self.nby
-        rows = np.array([self.row_of[k] for k in keys], np.int64)
-        s0, e0 = self.key_start[rows].reshape(-1), self.key_end[rows].reshape(-1)
-        buf, s2, e2 = self._streams(s0, e0)
-        kind = np.repeat(self.lay.intra[keys].astype(np.int64), nby)
-        got = parse_lanes(buf, s2, e2, self.tables, self.nt * self.nbx, self.pcs, kind, np.ones(kind.size, np.int64),
-                          self.container.name)
-        return [p.reshape(nloc, self.nt) for p in got.split(np.arange(len(keys) + 1) * nby)]
+    def _row_span(self, views: np.ndarray, by: np.ndarray):
+        """(lo, hi) block rows of the key views that block rows ``by`` of views with references
+        sample (inclusive, clipped to the view)."""
+        B = self.block_size
+        r = self._reach[views, by]
+        return np.maximum(by * B - r, 0) // B, np.minimum((by + 1) * B - 1 + r, self.Hp - 1) // B
+
+    def _need_mask(self, views: np.ndarray, by: np.ndarray) -> np.ndarray:
+        """(n_keys, nby) bool: the key-view block rows that requests (views, block rows) read."""
+        nk, nby = self._key_done.shape
+        diff = np.zeros((nk, nby + 1), np.int64)
+        key = self.is_key[views]
+        if key.any():
+            s = self.key_slot[views[key]]
+            np.add.at(diff, (s, by[key]), 1)
+            np.add.at(diff, (s, by[key] + 1), -1)
+        if not key.all():
+            v, b = views[~key], by[~key]
+            refs = self.lay.refs[v]                                              # (M, 4)
+            lo, hi = self._row_span(v, b)
+            has = refs >= 0
+            s = self.key_slot[refs.clip(0)][has]
+            np.add.at(diff, (s, np.broadcast_to(lo[:, None], refs.shape)[has]), 1)
+            np.add.at(diff, (s, np.broadcast_to(hi[:, None] + 1, refs.shape)[has]), -1)
+        return np.cumsum(diff[:, :nby], axis=1) > 0
+
+    def _need_views(self, views: np.ndarray) -> np.ndarray:
+        """(n_keys, nby) bool: every block row of the key views that whole ``views`` read."""
+        need = np.zeros(self._key_done.shape, bool)
+        for v in np.unique(views).tolist():
+            if self.is_key[v]:
+                need[self.key_slot[v]] = True
+            else:
+                r = self.lay.refs[v]
+                need[self.key_slot[r[r >= 0]]] = True
+        return need
+
+    def _have_rows(self, views: np.ndarray, by: np.ndarray) -> None:
+        """Decode the key-view rows that requests (views, block rows) read, where not done yet."""
+        ok = self._rows_ok[views, by]
+        if not ok.all():
+            self._have_keys(self._need_mask(views[~ok], by[~ok]))
+            self._rows_ok[views, by] = True
+
+    def _have_keys(self, need: np.ndarray) -> None:
+        """Decode the key-view block rows of ``need`` (n_keys, nby) that are not decoded yet."""
+        if self._keys_all or not (need & ~self._key_done).any():
+            return
+        with self._key_lock:
+            self._decode_key_rows(need)
+
+    def decode_keys(self) -> None:
+        """Decode every key view now (what opening a file did before key views were decoded on
+        demand; the torch path and whole-view decodes of every view need them all)."""
+        if not self._keys_all:
+            self._have_keys(np.ones(self._key_done.shape, bool))
+
+    def _decode_key_rows(self, need: np.ndarray) -> None:
+        """Under the key lock: ``need``'s missing rows and the rows of other keys they are
+        predicted from, keys in coding order (a key is predicted from keys before it). Block rows
+        of transform-coded keys are parsed together, in groups of at most KEY_PARSE_TBS tbs (the
+        rANS lanes step together: a parse costs the longest row's symbols, not their sum)."""
+        lay, B, nby = self.lay, self.block_size, self.nby
+        keys = [int(k) for k in lay.keys]
+        need = need & ~self._key_done
+        for s in range(len(keys) - 1, -1, -1):          # rows of the references a needed row samples
+            k = keys[s]
+            if not need[s].any():
+                continue
+            if k in self.img_of:                         # JPEG 2000: the whole view at once
+                need[s] = ~self._key_done[s]
+                continue
+            if lay.intra[k]:
+                continue
+            rr = np.flatnonzero(need[s])
+            lo, hi = self._row_span(np.full(rr.size, k), rr)
+            refs = lay.refs[k]
+            for r in refs[refs >= 0].tolist():
+                t = self.key_slot[r]
+                diff = np.zeros(nby + 1, np.int64)
+                np.add.at(diff, lo, 1)
+                np.add.at(diff, hi + 1, -1)
+                need[t] |= (np.cumsum(diff[:nby]) > 0) & ~self._key_done[t]
+        pending = [s for s in range(len(keys)) if keys[s] not in self.img_of and need[s].any()]
+        group = max(1, KEY_PARSE_TBS // (self.nbx * self.nt))       # block rows per parse
+        parsed: dict = {}
+        pos = 0
+        for s in range(len(keys)):
+            rr = np.flatnonzero(need[s])
+            if rr.size == 0:
+                continue
+            k = keys[s]
+            if k in self.img_of:
+                self._decode_key_image(k)
+                continue
+            if s not in parsed:                            # parse the next keys' rows, about a group
+                chunk, n = [], 0
+                while pos < len(pending) and (not chunk or n + int(need[pending[pos]].sum()) <= group):
+                    t = pending[pos]
+                    chunk += [(t, r) for r in np.flatnonzero(need[t]).tolist()]
+                    n += int(need[t].sum())
+                    pos += 1
+                parsed.update(self._parse_key_rows(chunk))
+            p = parsed.pop(s)
+            locs = (rr[:, None] * self.nbx + np.arange(self.nbx)).reshape(-1)
+            pred = None
+            if lay.intra[k]:
+                up = self._thumb_up.get(k)
+                if up is None:
+                    th = (self.thumbs[self.thumb_of[k]] * lay.thumb_step16 + 8) >> 4
+                    up = self._thumb_up[k] = upsample_thumb(th, self.Hp, self.Wp).reshape(
+                        nby, self.tpb, TB, self.nbx, self.tpb, TB, self.P).transpose(0, 3, 1, 4, 2, 5, 6).reshape(
+                        nby * self.nbx, self.nt, TB, TB, self.P)
+                pred = up[locs]
+            blocks = self._reconstruct(np.full(locs.size, k), locs, 0, pred, p)
+            rows = blocks.reshape(rr.size, self.nbx, B, B, self.P).transpose(0, 2, 1, 3, 4).reshape(
+                rr.size, B, self.Wp, self.P)
+            self._set_key_rows(s, rr, rows)
+        if self._key_done.all():
+            self._keys_all = True
+            self._thumb_up.clear()
+
+    def _parse_key_rows(self, rows: list) -> dict:
+        """{key slot: Parsed (that key's rows × nbx lanes of nt tbs, rows ascending)} of the
+        block-row streams ``rows`` [(slot, row)], grouped by slot in ascending order."""
+        if not rows:
+            return {}
+        keys = self.lay.keys
+        sl = np.array([s for s, _ in rows], np.int64)
+        rw = np.array([r for _, r in rows], np.int64)
+        kk = np.asarray(keys, np.int64)[sl]
+        ci = np.array([self.row_of[int(k)] for k in kk], np.int64)
+        buf, s2, e2 = self._streams(self.key_start[ci, rw], self.key_end[ci, rw])
+        kind = self.lay.intra[kk].astype(np.int64)
+        got = self._parse_streams(buf, s2, e2, self.nt * self.nbx, kind, np.ones(kind.size, np.int64))
+        cut = np.flatnonzero(np.diff(sl)) + 1
+        bounds = np.concatenate([[0], cut, [sl.size]])
+        parts = got.split(bounds)
+        return {int(sl[a]): p.reshape((b - a) * self.nbx, self.nt) for p, a, b in zip(parts, bounds[:-1], bounds[1:])}
+
+    def _set_key_rows(self, slot: int, rows: np.ndarray, planes: np.ndarray) -> None:
+        """Store decoded block rows ``rows`` (n,) of key slot ``slot``: planes (n, B, Wp, P)."""
+        B = self.block_size
+        self.keyplanes[slot].reshape(self.nby, B, self.Wp, self.P)[rows] = planes
+        if self.atlas is not None:
+            self.atlas.set_rows(slot, rows, B, planes)
+        self._kp = None
+        self._key_done[slot, rows] = True
 
     # -- streams ----------------------------------------------------------------------------
     def _streams(self, starts: np.ndarray, ends: np.ndarray):
@@ -206,15 +358,10 @@ class TxDecoder(ProfileDecoder):
     def kp(self) -> np.ndarray:
         """(P, n_keys·Hp·Wp) planar key views (the gather layout of ``predict_tbs``), built on
         first use."""
+        self.decode_keys()
         if self._kp is None:
             self._kp = planar(self.keyplanes)
         return self._kp
-
-    def _set_key(self, slot: int, planes: np.ndarray) -> None:
-        self.keyplanes[slot] = planes
-        self._kp = None
-        if self.atlas is not None:
-            self.atlas.set(slot, planes)
 
     def _pred(self, views, ty, tx, xp=NUMPY, kp=None):
         """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
@@ -273,12 +420,17 @@ class TxDecoder(ProfileDecoder):
         buf, s2, e2 = self._streams(s, e)
         kind = self.lay.intra[views].astype(np.int64)
         key = self.is_key[views].astype(np.int64)
-        name = self.container.name
-        if views.size <= ONE_BY_ONE:             # few streams: the scalar parser is faster than lanes
-            got = [parse_one(bytes(buf[a:b]), self.tables, self.nt, self.pcs, int(k), int(y))
+        return self._parse_streams(buf, s2, e2, self.nt, kind, key)
+
+    def _parse_streams(self, buf, s2, e2, nt: int, kind, key):
+        """Parsed of streams ``buf[s2[i]:e2[i]]`` of ``nt`` tbs each (one lane per stream): one
+        by one or as lanes, whichever :data:`ONE_BY_ONE_RATIO` says is faster."""
+        n = e2 - s2
+        if n.size and int(n.sum()) < ONE_BY_ONE_RATIO * max(int(n.max()), 1):
+            got = [parse_one(bytes(buf[a:b]), self.tables, nt, self.pcs, int(k), int(y))
                    for a, b, k, y in zip(s2.tolist(), e2.tolist(), kind.tolist(), key.tolist())]
             return got[0] if len(got) == 1 else concat_parsed(got)
-        return parse_lanes(buf, s2, e2, self.tables, self.nt, self.pcs, kind, key, name)
+        return parse_lanes(buf, s2, e2, self.tables, nt, self.pcs, kind, key, self.container.name)
 
     def _reconstruct(self, views, locs, level, pred=None, parsed=None):
         """(M, B, B, P) int32 planes of block requests (views with references, or ``pred`` given
@@ -334,38 +486,22 @@ class TxDecoder(ProfileDecoder):
             pred[tbi] = self._add_residual(pred[tbi], self._residual(vs, parsed), parsed.modes)
         return pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
 
-    def _decode_key(self, k: int, parsed=None) -> None:
-        """Decode key view ``k``: its JPEG 2000 image, or its blocks (``parsed``: its rows'
-        syntax from :meth:`_parse_key_rows`)."""
-        slot = int(self.key_slot[k])
-        if k in self.img_of:                                  # a JPEG 2000 intra key view
-            from formats.pixels import to_planes
+    def _decode_key_image(self, k: int) -> None:
+        """Decode JPEG 2000 intra key view ``k`` (all its rows)."""
+        from formats.pixels import to_planes
 
-            from ..topcodec import decode_image
+        from ..topcodec import decode_image
 
-            a, b = self.img_of[k]
-            img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)),
-                               (self.Hp, self.Wp, self.P), self.dtype)
-            self._set_key(slot, to_planes(img))
-            return
-        nloc = self.nby * self.nbx
-        locs = np.arange(nloc)
-        views = np.full(nloc, k)
-        pred = None
-        if self.lay.intra[k]:
-            th = self.thumbs[self.thumb_of[k]] * self.lay.thumb_step16
-            th = (th + 8) >> 4
-            up = upsample_thumb(th, self.Hp, self.Wp)
-            pred = up.reshape(self.nby, self.tpb, TB, self.nbx, self.tpb, TB, self.P).transpose(
-                0, 3, 1, 4, 2, 5, 6).reshape(nloc, self.nt, TB, TB, self.P)
-        if parsed is None:
-            parsed = self._parse_key_rows([k])[0]
-        blocks = self._reconstruct(views, locs, 0, pred, parsed)
-        img = blocks.reshape(self.nby, self.nbx, self.block_size, self.block_size, self.P).transpose(0, 2, 1, 3, 4)
-        self._set_key(slot, img.reshape(self.Hp, self.Wp, self.P))
+        a, b = self.img_of[k]
+        img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)), (self.Hp, self.Wp, self.P), self.dtype)
+        B = self.block_size
+        self._set_key_rows(int(self.key_slot[k]), np.arange(self.nby),
+                           to_planes(img).reshape(self.nby, B, self.Wp, self.P))
 
     # -- ProfileDecoder ---------------------------------------------------------------------
     def _key_blocks(self, views, by, bx):
+        if not self._keys_all:
+            self._have_rows(views, by)
         B = self.block_size
         ys = by[:, None] * B + np.arange(B)
         xs = bx[:, None] * B + np.arange(B)
@@ -378,6 +514,8 @@ class TxDecoder(ProfileDecoder):
             out[key] = self._key_blocks(views[key], by[key], bx[key])
         nk = np.flatnonzero(~key)
         if nk.size:
+            if not self._keys_all:
+                self._have_rows(views[nk], by[nk])
             order = nk[np.lexsort((bx[nk], by[nk], views[nk]))]          # by view, then raster: shared
             step = max(1, PARSE_TBS // self.nt)                         # references stay in cache
             for a in range(0, order.size, step):
@@ -402,6 +540,9 @@ class TxDecoder(ProfileDecoder):
         """One request, lean: the prediction of the block's nt tbs from every reference at once
         (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
         B, P, tpb = self.block_size, self.P, self.tpb
+        if not self._keys_all and not self._rows_ok[view, by]:
+            self._have_keys(self._need_mask(np.array([view]), np.array([by])))
+            self._rows_ok[view, by] = True
         if self.is_key[view]:
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
@@ -431,6 +572,8 @@ class TxDecoder(ProfileDecoder):
         """Whole views; the coded blocks of all of them parsed together (the rANS lanes step
         together: one parse costs about the longest stream, so many views share it)."""
         out = np.empty((views.size, self.Hp, self.Wp, self.P), np.int32)
+        if not self._keys_all:
+            self._have_keys(self._need_views(views))
         pv = [int(v) for v in views.tolist() if not self.is_key[v]]
         parsed = {}
         if level == 0 and len(pv) > 1:
@@ -446,9 +589,16 @@ class TxDecoder(ProfileDecoder):
             out[i] = self._view_planes(v, level, parsed.get(v))
         return out
 
+    def prepare(self, views, by):
+        if not self._keys_all:
+            self._have_rows(views, by)
+
     def view_groups(self, views: np.ndarray) -> list:
         """Views in groups whose coded blocks are parsed together (about PARSE_TBS tbs, at most
-        GROUP_PIXELS pixels each: the group's int32 planes are held at once)."""
+        GROUP_PIXELS pixels each: the group's int32 planes are held at once); the key-view rows
+        every group reads are decoded first, in one pass."""
+        if not self._keys_all:
+            self._have_keys(self._need_views(views))
         cost = self.coded[views].sum(axis=1) * self.nt + 1
         most = max(1, GROUP_PIXELS // (self.Hp * self.Wp))
         groups, cur, acc = [], [], 0
@@ -478,6 +628,8 @@ class TorchTx:
 
     def __init__(self, dec: TxDecoder, device):
         from ..xp import torch_backend
+
+        dec.decode_keys()                      # the device holds every key view
 
         self.d = dec
         self.xp = torch_backend(device)

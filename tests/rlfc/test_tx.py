@@ -361,3 +361,96 @@ def test_ablate_rejects_unknown_levers(bad):
     with pytest.raises(LfcError, match="ablate"):
         tx(smooth_lf(), step=6.0, ablate=bad)
 
+
+def _tall_parallax_lf(c=3, dtype=np.uint8, dy=5):
+    """5×5 views of 88×40 px (6 block rows of 16) whose content moves ``dy`` px down and 1 px
+    right per view step: the prediction of a block row samples key rows above and below it."""
+    rng = np.random.default_rng(7)
+    peak = np.iinfo(dtype).max
+    H, W = 88, 40
+    base = rng.random((H + 4 * dy + 8, W + 12, c))
+    for ax in (0, 1):
+        base = np.apply_along_axis(lambda m: np.convolve(m, np.ones(3) / 3, mode="same"), ax, base)
+    base = (base - base.min()) / np.ptp(base)
+    views = np.zeros((5, 5, H, W, c), dtype)
+    for r in range(5):
+        for q in range(5):
+            views[r, q] = np.rint(base[r * dy:r * dy + H, q:q + W] * peak)
+    return make_lf(views)
+
+
+@pytest.mark.parametrize("kw", [dict(intra_codec="tx"), dict(intra_codec="j2k"), dict(intra_codec="tx", c=4),
+                                dict(intra_codec="tx", dtype=np.uint16), dict(intra_codec="tx", c=1)])
+def test_key_views_are_decoded_by_rows_on_demand(kw, rng):
+    """Opening a file decodes no key view; a request decodes the key-view block rows it needs
+    (and the rows those are predicted from), and every request order gives the pixels of a
+    decoder that decoded everything first: single blocks, batches, threads, whole views."""
+    import rlfc.decoder as rdec
+
+    kw = dict(kw)
+    lf = _tall_parallax_lf(kw.pop("c", 3), kw.pop("dtype", np.uint8))
+    step = 4.0 * (257 if lf.views.dtype == np.uint16 else 1)
+    e = tx(lf, step=step, key_spacing=2, **kw)
+    ref, blob = open_encoded(lf, e)
+    full = ref.decode_all()
+    assert (full == e.decoded).all() and ref.core._keys_all
+    core = RlfcDecoder(open_lfc(blob)).core
+    assert not core._key_done.any() and (core.lay.refs[list(core.lay.keys)] >= 0).any()   # predicted keys too
+    assert (core._reach.max() > 1) and core.nby == 6
+    assert bool(core.img_of) == (kw.get("intra_codec") == "j2k")          # a JPEG 2000 key is decoded whole
+    B = ref.block_size
+    nv, nby, nbx = lf.rows * lf.cols, ref.nby, ref.nbx
+    # one block of a view that is not a key: only some key rows get decoded
+    d = RlfcDecoder(open_lfc(blob))
+    v = int(np.flatnonzero(~d.core.is_key)[-1])
+    r, q = divmod(v, lf.cols)
+    assert (d.decode_block(r, q, 2, 1) == full[r, q, 2 * B:3 * B, B:2 * B]).all()
+    assert 0 < d.core._key_done.sum() < d.core._key_done.size
+    for seed in range(4):                  # random single blocks, then batches, on fresh decoders
+        d = RlfcDecoder(open_lfc(blob))
+        g = np.random.default_rng(seed)
+        for _ in range(12):
+            v, by, bx = int(g.integers(nv)), int(g.integers(nby)), int(g.integers(nbx))
+            r, q = divmod(v, lf.cols)
+            got = d.decode_block(r, q, by, bx)
+            assert (got == full[r, q, by * B:(by + 1) * B, bx * B:(bx + 1) * B]).all(), (seed, v, by, bx)
+        vs, bys, bxs = g.integers(0, nv, 40), g.integers(0, nby, 40), g.integers(0, nbx, 40)
+        old = rdec.DECODE_CHUNK
+        try:
+            rdec.DECODE_CHUNK = B * B * 3
+            blocks = d.decode_blocks(vs, bys, bxs, threads=2)
+        finally:
+            rdec.DECODE_CHUNK = old
+        for i in range(40):
+            r, q = divmod(int(vs[i]), lf.cols)
+            ref_b = full[r, q, bys[i] * B:(bys[i] + 1) * B, bxs[i] * B:(bxs[i] + 1) * B]
+            assert (blocks[i][:ref_b.shape[0], :ref_b.shape[1]] == ref_b).all()
+        assert (d.decode_view(4, 3) == full[4, 3]).all()
+    d = RlfcDecoder(open_lfc(blob))
+    assert (TorchBlockDecoder(d, "cpu").decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
+
+
+def test_a_block_request_reads_only_the_key_rows_it_needs():
+    """The first block of a view asks the file for the key-view rows it samples (and their
+    references' rows), not the key views' whole streams; the rest are read when needed."""
+    lf = _tall_parallax_lf(dy=1)
+    e = tx(lf, step=3.0, key_spacing=2, intra_codec="tx")
+    _, blob = open_encoded(lf, e)
+    d = RlfcDecoder(open_lfc(blob))
+    core = d.core
+    asked = []
+    real = core._streams
+
+    def spy(s, e_):
+        asked.append(int((e_ - s).sum()))
+        return real(s, e_)
+
+    core._streams = spy
+    key_bytes = int((core.key_end - core.key_start).sum())
+    d.decode_block(0, 1, 0, 0)
+    assert 0 < core._key_done.sum() < core._key_done.size
+    first = sum(asked)
+    assert 0 < first < key_bytes, (asked, key_bytes)
+    asked.clear()
+    d.decode_views(np.flatnonzero(core.is_key))             # the other rows, each read once
+    assert core._keys_all and first + sum(asked) == key_bytes
