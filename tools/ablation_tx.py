@@ -23,7 +23,10 @@ decode cost of that file on this machine (median ``decode_block`` µs over 300 r
    views that cost less alone become JPEG 2000 keys.
 8. ``+ λ trim`` (the shipped default).
 
-Then variants of row 8: random-access blocks of 8 and 32 pixels, key spacing 2 and 4.
+Then variants of row 8: random-access blocks of 8 and 32 pixels, key spacing 2 and 4; and rows
+13–19, leave one out: the default with one lever off (disparity, single-reference modes, RDO
+quantization, intra 8×8 blocks, the key step ratio, JPEG 2000, the λ trim), which says what each
+lever buys in the shipped mix rather than in the order the rows above add them.
 Rows are appended to ``DIR/ablation_tx.jsonl`` as they finish (one line per scene and row);
 ``DIR/ablation_tx.md`` is rewritten from it after each scene.
 """
@@ -66,6 +69,14 @@ ROWS = [
     ("default, 32x32 random-access blocks", {"block_size": 32}),
     ("default, key spacing 2", {"key_spacing": 2}),
     ("default, key spacing 4", {"key_spacing": 4}),
+    # leave one out: the default with one lever off (what each lever buys in the shipped mix)
+    ("default without disparity", {"max_disparity": 0.0}),
+    ("default without single-reference modes", {"ablate": ["ref_modes"]}),
+    ("default without RDO quantization", {"ablate": ["rdoq"]}),
+    ("default without intra 8x8 blocks", {"ablate": ["intra_tbs"]}),
+    ("default without key step ratio (1)", {"key_ratio": 1.0}),
+    ("default without JPEG 2000 (transform keys, no view alone)", {"intra_codec": "tx"}),
+    ("default without lambda trim", {"ablate": ["lambda_trim"]}),
 ]
 
 
