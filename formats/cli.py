@@ -118,7 +118,14 @@ def cmd_info(a) -> int:
         }
         if all(isinstance(scene.get(k), int) and scene[k] > 0 for k in ("rows", "cols", "height", "width")):
             out["bpp"] = 8.0 * c.size / (scene["rows"] * scene["cols"] * scene["height"] * scene["width"])
-        out["decoder"] = open_decoder(f).info()
+        try:
+            out["decoder"] = open_decoder(f).info()
+        except TruncatedError as e:
+            if not a.partial:
+                raise
+            # a prefix the codec cannot open (an RLFC file needs every section): the sections
+            # above are still what the prefix holds
+            out["decoder"] = {"summary": f"this prefix does not open as a light field: {e}", "decodable": False}
     if a.json:
         print(json.dumps(out, indent=1, allow_nan=False))
         return 0

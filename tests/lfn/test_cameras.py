@@ -160,3 +160,21 @@ def test_cli_lfn_options_on_rlfc_files_and_prefix_without_partial(tmp_path, caps
     assert "--pose FILE" in capsys.readouterr().err
     assert main(["info", str(pre), "--partial"]) == 0
     assert "in this prefix" in capsys.readouterr().out
+
+
+def test_cli_info_partial_lists_the_sections_of_an_rlfc_prefix(tmp_path, capsys):
+    """An RLFC file needs every section to open: ``info --partial`` on a prefix still lists what
+    the prefix holds and says it does not open; without ``--partial`` it is a one-line error."""
+    from formats.cli import main
+
+    blob = (ROOT / "tests" / "data" / "golden" / "rlfc_tx2_lossy_rgb8.lfc").read_bytes()
+    pre = tmp_path / "prefix.lfc"
+    pre.write_bytes(blob[:len(blob) - 200])
+    assert main(["info", str(pre), "--partial"]) == 0
+    out = capsys.readouterr().out
+    assert "does not open as a light field" in out and "tx.blocks" in out and "in this prefix" in out
+    assert main(["info", str(pre), "--partial", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["decoder"]["decodable"] is False
+    assert main(["info", str(pre)]) == 2
+    err = capsys.readouterr().err
+    assert "--partial" in err and err.count("\n") == 1
