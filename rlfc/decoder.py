@@ -185,6 +185,13 @@ class RlfcDecoder(Decoder):
         self._run(run, range(len(groups)), threads)
         return out
 
+    def decode_keys(self) -> None:
+        """Decode every key view now. ``tx`` files decode key views by block rows when a
+        request first needs them (opening is fast, a first block needs about a fifth of them);
+        a renderer about to sweep the whole light field can pay the whole decode once, up front,
+        instead of in pieces over its first frames. Other profiles decode them at open."""
+        getattr(self.core, "decode_keys", lambda: None)()
+
     def decode_view(self, row: int, col: int, level: int = 0) -> np.ndarray:
         """One view: (H, W, C) pixels."""
         return self.decode_views([self.view_index(row, col)], level)[0]

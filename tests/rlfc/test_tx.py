@@ -428,6 +428,10 @@ def test_key_views_are_decoded_by_rows_on_demand(kw, rng):
         assert (d.decode_view(4, 3) == full[4, 3]).all()
     d = RlfcDecoder(open_lfc(blob))
     assert (TorchBlockDecoder(d, "cpu").decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
+    d = RlfcDecoder(open_lfc(blob))
+    d.decode_keys()                                    # every key view up front, on request
+    assert d.core._keys_all and d.core._key_done.all()
+    assert (d.decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
 
 
 def test_a_block_request_reads_only_the_key_rows_it_needs():
