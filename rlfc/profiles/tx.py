@@ -171,24 +171,25 @@ class TxDecoder(ProfileDecoder):
         r = self._reach[views, by]
         return np.maximum(by * B - r, 0) // B, np.minimum((by + 1) * B - 1 + r, self.Hp - 1) // B
 
-    def _need_mask(self, views: np.ndarray, by: np.ndarray) -> np.ndarray:
-        """(n_keys, nby) bool: the key-view block rows that requests (views, block rows) read."""
+    def _spans(self, slots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+        """(n_keys, nby) bool: block rows lo..hi (inclusive) of key slots ``slots`` (all (n,))."""
         nk, nby = self._key_done.shape
         diff = np.zeros((nk, nby + 1), np.int64)
-        key = self.is_key[views]
-        if key.any():
-            s = self.key_slot[views[key]]
-            np.add.at(diff, (s, by[key]), 1)
-            np.add.at(diff, (s, by[key] + 1), -1)
-        if not key.all():
-            v, b = views[~key], by[~key]
-            refs = self.lay.refs[v]                                              # (M, 4)
-            lo, hi = self._row_span(v, b)
-            has = refs >= 0
-            s = self.key_slot[refs.clip(0)][has]
-            np.add.at(diff, (s, np.broadcast_to(lo[:, None], refs.shape)[has]), 1)
-            np.add.at(diff, (s, np.broadcast_to(hi[:, None] + 1, refs.shape)[has]), -1)
+        np.add.at(diff, (slots, lo), 1)
+        np.add.at(diff, (slots, hi + 1), -1)
         return np.cumsum(diff[:, :nby], axis=1) > 0
+
+    def _need_mask(self, views: np.ndarray, by: np.ndarray) -> np.ndarray:
+        """(n_keys, nby) bool: the key-view block rows that requests (views, block rows) read:
+        a key view its own row, any other view its references' rows around it."""
+        key = self.is_key[views]
+        v, b = views[~key], by[~key]
+        refs = self.lay.refs[v]                                                  # (M, 4)
+        lo, hi = self._row_span(v, b)
+        has = refs >= 0
+        return self._spans(np.concatenate([self.key_slot[views[key]], self.key_slot[refs.clip(0)][has]]),
+                           np.concatenate([by[key], np.broadcast_to(lo[:, None], refs.shape)[has]]),
+                           np.concatenate([by[key], np.broadcast_to(hi[:, None], refs.shape)[has]]))
 
     def _need_views(self, views: np.ndarray) -> np.ndarray:
         """(n_keys, nby) bool: every block row of the key views that whole ``views`` read."""
@@ -224,8 +225,8 @@ class TxDecoder(ProfileDecoder):
     def _decode_key_rows(self, need: np.ndarray) -> None:
         """Under the key lock: ``need``'s missing rows and the rows of other keys they are
         predicted from, keys in coding order (a key is predicted from keys before it). Block rows
-        of transform-coded keys are parsed together, in groups of at most KEY_PARSE_TBS tbs (the
-        rANS lanes step together: a parse costs the longest row's symbols, not their sum)."""
+        of transform-coded keys are parsed together (:meth:`_parse_streams`), in groups of about
+        KEY_PARSE_TBS tbs (whole keys)."""
         lay, B, nby = self.lay, self.block_size, self.nby
         keys = [int(k) for k in lay.keys]
         need = need & ~self._key_done
@@ -241,12 +242,8 @@ class TxDecoder(ProfileDecoder):
             rr = np.flatnonzero(need[s])
             lo, hi = self._row_span(np.full(rr.size, k), rr)
             refs = lay.refs[k]
-            for r in refs[refs >= 0].tolist():
-                t = self.key_slot[r]
-                diff = np.zeros(nby + 1, np.int64)
-                np.add.at(diff, lo, 1)
-                np.add.at(diff, hi + 1, -1)
-                need[t] |= (np.cumsum(diff[:nby]) > 0) & ~self._key_done[t]
+            t = self.key_slot[refs[refs >= 0]]
+            need |= self._spans(np.repeat(t, rr.size), np.tile(lo, t.size), np.tile(hi, t.size)) & ~self._key_done
         pending = [s for s in range(len(keys)) if keys[s] not in self.img_of and need[s].any()]
         group = max(1, KEY_PARSE_TBS // (self.nbx * self.nt))       # block rows per parse
         parsed: dict = {}
@@ -500,8 +497,6 @@ class TxDecoder(ProfileDecoder):
 
     # -- ProfileDecoder ---------------------------------------------------------------------
     def _key_blocks(self, views, by, bx):
-        if not self._keys_all:
-            self._have_rows(views, by)
         B = self.block_size
         ys = by[:, None] * B + np.arange(B)
         xs = bx[:, None] * B + np.arange(B)
@@ -509,13 +504,13 @@ class TxDecoder(ProfileDecoder):
 
     def blocks(self, views, by, bx, level):
         out = np.empty((views.size, self.block_size, self.block_size, self.P), np.int32)
+        if not self._keys_all:                       # every key-view row the call reads, in one pass
+            self._have_rows(views, by)
         key = self.is_key[views]
         if key.any():
             out[key] = self._key_blocks(views[key], by[key], bx[key])
         nk = np.flatnonzero(~key)
         if nk.size:
-            if not self._keys_all:
-                self._have_rows(views[nk], by[nk])
             order = nk[np.lexsort((bx[nk], by[nk], views[nk]))]          # by view, then raster: shared
             step = max(1, PARSE_TBS // self.nt)                         # references stay in cache
             for a in range(0, order.size, step):
@@ -540,9 +535,8 @@ class TxDecoder(ProfileDecoder):
         """One request, lean: the prediction of the block's nt tbs from every reference at once
         (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
         B, P, tpb = self.block_size, self.P, self.tpb
-        if not self._keys_all and not self._rows_ok[view, by]:
-            self._have_keys(self._need_mask(np.array([view]), np.array([by])))
-            self._rows_ok[view, by] = True
+        if not self._keys_all and not self._rows_ok[view, by]:       # (a scalar check: this path is lean)
+            self._have_rows(np.array([view]), np.array([by]))
         if self.is_key[view]:
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
