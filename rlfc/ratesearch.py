@@ -29,7 +29,8 @@ class SearchResult:
 def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, target: float, *,
                   feasible_above: bool, slope0: float, lo: float, hi: float, tol: float,
                   min_width: float = 1 / 64, max_evals: int = 14,
-                  prefer: Callable[[float, Any, float, Any], bool] | None = None) -> SearchResult:
+                  prefer: Callable[[float, Any, float, Any], bool] | None = None,
+                  snap: Callable[[float], float] | None = None) -> SearchResult:
     """Search q in [lo, hi] for ``evaluate(q) = (value, result)``, value decreasing in q.
 
     Args:
@@ -41,6 +42,11 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
         tol: a feasible point with |value - target| <= tol ends the search.
         prefer: prefer(q_new, result_new, q_old, result_old) among feasible points (default:
             the larger q for a floor, the smaller for a ceiling).
+        snap: where q is quantized (the coder's step grid: 1/16 units), the grid point that
+            codes like q; every point evaluated is snapped, none twice: where the secant lands
+            on a point already evaluated, the bracket's middle grid point is taken, or without
+            a bracket the next grid point in the secant's direction, and the search ends when
+            the bracket has no grid point inside.
     """
     if not slope0 < 0:
         raise ValueError("slope0 must be negative")
@@ -51,7 +57,22 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
     best = None                        # (q, result) preferred feasible
     closest = None                     # (|value - target|, q, result) when nothing is feasible
     width_before = [float("inf"), float("inf")]
-    q = min(max(q0, lo), hi)
+    snap = snap or (lambda q: q)
+
+    def seen(q):
+        return any(abs(q - p[0]) < 1e-9 for p in pts)
+
+    def grid_step(q, direction):
+        """The next grid point from q in ``direction`` (±1), or q at a bound."""
+        u = 1 / 1024
+        while u < 1:
+            qn = snap(min(max(q + direction * u, lo), hi))
+            if abs(qn - q) > 1e-9:
+                return qn
+            u *= 2
+        return q
+
+    q = snap(min(max(q0, lo), hi))
     for _ in range(max_evals):
         v, r = evaluate(q)
         pts.append((q, v))
@@ -84,9 +105,20 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
             width_before = [width, width_before[0]]
             if not a < qn < b or stalled:
                 qn = (a + b) / 2
-        qn = min(max(qn, lo), hi)
-        if any(abs(qn - p[0]) < 1e-6 for p in pts):       # nothing new to learn (at a bound)
-            break
+        raw = min(max(qn, lo), hi)
+        qn = snap(raw)
+        if seen(qn):                                       # the grid point is known already
+            if good is not None and bad is not None:
+                a, b = sorted((good, bad))
+                qn = snap((a + b) / 2)
+                if not a + 1e-9 < qn < b - 1e-9 or seen(qn):
+                    qn = grid_step(a, 1)                   # the bracket's first inner point
+                    if not qn < b - 1e-9 or seen(qn):
+                        break                              # no grid point inside the bracket
+            else:
+                qn = grid_step(near[0][0], 1 if raw >= near[0][0] else -1)
+                if seen(qn):
+                    break                                  # nothing new to learn (at a bound)
         q = qn
     if best is not None:
         return SearchResult(True, best[0], best[1], pts)

@@ -25,7 +25,7 @@ from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
 from .kernels import dequantize
-from .transform import COEF_MAX, UNZIG, ZIGZAG, forward, inverse
+from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
@@ -337,6 +337,15 @@ class TxEncoder:
         out[:, self.bypass] = 16
         return out
 
+    def grid_step(self, step: float) -> float:
+        """The step that codes like ``step`` and lies on the grid of the other views' luma step
+        (1/16 units; :meth:`steps16` of both are equal): rate control searches this grid."""
+        if self.p.lossless:
+            return step
+        wp0 = float(self.w[0]) if self.w[0] > 0 else 1.0
+        s16 = max(16.0, float(np.rint(step / math.sqrt(wp0) * 16)))
+        return s16 / 16 * math.sqrt(wp0)
+
     # -- prediction ------------------------------------------------------------------------
     def key_source(self, keyplanes: np.ndarray):
         """What :meth:`predict_view` samples, for a pass whose key views are not decoded yet
@@ -387,7 +396,12 @@ class TxEncoder:
 
     def _quantize(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
         """RDO quantization of tbs' residuals r (T, 8, 8, P) → (levels (T, P, 64) scan order,
-        cost J (T,), distortion-if-skipped D0 (T,), must_code (T,) bool, model bits R (T,))."""
+        cost J (T,), distortion-if-skipped D0 (T,), must_code (T,) bool, model bits R (T,)).
+
+        Per coefficient the candidates are round-to-nearest, one less, and 0 (cost
+        w·error² + λ·bits); per tb the last coded position is the argmin of the cumulative
+        cost (coded below it, dropped above). Tbs none of whose coefficients round away from 0
+        skip the search (its result is known: nothing coded)."""
         T = r.shape[0]
         P = self.P
         levels = np.zeros((T, P, 64), np.int64)
@@ -395,72 +409,90 @@ class TxEncoder:
         D0 = np.zeros(T)
         must = np.zeros(T, bool)
         Rb = np.zeros(T)
+        tr = np.flatnonzero(~self.bypass)
+        if tr.size:                 # the analysis of every transformed plane: one GEMM, scan order out
+            rt = r.reshape(T, 64, P)[:, :, tr].transpose(0, 2, 1).reshape(-1, 64).astype(np.float64)
+            Xall = (rt @ _FWD_SCAN).reshape(T, tr.size, 64)
+        pos = np.arange(64)
         for p in range(P):
             pc = int(self.pcs[p])
-            rp = r[..., p].astype(np.float64)
             if self.bypass[p]:                                   # exact: levels are the residual samples
+                rp = r[..., p].astype(np.float64)
                 lv = np.rint(rp.reshape(T, 64) * 16 / step16[p]).astype(np.int64)
                 levels[:, p] = lv
                 nz = lv != 0
                 must |= nz.any(axis=1)
                 last = np.where(nz.any(1), 64 - np.argmax(nz[:, ::-1], axis=1), 0)
                 bits = _level_bits(model, np.abs(lv), pc, key)
-                inside = np.arange(64)[None, :] < last[:, None]
+                inside = pos[None, :] < last[:, None]
                 rb = (bits * inside).sum(1) + model.last[pc, mode_cls, key, last]
                 J += lam * rb
                 Rb += rb
                 continue
             wgt = self.w[p]
-            X = forward(rp).reshape(T, 64)[:, ZIGZAG]            # scan order
-            D0 += wgt * (X ** 2).sum(1)
+            X = Xall[:, int(np.searchsorted(tr, p))]
+            X2 = X * X
+            e = X2.sum(1)
+            D0 += wgt * e
             if wgt == 0:
                 continue
             d = step16[p] / 16.0
             lastb = model.last[pc, mode_cls, key]
             # tbs whose every coefficient rounds to 0 code nothing: J = their error + the bits of
             # "last = 0" (exactly what the search below finds for them), so only the rest search
-            act = np.flatnonzero(np.abs(X).max(1) >= 0.5 * d)
+            ax = np.abs(X)
+            act = np.flatnonzero(ax.max(1) >= 0.5 * d)
             idle = np.ones(T, bool)
             idle[act] = False
-            J[idle] += wgt * (X[idle] ** 2).sum(1) + lam * lastb[0]
+            J[idle] += wgt * e[idle] + lam * lastb[0]
             Rb[idle] += lastb[0]
             if act.size == 0:
                 continue
-            X = X[act]
             Ta = act.size
-            ax = np.abs(X)
+            ax = ax[act]
+            dz = wgt * X2[act]                                    # cost past the last position (not coded)
             ln = np.floor(ax / d + 0.5).astype(np.int64)
             lo = np.maximum(ln - 1, 0)
-            zero_bits = model.pos_bits(pc, key)[np.arange(64) * 16]
-            j_ln = wgt * (ax - ln * d) ** 2 + lam * _level_bits(model, ln, pc, key)
-            j_lo = wgt * (ax - lo * d) ** 2 + lam * _level_bits(model, lo, pc, key)
-            j_0 = wgt * ax ** 2 + lam * zero_bits[None, :]
-            use_lo = j_lo < j_ln
-            z = j_0 <= np.where(use_lo, j_lo, j_ln)
+            zero_bits = model.pos_bits(pc, key)[pos * 16]
+            b_ln = _level_bits(model, ln, pc, key)
+            b_lo = _level_bits(model, lo, pc, key)
+            j_ln = wgt * (ax - ln * d) ** 2 + lam * b_ln
+            j_lo = wgt * (ax - lo * d) ** 2 + lam * b_lo
+            j_0 = dz + lam * zero_bits[None, :]                   # cost as a coded zero
+            jmin = np.minimum(j_lo, j_ln)
             if "rdoq" in self.p.ablate:                           # plain rounding (ablation)
-                use_lo, z = np.zeros_like(use_lo), ln == 0
-            lv = np.where(use_lo, lo, ln)
-            jc = np.where(use_lo, j_lo, j_ln)
-            lv = np.where(z, 0, lv)
-            jc = np.where(z, j_0, jc)                             # cost of each coefficient as chosen
-            jz = j_0                                              # cost as a coded zero
-            dz = wgt * X ** 2                                     # cost past the last position (not coded)
-            # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} jc' + Σ_{i>=L} dz + λ·bits(L)
-            jkeep = np.where(lv > 0, jc, jz)
-            c1 = np.concatenate([np.zeros((Ta, 1)), np.cumsum(jkeep, axis=1)], axis=1)          # (Ta, 65)
-            c0 = np.concatenate([np.cumsum(dz[:, ::-1], axis=1)[:, ::-1], np.zeros((Ta, 1))], axis=1)
-            JL = c1 + c0 + lam * lastb[None, :]
-            valid = np.concatenate([np.ones((Ta, 1), bool), lv > 0], axis=1)                     # L-1 nonzero
-            JL = np.where(valid, JL, np.inf)
+                use_lo, z = np.zeros_like(ln, bool), ln == 0
+                jc = np.where(z, j_0, j_ln)
+            else:
+                use_lo = j_lo < j_ln
+                z = j_0 <= jmin
+                # the cost of each coefficient as chosen (a level of 0 costs exactly j_0 whichever
+                # way it was reached: lo = 0 gives j_lo = j_0)
+                jc = np.minimum(j_0, jmin)
+            lv = (ln - use_lo) * ~z
+            # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} jc + Σ_{i>=L} dz + λ·bits(L)
+            c1 = np.empty((Ta, 65))
+            c1[:, 0] = 0.0
+            np.cumsum(jc, axis=1, out=c1[:, 1:])
+            c0r = np.empty((Ta, 65))
+            c0r[:, 0] = 0.0
+            np.cumsum(dz[:, ::-1], axis=1, out=c0r[:, 1:])
+            JL = c1
+            JL += c0r[:, ::-1]
+            JL += lam * lastb[None, :]
+            zero = lv == 0
+            JL[:, 1:] += np.where(zero, np.inf, 0.0)              # L-1 must be nonzero
             if "rdoq" in self.p.ablate:                           # the last nonzero, whatever it costs
                 L = np.where(lv.any(1), 64 - np.argmax(lv[:, ::-1] > 0, axis=1), 0)
             else:
                 L = JL.argmin(1)
-            lv = np.where(np.arange(64)[None, :] < L[:, None], lv, 0)
-            levels[act, p] = np.where(X < 0, -lv, lv)
+            kept = pos[None, :] < L[:, None]
+            lv *= kept
             J[act] += JL[np.arange(Ta), L]
-            kept = np.arange(64)[None, :] < L[:, None]
-            Rb[act] += (_level_bits(model, lv, pc, key) * kept).sum(1) + lastb[L]
+            bits = np.where(zero, zero_bits[None, :], np.where(use_lo, b_lo, b_ln))
+            Rb[act] += (bits * kept).sum(1) + lastb[L]
+            lv -= 2 * lv * (X[act] < 0)
+            levels[act, p] = lv
         return levels, J, D0, must, Rb
 
     def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
@@ -877,6 +909,8 @@ def _params_from(options: EncodeOptions) -> TxParams:
 
 SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key view …
 SEARCH_MIN_VIEWS = 16  # … where there are at least this many
+MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the entropy model measured
+                      # nearest to its step where one is this near (else it measures one first)
 PSNR_SLOPE = -2.5    # dB per octave of the step around 40 dB (dense grids: 2.2-2.8), the search's prior
 BPP_SLOPE = -1.0     # log2 bpp per octave of the step, the same for a bpp target
 
@@ -1002,7 +1036,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             step = 2.0 ** logq
             near = min(models, key=lambda k: abs(math.log2(k) - logq)) if models else None
             r = enc.run(step, models[near] if near is not None else model, progress, views=sample)
-            if near is None or abs(math.log2(near) - logq) > 0.25:
+            if near is None or abs(math.log2(near) - logq) > MODEL_REACH:
                 r = enc.run(step, enc.model_of(r), progress, views=sample)   # far from any model: measure first
             models[step] = enc.model_of(r)
             ps = enc.psnr(r)
@@ -1025,6 +1059,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 b0 = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
                 q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
             q0 = min(max(q0, lo_q), hi_q)
+            models[probe["step"]] = enc.model_of(probe)   # the first evaluation's model, where near
         probe = None                   # (its coded views are not needed any more)
         floor = options.target_psnr is not None
 
@@ -1038,7 +1073,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
         sr = secant_search(value, q0, options.target_psnr if floor else math.log2(options.target_bpp),
                            feasible_above=floor, slope0=PSNR_SLOPE if floor else BPP_SLOPE, lo=lo_q, hi=hi_q,
-                           tol=0.03 if floor else 0.01, prefer=prefer)
+                           tol=0.03 if floor else 0.01, prefer=prefer,
+                           snap=lambda q: math.log2(enc.grid_step(2.0 ** q)))
         found, res = sr.found, sr.result
         if not found:
             notes.append("even the finest quantizer misses the target; the closest setting is written" if floor else

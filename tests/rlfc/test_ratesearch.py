@@ -48,3 +48,47 @@ def test_unreachable_target_returns_the_closest_and_not_found():
 def test_bad_prior_slope_is_refused():
     with pytest.raises(ValueError):
         secant_search(lambda q: (0, 0), 0, 1, feasible_above=True, slope0=1.0, lo=0, hi=1, tol=0.1)
+
+
+def _grid(unit):
+    """Snap log2(step) to steps that are multiples of ``unit`` (the coder's 1/16 grid)."""
+    return lambda q: math.log2(max(unit, round(2.0 ** q / unit) * unit))
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_snapped_search_never_evaluates_a_grid_point_twice(seed):
+    """The coder's steps are quantized: a search that snaps its points evaluates each grid point
+    once, only grid points, and ends feasible next to an infeasible neighbour (or within tol)."""
+    rng = np.random.default_rng(seed)
+    unit = 1 / 16
+    snap = _grid(unit)
+    off = rng.uniform(-0.5, 0.5)
+    jitter = {}
+
+    def f(q):                                  # a staircase: value depends on the grid point only
+        s = round(2.0 ** q / unit)
+        jitter.setdefault(s, 0.02 * rng.standard_normal())
+        return 40.0 + off - 6.0 * (math.log2(s * unit) - 3.4) + jitter[s], s
+    r = secant_search(f, 3.0, 40.0, feasible_above=True, slope0=-2.5, lo=0, hi=9, tol=0.03, snap=snap)
+    steps = [round(2.0 ** q / unit) for q, _ in r.points]
+    assert len(steps) == len(set(steps))                       # no grid point twice
+    assert all(abs(q - snap(q)) < 1e-12 for q, _ in r.points)  # only grid points
+    assert r.found and f(r.q)[0] >= 40.0
+    s = round(2.0 ** r.q / unit)
+    done = dict(zip(steps, (v for _, v in r.points)))
+    assert f(r.q)[0] - 40.0 <= 0.03 or (s + 1 in done and done[s + 1] < 40.0)
+
+
+def test_snapped_search_moves_off_a_known_point_without_a_bracket():
+    """A secant step smaller than half a grid unit must still move (one unit), not stop short."""
+    unit = 1 / 2                               # a coarse grid: one unit at step 8 is 0.17 octave
+    snap = _grid(unit)
+    calls = []
+
+    def f(q):                                  # 0.005 dB short at step 8; one unit finer meets it
+        s = round(2.0 ** q / unit)
+        calls.append(s)
+        return (39.995 if s >= 16 else 40.3), s
+    r = secant_search(f, 3.0, 40.0, feasible_above=True, slope0=-2.5, lo=0, hi=9, tol=0.03, snap=snap)
+    assert calls[:2] == [16, 15]               # the secant's step (0.008 octave) snaps back to 16
+    assert r.found and round(2.0 ** r.q / unit) == 15
