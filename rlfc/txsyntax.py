@@ -81,7 +81,8 @@ def bucket_of(r: np.ndarray) -> np.ndarray:
 
 
 # -- encoder ---------------------------------------------------------------------------------
-def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: np.ndarray, pcs: np.ndarray):
+def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: np.ndarray, pcs: np.ndarray,
+                  counts_only: bool = False):
     """The symbols and raw bits of S blocks.
 
     Args:
@@ -91,7 +92,8 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
 
     Returns:
         (lane, ctx, sym) flat int64 arrays in decode order per lane (lanes ascending), and
-        (rlane, bits) flat arrays of raw bits (0/1) in order per lane.
+        (rlane, bits) flat arrays of raw bits (0/1) in order per lane; with ``counts_only``,
+        their (N_CTX, ALPHABET) counts only (:func:`count_symbols`: no ordering, no raw bits).
     """
     S, nt, P, _ = levels.shape
     levels = np.where((modes != MODE_SKIP)[:, :, None, None], levels, 0)
@@ -125,6 +127,8 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     r = m[esc] - ESC - np.where(first[esc], 1, 0)
     k = bucket_of(r)
     parts.append((gs[grp][esc], 1_000_000 + order[esc], ctx_esc(pc[esc]), k))
+    if counts_only:
+        return count_symbols(np.concatenate([x[2] for x in parts]), np.concatenate([x[3] for x in parts]))
     lane = np.concatenate([x[0] for x in parts])
     order_all = np.concatenate([x[1] for x in parts])
     ctx = np.concatenate([x[2] for x in parts])
