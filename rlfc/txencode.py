@@ -46,7 +46,7 @@ INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be bea
 #: intra 8×8 blocks are tried only where the block's energy about its mean is below this many
 #: times its prediction residual's (measured on the six dense grids at 40 dB: 98.7–99.9% of the
 #: blocks that chose intra lie below 4; 0 = try every candidate)
-INTRA_ENERGY_RATIO = 0.0
+INTRA_ENERGY_RATIO = 4.0
 FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
 PAD = 8
 
