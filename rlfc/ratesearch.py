@@ -62,7 +62,7 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
     def seen(q):
         return any(abs(q - p[0]) < 1e-9 for p in pts)
 
-    def grid_step(q, direction):
+    def next_point(q, direction):
         """The next grid point from q in ``direction`` (±1), or q at a bound."""
         u = 1 / 1024
         while u < 1:
@@ -112,11 +112,11 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
                 a, b = sorted((good, bad))
                 qn = snap((a + b) / 2)
                 if not a + 1e-9 < qn < b - 1e-9 or seen(qn):
-                    qn = grid_step(a, 1)                   # the bracket's first inner point
+                    qn = next_point(a, 1)                    # the bracket's first inner point
                     if not qn < b - 1e-9 or seen(qn):
                         break                              # no grid point inside the bracket
             else:
-                qn = grid_step(near[0][0], 1 if raw >= near[0][0] else -1)
+                qn = next_point(near[0][0], 1 if raw >= near[0][0] else -1)
                 if seen(qn):
                     break                                  # nothing new to learn (at a bound)
         q = qn

@@ -5,7 +5,7 @@ Decoders reconstruct exactly in integers (int64, numpy or torch): for a block X 
 coefficients (orthonormal-DCT units), residual = ((T^T · X + 64) >> 7 · T + 128) >> 8, i.e.
 Y = (T^T X + 64) >> 7 (columns), R = (Y T + 128) >> 8 (rows), arithmetic shifts. T ≈ 64·√8·C
 (C the orthonormal DCT-II), so T^T X T / 2^15 ≈ C^T X C. Encoders analyse with the exact
-float inverse of that synthesis (:func:`forward`) and reconstruct with the integer inverse
+float inverse of that synthesis (:data:`FORWARD_SCAN`) and reconstruct with the integer inverse
 (closed loop), so every decoder agrees bit for bit.
 """
 from __future__ import annotations
@@ -39,17 +39,11 @@ COEF_MAX = (1 << 21) - 1
 _F = np.linalg.inv(T8.T.astype(np.float64)) * np.sqrt(2.0 ** 15)
 
 
-#: :func:`forward` as one (64, 64) matrix on raster-flattened blocks with the zig-zag scan
+#: the encoder's float analysis as one (64, 64) matrix on raster-flattened blocks, zig-zag scan
 #: applied to its output: ``r.reshape(-1, 64) @ FORWARD_SCAN`` = the scan-order coefficients
-#: (one GEMM instead of batched 8×8 products; equal to :func:`forward` within float64 rounding)
+#: whose exact synthesis is r (≈ the orthonormal DCT); quantize them and :func:`inverse` gives r
+#: back within about ±1
 FORWARD_SCAN = np.ascontiguousarray(np.kron(_F, _F).T[:, ZIGZAG])
-
-
-def forward(r: np.ndarray) -> np.ndarray:
-    """Float analysis of (..., 8, 8) residuals: the coefficients whose exact synthesis is r
-    (≈ the orthonormal DCT); round them (or quantize) and :func:`inverse` gives r back within
-    about ±1."""
-    return np.matmul(np.matmul(_F, r.astype(np.float64)), _F.T)
 
 
 def inverse(X, xp=None):

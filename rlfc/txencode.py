@@ -347,8 +347,7 @@ class TxEncoder:
         if self.p.lossless:
             return step
         wp0 = float(self.w[0]) if self.w[0] > 0 else 1.0
-        s16 = max(16.0, float(np.rint(step / math.sqrt(wp0) * 16)))
-        return s16 / 16 * math.sqrt(wp0)
+        return float(self.steps16(step)[1, 0]) / 16 * math.sqrt(wp0)
 
     # -- prediction ------------------------------------------------------------------------
     def key_source(self, keyplanes: np.ndarray):
@@ -463,12 +462,12 @@ class TxEncoder:
             j_ln = wgt * (ax - ln * d) ** 2 + lam * b_ln
             j_lo = wgt * (ax - lo * d) ** 2 + lam * b_lo
             j_0 = dz + lam * zero_bits[None, :]                   # cost as a coded zero
-            jmin = np.minimum(j_lo, j_ln)
             if "rdoq" in self.p.ablate:                           # plain rounding (ablation)
                 use_lo, z = np.zeros_like(ln, bool), ln == 0
                 jc = np.where(z, j_0, j_ln)
             else:
                 use_lo = j_lo < j_ln
+                jmin = np.minimum(j_lo, j_ln)
                 z = j_0 <= jmin
                 # the cost of each coefficient as chosen (a level of 0 costs exactly j_0 whichever
                 # way it was reached: lo = 0 gives j_lo = j_0)
