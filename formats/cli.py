@@ -185,6 +185,8 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
                          lossless=bool(a.lossless), profile=getattr(a, "profile", None) or "auto",
                          params=codec.params_from_args(a), workers=getattr(a, "workers", 1),
                          scheduler=getattr(a, "scheduler", None))
+    if codec.writes_set(opts):
+        return _write_set(a, codec, lf, opts, out, t0)
     prog = _Progress(a.quiet)
     try:
         enc = codec.encode(lf, opts, prog)
@@ -238,6 +240,33 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     return 0
 
 
+def _write_set(a, codec, lf, opts, out: Path, t0: float) -> int:
+    """An encode that writes a set of files (``train --tiles K``: OUT.json + one .lfc per tile)."""
+    prog = _Progress(a.quiet)
+    try:
+        report = codec.encode_set(lf, opts, out, prog)
+    finally:
+        prog.close()
+    report = {"file": str(out), "encode_s": round(time.perf_counter() - t0, 3), "views": lf.rows * lf.cols,
+              "codec": codec.codec_id, **report}
+    notes = []
+    if report.get("psnr_heldout", np.inf) < report.get("psnr_heldout_nearest_view", -np.inf):
+        notes.append(f"held-out views: the set ({report['psnr_heldout']:.2f} dB) is below the nearest training "
+                     f"view ({report['psnr_heldout_nearest_view']:.2f} dB); train longer (--steps) or larger")
+    report["notes"] = notes
+    for m in notes:
+        print(f"lfcodec: warning: {m}", file=sys.stderr)
+    if a.json:
+        print(_dump(report))
+    elif not a.quiet:
+        quality = ("" if report.get("psnr_heldout") is None else
+                   f", held-out PSNR {report['psnr_heldout']:.2f} dB on {report['heldout_views']} views (nearest "
+                   f"training view {report['psnr_heldout_nearest_view']:.2f} dB)")
+        print(f"wrote {out} and {len(report['files']) - 1} files beside it: {report['bytes']} bytes in all"
+              f"{quality}, {report['encode_s']:.1f} s")
+    return 0
+
+
 def cmd_train(a) -> int:
     return cmd_encode(a, "lfn")
 
@@ -264,7 +293,7 @@ def _floats(text: str, n: int, what: str) -> tuple:
 
 
 def cmd_render(a) -> int:
-    from .campath import assemble_quilt, quilt_views, turn_frames
+    from .campath import turn_frames
     from .imageio import write_image
     from .lfcfile import open_lfc
     from .registry import open_decoder
@@ -282,26 +311,13 @@ def cmd_render(a) -> int:
         raise ParameterError(f"{out}: render writes PNG files (name it .png; a folder or .mp4 with --path)")
     if not out.parent.exists():
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
+    if _is_set(a.input):
+        _render_kind(a, "lfn")
+        with _open_set(a) as d:
+            return _render_lfn_still(a, d, out)
     with open_lfc(a.input, partial=a.partial) as f:
-        lfn = _render_kind(a, f)
-        if lfn:
-            d = open_decoder(f, device=_lfn_device(a.device))
-            t0 = time.perf_counter()
-            if a.quilt:
-                cols, rows = _grid(a.quilt)
-                if a.stereo is not None:
-                    raise ParameterError("--quilt and --stereo are two different layouts: give one")
-                base, n = _lfn_camera(a, d), quilt_views(cols, rows)
-                yaws = np.linspace(-QUILT_CONE / 2, QUILT_CONE / 2, n) if n > 1 else np.zeros(1)
-                img = assemble_quilt([_lfn_frame(a, d, d.turn_pose(base, float(y))) for y in yaws], cols, rows)
-            else:
-                img = _lfn_frame(a, d, _lfn_camera(a, d))
-            write_image(out, img)
-            if not a.quiet:
-                print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
-                      f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes), "
-                      f"{d.rays_evaluated} rays evaluated")
-            return 0
+        if _render_kind(a, f.codec):
+            return _render_lfn_still(a, open_decoder(f, device=_lfn_device(a.device)), out)
         d = open_decoder(f)
         ren = _grid_renderer(a, d)
         t0 = time.perf_counter()
@@ -321,12 +337,49 @@ def cmd_render(a) -> int:
 QUILT_CONE = 35.0   # degrees: a light field network's quilt turns the camera across this view cone
 
 
-def _render_kind(a, f) -> bool:
+def _is_set(source) -> bool:
+    """Whether ``source`` names a set of files a codec opens as one (an LFN tile set's manifest)."""
+    from .registry import set_codec
+
+    return set_codec(source) is not None
+
+
+def _open_set(a):
+    """The set of files named by the input (a manifest path or URL), opened by its codec."""
+    from .registry import open_set
+
+    return open_set(a.input, device=_lfn_device(a.device), partial=a.partial)
+
+
+def _render_lfn_still(a, d, out: Path) -> int:
+    """One frame (or a quilt) from a light field network or a tile set of them."""
+    from .campath import assemble_quilt, quilt_views
+    from .imageio import write_image
+
+    t0 = time.perf_counter()
+    if a.quilt:
+        cols, rows = _grid(a.quilt)
+        if a.stereo is not None:
+            raise ParameterError("--quilt and --stereo are two different layouts: give one")
+        base, n = _lfn_camera(a, d), quilt_views(cols, rows)
+        yaws = np.linspace(-QUILT_CONE / 2, QUILT_CONE / 2, n) if n > 1 else np.zeros(1)
+        img = assemble_quilt([_lfn_frame(a, d, d.turn_pose(base, float(y))) for y in yaws], cols, rows)
+    else:
+        img = _lfn_frame(a, d, _lfn_camera(a, d))
+    write_image(out, img)
+    if not a.quiet:
+        print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
+              f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes), "
+              f"{d.rays_evaluated} rays evaluated")
+    return 0
+
+
+def _render_kind(a, codec: str) -> bool:
     """True for a light field network file (rendered from camera poses), False for an RLFC grid
     (rendered from decoded views); options that do not apply to the file's kind are refused."""
     from .campath import turn_frames
 
-    lfn = f.codec == "lfn"
+    lfn = codec == "lfn"
     if lfn:
         used = [o for o, v in (("--focus", a.focus is not None), ("--aperture", a.aperture != 0), ("--fast", a.fast))
                 if v]
@@ -338,7 +391,7 @@ def _render_kind(a, f) -> bool:
                                ("--scale", a.scale)) if v is not None]
         if used:
             raise ParameterError(f"{a.input}: {', '.join(used)} are options for light field network files (this is "
-                                 f"{f.codec}); an RLFC grid renders positions on its camera plane (--at)")
+                                 f"{codec}); an RLFC grid renders positions on its camera plane (--at)")
         if a.path is not None and turn_frames(a.path) is not None:
             raise ParameterError(f"{a.input}: --path turn turns a free camera about the scene, which light field "
                                  f"network files render; an RLFC grid takes orbit, sweep or a file of cameras")
@@ -427,9 +480,13 @@ def _render_path(a, out: Path) -> int:
     from .registry import open_decoder
     from .video import SequenceWriter
 
+    if _is_set(a.input):
+        _render_kind(a, "lfn")
+        with _open_set(a) as d:
+            return _render_lfn_path(a, d, out)
     with open_lfc(a.input, partial=a.partial) as f:
-        if _render_kind(a, f):
-            return _render_lfn_path(a, f, out)
+        if _render_kind(a, f.codec):
+            return _render_lfn_path(a, open_decoder(f, device=_lfn_device(a.device)), out)
         d = open_decoder(f)
         ren = _grid_renderer(a, d)
         cams = read_path(a.path, d.rows, d.cols)
@@ -457,16 +514,14 @@ def _render_path(a, out: Path) -> int:
     return 0
 
 
-def _render_lfn_path(a, f, out: Path) -> int:
+def _render_lfn_path(a, d, out: Path) -> int:
     """``render --path`` on a light field network: grid positions of orbit / sweep / a camera file
     through :meth:`grid_pose`, or ``turn[:N]``: the --at / --pose camera turned a full circle
     about the scene's pivot in N frames."""
     from formats.campath import read_path, turn_frames
 
-    from .registry import open_decoder
     from .video import SequenceWriter
 
-    d = open_decoder(f, device=_lfn_device(a.device))
     n = turn_frames(a.path)
     if n is not None:
         base = _lfn_camera(a, d)

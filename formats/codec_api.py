@@ -131,6 +131,24 @@ class Codec(abc.ABC):
     def open(self, f, **kw) -> Decoder:
         """A decoder over an opened :class:`~formats.lfcfile.LfcFile` of this codec."""
 
+    #: file-name suffix (lower case) of a set of files this codec writes and opens as one (a
+    #: manifest naming the others, e.g. ".json"), or None for codecs that write one .lfc only
+    set_suffix: str | None = None
+
+    def writes_set(self, options: EncodeOptions) -> bool:
+        """Whether ``options`` ask for a set of files (:meth:`encode_set`) rather than one .lfc."""
+        return False
+
+    def encode_set(self, lf, options: EncodeOptions, out, progress: Progress | None = None) -> dict:
+        """Encode to a set of files: ``out`` (named with :attr:`set_suffix`) and the files it names,
+        beside it, each written atomically. Returns a JSON-able report with at least ``bytes`` (all
+        files) and ``files`` (their names)."""
+        raise UnsupportedError(f"codec {self.codec_id!r} writes single .lfc files only")
+
+    def open_set(self, source, **kw):
+        """A renderer/decoder over a set of files (``source``: the manifest's path or URL)."""
+        raise UnsupportedError(f"codec {self.codec_id!r} opens single .lfc files only")
+
     def add_arguments(self, parser) -> None:
         """Add this codec's own command-line options (an argparse parser or group)."""
 

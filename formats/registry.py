@@ -53,3 +53,22 @@ def get_codec(codec_id: str) -> Codec:
 def open_decoder(f, **kw):
     """A decoder for an opened :class:`~formats.lfcfile.LfcFile`, chosen by its codec id."""
     return get_codec(f.codec).open(f, **kw)
+
+
+def set_codec(source) -> Codec | None:
+    """The codec whose sets of files (:attr:`Codec.set_suffix`) ``source`` (a path or URL) names,
+    or None: such a source is opened with :func:`open_set`, not as an .lfc file."""
+    name = str(source).lower()
+    for cid in available_codecs():
+        suffix = get_codec(cid).set_suffix
+        if suffix and name.endswith(suffix):
+            return get_codec(cid)
+    return None
+
+
+def open_set(source, **kw):
+    """Open a set of files by its manifest (path or URL), through the codec that writes such sets."""
+    codec = set_codec(source)
+    if codec is None:
+        raise UnsupportedError(f"{source}: no codec opens sets of files named like this")
+    return codec.open_set(source, **kw)

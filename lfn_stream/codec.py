@@ -2,6 +2,8 @@
 config + sections for the container (the codec never opens files)."""
 from __future__ import annotations
 
+import numpy as np
+
 from formats.codec_api import Codec, EncodeOptions, Encoded
 from formats.errors import ParameterError
 
@@ -44,9 +46,116 @@ def heldout_report(lf, config: dict, sections, info: dict) -> dict:
 
 NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
 TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s", "lod_levels")
-OPTIONS = {"depth": int, "min_neurons": int, "max_neurons": int, "occupancy_neurons": int, "steps": int,
+OPTIONS = {"tiles": int, "tile_band": float, "depth": int, "min_neurons": int, "max_neurons": int, "occupancy_neurons": int, "steps": int,
            "batch": int, "lr": float, "holdout": int, "device": str, "checkpoint": str, "weights": str,
            "resolution": int, "lod_levels": int}
+
+
+def _setup(lf, p: dict):
+    """(full-size light field, the one trained on, LfnConfig, TrainOptions, weight dtype) from the
+    codec's params (``p`` is consumed; unknown keys are a ParameterError)."""
+    import dataclasses
+
+    import numpy as np
+
+    from formats.transform import resize_lightfield
+
+    from .train import TrainOptions
+
+    if not isinstance(lf.views, np.ndarray):          # a ViewStack (zarr, dask, ...): read it all
+        lf = dataclasses.replace(lf, views=np.asarray(lf.views))
+    p = dict(p)
+    p.pop("tiles", None)
+    p.pop("tile_band", None)
+    weights = p.pop("weights", "fp16")
+    resolution = p.pop("resolution", 128)
+    full = lf
+    if resolution:   # train at reduced resolution; the file keeps the scene's geometry (renders full size)
+        if resolution < 8:
+            raise ParameterError(f"--resolution must be 0 (full) or >= 8 pixels, got {resolution}")
+        lf = resize_lightfield(lf, resolution)
+    if weights not in ("fp16", "fp32"):
+        raise ParameterError(f"weights must be fp16 or fp32, got {weights!r}")
+    unknown = set(p) - set(NET_KEYS) - set(TRAIN_KEYS)
+    if unknown:
+        raise ParameterError(f"unknown LFN option(s): {', '.join(sorted(unknown))}")
+    cfg = LfnConfig(**{k: p[k] for k in NET_KEYS if k in p})
+    opts = TrainOptions(**{k: p[k] for k in TRAIN_KEYS if k in p})
+    return full, lf, cfg, opts, weights
+
+
+def finish_network(full, lf, model, occ, info: dict, opts, weights: str, progress=None):
+    """(config, sections, summary) of a trained network: its display ladder (measured on training
+    rays: held-out views stay unseen), packed, and scored on the held-out views at full size."""
+    if progress:
+        progress("display ladder", 0, 1)
+    # measured on training rays: held-out views stay unseen for evaluation (measuring on half of them
+    # instead gave no fewer drops on the other half; BENCHMARKS.md)
+    rays, targets = sample_rays(lf, info["train_views"], info["norm"], seed=opts.seed)
+    info["display"] = display_ladder(size_psnr(model, rays, targets, model.cfg), model.cfg)
+    config, sections = to_sections(model, occ, info, weights)
+    summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
+               "display_sizes": len(info["display"]),
+               "final_loss": opts.history[-1][1] if opts.history else None}
+    if info["test_views"]:
+        if progress:
+            progress("held-out views", 0, len(info["test_views"]))
+        summary.update(heldout_report(full, config, sections, info))
+    return config, sections, summary
+
+
+def encode_tiles(lf, options: EncodeOptions, out, progress=None) -> dict:
+    """Train a tile set (:mod:`lfn_stream.tiles`: one LFN per region of camera space, ``tiles``
+    and ``tile_band`` in ``options.params``) and write it: ``out`` (a ``.json`` manifest) and one
+    ``.lfc`` per tile beside it (each written atomically, the manifest last). Returns a report:
+    bytes, per-tile summaries, and the blended renderer's held-out PSNR beside the nearest
+    training view's."""
+    from pathlib import Path
+
+    from formats.lfcfile import write_lfc
+
+    from .tiles import DEFAULT_BAND, manifest_of, open_tiles, tile_file_names, train_tiles, write_manifest
+
+    if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
+        raise ParameterError("light field networks take no --target-psnr/--target-bpp/--lossless "
+                             "(train longer or larger instead)")
+    out = Path(out)
+    if out.suffix.lower() != ".json":
+        raise ParameterError(f"{out}: a tile set is written as a manifest named *.json (and one .lfc per tile "
+                             f"beside it)")
+    p = dict(options.params)
+    k, band = p.get("tiles", 1), p.get("tile_band", DEFAULT_BAND)
+    full, small, cfg, opts, weights = _setup(lf, p)
+    inputs = {Path(x).resolve() for x in lf.meta.get("input_paths", ())}
+    for n in tile_file_names(out, k if isinstance(k, int) and 0 < k <= 64 else 0):    # (k is checked below)
+        if (out.parent / n).resolve() in inputs:
+            raise ParameterError(f"{out.parent / n}: refusing to write over one of the input files of the scene")
+    res = train_tiles(small, cfg, opts, k, band, progress)
+    names = tile_file_names(out, len(res["tiles"]))
+    total, tiles = 0, []
+    for j, ((model, occ, info), name) in enumerate(zip(res["tiles"], names)):
+        info_t = {**info, "test_views": []}            # scored below as a blend, not tile by tile
+        config, sections, summary = finish_network(full, small, model, occ, info_t, opts, weights, progress)
+        config["tile"] = {"index": j, "count": len(names), "centre": [float(v) for v in res["centres"][j]]}
+        nbytes = write_lfc(out.parent / name, CODEC_ID, CODEC_VERSION, config, full.geometry(), sections,
+                           more=MOVED_KEYS)
+        total += nbytes
+        tiles.append({"file": name, "bytes": nbytes, "train_views": len(info["train_views"]), **summary})
+    manifest = manifest_of(res["centres"], res["band"], names, [t[2]["train_views"] for t in res["tiles"]])
+    write_manifest(out, manifest)
+    total += out.stat().st_size
+    report = {"files": [out.name, *names], "tiles": tiles, "bytes": total, "band": res["band"]}
+    if res["test_views"]:
+        from .evaluate import evaluate
+
+        if progress:
+            progress("held-out views", 0, len(res["test_views"]))
+        with open_tiles(out, device="cpu") as r:
+            row = evaluate(r, full, res["test_views"], np.asarray(res["train_views"]), [float(cfg.max_neurons)])[0]
+        report.update({"heldout_views": len(res["test_views"]), "psnr_heldout": round(row["psnr"], 3),
+                       "ssim_heldout": None if row["ssim"] is None else round(row["ssim"], 4),
+                       "psnr_heldout_nearest_view": round(row["psnr_nearest_view"], 3)})
+    return report
 
 
 class LfnCodec(Codec):
@@ -55,54 +164,23 @@ class LfnCodec(Codec):
     description = "light field network with continuous levels of detail, streamed by network size"
 
     def encode(self, lf, options: EncodeOptions, progress=None) -> Encoded:
-        from .train import TrainOptions, train
+        from .train import train
 
         if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
             raise ParameterError("light field networks take no --target-psnr/--target-bpp/--lossless "
                                  "(train longer or larger instead)")
-        import dataclasses
-
-        import numpy as np
-
-        if not isinstance(lf.views, np.ndarray):          # a ViewStack (zarr, dask, ...): read it all
-            lf = dataclasses.replace(lf, views=np.asarray(lf.views))
-        from formats.transform import resize_lightfield
-
         p = dict(options.params)
-        weights = p.pop("weights", "fp16")
-        resolution = p.pop("resolution", 128)
-        full = lf
-        if resolution:   # train at reduced resolution; the file keeps the scene's geometry (renders full size)
-            if resolution < 8:
-                raise ParameterError(f"--resolution must be 0 (full) or >= 8 pixels, got {resolution}")
-            lf = resize_lightfield(lf, resolution)
-        if weights not in ("fp16", "fp32"):
-            raise ParameterError(f"weights must be fp16 or fp32, got {weights!r}")
-        unknown = set(p) - set(NET_KEYS) - set(TRAIN_KEYS)
-        if unknown:
-            raise ParameterError(f"unknown LFN option(s): {', '.join(sorted(unknown))}")
-        cfg = LfnConfig(**{k: p[k] for k in NET_KEYS if k in p})
-        opts = TrainOptions(**{k: p[k] for k in TRAIN_KEYS if k in p})
+        if p.get("tiles", 1) != 1:
+            raise ParameterError("--tiles writes a tile set (a manifest and one file per tile): use `lfcodec train "
+                                 "SCENE OUT.json --tiles K` (or lfn_stream.codec.encode_tiles)")
+        full, lf, cfg, opts, weights = _setup(lf, p)
 
         def prog(step, loss):
             if progress:
                 progress("train", step + 1, opts.steps)
 
         model, occ, info = train(lf, cfg, opts, progress=prog)
-        if progress:
-            progress("display ladder", 0, 1)
-        # measured on training rays: held-out views stay unseen for evaluation (measuring on half of them
-        # instead gave no fewer drops on the other half; BENCHMARKS.md)
-        rays, targets = sample_rays(lf, info["train_views"], info["norm"], seed=opts.seed)
-        info["display"] = display_ladder(size_psnr(model, rays, targets, cfg), cfg)
-        config, sections = to_sections(model, occ, info, weights)
-        summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
-                   "display_sizes": len(info["display"]),
-                   "final_loss": opts.history[-1][1] if opts.history else None}
-        if info["test_views"]:
-            if progress:
-                progress("held-out views", 0, len(info["test_views"]))
-            summary.update(heldout_report(full, config, sections, info))
+        config, sections, summary = finish_network(full, lf, model, occ, info, opts, weights, progress)
         notes = []
         if summary.get("psnr_heldout", np.inf) < summary.get("psnr_heldout_nearest_view", -np.inf):
             notes.append(f"held-out views: the network ({summary['psnr_heldout']:.2f} dB) is below the nearest "
@@ -112,6 +190,19 @@ class LfnCodec(Codec):
 
     def open(self, f, **kw) -> LfnRenderer:
         return LfnRenderer(f, **kw)
+
+    set_suffix = ".json"      # a tile set's manifest (lfn_stream.tiles)
+
+    def writes_set(self, options: EncodeOptions) -> bool:
+        return options.params.get("tiles", 1) != 1
+
+    def encode_set(self, lf, options: EncodeOptions, out, progress=None) -> dict:
+        return encode_tiles(lf, options, out, progress)
+
+    def open_set(self, source, **kw):
+        from .tiles import open_tiles
+
+        return open_tiles(source, **kw)
 
     def add_arguments(self, g) -> None:
         g.add_argument("--depth", type=int, default=None, help="lfn: hidden layers (default 6)")
@@ -133,6 +224,12 @@ class LfnCodec(Codec):
         g.add_argument("--device", default=None, help="lfn: cpu or cuda (default cpu)")
         g.add_argument("--weights", default=None, choices=["fp16", "fp32"], help="lfn: stored weight precision")
         g.add_argument("--checkpoint", default=None, help="lfn: checkpoint .npz (saved periodically; resumed from)")
+        g.add_argument("--tiles", type=int, default=None,
+                       help="lfn: train a tile set of this many networks over camera space (k-means of the camera "
+                            "centres), written as OUT.json and one .lfc per tile beside it (default 1: one network)")
+        g.add_argument("--tile-band", type=float, default=None,
+                       help="lfn: tiles blend where a camera is within (1 + band) x its distance to the nearest tile "
+                            "centre; each tile trains on the cameras it blends at (default 0.5)")
 
     def params_from_args(self, a) -> dict:
         return {k: getattr(a, k) for k in OPTIONS if getattr(a, k, None) is not None}

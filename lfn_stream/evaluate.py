@@ -50,7 +50,8 @@ def prefix_bytes(r: LfnRenderer, level: float) -> int:
 
 
 def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, baselines: bool = True) -> list[dict]:
-    """Rows of level, width, scale, bytes, PSNR, SSIM, render ms per 256² view (+ baselines)."""
+    """Rows of level, width, scale, bytes, PSNR, SSIM, render ms per 256² view (+ baselines);
+    ``r`` an :class:`LfnRenderer` or a tile set (:class:`lfn_stream.tiles.TiledLfnRenderer`)."""
     peak = float(np.iinfo(lf.views.dtype).max)
     flat = lf.views.reshape(-1, lf.height, lf.width, lf.channels)
     tg = targets_of(flat, lf.has_alpha).astype(np.float32) / peak        # (N, H, W, 4)
@@ -76,7 +77,7 @@ def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, ba
                 near = train_views[int(np.argmin(np.linalg.norm(pos[train_views] - pos[v], axis=1)))]
                 base_near.append(np.mean((area_downsample(tg[near], scale)[..., :nch] - ref) ** 2))
                 base_mean.append(np.mean((mean_img - ref) ** 2))
-        row = {"level": level, "neurons": level, "scale": scale, "bytes": prefix_bytes(r, level),
+        row = {"level": level, "neurons": level, "scale": scale, "bytes": r.prefix_bytes(level) if hasattr(r, "prefix_bytes") else prefix_bytes(r, level),
                "psnr": 10 * math.log10(1 / float(np.mean(ps))),
                "ssim": None if np.isnan(ss).all() else float(np.nanmean(ss)),
                "ms_per_256sq": 1e3 * ts / npx * 65536}
