@@ -138,7 +138,7 @@ def write_manifest(path: str | os.PathLike, manifest: dict) -> None:
     path = Path(path)
     tmp = path.with_name(f".{path.name}.tmp{os.getpid()}")
     try:
-        tmp.write_text(json.dumps(manifest, indent=1))
+        tmp.write_text(json.dumps(manifest))
         os.replace(tmp, path)
     finally:
         if tmp.exists():
@@ -188,7 +188,8 @@ def _resolve(base: str, name: str) -> str:
 
 class TiledLfnRenderer:
     """Renderer over a tile set: opens the manifest (path or URL), opens each submodel file on
-    first use (a URL's by byte ranges, each with its own page cache of ``cache_bytes``), and
+    first use (a URL's by byte ranges; ``cache_bytes``, the page-cache budget of the whole set,
+    is split evenly among the tiles' caches, at least 4 KiB each), and
     renders a camera by blending the submodels around it (module docstring). The pose methods
     and :meth:`render_pose` / :meth:`to_pixels` are those of :class:`LfnRenderer`, so renderers
     and the CLI use either.
@@ -223,7 +224,8 @@ class TiledLfnRenderer:
         self.manifest_bytes = len(data)
         self.band, self.centres = m["band"], m["centres"]
         self.files = [_resolve(src, f) for f in m["files"]]
-        self._kw = {"partial": partial, "cache_bytes": cache_bytes, **({"limits": limits} if limits else {})}
+        per = None if cache_bytes is None else max(4096, int(cache_bytes) // len(self.files))
+        self._kw = {"partial": partial, "cache_bytes": per, **({"limits": limits} if limits else {})}
         self._device = device
         self._tiles: dict[int, object] = {}
         self.tiles_rendered = 0
@@ -352,10 +354,5 @@ def open_tiles(source, device: str | None = None, **kw) -> TiledLfnRenderer:
     return TiledLfnRenderer(source, device, **kw)
 
 
-def is_tile_manifest(source) -> bool:
-    """True when ``source`` names a tile manifest (a ``.json`` path or URL)."""
-    return isinstance(source, (str, os.PathLike)) and str(source).lower().endswith(".json")
-
-
 __all__ = ["FORMAT_ID", "blend_weights", "partition_cameras", "train_tiles", "tile_file_names", "manifest_of",
-           "write_manifest", "read_manifest", "TiledLfnRenderer", "open_tiles", "is_tile_manifest"]
+           "write_manifest", "read_manifest", "TiledLfnRenderer", "open_tiles"]

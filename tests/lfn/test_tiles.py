@@ -4,6 +4,8 @@ import shutil
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from formats.cli import main
 from formats.codec_api import EncodeOptions
@@ -108,9 +110,11 @@ def test_tile_set_streams_over_http(tileset):
     with FileServer(d) as srv:
         with open_tiles(srv.url_of("s.json"), device="cpu", cache_bytes=1 << 16) as r:
             remote = r.render_pose(pose, 6.5, 1.0)
-            opened = len(r._tiles)
+            used = set(r.weights(pose))
+            assert set(r._tiles) == used | {0}          # only the tiles the camera blends (and tile 0) opened
+            held = sum(t.file.container._src.cached_bytes for t in r._tiles.values())
+            assert held <= 1 << 16                        # the budget is the whole set's
     assert np.array_equal(local, remote)
-    assert opened <= 3
 
 
 def test_cli_trains_and_renders_a_tile_set(tmp_path, capsys):
@@ -174,3 +178,23 @@ def test_missing_or_mismatched_tiles_are_typed_errors(tileset, tmp_path, capsys)
     assert main(["render", str(tmp_path / "s.json"), str(tmp_path / "x.png"), "--quiet"]) == 2
     assert main(["render", str(tmp_path / "none.json"), str(tmp_path / "x.png"), "--quiet"]) == 2
     assert "no such tile manifest" in capsys.readouterr().err
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.one_of(st.binary(max_size=200),
+                 st.recursive(st.none() | st.booleans() | st.floats() | st.integers() | st.text(max_size=20),
+                              lambda c: st.lists(c, max_size=4) | st.dictionaries(st.text(max_size=8), c, max_size=4),
+                              max_leaves=20).map(lambda o: json.dumps(o).encode()),
+                 st.fixed_dictionaries({"format": st.just(FORMAT_ID), "version": st.just(1),
+                                        "band": st.floats() | st.integers(),
+                                        "tiles": st.lists(st.fixed_dictionaries({
+                                            "file": st.text(max_size=12),
+                                            "centre": st.lists(st.floats() | st.integers(), max_size=4)}),
+                                            max_size=3)}).map(lambda o: json.dumps(o).encode())))
+def test_any_manifest_bytes_read_or_fail_with_a_format_error(data):
+    try:
+        m = read_manifest(data, "m.json")
+    except FormatError:
+        return
+    assert 1 <= len(m["files"]) <= 64 and np.isfinite(m["centres"]).all() and 0 <= m["band"] <= 4
+    assert all(".." not in f.split("/") and not f.startswith("/") for f in m["files"])
