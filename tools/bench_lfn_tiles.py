@@ -73,6 +73,7 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=1000)
     ap.add_argument("--tiles", type=int, default=4)
     ap.add_argument("--wide", type=int, default=256, help="neurons of the wide global network")
+    ap.add_argument("--band", type=float, default=0.5, help="the tile set's blend band (lfn_stream.tiles)")
     ap.add_argument("--max-neurons", type=int, default=128)
     ap.add_argument("--resolution", type=int, default=128)
     ap.add_argument("--batch", type=int, default=4096)
@@ -85,8 +86,9 @@ def main(argv=None) -> int:
     base = {"steps": a.steps, "resolution": a.resolution, "batch": a.batch, "max_neurons": a.max_neurons}
     runs = {"global": (run_global, base),
             "wide": (run_global, {**base, "max_neurons": a.wide}),
-            "tiles": (run_tiles, {**base, "tiles": a.tiles}),
-            "tiles_equal_compute": (run_tiles, {**base, "tiles": a.tiles, "steps": max(1, a.steps // a.tiles)})}
+            "tiles": (run_tiles, {**base, "tiles": a.tiles, "tile_band": a.band}),
+            "tiles_equal_compute": (run_tiles, {**base, "tiles": a.tiles, "tile_band": a.band,
+                                                "steps": max(1, a.steps // a.tiles)})}
     out = {"scene": a.scene, "machine": machine(), "args": vars(a), "results": []}
     with tempfile.TemporaryDirectory() as d:
         for name, (fn, params) in runs.items():
