@@ -99,8 +99,15 @@ def _dump(obj) -> str:
 # -- info ------------------------------------------------------------------------------------
 def cmd_info(a) -> int:
     from .lfcfile import open_lfc
-    from .registry import open_decoder
+    from .registry import open_decoder, open_set
 
+    if _is_set(a.file):             # a set of files (an LFN tile set's manifest): what its codec says
+        if a.verify:
+            raise ParameterError(f"{a.file}: --verify checks one .lfc file; verify each file the manifest names")
+        with open_set(a.file, partial=a.partial) as d:
+            out = {"file": str(a.file), **d.info()}
+        print(json.dumps(out, indent=1, allow_nan=False) if a.json else f"{a.file}: {out['summary']}")
+        return 0
     with open_lfc(a.file, partial=a.partial) as f:
         if a.verify:
             f.container.verify_all()
@@ -187,6 +194,9 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
                          scheduler=getattr(a, "scheduler", None))
     if codec.writes_set(opts):
         return _write_set(a, codec, lf, opts, out, t0)
+    if _is_set(out):
+        raise ParameterError(f"{out}: this name is for a manifest of a set of files (e.g. --tiles K); name a single "
+                             f"file OUT.lfc")
     prog = _Progress(a.quiet)
     try:
         enc = codec.encode(lf, opts, prog)

@@ -65,7 +65,8 @@ def _setup(lf, p: dict):
     if not isinstance(lf.views, np.ndarray):          # a ViewStack (zarr, dask, ...): read it all
         lf = dataclasses.replace(lf, views=np.asarray(lf.views))
     p = dict(p)
-    p.pop("tiles", None)
+    if p.pop("tiles", 1) == 1 and "tile_band" in p:
+        raise ParameterError("--tile-band sets how tiles blend: it goes with --tiles K (K > 1)")
     p.pop("tile_band", None)
     weights = p.pop("weights", "fp16")
     resolution = p.pop("resolution", 128)

@@ -135,6 +135,15 @@ def test_cli_trains_and_renders_a_tile_set(tmp_path, capsys):
     assert main(["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "t.lfc"), "--tiles", "2", *args]) == 2
     assert "manifest named *.json" in capsys.readouterr().err
     assert main(["render", str(out), str(tmp_path / "f.png"), "--focus", "1", "--quiet"]) == 2
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["tiles"] == 2
+    # a single file is not written under a manifest's name; --tile-band needs --tiles
+    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "one.json"), *args]) == 2
+    assert "name a single file" in capsys.readouterr().err and not (tmp_path / "one.json").exists()
+    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "one.lfc"), "--tile-band", "1",
+                 *args]) == 2
+    assert "goes with --tiles" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("text, needle", [
