@@ -46,17 +46,15 @@ def heldout_report(lf, config: dict, sections, info: dict) -> dict:
 
 NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
 TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s", "lod_levels")
-OPTIONS = {"tiles": int, "tile_band": float, "depth": int, "min_neurons": int, "max_neurons": int, "occupancy_neurons": int, "steps": int,
-           "batch": int, "lr": float, "holdout": int, "device": str, "checkpoint": str, "weights": str,
+OPTIONS = {"tiles": int, "tile_band": float, "depth": int, "min_neurons": int, "max_neurons": int,
+           "occupancy_neurons": int, "steps": int, "batch": int, "lr": float, "holdout": int, "device": str, "checkpoint": str, "weights": str,
            "resolution": int, "lod_levels": int}
 
 
 def _setup(lf, p: dict):
     """(full-size light field, the one trained on, LfnConfig, TrainOptions, weight dtype) from the
-    codec's params (``p`` is consumed; unknown keys are a ParameterError)."""
+    codec's params (unknown keys are a ParameterError)."""
     import dataclasses
-
-    import numpy as np
 
     from formats.transform import resize_lightfield
 
