@@ -6,6 +6,7 @@ become one line on stderr and exit code 2.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -305,8 +306,6 @@ def _floats(text: str, n: int, what: str) -> tuple:
 def cmd_render(a) -> int:
     from .campath import turn_frames
     from .imageio import write_image
-    from .lfcfile import open_lfc
-    from .registry import open_decoder
 
     out = Path(a.out)
     if a.path is not None:
@@ -321,14 +320,9 @@ def cmd_render(a) -> int:
         raise ParameterError(f"{out}: render writes PNG files (name it .png; a folder or .mp4 with --path)")
     if not out.parent.exists():
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
-    if _is_set(a.input):
-        _render_kind(a, "lfn")
-        with _open_set(a) as d:
+    with _render_source(a) as (lfn, d):
+        if lfn:
             return _render_lfn_still(a, d, out)
-    with open_lfc(a.input, partial=a.partial) as f:
-        if _render_kind(a, f.codec):
-            return _render_lfn_still(a, open_decoder(f, device=_lfn_device(a.device)), out)
-        d = open_decoder(f)
         ren = _grid_renderer(a, d)
         t0 = time.perf_counter()
         if a.quilt:
@@ -354,11 +348,22 @@ def _is_set(source) -> bool:
     return set_codec(source) is not None
 
 
-def _open_set(a):
-    """The set of files named by the input (a manifest path or URL), opened by its codec."""
-    from .registry import open_set
+@contextlib.contextmanager
+def _render_source(a):
+    """(is a light field network, its opened decoder) for ``render``'s input: a set of files (an
+    LFN tile set's manifest, opened by its codec) or an .lfc file; options that do not apply to
+    the kind are refused (:func:`_render_kind`). Closed on exit."""
+    from .lfcfile import open_lfc
+    from .registry import open_decoder, open_set
 
-    return open_set(a.input, device=_lfn_device(a.device), partial=a.partial)
+    if _is_set(a.input):
+        _render_kind(a, "lfn")
+        with open_set(a.input, device=_lfn_device(a.device), partial=a.partial) as d:
+            yield True, d
+        return
+    with open_lfc(a.input, partial=a.partial) as f:
+        lfn = _render_kind(a, f.codec)
+        yield lfn, (open_decoder(f, device=_lfn_device(a.device)) if lfn else open_decoder(f))
 
 
 def _render_lfn_still(a, d, out: Path) -> int:
@@ -486,18 +491,11 @@ def _render_path(a, out: Path) -> int:
     """``render --path``: a sequence of frames along a camera path, to PNG frames or an MP4."""
     from formats.campath import read_path
 
-    from .lfcfile import open_lfc
-    from .registry import open_decoder
     from .video import SequenceWriter
 
-    if _is_set(a.input):
-        _render_kind(a, "lfn")
-        with _open_set(a) as d:
+    with _render_source(a) as (lfn, d):
+        if lfn:
             return _render_lfn_path(a, d, out)
-    with open_lfc(a.input, partial=a.partial) as f:
-        if _render_kind(a, f.codec):
-            return _render_lfn_path(a, open_decoder(f, device=_lfn_device(a.device)), out)
-        d = open_decoder(f)
         ren = _grid_renderer(a, d)
         cams = read_path(a.path, d.rows, d.cols)
         for s_, t_ in cams[:, :2]:                      # every camera checked before any frame is written

@@ -113,7 +113,7 @@ def encode_tiles(lf, options: EncodeOptions, out, progress=None) -> dict:
 
     from formats.lfcfile import write_lfc
 
-    from .tiles import DEFAULT_BAND, manifest_of, open_tiles, tile_file_names, train_tiles, write_manifest
+    from .tiles import DEFAULT_BAND, MAX_TILES, manifest_of, open_tiles, tile_file_names, train_tiles, write_manifest
 
     if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
         raise ParameterError("light field networks take no --target-psnr/--target-bpp/--lossless "
@@ -126,7 +126,7 @@ def encode_tiles(lf, options: EncodeOptions, out, progress=None) -> dict:
     k, band = p.get("tiles", 1), p.get("tile_band", DEFAULT_BAND)
     full, small, cfg, opts, weights = _setup(lf, p)
     inputs = {Path(x).resolve() for x in lf.meta.get("input_paths", ())}
-    for n in tile_file_names(out, k if isinstance(k, int) and 0 < k <= 64 else 0):    # (k is checked below)
+    for n in tile_file_names(out, k if isinstance(k, int) and 0 < k <= MAX_TILES else 0):   # (k: checked below)
         if (out.parent / n).resolve() in inputs:
             raise ParameterError(f"{out.parent / n}: refusing to write over one of the input files of the scene")
     res = train_tiles(small, cfg, opts, k, band, progress)

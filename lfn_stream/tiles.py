@@ -26,7 +26,6 @@ import dataclasses
 import json
 import math
 import os
-import posixpath
 import re
 from pathlib import Path
 
@@ -183,7 +182,7 @@ def _resolve(base: str, name: str) -> str:
     if is_url(base):
         head, _, _ = base.rpartition("/")
         return f"{head}/{name}"
-    return str(Path(base).parent / Path(*posixpath.split(name)))
+    return str(Path(base).parent / name)
 
 
 class TiledLfnRenderer:
