@@ -822,8 +822,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "page's URL. The page fetches the file by HTTP Range requests and decodes it in "
                                    "the browser (RLFC profile tx: key views, maps, residual blocks; JPEG 2000 key "
                                    "views through OpenJPEG compiled to WebAssembly); drag to move the viewpoint, "
-                                   "sliders for focus and aperture.")
-    w.add_argument("input")
+                                   "sliders for focus and aperture. Light field networks and LFN tile sets (their "
+                                   "manifest, OUT.json) render in the page as well.")
+    w.add_argument("input", help="an .lfc file, or an LFN tile set's manifest (.json)")
     w.add_argument("--host", default="127.0.0.1", help="address to listen on (default 127.0.0.1)")
     w.add_argument("--port", type=int, default=8000, help="port (default 8000; 0 = any free port)")
     w.add_argument("--open", action="store_true", help="also open the page in the default browser")

@@ -6,6 +6,8 @@
 // Light field networks (codec "lfn") open in the same page: lfn.js renders the network in JS at
 // a chosen (fractional) number of neurons, fetching further step sections as the level rises;
 // drag moves along the grid, or orbits a posed capture's cameras about their common target.
+// A tile set's manifest (?file=NAME.json, tiles.js) opens the same way: each tile's file is
+// opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
 //
 // For tests and scripts: window.lfcViewer = {ready (a promise), show(...) → frame info, state};
 // RLFC files: show(s, t, {focus, aperture, level, robust}); LFN files: show({s, t} | {view, yaw,
@@ -15,6 +17,7 @@ import { LfcFile, RangeSource, TxDecoder } from "./lfc.js";
 import { LfnDecoder } from "./lfn.js";
 import { makeKeyImage } from "./openjpeg.js";
 import { Renderer, toRGBA } from "./render.js";
+import { TiledLfn } from "./tiles.js";
 
 const $ = (id) => document.getElementById(id);
 const params = new URLSearchParams(location.search);
@@ -47,10 +50,16 @@ function scheduler(draw) {
 
 async function main() {
   if (!fileUrl) throw new Error("no file given: open this page as index.html?file=NAME.lfc");
-  const source = new RangeSource(new URL(fileUrl, location.href).href);
+  const url = new URL(fileUrl, location.href);
+  const source = new RangeSource(url.href);
   const t0 = performance.now();
+  if (/\.json$/i.test(url.pathname)) {              // an LFN tile set's manifest
+    const dec = await TiledLfn.open(source, fileUrl, (name) => new RangeSource(new URL(name, url).href),
+      { chunkBytes: chunkMiB * (1 << 20) });
+    return mainLfn(dec, dec.source, t0);
+  }
   const file = await LfcFile.open(source, fileUrl, chunkMiB * (1 << 20));
-  if (file.meta.codec === "lfn") return mainLfn(file, source, t0);
+  if (file.meta.codec === "lfn") return mainLfn(await LfnDecoder.open(file, { maxNeurons: 0 }), source, t0);   // the base network first
   let keyImage = null;
   if (typeof globalThis.OpenJPEGWASM === "function") {
     const factory = () => globalThis.OpenJPEGWASM({ locateFile: (p) => new URL(`vendor/${p}`, import.meta.url).href });
@@ -128,8 +137,8 @@ async function main() {
   };
 }
 
-async function mainLfn(file, source, t0) {
-  const dec = await LfnDecoder.open(file, { maxNeurons: 0 });      // the base network first
+async function mainLfn(dec, source, t0) {
+  const tiled = dec instanceof TiledLfn;
   const openMs = performance.now() - t0;
   const posed = dec.layout === "posed";
   Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
@@ -140,7 +149,7 @@ async function mainLfn(file, source, t0) {
   $("lfn-controls").hidden = false;
   $("viewidx").max = String(dec.rows * dec.cols - 1);
   $("neurons").min = String(dec.minN); $("neurons").max = String(dec.maxN); $("neurons").value = String(state.neurons);
-  $("title").textContent = `${fileUrl} — light field network, ${dec.depth} layers of ${dec.minN}..${dec.maxN} neurons; ${dec.rows}×${dec.cols} views of ${dec.W}×${dec.H}`;
+  $("title").textContent = `${fileUrl} — ${tiled ? `tile set of ${dec.files.length} light field networks` : "light field network"}, ${dec.depth} layers of ${dec.minN}..${dec.maxN} neurons; ${dec.rows}×${dec.cols} views of ${dec.W}×${dec.H}`;
   const canvas = $("view"), ctx = canvas.getContext("2d");
   canvas.style.width = `${dec.W}px`;
 
@@ -153,6 +162,7 @@ async function mainLfn(file, source, t0) {
       `bytes fetched  ${source.bytesFetched.toLocaleString()} of ${source._size.toLocaleString()}`,
       `range requests ${source.requests}`,
       `network        ${dec.neurons} of ${dec.maxN} neurons fetched (${(held / 1024).toFixed(1)} KiB of weights)`,
+      ...(tiled ? [`tiles          ${f ? f.tiles.join(", ") : "-"} blended; ${dec.tiles.size} of ${dec.files.length} opened`] : []),
       `open           ${openMs.toFixed(0)} ms`,
       `frame          ${f ? f.ms.toFixed(1) : "-"} ms, ${f ? `${f.w}×${f.h}` : "-"} at ${f ? f.neurons.toFixed(2) : "-"} neurons`,
       `rays evaluated ${f ? f.evaluated.toLocaleString() : "-"}${dec.occ ? " (the occupancy net skips the others)" : ""}`,
@@ -164,9 +174,10 @@ async function mainLfn(file, source, t0) {
   };
 
   const draw = async (neurons = state.neurons) => {
-    await dec.grow(neurons);                 // fetches the step sections this level needs
+    const p = pose();
+    await dec.grow(neurons, p);              // fetches the step sections this level needs (a tile set: of the camera's tiles)
     // beyond what the file holds: the best size of its display ladder that the held steps reach
-    const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(), p = pose();
+    const n = neurons <= dec.neurons ? neurons : dec.displayNeurons();
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
     const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc);      // a quarter-scale preview while dragging
@@ -175,7 +186,7 @@ async function mainLfn(file, source, t0) {
     canvas.width = r.w;
     canvas.height = r.h;
     ctx.putImageData(new ImageData(toRGBA(px, r.h, r.w, dec.C, dec.peak), r.w, r.h), 0, 0);
-    state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated };
+    state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated, tiles: r.tiles || [0] };
     stats();
     return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons };
   };

@@ -54,8 +54,28 @@ def site(tmp_path_factory):
 
     lfn_file(d, 3, posed=True, occ=False).rename(d / "net_posed.lfc")
     lfn_file(d, 3, posed=False, occ=False, seed=1).rename(d / "net_grid.lfc")
+    tile_set(d)
     with FileServer(d, viewer=True) as srv:
         yield srv, f
+
+
+def tile_set(d: Path) -> None:
+    """A tile set of two posed networks (different weights, the same cameras) centred on cameras 0
+    and 2 of the six (set.json), and manifests a reader must refuse."""
+    import json
+
+    from lfn_stream.tiles import manifest_of, write_manifest
+    from tests.formats.test_web_lfn import lfn_file, orbit_c2w
+
+    for j in range(2):
+        lfn_file(d, 3, posed=True, occ=j == 1, seed=5 + j).rename(d / f"set.tile{j:02d}.lfc")
+    c = orbit_c2w(6)[0, :, :3, 3]
+    write_manifest(d / "set.json", manifest_of(c[[0, 2]], 0.5, ["set.tile00.lfc", "set.tile01.lfc"], [[0, 1], [1, 2, 3]]))
+    m = json.loads((d / "set.json").read_text())
+    m["tiles"][1]["file"] = "../net_posed.lfc"
+    (d / "escape.json").write_text(json.dumps(m))
+    m["tiles"][1]["file"] = "net_grid.lfc"                  # another scene: refused when first blended
+    (d / "mixed.json").write_text(json.dumps(m))
 
 
 @pytest.fixture(scope="module")
@@ -188,3 +208,40 @@ def test_network_weights_stream_as_the_level_rises(site, page):
     drag(page)
     after = page.evaluate("[lfcViewer.state.s, lfcViewer.state.t]")
     assert after != before
+
+
+def test_tile_sets_render_in_the_page(site, page):
+    """A tile set's manifest opens like one network: only the tiles a camera blends are opened, and
+    the frame is the Python TiledLfnRenderer's blend within one grey level."""
+    from lfn_stream import open_tiles
+
+    srv, f = site
+    assert open_viewer(page, srv, "set.json") == "ready", page.inner_text("#error")
+    assert page.evaluate("lfcViewer.state.mode") == "lfn" and "tiles" in page.inner_text("#stats")
+    assert page.evaluate("lfcViewer.decoder.tiles.size") == 1           # camera 0 is tile 0's centre
+    t = open_tiles(f.parent / "set.json", device="cpu")
+    for cam, pose, neurons, tiles in (("{view: 1}", t.pose(0, 1), 20, [0, 1]), ("{view: 1, yaw: -10, pitch: 5}",
+                                      t.orbit_pose(0, 1, -10, 5), 12.5, [0, 1]), ("{view: 3}", t.pose(0, 3), 14, [1])):
+        info = page.evaluate(f"lfcViewer.show({cam}, {{neurons: {neurons}, scale: 1}})")
+        assert sorted(info["tiles"]) == sorted(t.weights(pose)) == tiles, (info["tiles"], t.weights(pose), cam)
+        want = t.to_pixels(t.render_pose(pose, float(neurons), 1.0))
+        got = canvas_rgba(page)[..., :3]
+        assert got.shape == want.shape
+        assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.02
+    assert page.evaluate("lfcViewer.decoder.tiles.size") == 2
+    sizes = sum((f.parent / n).stat().st_size for n in ("set.json", "set.tile00.lfc", "set.tile01.lfc"))
+    assert 2 < info["requests"] and info["bytesFetched"] <= sizes
+    t.close()
+
+
+@pytest.mark.parametrize("name, words", [("escape.json", "relative name"), ("mixed.json", "differ from the others")])
+def test_bad_tile_sets_show_a_message(site, page, name, words):
+    srv, _ = site
+    state = open_viewer(page, srv, name)
+    if name == "mixed.json":                       # tile 1 is opened when a camera first blends it
+        assert state == "ready"
+        with pytest.raises(Exception, match=words):
+            page.evaluate("lfcViewer.show({view: 1}, {neurons: 8})")
+        return
+    assert state == "error"
+    assert words in page.inner_text("#error") and name in page.inner_text("#error")

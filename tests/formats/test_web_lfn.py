@@ -189,3 +189,42 @@ def test_bad_networks_get_typed_errors(tmp_path):
     for name, (m, s, err, needle) in cases.items():
         info = run_js(write(name, m, s), tmp_path / name, ["view,0,max,1"])
         assert not info["ok"] and info["name"] == err and needle in info["message"], (name, info)
+
+
+def test_tile_manifests_and_blend_weights_match_python(tmp_path):
+    """tiles.js reads manifests as lfn_stream.tiles.read_manifest does (the same refusals) and
+    blends the same tiles with the same weights."""
+    from formats.errors import FormatError
+    from lfn_stream.tiles import blend_weights, read_manifest
+
+    rng = np.random.default_rng(3)
+    good = {"format": "lfcodec-lfn-tiles", "version": 1, "band": 0.7,
+            "tiles": [{"file": f"a/t{j}.lfc", "centre": rng.normal(size=3).tolist(), "views": [j]} for j in range(5)]}
+    bad = [{**good, "version": 2}, {**good, "band": 5}, {**good, "tiles": []}, {**good, "format": "x"},
+           {**good, "tiles": [{"file": "../t.lfc", "centre": [0, 0, 0]}]},
+           {**good, "tiles": [{"file": "/abs.lfc", "centre": [0, 0, 0]}]},
+           {**good, "tiles": [{"file": "t.lfc", "centre": [0, 0]}]}, [1, 2]]
+    texts = [json.dumps(good)] + [json.dumps(b) for b in bad] + ["{not json", '{"format": "lfcodec-lfn-tiles", "version": 1, "tiles": [{"file": "t.lfc", "centre": [1e300, 0, 0]}]}']
+    cams = rng.normal(scale=1.5, size=(40, 3)).tolist() + [good["tiles"][2]["centre"]]
+    script = tmp_path / "t.mjs"
+    script.write_text(f"""
+const {{ readManifest, blendWeights }} = await import({json.dumps(str(HERE.parents[1] / "formats/web/tiles.js"))});
+const texts = {json.dumps(texts)}, cams = {json.dumps(cams)};
+const out = texts.map((t) => {{ try {{ const m = readManifest(new TextEncoder().encode(t), "m.json");
+  return {{ ok: true, files: m.files, w: cams.map((p) => Array.from(blendWeights(m.centres, p, m.band))) }};
+}} catch (e) {{ return {{ ok: false, name: e.name, message: e.message }}; }} }});
+console.log(JSON.stringify(out));
+""")
+    got = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
+    assert got.returncode == 0, got.stderr[-2000:]
+    res = json.loads(got.stdout)
+    for text, r in zip(texts, res):
+        try:
+            m = read_manifest(text.encode(), "m.json")
+        except FormatError as e:
+            assert not r["ok"] and r["name"] == "FormatError", (text, r, e)
+            continue
+        assert r["ok"] and r["files"] == m["files"], (text, r)
+        want = np.stack([blend_weights(m["centres"], np.asarray(p), m["band"]) for p in cams])
+        np.testing.assert_allclose(np.asarray(r["w"]), want, rtol=0, atol=1e-12)
+        assert ((np.asarray(r["w"]) > 0) == (want > 0)).all()
