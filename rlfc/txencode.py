@@ -194,6 +194,18 @@ def _level_bits(model: Model, l: np.ndarray, pc: int, key: int) -> np.ndarray:
     return b
 
 
+def _level_bits_at(model: Model, l: np.ndarray, col: np.ndarray, pc: int, key: int) -> np.ndarray:
+    """:func:`_level_bits` of magnitudes ``l`` (>= 0) at scan positions ``col``, both (n,)."""
+    tab = model.pos_bits(pc, key)
+    b = tab.take(col * 16 + np.minimum(l, ESC)) + (l > 0)
+    big = l >= ESC
+    if big.any():
+        r = l[big] - ESC
+        k = np.floor(np.log2(r + 1.0)).astype(np.int64)
+        b[big] += model.esc[pc, np.minimum(k, 23)] + k
+    return b
+
+
 # -- one view ----------------------------------------------------------------------------------
 @dataclass
 class ViewCode:
@@ -454,25 +466,34 @@ class TxEncoder:
             Ta = act.size
             ax = ax[act]
             dz = wgt * X2[act]                                    # cost past the last position (not coded)
-            ln = np.floor(ax / d + 0.5).astype(np.int64)
-            lo = np.maximum(ln - 1, 0)
             zero_bits = model.pos_bits(pc, key)[pos * 16]
-            b_ln = _level_bits(model, ln, pc, key)
-            b_lo = _level_bits(model, lo, pc, key)
-            j_ln = wgt * (ax - ln * d) ** 2 + lam * b_ln
-            j_lo = wgt * (ax - lo * d) ** 2 + lam * b_lo
             j_0 = dz + lam * zero_bits[None, :]                   # cost as a coded zero
+            # the candidates are evaluated only where rounding gives a nonzero level: where it
+            # gives 0 every candidate is 0 and costs exactly j_0 (the same floating-point
+            # operations), so the decisions there are known
+            t = ax / d + 0.5
+            nzi = np.flatnonzero(t >= 1.0)                        # flat (Ta·64) indices of ln > 0
+            row, col = np.divmod(nzi, 64)
+            ln = np.floor(t.ravel()[nzi]).astype(np.int64)
+            lo = ln - 1
+            a = ax.ravel()[nzi]
+            b_ln = _level_bits_at(model, ln, col, pc, key)
+            b_lo = _level_bits_at(model, lo, col, pc, key)
+            j_ln = wgt * (a - ln * d) ** 2 + lam * b_ln
+            j_lo = wgt * (a - lo * d) ** 2 + lam * b_lo
+            j0 = j_0.ravel()[nzi]
+            jc = j_0.copy()
             if "rdoq" in self.p.ablate:                           # plain rounding (ablation)
-                use_lo, z = np.zeros_like(ln, bool), ln == 0
-                jc = np.where(z, j_0, j_ln)
+                use_lo, z = np.zeros(nzi.size, bool), np.zeros(nzi.size, bool)
+                jc.ravel()[nzi] = j_ln
             else:
                 use_lo = j_lo < j_ln
                 jmin = np.minimum(j_lo, j_ln)
-                z = j_0 <= jmin
+                z = j0 <= jmin
                 # the cost of each coefficient as chosen (a level of 0 costs exactly j_0 whichever
                 # way it was reached: lo = 0 gives j_lo = j_0)
-                jc = np.minimum(j_0, jmin)
-            lv = (ln - use_lo) * ~z
+                jc.ravel()[nzi] = np.minimum(j0, jmin)
+            lvs = (ln - use_lo) * ~z                              # the levels at nzi (0 elsewhere)
             # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} jc + Σ_{i>=L} dz + λ·bits(L)
             c1 = np.empty((Ta, 65))
             c1[:, 0] = 0.0
@@ -483,18 +504,24 @@ class TxEncoder:
             JL = c1
             JL += c0r[:, ::-1]
             JL += lam * lastb[None, :]
-            zero = lv == 0
-            JL[:, 1:] += np.where(zero, np.inf, 0.0)              # L-1 must be nonzero
+            nz = lvs != 0
+            last_ok = np.full((Ta, 64), np.inf)                   # L-1 must be nonzero
+            last_ok.ravel()[nzi[nz]] = 0.0
+            JL[:, 1:] += last_ok
             if "rdoq" in self.p.ablate:                           # the last nonzero, whatever it costs
-                L = np.where(lv.any(1), 64 - np.argmax(lv[:, ::-1] > 0, axis=1), 0)
+                L = np.zeros(Ta, np.int64)
+                np.maximum.at(L, row[nz], col[nz] + 1)
             else:
                 L = JL.argmin(1)
             kept = pos[None, :] < L[:, None]
-            lv *= kept
             J[act] += JL[np.arange(Ta), L]
-            bits = np.where(zero, zero_bits[None, :], np.where(use_lo, b_lo, b_ln))
+            bits = np.repeat(zero_bits[None, :], Ta, axis=0)
+            bits.ravel()[nzi] = np.where(nz, np.where(use_lo, b_lo, b_ln), zero_bits[col])
             Rb[act] += (bits * kept).sum(1) + lastb[L]
-            lv -= 2 * lv * (X[act] < 0)
+            lvs = lvs * (col < L[row])
+            lvs -= 2 * lvs * (X[act].ravel()[nzi] < 0)
+            lv = np.zeros((Ta, 64), np.int64)
+            lv.ravel()[nzi] = lvs
             levels[act, p] = lv
         return levels, J, D0, must, Rb
 
