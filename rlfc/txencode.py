@@ -278,6 +278,7 @@ class TxEncoder:
             raise ParameterError("JPEG 2000 intra key views need grey or RGB views (alpha must stay exact)")
         self.intra_codec = ic
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
+        self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
         if progress:
             progress("disparity", 0, None)
         n_maps = len(self.s.cell_views)
@@ -726,7 +727,11 @@ class TxEncoder:
         def err(dec):
             return colour_sq_error(orig, dec[:self.h, :self.w_px])[0]
 
-        found = smallest_j2k(from_planes(planes, dt), budget, err, target, tx_bytes if give_up else math.inf)
+        # where OpenJPEG lands for this view, kept across the passes of rate control (a view not
+        # searched before starts from the last view's)
+        hint = self._j2k_hints.setdefault(v, dict(self._j2k_hints.get("last", {})))
+        found = smallest_j2k(from_planes(planes, dt), budget, err, target, tx_bytes if give_up else math.inf, hint)
+        self._j2k_hints["last"] = hint
         if found is None or len(found[0]) >= tx_bytes:
             return None, tx_code, (len(found[0]) if found is not None else None)
         data, dec = found

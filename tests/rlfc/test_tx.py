@@ -1,6 +1,8 @@
 """The tx profile: exact lossless, decode == the encoder's closed loop, every decoder path
 agrees (full, view, block, batched, torch, byte range), hard cases, random-access bound, and
 bits on real data."""
+import math
+
 import numpy as np
 import pytest
 
@@ -308,6 +310,35 @@ def test_smallest_jpeg2000_within_a_budget():
         assert got is not None and colour_sq_error(img, got[1])[0] <= budget
         assert psnr_rgb(img, got[1]) < db + 0.5              # not far better than asked (not wasteful)
         assert smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db, len(got[0]) // 2) is None
+
+
+def test_jpeg2000_search_learns_where_openjpeg_lands(monkeypatch):
+    """A hint carries the level offset that met the budget to the next search of the image: at
+    a nearby target the warm search needs fewer encodes than the cold one (where OpenJPEG lands
+    well below the level asked: 2 against 5 here), still meets its budget, and writes the hint
+    back."""
+    import imagecodecs
+
+    from formats.metrics import colour_sq_error
+    from rlfc import j2ksearch
+
+    img = smooth_lf(rows=1, cols=1, h=64, w=80, seed=7).views[0, 0]
+    tries = []
+    enc = imagecodecs.jpeg2k_encode
+    monkeypatch.setattr(imagecodecs, "jpeg2k_encode", lambda a, level, **k: tries.append(level) or enc(a, level=level, **k))
+
+    def search(db, hint):
+        tries.clear()
+        budget = 255.0 ** 2 * img.size / 10 ** (db / 10)
+        got = j2ksearch.smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db, hint=hint)
+        assert got is not None and colour_sq_error(img, got[1])[0] <= budget
+        return len(tries)
+
+    hint = {}
+    search(44.0, hint)
+    assert "ask_db" in hint and math.isfinite(hint["ask_db"]) and hint["ask_db"] > j2ksearch.FIRST_ASK_DB
+    cold, warm = search(44.2, None), search(44.2, dict(hint))
+    assert warm < cold
 
 
 def test_lambda_trim_spends_a_psnr_margin_between_quantizer_steps():
