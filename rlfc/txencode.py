@@ -184,19 +184,13 @@ class Model:
 def _level_bits(model: Model, l: np.ndarray, pc: int, key: int) -> np.ndarray:
     """Bits of coding magnitudes l (>= 0, (T, 64) in scan order), not the last one: symbol,
     sign, escape bucket and suffix."""
-    tab = model.pos_bits(pc, key)                           # (64·16,) flat: position·16 + symbol
-    b = tab.take(np.arange(64)[None, :] * 16 + np.minimum(l, ESC)) + (l > 0)
-    big = l >= ESC
-    if big.any():
-        r = l[big] - ESC
-        k = np.floor(np.log2(r + 1.0)).astype(np.int64)
-        b[big] += model.esc[pc, np.minimum(k, 23)] + k
-    return b
+    return _level_bits_at(model, l, np.arange(64)[None, :], pc, key)
 
 
 def _level_bits_at(model: Model, l: np.ndarray, col: np.ndarray, pc: int, key: int) -> np.ndarray:
-    """:func:`_level_bits` of magnitudes ``l`` (>= 0) at scan positions ``col``, both (n,)."""
-    tab = model.pos_bits(pc, key)
+    """:func:`_level_bits` of magnitudes ``l`` (>= 0) at scan positions ``col`` (arrays that
+    broadcast together: (n,) and (n,), or (T, 64) and (1, 64))."""
+    tab = model.pos_bits(pc, key)                           # (64·16,) flat: position·16 + symbol
     b = tab.take(col * 16 + np.minimum(l, ESC)) + (l > 0)
     big = l >= ESC
     if big.any():
@@ -619,6 +613,7 @@ class TxEncoder:
             (N0, Hp, Wp, P) int32 decoded planes.
         """
         s16 = self.steps16(step)
+        hints = {k: dict(h) for k, h in self._j2k_hints.items()}     # (a rerun of this pass starts from them)
         lam_k = self.p.lam * lam_scale * (s16[0, 0] / 16.0) ** 2
         lam_n = self.p.lam * lam_scale * (s16[1, 0] / 16.0) ** 2
         n0 = self.n0
@@ -696,7 +691,7 @@ class TxEncoder:
                 codes[v] = c
         return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
                 "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
-                "lam_scale": lam_scale}
+                "lam_scale": lam_scale, "j2k_hints": hints}
 
     #: a JPEG 2000 intra key may land this much (dB) below its transform coding's PSNR (the
     #: rate control measures the decoded views, whichever codec made them)
@@ -792,6 +787,8 @@ class TxEncoder:
         """``res``, or the same run again keeping the decoded pixels where it kept none (the
         same integers)."""
         if any(c.px is None for c in res["codes"]):
+            # the JPEG 2000 searches start where they started in that pass: the same codestreams
+            self._j2k_hints = {k: dict(h) for k, h in res.get("j2k_hints", {}).items()}
             return self.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
         return res
 

@@ -489,3 +489,23 @@ def test_a_block_request_reads_only_the_key_rows_it_needs():
     asked.clear()
     d.decode_views(np.flatnonzero(core.is_key))             # the other rows, each read once
     assert core._keys_all and first + sum(asked) == key_bytes
+
+
+def test_a_rerun_codes_the_same_jpeg2000_key_views():
+    """JPEG 2000 searches start where earlier passes learnt OpenJPEG lands, so a pass depends on
+    the passes before it; rerunning a pass to get its pixels (``with_pixels``) starts from the
+    hints that pass started from and writes the same codestreams and integers."""
+    import rlfc.txencode as T
+    from formats.scenes import read_scene
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    model = T.Model(T.default_counts())
+    first = enc.run(2.5, model)
+    assert first["keyimg"] and any(c.px is None for c in first["codes"])     # (pixels not kept)
+    before = {k: dict(h) for k, h in enc._j2k_hints.items()}
+    enc.run(4.0, model)                                   # another step: the hints move
+    assert enc._j2k_hints != before
+    again = enc.with_pixels(first)
+    assert again["keyimg"] == first["keyimg"] and enc.psnr(again) == enc.psnr(first)
+    assert all((a.modes == b.modes).all() and (a.lv == b.lv).all() for a, b in zip(first["codes"], again["codes"]))
