@@ -4,7 +4,8 @@ minimise the cell's luma error against the original key views.
 
 Coarse to fine: whole-pixel disparities by shifting whole views (OpenCV, fast), widened from
 ±4 up to ``max_disparity`` while many blocks sit at the edge of the range and widening pays;
-then ±1/2, ±1/4, ±1/8, ±1/16 px around each block's best, each reference warped per block at
+then ±1/2 (twice), ±1/4, ±1/8, ±1/16 px around each block's best (one cost evaluation per step
+and sign serves both the shared map and each cell's own values), each reference warped per block at
 the decoder's 1/16-px positions (OpenCV remap in float; the decoder's integer rounding is left
 out of an estimate that only ranks candidates: 3.3× faster than the integer predictor, files
 0.1–0.5% smaller or +0.07% on the six dense grids, BENCHMARKS.md); then the map is regularized
@@ -211,19 +212,23 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
         return best_mode(est.costs_maps(dmaps, runner))       # (n_maps, nloc8)
 
     cur = total(disp)
-    for step in (8, 4, 2, 1):              # refine the shared map, then each cell's own values
+    # refine the shared map, then each cell's own values, from one evaluation per step and sign:
+    # a block's cost depends only on its own disparity, so the costs of every cell one step
+    # along (dc) are also those of the shared map's candidate for the cells that follow it.
+    # (The half-pixel step twice: a block the shared map moved takes no second step in the same
+    # round; with one round of each step stanford_chess's file was 0.8% larger.)
+    for step in (8, 8, 4, 2, 1):
         for sgn in (-1, 1):
-            nb = np.clip(base + sgn * step, -lim, lim)
-            follow = disp == base[None, :]
-            cand = np.where(follow, nb[None, :], disp)
-            cc = total(cand)
-            gain = np.where(follow, cur - cc, 0).sum(0) > 0
-            base = np.where(gain, nb, base)
-            upd = follow & gain[None, :]
-            disp, cur = np.where(upd, cand, disp), np.where(upd, cc, cur)
             dc = np.clip(disp + sgn * step, -lim, lim)
             cc = total(dc)
-            better = (cc + pen_delta * (dc != base[None, :]) < cur + pen_delta * (disp != base[None, :]))
+            follow = disp == base[None, :]
+            gain = np.where(follow, cur - cc, 0).sum(0) > 0       # the shared map moves here
+            base = np.where(gain, np.clip(base + sgn * step, -lim, lim), base)
+            upd = follow & gain[None, :]
+            disp, cur = np.where(upd, dc, disp), np.where(upd, cc, cur)
+            # each cell's own value, where that pays its side cost (blocks the shared map moved
+            # have taken this step already; the next, finer step refines them)
+            better = ~upd & (cc + pen_delta * (dc != base[None, :]) < cur + pen_delta * (disp != base[None, :]))
             disp, cur = np.where(better, dc, disp), np.where(better, cc, cur)
         if progress:
             progress("disparity", len(costs) + 2 * (5 - step.bit_length()), None)
