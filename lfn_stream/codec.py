@@ -47,8 +47,8 @@ def heldout_report(lf, config: dict, sections, info: dict) -> dict:
 NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
 TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s", "lod_levels")
 OPTIONS = {"tiles": int, "tile_band": float, "depth": int, "min_neurons": int, "max_neurons": int,
-           "occupancy_neurons": int, "steps": int, "batch": int, "lr": float, "holdout": int, "device": str, "checkpoint": str, "weights": str,
-           "resolution": int, "lod_levels": int}
+           "occupancy_neurons": int, "steps": int, "batch": int, "lr": float, "holdout": int, "device": str,
+           "checkpoint": str, "weights": str, "resolution": int, "lod_levels": int}
 
 
 def _setup(lf, p: dict):

@@ -35,7 +35,12 @@ def _ssim(a: np.ndarray, b: np.ndarray) -> float:
 
 def prefix_bytes(r: LfnRenderer, level: float) -> int:
     """Bytes of the file prefix holding the network a level needs (header, meta, base,
-    occupancy, steps; version 3: up to the end of the checksum chunk holding the last step)."""
+    occupancy, steps; version 3: up to the end of the checksum chunk holding the last step); of
+    a tile set (:class:`lfn_stream.tiles.TiledLfnRenderer`), its own sum over the tiles."""
+    from .tiles import TiledLfnRenderer
+
+    if isinstance(r, TiledLfnRenderer):
+        return r.prefix_bytes(level)
     c = r.file.container
     n = int(math.ceil(level - 1e-9)) - r.cfg.min_neurons
     names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else [])
@@ -77,7 +82,7 @@ def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, ba
                 near = train_views[int(np.argmin(np.linalg.norm(pos[train_views] - pos[v], axis=1)))]
                 base_near.append(np.mean((area_downsample(tg[near], scale)[..., :nch] - ref) ** 2))
                 base_mean.append(np.mean((mean_img - ref) ** 2))
-        row = {"level": level, "neurons": level, "scale": scale, "bytes": r.prefix_bytes(level) if hasattr(r, "prefix_bytes") else prefix_bytes(r, level),
+        row = {"level": level, "neurons": level, "scale": scale, "bytes": prefix_bytes(r, level),
                "psnr": 10 * math.log10(1 / float(np.mean(ps))),
                "ssim": None if np.isnan(ss).all() else float(np.nanmean(ss)),
                "ms_per_256sq": 1e3 * ts / npx * 65536}

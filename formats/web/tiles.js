@@ -71,8 +71,7 @@ export class TiledLfn {
     Object.assign(t, { name, band: m.band, files: m.files, centres: m.centres, manifestBytes: size, openSource,
       chunkBytes: chunkBytes / m.files.length, tiles: new Map(), sources: [manifest], active: [0] });
     const first = await t.tile(0);
-    for (const k of ["rows", "cols", "W", "H", "C", "peak", "minN", "maxN", "depth", "layout", "poses", "pivot", "up"]) t[k] = first[k];
-    t.occ = first.occ;
+    for (const k of ["rows", "cols", "W", "H", "C", "peak", "minN", "maxN", "depth", "layout", "occ"]) t[k] = first[k];
     const src = t.sources;
     t.source = {                                   // what the viewer's panel shows, summed over files
       get bytesFetched() { return src.reduce((a, s) => a + s.bytesFetched, 0); },
@@ -118,8 +117,6 @@ export class TiledLfn {
 
   /** Neurons held by every tile of the last camera (tile 0 before any). */
   get neurons() { return Math.min(...this._activeTiles().map((d) => d.neurons)); }
-
-  get display() { return this.tiles.get(0).display; }
 
   displayNeurons() { return Math.min(...this._activeTiles().map((d) => d.displayNeurons())); }
 
