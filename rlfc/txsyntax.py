@@ -41,6 +41,7 @@ N_BUCKETS = 24
 BAND = np.array([0] + [1] * 2 + [2] * 3 + [3] * 4 + [4] * 11 + [5] * 43, dtype=np.int64)
 N_BANDS = 6
 _BAND8 = [8 * int(b) for b in BAND]      # band·8: the band's offset among magnitude contexts
+_BAND8_ARR = np.array(_BAND8, np.int64)
 N_PC = 3          # plane classes
 _MASK = RANS_M - 1
 
@@ -369,50 +370,45 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
                 last[act, t, p] = dec.step(act, ctx_last(pcs[p], modes[act, t], key[act]))
     if (last > 64).any():
         raise FormatError(f"{name}: tx block has a last position past 64")
-    # magnitudes: per lane, groups (t, p) in order, each of length last
+    # magnitudes: per lane, groups g = (lane, t, p) in order, each of length last; symbol j of a
+    # group is at scan position last − 1 − j
     gl = last.reshape(S, nt * P)
     per_lane = gl.sum(axis=1)
     tot = int(per_lane.sum())
     lane_start = np.cumsum(per_lane) - per_lane
     flat_len = gl.reshape(-1)
-    gidx = np.repeat(np.arange(S * nt * P), flat_len)                   # group of each symbol
+    G = flat_len.size
     j = np.arange(tot) - np.repeat(np.cumsum(flat_len) - flat_len, flat_len)
-    pos = np.repeat(flat_len, flat_len) - 1 - j
-    g_lane, g_tp = np.divmod(gidx, nt * P)
-    pc = pcs[g_tp % P]
-    band = BAND[pos]
-    mags = np.zeros(tot, np.int64)
-    base = ctx_mag(pc, band, key[g_lane], 0)
-    order = np.argsort(-per_lane, kind="stable")
-    lens = per_lane[order]
-    for k in range(int(lens[0]) if S else 0):
-        m = int(np.searchsorted(-lens, -k, side="left"))
-        ln = order[:m]
-        i = lane_start[ln] + k
-        jj = j[i]
-        nb = np.where(jj == 0, 0, 1 + ((jj >= 1) & (mags[i - 1] > 0)) + ((jj >= 2) & (mags[i - 2 * (jj >= 2)] > 0)))
-        s = dec.step(ln, base[i] + nb)
-        if (s > ESC).any():
-            raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
-        mags[i] = s + (jj == 0)
-    # escapes
-    esc = np.flatnonzero(mags >= ESC + (j == 0))
+    index = np.repeat((np.arange(G) << 6) + flat_len - 1, flat_len) - j      # g·64 + position: ascending
+    g_pc = np.tile(pcs, G // P)                                             # per group: plane class, key
+    g_ctx = ctx_mag(g_pc, 0, np.repeat(key, nt * P), 0)
+    g_lane = np.repeat(np.arange(S), per_lane)
+    ctx1 = np.repeat(g_ctx, flat_len) + _BAND8_ARR[index & 63] + (j >= 1)
+    sym = _magnitudes(dec, tables, S, per_lane, lane_start, g_lane, j, ctx1)
+    if tot and int(sym.max()) > ESC:
+        raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
+    # escapes (symbol ESC: |c| >= ESC + first)
+    esc = np.flatnonzero(sym == ESC)
     if esc.size:
         e_lane = g_lane[esc]
         ec = np.bincount(e_lane, minlength=S)
         es = np.cumsum(ec) - ec
         col = np.arange(esc.size) - es[e_lane]
+        e_pc = g_pc[index[esc] >> 6]
         buckets = np.zeros(esc.size, np.int64)
         for k in range(int(ec.max())):
             sel = np.flatnonzero(col == k)
-            buckets[sel] = dec.step(e_lane[sel], ctx_esc(pc[esc[sel]]))
+            buckets[sel] = dec.step(e_lane[sel], ctx_esc(e_pc[sel]))
         if (buckets >= N_BUCKETS).any() or (buckets > 40).any():
             raise FormatError(f"{name}: tx block has an undefined escape bucket")
     else:
         buckets = np.zeros(0, np.int64)
     # raw bits: signs then escape suffixes, per lane
-    nz = mags > 0
-    nsign = np.bincount(g_lane[nz], minlength=S)
+    first = j == 0
+    nz = (sym > 0) | first
+    sidx = np.flatnonzero(nz)
+    s_lane = g_lane[sidx]
+    nsign = np.bincount(s_lane, minlength=S)
     nsuf = np.bincount(g_lane[esc], weights=buckets, minlength=S).astype(np.int64) if esc.size else np.zeros(S, np.int64)
     nbits = nsign + nsuf
     kb = np.minimum(nbits, BACK_BITS)
@@ -423,22 +419,92 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     if not ok.all():
         raise FormatError(f"{name}: tx block stream is malformed (its symbols do not end where its raw bits start)")
     back = dec.back()
-    sidx = np.flatnonzero(nz)
-    scount = np.cumsum(nz) - 1                                           # index among nonzeros overall
-    soff = scount[sidx] - (np.cumsum(nsign) - nsign)[g_lane[sidx]]      # bit offset within the lane
-    sbit = _raw_bits(buf, raw_start[g_lane[sidx]], back[g_lane[sidx]], kb[g_lane[sidx]], soff)
-    vals = mags.copy()
+    soff = np.arange(sidx.size) - (np.cumsum(nsign) - nsign)[s_lane]     # bit offset within the lane
+    sbit = _raw_bits(buf, raw_start[s_lane], back[s_lane], kb[s_lane], soff)
+    vals = sym[sidx] + first[sidx]
     if esc.size:
-        first = (j[esc] == 0).astype(np.int64)
         eoff = nsign[e_lane] + (np.cumsum(buckets) - buckets) - (np.cumsum(nsuf) - nsuf)[e_lane]
         suffix = np.zeros(esc.size, np.int64)
         for b in range(int(buckets.max(initial=0))):
             m = buckets > b
             suffix[m] |= _raw_bits(buf, raw_start[e_lane[m]], back[e_lane[m]], kb[e_lane[m]], eoff[m] + b) << b
-        vals[esc] = ESC + first + ((1 << buckets) - 1) + suffix
-    vals[sidx] = np.where(sbit == 1, -vals[sidx], vals[sidx])
-    index = (gidx << 6) + pos                          # gidx = lane·nt·P + tb·P + plane: ascending
-    return Parsed(modes, index[sidx], vals[sidx], P)
+        vals[(np.cumsum(nz) - 1)[esc]] = ESC + first[esc] + ((1 << buckets) - 1) + suffix
+    return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
+
+
+def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, g_lane, j, ctx1) -> np.ndarray:
+    """The magnitude symbols of every lane (flat, lane-major), decoded in steps over the lanes
+    that still have symbols.
+
+    Step-major layout: lanes are ranked by their number of symbols (longest first), so the
+    lanes active at step k are ranks [0, m_k) and symbol k of rank r sits at offs[k] + r: every
+    per-step read and write is a contiguous slice (the lanes' states too, kept in rank order),
+    and a symbol's two predecessors in its lane are at the same rank in the two steps before.
+    ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1).
+    """
+    tot = ctx1.size
+    order = np.argsort(-per_lane, kind="stable")
+    rank = np.empty(S, np.int64)
+    rank[order] = np.arange(S)
+    lens = per_lane[order]
+    K = int(lens[0]) if S else 0
+    cnt = np.searchsorted(-lens, -np.arange(K), side="left")          # lanes with more than k symbols
+    offs = np.cumsum(cnt) - cnt
+    sm = offs[np.arange(tot) - lane_start[g_lane]] + rank[g_lane]     # lane-major → step-major
+    c1 = np.empty(tot, np.uint32)
+    c1[sm] = ctx1
+    jm = np.empty(tot, np.int8)
+    jm[sm] = np.minimum(j, 2)
+    first = jm == 0
+    g1 = ~first                                                        # the previous symbol is of my group
+    g2 = jm == 2                                                       # ... and the one before it
+    sym = np.zeros(tot, np.int64)
+    nz = np.zeros(tot, bool)
+    tab = slot_words(tables)
+    x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order]
+    buf, top = dec.buf, dec.top
+    offl = offs.tolist()
+    for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
+        c = c1[o:o + m]
+        if k >= 1:
+            o1 = offl[k - 1]
+            c = c + (nz[o1:o1 + m] & g1[o:o + m])
+            if k >= 2:
+                o2 = offl[k - 2]
+                c += nz[o2:o2 + m] & g2[o:o + m]
+        x = x_all[:m]
+        w = tab[(c << PROB_BITS) | (x & _MASK)]                         # symbol | freq << 7 | (slot − cum) << 20
+        x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+        p = p_all[:m]
+        need = x < RANS_L
+        x = np.where(need, (x << 8) | buf[np.minimum(p, top)], x)
+        p += need
+        need = x < RANS_L
+        if need.any():                                                 # a second byte: rare
+            x = np.where(need, (x << 8) | buf[np.minimum(p, top)], x)
+            p += need
+        x_all[:m] = x
+        s = w & 127
+        sym[o:o + m] = s
+        np.logical_or(s > 0, first[o:o + m], out=nz[o:o + m])
+    dec.x[order], dec.ptr[order] = x_all, p_all
+    return sym[sm]
+
+
+def slot_words(tables: Tables) -> np.ndarray:
+    """(C·M,) uint32 per context and slot: symbol | freq << 7 | (slot − cum) << 20, so one
+    look-up serves a decode step (x = freq·(x >> n) + slot − cum); alphabets up to 128 symbols.
+    Cached on the tables."""
+    got = getattr(tables, "_slot_words", None)
+    if got is None:
+        C, A = tables.freq.shape
+        if A > 128:
+            raise ValueError("slot words hold alphabets of at most 128 symbols")
+        s = tables.slot.astype(np.int64)                                   # (C, M)
+        ci = np.arange(C)[:, None]
+        d = np.arange(RANS_M)[None, :] - tables.cum[ci, s]
+        got = tables._slot_words = (s | (tables.freq[ci, s] << 7) | (d << 20)).astype(np.uint32).reshape(-1)
+    return got
 
 
 def _raw_bits(buf, start, back, kb, off):
