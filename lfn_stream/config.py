@@ -59,7 +59,10 @@ class LfnConfig:
         """From a file's ``config.network`` (version-1 keys are renamed)."""
         if not isinstance(d, dict):
             raise ParameterError("network config must be a JSON object")
-        if version < 2:
+        if version < 2:                          # version 1 names; either name is read (FORMAT.md)
+            twice = [k for k, new in V1_KEYS.items() if k in d and new in d]
+            if twice:
+                raise ParameterError(f"network config names a size twice: {twice[0]} and {V1_KEYS[twice[0]]}")
             d = {V1_KEYS.get(k, k): v for k, v in d.items()}
         known = set(LfnConfig.__dataclass_fields__)
         if set(d) - known:

@@ -202,13 +202,11 @@ MAX_RESIDUAL = 1 << 24
 _VMAX_LIST = _VMAX.tolist()
 
 
-def check_blocks(modes: np.ndarray, mins: np.ndarray, q16, bitmaps_high=None) -> None:
+def check_blocks(modes: np.ndarray, mins: np.ndarray, q16) -> None:
     """(S, P) modes and minimums of present blocks, (P,) quantizer steps: every mode defined
     (:func:`check_modes`) and every residual the header allows within ±MAX_RESIDUAL; else
-    FormatError. ``bitmaps_high``: bitmap bits beyond the last node (must be zero)."""
+    FormatError."""
     check_modes(modes)
-    if bitmaps_high is not None and np.any(bitmaps_high):
-        raise FormatError("rlfc block run's bitmap names a node the tree does not have (corrupt file)")
     if q16 is None:
         return
     vmax = _VMAX[modes]
@@ -278,6 +276,12 @@ class BlockStore:
             u = np.unique(loc)
             self.verify(self.index[u], self.index[u + 1])
         nonempty = o1 > o0
+        ne = np.flatnonzero(nonempty)                # every run read: its bitmap is checked whole
+        if ne.size:
+            if (o1[ne] - o0[ne] < self.nbm).any():
+                raise FormatError("rlfc block run is shorter than its bitmap (corrupt file)")
+            if self._high and self.nbm and (buf[o0[ne] + self.nbm - 1] & self._high).any():
+                raise FormatError("rlfc block run's bitmap names a node the tree does not have (corrupt file)")
         byte = buf[np.where(nonempty, o0 + (g >> 3), 0)]
         present = nonempty & (((byte >> (g & 7).astype(np.uint8)) & 1) == 1)
         sel = np.flatnonzero(present)
@@ -286,8 +290,6 @@ class BlockStore:
             z = np.zeros((0, self.P), np.int64)
             return sel, np.zeros(0, bool), np.zeros(0, np.int64), z.astype(np.uint8), z, z
         s0, s1, sg = o0[sel], o1[sel], g[sel]
-        if (s1 - s0 < self.nbm).any():
-            raise FormatError("rlfc block run is shorter than its bitmap (corrupt file)")
         bm = buf[s0[:, None] + np.arange(self.nbm)]                     # (S, nbm)
         pc = _POPCOUNT[bm]
         total = pc.sum(axis=1)
@@ -302,7 +304,7 @@ class BlockStore:
         modes = hdr[:, self.off_bytes:self.off_bytes + self.P]
         mins = _from_le(hdr[:, self.off_bytes + self.P:].reshape(-1, self.min_bytes), True).reshape(-1, self.P)
         is_raw = modes[:, 0] == MODE_RAW
-        check_blocks(modes, mins, self.q16, bm[:, -1] & self._high if self._high and self.nbm else None)
+        check_blocks(modes, mins, self.q16)
         psize = self.table[modes]
         psize[is_raw] = 0
         pstart = pay[:, None] + (np.cumsum(psize, axis=1) - psize)

@@ -106,6 +106,20 @@ def test_bitmap_bits_beyond_the_tree_are_refused():
         _decode_all_paths(_rebuild(meta, secs))
 
 
+def test_a_run_naming_only_nodes_beyond_the_tree_is_refused():
+    """No node of the tree present, one bit past it set: nothing selects the run's headers, yet
+    a whole decode reads the run, so it is refused (found by tools.fuzz: the reference decoder
+    refused the file, the library had decoded it)."""
+    meta, secs, lengths = _bise_runs()
+    nbm = meta["config"]["layout"]["bitmap_bytes"]
+    start = int(lengths[:int(np.flatnonzero(lengths)[0])].sum())
+    b = bytearray(dict(secs)["rlfc.blocks"])
+    b[start:start + nbm] = bytes(nbm - 1) + b"\x80"
+    secs = [(n, bytes(b) if n == "rlfc.blocks" else d) for n, d in secs]
+    with pytest.raises(FormatError, match="bitmap names a node"):
+        open_decoder(open_lfc(_rebuild(meta, secs))).decode_all()
+
+
 def test_residuals_beyond_the_stated_range_are_refused():
     """A 32-bit minimum times a large step would wrap int32 planes: the header is refused
     instead (before the change: a silently wrong block, 0 where the exact sum gives 65535)."""

@@ -64,10 +64,13 @@ class RefLfn:
         meta, secs = merge_more(meta, secs), dict(secs)
         c, s = meta["config"], meta["scene"]
         net = c["network"]
-        v1 = meta["codec_version"] == 1          # version 1 named the sizes *_width
+        v1 = meta["codec_version"] == 1          # version 1 named the sizes *_width; decoders read both
 
         def pick(a, b):
-            return net[b if v1 else a]
+            if not v1:
+                return net[a]
+            need((a in net) != (b in net), f"network size named once ({a} or {b})")
+            return net[a] if a in net else net[b]
         self.D = pint(net["depth"], 1, 32)
         self.m = pint(pick("min_neurons", "min_width"), 1, 4096)
         self.M = pint(pick("max_neurons", "max_width"), self.m, 4096)

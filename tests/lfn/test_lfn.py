@@ -508,3 +508,15 @@ def test_lfn_files_honour_the_limits_they_are_opened_with():
     for r in (LfnRenderer(open_lfc(blob, limits=big), device="cpu"), LfnRenderer(open_lfc(blob), device="cpu",
                                                                                    limits=big)):
         assert r.cols == n and r.render(0, n - 1, 4.0, 1.0).shape == (2, 2, 4)
+
+
+def test_version_1_network_sizes_are_read_by_either_name_never_both():
+    """FORMAT.md: version 1 named the sizes *_width and decoders read both names; a config that
+    names one size twice is ambiguous and refused (the reference reader agrees, tools/reflfn.py)."""
+    old = {"depth": 3, "min_width": 4, "max_width": 12, "occupancy_width": 8}
+    new = {"depth": 3, "min_neurons": 4, "max_neurons": 12, "occupancy_neurons": 8}
+    assert LfnConfig.from_dict(old, version=1) == LfnConfig.from_dict(new, version=1) == CFG
+    with pytest.raises(ParameterError, match="twice"):
+        LfnConfig.from_dict({**new, "min_width": 5}, version=1)
+    with pytest.raises(ParameterError, match="unknown"):
+        LfnConfig.from_dict(old, version=2)
