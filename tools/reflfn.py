@@ -76,8 +76,9 @@ class RefLfn:
         self.M = pint(pick("max_neurons", "max_width"), self.m, 4096)
         self.k_occ = pint(pick("occupancy_neurons", "occupancy_width"), 0, 4096)
         need(net.get("in_features", 6) == 6 and net.get("out_features", 4) == 4, "features")
-        need(c["weights"] in DT, "weights dtype")
-        dt = np.dtype(DT[c["weights"]])
+        wd = c.get("weights", "fp16")              # FORMAT.md: fp16 when absent
+        need(wd in DT, "weights dtype")
+        dt = np.dtype(DT[wd])
         self.centre = [fnum(x) for x in c["norm"]["centre"]]
         self.radius = fnum(c["norm"]["radius"])
         need(len(self.centre) == 3 and self.radius > 0, "norm")
