@@ -30,6 +30,7 @@ from .txpredict import DISP_BITS, TB, W_BITS
 CV_MAX = 32766          # largest image side OpenCV's remap accepts (< SHRT_MAX)
 SMALL = 64              # (blocks × references) up to which every reference is sampled (fewer calls)
 _E = np.arange(TB, dtype=np.float32)
+_F16 = np.float32(1.0 / (1 << DISP_BITS))
 
 
 class KeyAtlas:
@@ -153,16 +154,17 @@ def _predict_dense(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> n
     """:func:`predict` for a few blocks (one random-access request): every reference sampled,
     weight 0 or not, in about a third of the numpy calls (calls, not pixels, cost here)."""
     M, R = slots.shape
-    f16 = np.float32(1.0 / (1 << DISP_BITS))
-    Y = ((y0[:, None] << DISP_BITS) + disp_y).astype(np.float32) * f16                  # (M, R)
-    X = ((x0[:, None] << DISP_BITS) + disp_x).astype(np.float32) * f16
+    Y = ((y0[:, None] << DISP_BITS) + disp_y).astype(np.float32) * _F16                 # (M, R)
+    X = ((x0[:, None] << DISP_BITS) + disp_x).astype(np.float32) * _F16
     rows = np.minimum(np.maximum(Y[..., None] + _E, 0), atlas.hp - 1) + (slots * atlas.hp).astype(np.float32)[..., None]
     cols = np.minimum(np.maximum(X[..., None] + _E, 0), atlas.wp - 1)
-    mr = np.repeat(rows.reshape(-1, TB), TB, axis=1)                                       # (M·R, 64) rows
-    mc = np.tile(cols.reshape(-1, TB), TB)
+    n = M * R
+    mr = np.broadcast_to(rows.reshape(n, TB, 1), (n, TB, TB)).reshape(n, TB * TB)        # (M·R, 64) rows
+    mc = np.broadcast_to(cols.reshape(n, 1, TB), (n, TB, TB)).reshape(n, TB * TB)
     smp = cv2.remap(atlas.groups[0], mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    smp = np.floor(smp).reshape(M, R, TB * TB, atlas.C)[..., :atlas.P]                     # atlas + 0.5: rounded
-    acc = np.einsum("mrxp,mr->mxp", smp, weights.astype(smp.dtype)).astype(np.int32)
-    acc += 1 << (W_BITS - 1)
-    acc >>= W_BITS
-    return acc.reshape(M, TB, TB, atlas.P)
+    np.floor(smp, out=smp)                                                               # atlas + 0.5: rounded
+    acc = np.matmul(weights.astype(smp.dtype)[:, None, :], smp.reshape(M, R, -1))        # (M, 1, 64·C) integers
+    out = acc.reshape(M, TB * TB, atlas.C)[..., :atlas.P].astype(np.int32)
+    out += 1 << (W_BITS - 1)
+    out >>= W_BITS
+    return out.reshape(M, TB, TB, atlas.P)

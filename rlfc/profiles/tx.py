@@ -520,14 +520,17 @@ class TxDecoder(ProfileDecoder):
         return out.reshape(views.size, B * B, self.P)
 
     def _view_refs(self, v: int):
-        """Per-view constants of the scalar path (cached): reference key slots (R,), blend
-        weights (R,), position offsets (R, 2)."""
+        """Per-view constants of the scalar path (cached): reference key slots (R,), weights
+        per tb mode (R + 1, R) (mode 0: the view's blend weights; mode k: all 64 on reference
+        k − 1), position offsets (R, 2)."""
         got = self._ref_cache.get(v)
         if got is None:
             lay = self.lay
             refs = lay.refs[v]
             r0 = refs.clip(0)
-            got = (self.key_slot[r0].clip(0), lay.weights[v].copy(), lay.positions[v] - lay.positions[r0])
+            R = refs.size
+            w = np.concatenate([lay.weights[v][None, :], 64 * np.eye(R, dtype=lay.weights.dtype)])
+            got = (self.key_slot[r0].clip(0), w, lay.positions[v] - lay.positions[r0])
             self._ref_cache[v] = got
         return got
 
@@ -540,16 +543,14 @@ class TxDecoder(ProfileDecoder):
         if self.is_key[view]:
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
-        slots, wv, dpos = self._view_refs(view)
+        slots, wmode, dpos = self._view_refs(view)
         cell = self.lay.cell[view]
         ty = by * tpb + self._tby                                           # (nt,) raster within the block
         tx = bx * tpb + self._tbx
         loc8 = ty * self.nbx8 + tx
         d = self.disp[cell, loc8]
-        mode = self.modes[cell, loc8]
-        R = wv.size
-        w = np.where(mode[:, None] == 0, wv[None, :], 64 * (np.arange(R)[None, :] == mode[:, None] - 1))   # (nt, R)
-        args = (np.broadcast_to(slots, (ty.size, R)), w, d[:, None] * dpos[None, :, 0], d[:, None] * dpos[None, :, 1],
+        dd = d[:, None, None] * dpos[None]                                  # (nt, R, 2)
+        args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[self.modes[cell, loc8]], dd[..., 0], dd[..., 1],
                 ty * TB, tx * TB)
         if self.atlas is not None:                          # the remap kernel, every reference at once
             out = _predict_dense(self.atlas, *args)
