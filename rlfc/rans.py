@@ -177,6 +177,53 @@ def encode_lanes(ctx: np.ndarray, sym: np.ndarray, lengths: np.ndarray, tables: 
     if S == 0:
         return out
     lengths = np.asarray(lengths, dtype=np.int64)
+    C, A = tables.freq.shape
+    fc_t = ((tables.freq << 32) | tables.cum[:, :A]).reshape(-1)          # freq << 32 | cum per (ctx, sym)
+    for a in range(0, S, chunk):
+        idx = np.arange(a, min(S, a + chunk))
+        order = idx[np.argsort(-lengths[idx], kind="stable")]        # active lanes form a prefix
+        ln = lengths[order]
+        K = int(ln[0]) if ln.size else 0
+        n = order.size
+        # step-major: row k holds every lane's k-th symbol (contiguous slices per step)
+        ci, si = ctx[order, :K].astype(np.int64).T, sym[order, :K].astype(np.int64).T      # (K, n)
+        valid = np.arange(K)[:, None] < ln[None, :]
+        if (((ci < 0) | (ci >= C) | (si < 0) | (si >= A)) & valid).any():
+            raise ValueError("a context or symbol outside the tables")
+        fc = fc_t[np.where(valid, ci * A + si, 0)]
+        if ((fc >> 32)[valid] == 0).any():
+            raise ValueError("a symbol with frequency 0 in its context cannot be coded")
+        cnt = np.searchsorted(-ln, -np.arange(K), side="left").tolist()  # lanes with ln > k: the first m
+        cap = 2 * K + STATE_BYTES
+        buf = np.zeros((n, cap), dtype=np.uint8)
+        wp = np.full(n, cap, dtype=np.int64)
+        x = np.full(n, L, dtype=np.int64) + (0 if back is None else np.asarray(back, np.int64)[order])
+        rows = np.arange(n)
+        for k in range(K - 1, -1, -1):
+            m = cnt[k]
+            if m == 0:
+                continue
+            w = fc[k, :m]
+            f = w >> 32
+            xm = x[:m]
+            xmax = _XMAX_SCALE * f
+            for _ in range(2):                                     # at most two bytes out per symbol
+                e = xm >= xmax
+                if not e.any():
+                    break
+                r = rows[:m][e]
+                wp[r] -= 1
+                buf[r, wp[r]] = (xm[e] & 255).astype(np.uint8)
+                xm[e] >>= 8
+            q, rem = np.divmod(xm, f)
+            x[:m] = (q << PROB_BITS) + rem + (w & 0xFFFFFFFF)
+        wp -= STATE_BYTES                                          # flush: x little-endian first
+        sh = 8 * np.arange(STATE_BYTES)
+        buf[rows[:, None], wp[:, None] + np.arange(STATE_BYTES)] = ((x[:, None] >> sh) & 255).astype(np.uint8)
+        for i, o in enumerate(order.tolist()):
+            out[o] = buf[i, wp[i]:].tobytes()
+    return out
+    lengths = np.asarray(lengths, dtype=np.int64)
     freq, cum = tables.freq, tables.cum
     for a in range(0, S, chunk):
         idx = np.arange(a, min(S, a + chunk))
