@@ -137,7 +137,14 @@ def grid_positions(rows: int, cols: int, baseline: tuple[float, float] = (1.0, 1
 
 def _finite_array(v, shape: tuple, where: str, key: str) -> np.ndarray:
     """A JSON list → float64 array of exactly ``shape`` with finite entries, else FormatError."""
+    def has_bool(x, depth: int) -> bool:          # JSON true/false are not numbers (float() would take them)
+        if isinstance(x, bool):
+            return True
+        return depth > 0 and isinstance(x, list) and any(has_bool(y, depth - 1) for y in x)
+
     try:
+        if has_bool(v, len(shape)):
+            raise TypeError
         a = np.asarray(v, dtype=np.float64)
     except (TypeError, ValueError, OverflowError):
         raise FormatError(f"{where}: field {key!r} must be a {'x'.join(map(str, shape))} array of numbers") from None
@@ -189,6 +196,9 @@ def read_geometry(g: dict, where: str, limits: Limits = DEFAULT, rows: int | Non
         out["positions"] = _finite_array(f.obj["positions"], shape + (3,), where, "positions")
     else:
         out["baseline"] = _finite_array(f._get("baseline", [1.0, 1.0]), (2,), where, "baseline").tolist()
+        steps = np.maximum([out["cols"] - 1, out["rows"] - 1], 1)
+        if not (np.abs(out["baseline"]) < 1e100 / steps).all():       # the grid's extent (squared in distances)
+            raise FormatError(f"{where}: field 'baseline' times the grid size overflows the camera positions")
     if f.has("c2w"):
         out["c2w"] = _finite_array(f.obj["c2w"], shape + (4, 4), where, "c2w")
     if f.has("splits"):

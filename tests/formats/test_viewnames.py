@@ -124,3 +124,29 @@ def test_bad_splits_are_format_errors(splits):
     with pytest.raises(FormatError, match="splits"):
         read_geometry(g, "scene")
     assert read_geometry({**g, "splits": [["train", 3], ["test", 1]]}, "scene")["splits"] == [("train", 3), ("test", 1)]
+
+
+def test_a_baseline_whose_grid_overflows_is_a_format_error():
+    """Finite baseline, infinite camera positions (found by tools.fuzz seed 31 as a numpy overflow
+    warning): refused before positions are built."""
+    import warnings
+
+    from formats.lightfield import read_geometry
+
+    g = {"rows": 1, "cols": 4, "height": 2, "width": 2, "channels": 3, "dtype": "uint8", "baseline": [1e308, 1.0]}
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with pytest.raises(FormatError, match="baseline"):
+            read_geometry(g, "scene")
+    assert read_geometry({**g, "baseline": [1e90, 1.0]}, "scene")["baseline"] == [1e90, 1.0]
+
+
+@pytest.mark.parametrize("field", ["principal", "focal", "baseline"])
+def test_booleans_are_not_numbers_in_geometry(field):
+    """JSON false in a numeric field (found by tools.fuzz seed 31: the library read it as 0, the
+    reference reader refused it) is a FormatError."""
+    from formats.lightfield import read_geometry
+
+    g = {"rows": 1, "cols": 4, "height": 2, "width": 2, "channels": 3, "dtype": "uint8", field: [1.0, False]}
+    with pytest.raises(FormatError, match=field):
+        read_geometry(g, "scene")
