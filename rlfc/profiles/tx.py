@@ -25,7 +25,7 @@ from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
-from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict
+from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict, predict_rows
 from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
@@ -466,22 +466,41 @@ class TxDecoder(ProfileDecoder):
         syntax, when the caller parsed several views together)."""
         n8y, n8x, tpb, P = self.nby8, self.nbx8, self.tpb, self.P
         T = n8y * n8x
-        ty, tx = np.divmod(np.arange(T), n8x)
-        pred = np.empty((T, TB, TB, P), np.int32)
-        vv = np.full(min(T, PRED_TBS), v)
-        for a in range(0, T, PRED_TBS):
-            b = min(T, a + PRED_TBS)
-            pred[a:b] = self._pred(vv[:b - a], ty[a:b], tx[a:b])
+        if self.atlas is None:
+            ty, tx = np.divmod(np.arange(T), n8x)
+            pred = np.empty((T, TB, TB, P), np.int32)
+            vv = np.full(min(T, PRED_TBS), v)
+            for a in range(0, T, PRED_TBS):
+                b = min(T, a + PRED_TBS)
+                pred[a:b] = self._pred(vv[:b - a], ty[a:b], tx[a:b])
+            out = pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
+        else:                           # raster bands of blend (mode 0) blocks, then the other blocks
+            out = np.empty((self.Hp, self.Wp, P), np.int32)
+            slots, wmode, dpos = self._view_refs(v)
+            cell = self.lay.cell[v]
+            d = self.disp[cell].reshape(1, n8y, n8x)
+            dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]             # (R, n8y, n8x)
+            band = max(1, PRED_TBS // n8x)
+            for a in range(0, n8y, band):
+                b = min(n8y, a + band)
+                out[a * TB:b * TB] = predict_rows(self.atlas, slots, wmode[0], dy[:, a:b], dx[:, a:b], a)
+            other = np.flatnonzero(self.modes[cell] != 0)
+            if other.size:
+                ty, tx = np.divmod(other, n8x)
+                out.reshape(n8y, TB, n8x, TB, P)[ty, :, tx] = self._pred(np.full(other.size, v), ty, tx)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
             by, bx = np.divmod(locs, self.nbx)
             t = np.arange(self.nt)
-            tbi = (by[:, None] * tpb + t // tpb) * n8x + bx[:, None] * tpb + t % tpb      # (S, nt) raster tb index
+            ty = (by[:, None] * tpb + t // tpb).reshape(-1)                                # (S·nt,) tb rows, cols
+            tx = (bx[:, None] * tpb + t % tpb).reshape(-1)
             vs = np.full(locs.size, v)
             if parsed is None:
                 parsed = self._parse(vs, locs)
-            pred[tbi] = self._add_residual(pred[tbi], self._residual(vs, parsed), parsed.modes)
-        return pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
+            o4 = out.reshape(n8y, TB, n8x, TB, P)
+            got = o4[ty, :, tx].reshape(locs.size, self.nt, TB, TB, P)
+            o4[ty, :, tx] = self._add_residual(got, self._residual(vs, parsed), parsed.modes).reshape(-1, TB, TB, P)
+        return out
 
     def _decode_key_image(self, k: int) -> None:
         """Decode JPEG 2000 intra key view ``k`` (all its rows)."""

@@ -20,6 +20,25 @@ def test_ycocg_r_is_lossless(dtype, rng):
     assert p[:, 1:].min() >= -peak and p[:, 1:].max() <= peak         # Co/Cg need one extra bit
 
 
+@pytest.mark.parametrize("shape", [(300, 256, 3), (70000, 3), (4, 128, 128, 4), (2, 10, 10, 3)])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_from_planes_split_path_is_the_same_integers(shape, dtype, rng):
+    """Large inputs go through OpenCV-split planes (formats.pixels.SPLIT_MIN); out-of-range planes
+    (a residual past the clip) clip the same as the small-input path."""
+    from formats.pixels import inverse_int
+
+    peak = int(np.iinfo(dtype).max)
+    p = rng.integers(-2 * peak, 2 * peak, shape).astype(np.int32)
+    ref = np.clip(inverse_int(p.copy()), 0, peak).astype(dtype)
+    got = from_planes(p, dtype)
+    assert got.dtype == dtype and got.shape == ref.shape and np.array_equal(got, ref)
+    x = rng.integers(0, peak, shape, endpoint=True).astype(dtype)
+    assert np.array_equal(from_planes(to_planes(x), dtype), x)
+    if len(shape) >= 3:                               # views cropped from padded planes (row strides)
+        crop = p[..., 1:shape[-2] - 1, :] if len(shape) == 3 else p[:, 1:, 2:]
+        assert np.array_equal(from_planes(crop, dtype), np.clip(inverse_int(crop.copy()), 0, peak).astype(dtype))
+
+
 @pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(c=2),
                                 dict(h=13, w=19), dict(rows=1, cols=5), dict(rows=5, cols=1)])
 def test_lossless_exact_and_decoders_agree(kw):
