@@ -31,7 +31,7 @@ from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, planar, predict_tbs, upsample_thumb
-from .txsample import KeyAtlas, predict as remap_predict
+from .txsample import KeyAtlas, predict_view
 from .txmaps import pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
 from .txstructure import build, build_intra
@@ -370,22 +370,19 @@ class TxEncoder:
         """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``
         (:meth:`key_source`: an atlas, or planar planes); the same integers either way."""
         s = self.s
-        nloc8 = self.nby8 * self.nbx8
-        ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
         m = s.cell[v]
         d, mode = self.disp[m], self.modes[m]
-        w = np.where(mode[:, None] == 0, s.weights[v][None, :],
-                     64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
         r0 = s.refs[v].clip(0)
         dpos = s.positions[v] - s.positions[r0]
+        if isinstance(kp, KeyAtlas):                 # raster bands (the decoder's whole-view path)
+            return predict_view(kp, self.key_slot[r0], s.weights[v], d, mode, dpos, self.nby8, self.nbx8)
+        nloc8 = self.nby8 * self.nbx8
+        ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
+        w = np.where(mode[:, None] == 0, s.weights[v][None, :],
+                     64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
         slots = np.broadcast_to(self.key_slot[r0], (nloc8, MAX_REFS))
-        if isinstance(kp, KeyAtlas):
-            p = np.concatenate([remap_predict(kp, slots[a:a + 4096], w[a:a + 4096], d[a:a + 4096, None] * dpos[None, :, 0],
-                                              d[a:a + 4096, None] * dpos[None, :, 1], ty[a:a + 4096] * TB,
-                                              tx[a:a + 4096] * TB) for a in range(0, nloc8, 4096)])
-        else:
-            p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
-                            d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
+        p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
+                        d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
         return p.reshape(self.nby8, self.nbx8, TB, TB, self.P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, self.P)
 
     def thumb_levels(self, v: int, thumb16: int) -> np.ndarray:

@@ -203,6 +203,41 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int) -> n
     return out
 
 
+#: 8×8 blocks per band of :func:`predict_view` (its temporaries stay in the caches)
+BAND_TBS = 1024
+
+
+def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n8x: int) -> np.ndarray:
+    """The prediction of a whole view with references: the blend-mode blocks by
+    :func:`predict_rows` in bands, the single-reference blocks by :func:`predict`.
+
+    Args:
+        slots: (R,) key slots of the references; weights: (R,) blend weights (sum 64);
+            disp: (T,) disparity of each 8×8 block (raster order, T = n8y·n8x); modes: (T,)
+            0 = blend, k = reference k − 1 alone; dpos: (R, 2) position offsets (displacement
+            = disparity × offset, in 1/16 pixel).
+
+    Returns:
+        (8·n8y, 8·n8x, P) int32, the integers of :func:`predict` for every block.
+    """
+    R, P = slots.size, atlas.P
+    d = np.asarray(disp).reshape(1, n8y, n8x)
+    dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]                  # (R, n8y, n8x)
+    out = np.empty((n8y * TB, n8x * TB, P), np.int32)
+    band = max(1, BAND_TBS // n8x)
+    for a in range(0, n8y, band):
+        b = min(n8y, a + band)
+        out[a * TB:b * TB] = predict_rows(atlas, slots, weights, dy[:, a:b], dx[:, a:b], a)
+    other = np.flatnonzero(np.asarray(modes) != 0)
+    if other.size:
+        ty, tx = np.divmod(other, n8x)
+        w = 64 * (np.arange(R)[None, :] == np.asarray(modes)[other, None] - 1)
+        p = predict(atlas, np.broadcast_to(slots, (other.size, R)), w, dy.reshape(R, -1)[:, other].T,
+                    dx.reshape(R, -1)[:, other].T, ty * TB, tx * TB)
+        out.reshape(n8y, TB, n8x, TB, P)[ty, :, tx] = p
+    return out
+
+
 def _predict_dense(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarray:
     """:func:`predict` for a few blocks (one random-access request): every reference sampled,
     weight 0 or not, in about a third of the numpy calls (calls, not pixels, cost here)."""

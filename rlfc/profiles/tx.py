@@ -25,7 +25,7 @@ from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
-from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict, predict_rows
+from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict, predict_view
 from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
@@ -475,19 +475,9 @@ class TxDecoder(ProfileDecoder):
                 pred[a:b] = self._pred(vv[:b - a], ty[a:b], tx[a:b])
             out = pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
         else:                           # raster bands of blend (mode 0) blocks, then the other blocks
-            out = np.empty((self.Hp, self.Wp, P), np.int32)
             slots, wmode, dpos = self._view_refs(v)
             cell = self.lay.cell[v]
-            d = self.disp[cell].reshape(1, n8y, n8x)
-            dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]             # (R, n8y, n8x)
-            band = max(1, PRED_TBS // n8x)
-            for a in range(0, n8y, band):
-                b = min(n8y, a + band)
-                out[a * TB:b * TB] = predict_rows(self.atlas, slots, wmode[0], dy[:, a:b], dx[:, a:b], a)
-            other = np.flatnonzero(self.modes[cell] != 0)
-            if other.size:
-                ty, tx = np.divmod(other, n8x)
-                out.reshape(n8y, TB, n8x, TB, P)[ty, :, tx] = self._pred(np.full(other.size, v), ty, tx)
+            out = predict_view(self.atlas, slots, wmode[0], self.disp[cell], self.modes[cell], dpos, n8y, n8x)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
             by, bx = np.divmod(locs, self.nbx)
