@@ -223,45 +223,6 @@ def encode_lanes(ctx: np.ndarray, sym: np.ndarray, lengths: np.ndarray, tables: 
         for i, o in enumerate(order.tolist()):
             out[o] = buf[i, wp[i]:].tobytes()
     return out
-    lengths = np.asarray(lengths, dtype=np.int64)
-    freq, cum = tables.freq, tables.cum
-    for a in range(0, S, chunk):
-        idx = np.arange(a, min(S, a + chunk))
-        order = idx[np.argsort(-lengths[idx], kind="stable")]        # active lanes form a prefix
-        ln = lengths[order]
-        K = int(ln[0]) if ln.size else 0
-        cx, sy = ctx[order, :K].astype(np.int64), sym[order, :K].astype(np.int64)
-        n = order.size
-        cap = 2 * K + STATE_BYTES
-        buf = np.zeros((n, cap), dtype=np.uint8)
-        wp = np.full(n, cap, dtype=np.int64)
-        x = np.full(n, L, dtype=np.int64) + (0 if back is None else np.asarray(back, np.int64)[order])
-        rows = np.arange(n)
-        for k in range(K - 1, -1, -1):
-            m = int(np.searchsorted(-ln, -k, side="left"))        # lanes with ln > k: the first m
-            if m == 0:
-                continue
-            c_, s_ = cx[:m, k], sy[:m, k]
-            f = freq[c_, s_]
-            if (f == 0).any():
-                raise ValueError("a symbol with frequency 0 in its context cannot be coded")
-            xm = x[:m]
-            xmax = _XMAX_SCALE * f
-            for _ in range(2):                                     # at most two bytes out per symbol
-                e = xm >= xmax
-                if not e.any():
-                    break
-                r = rows[:m][e]
-                wp[r] -= 1
-                buf[r, wp[r]] = (xm[e] & 255).astype(np.uint8)
-                xm[e] >>= 8
-            x[:m] = ((xm // f) << PROB_BITS) + (xm % f) + cum[c_, s_]
-        wp -= STATE_BYTES                                          # flush: x little-endian first
-        sh = 8 * np.arange(STATE_BYTES)
-        buf[rows[:, None], wp[:, None] + np.arange(STATE_BYTES)] = ((x[:, None] >> sh) & 255).astype(np.uint8)
-        for i, o in enumerate(order.tolist()):
-            out[o] = buf[i, wp[i]:].tobytes()
-    return out
 
 
 class LaneDecoder:
