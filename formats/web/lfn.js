@@ -119,7 +119,13 @@ export class LfnDecoder {
     if (!conf || typeof conf !== "object" || Array.isArray(conf)) throw new FormatError(`${name}: config is not an object`);
     const net = conf.network, where = `${name}: config.network`;
     if (!net || typeof net !== "object" || Array.isArray(net)) throw new FormatError(`${where} is not an object`);
-    const k = version < 2 ? { min: "min_width", max: "max_width", occ: "occupancy_width" } : { min: "min_neurons", max: "max_neurons", occ: "occupancy_neurons" };
+    // version 1 named the sizes *_width; decoders read either name, and refuse one named twice (FORMAT.md)
+    const pick = (a, b) => {
+      if (version >= 2) return a;
+      if (net[a] !== undefined && net[b] !== undefined) throw new FormatError(`${where}: network size named twice: ${b} and ${a}`);
+      return net[a] !== undefined ? a : b;
+    };
+    const k = { min: pick("min_neurons", "min_width"), max: pick("max_neurons", "max_width"), occ: pick("occupancy_neurons", "occupancy_width") };
     d.depth = intIn(net, "depth", 1, 32, where);          // the sizes are required (FORMAT.md)
     d.minN = intIn(net, k.min, 1, 4096, where);
     d.maxN = intIn(net, k.max, d.minN, 4096, where);
@@ -193,6 +199,9 @@ export class LfnDecoder {
         pos = nested(g.positions, [this.rows, this.cols, 3], `${where}.positions`);
       } else {
         const [bx, by] = finiteList(g.baseline === undefined ? [1, 1] : g.baseline, 2, `${where}.baseline`);
+        if (!(Math.abs(bx) < 1e100 / Math.max(this.cols - 1, 1) && Math.abs(by) < 1e100 / Math.max(this.rows - 1, 1))) {
+          throw new FormatError(`${where}.baseline times the grid size overflows the camera positions`);
+        }
         pos = [];
         for (let r = 0; r < this.rows; r++) for (let c = 0; c < this.cols; c++) pos.push(c * bx, -r * by, 0);
       }

@@ -185,6 +185,11 @@ def test_bad_networks_get_typed_errors(tmp_path):
                     "config.display"),
         "radius": ({**meta, "config": {**meta["config"], "norm": {"centre": [0, 0, 0], "radius": -1}}}, secs,
                    "FormatError", "radius"),
+        "named-twice": ({**meta, "codec_version": 1, "config": {**meta["config"], "network": {
+            **meta["config"]["network"], "min_width": meta["config"]["network"]["min_neurons"]}}}, secs,
+            "FormatError", "twice"),
+        "baseline-overflow": ({**meta, "scene": {**meta["scene"], "baseline": [1e308, 1.0]}}, secs,
+                              "FormatError", "baseline"),
     }
     for name, (m, s, err, needle) in cases.items():
         info = run_js(write(name, m, s), tmp_path / name, ["view,0,max,1"])
