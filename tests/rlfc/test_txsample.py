@@ -75,3 +75,36 @@ def test_remap_prediction_of_no_blocks():
     atlas = KeyAtlas(1, 16, 16, 3, 9)
     z = np.zeros((0, 4), np.int64)
     assert predict(atlas, z, z, z, z, np.zeros(0, np.int64), np.zeros(0, np.int64)).shape == (0, 8, 8, 3)
+
+
+@pytest.mark.parametrize("P,lo,hi,bits,cv_max", [(3, -255, 255, 9, None), (1, 0, 255, 8, None), (4, -255, 255, 9, None),
+                                                 (2, 0, 65535, 16, None), (3, -65535, 65535, 17, None),
+                                                 (3, -255, 255, 9, 100)])
+def test_whole_view_in_raster_bands_is_predict_tbs(P, lo, hi, bits, cv_max, monkeypatch):
+    """predict_view (blend blocks in raster bands, the others by the block kernel) gives every
+    block predict_tbs's integers; bands of a few block rows, keys across atlas groups."""
+    import rlfc.txsample as ts
+
+    if cv_max:
+        monkeypatch.setattr(ts, "CV_MAX", cv_max)       # 3 keys of 32 rows per stacked group
+    monkeypatch.setattr(ts, "BAND_TBS", 12)             # bands of 2 block rows of 6
+    rng = np.random.default_rng(P + bits)
+    n_keys, hp, wp, R = 7, 32, 48, 4
+    n8y, n8x = hp // TB, wp // TB
+    keys = rng.integers(lo, hi + 1, (n_keys, hp, wp, P)).astype(np.int32)
+    atlas = ts.KeyAtlas(n_keys, hp, wp, P, bits)
+    for s in range(n_keys):
+        atlas.set(s, keys[s])
+    slots = rng.choice(n_keys, R, replace=False)
+    weights = np.array([30, 0, 20, 14])                  # one reference unused by the blend
+    disp = rng.integers(-40, 40, n8y * n8x)
+    modes = np.where(rng.random(n8y * n8x) < 0.3, rng.integers(1, R + 1, n8y * n8x), 0)
+    dpos = rng.integers(-2, 3, (R, 2))
+    got = ts.predict_view(atlas, slots, weights, disp, modes, dpos, n8y, n8x)
+    T = n8y * n8x
+    ty, tx = np.divmod(np.arange(T), n8x)
+    w = np.where(modes[:, None] == 0, weights[None, :], 64 * (np.arange(R)[None, :] == modes[:, None] - 1))
+    ref = predict_tbs(NUMPY, planar(keys), (hp, wp), np.broadcast_to(slots, (T, R)), w, disp[:, None] * dpos[None, :, 0],
+                      disp[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
+    ref = ref.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(hp, wp, P)
+    assert got.dtype == np.int32 and np.array_equal(got, ref)
