@@ -30,7 +30,7 @@ from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
 from .ratesearch import secant_search
-from .txpredict import TB, planar, predict_tbs, upsample_thumb
+from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
 from .txmaps import pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
@@ -378,8 +378,7 @@ class TxEncoder:
             return predict_view(kp, self.key_slot[r0], s.weights[v], d, mode, dpos, self.nby8, self.nbx8)
         nloc8 = self.nby8 * self.nbx8
         ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
-        w = np.where(mode[:, None] == 0, s.weights[v][None, :],
-                     64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
+        w = mode_weights(s.weights[v])[mode]
         slots = np.broadcast_to(self.key_slot[r0], (nloc8, MAX_REFS))
         p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
                         d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)

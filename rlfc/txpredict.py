@@ -23,6 +23,15 @@ DISP_BITS = 4     # disparities and sample positions in 1/16 pixel
 W_BITS = 6        # blend weights sum to 64
 
 
+def mode_weights(weights: np.ndarray) -> np.ndarray:
+    """Blend weights per tb mode: (…, R) blend weights → (…, R + 1, R): mode 0 blends with
+    ``weights``, mode k puts all 64 on reference k − 1 (index it with the modes)."""
+    w = np.asarray(weights)
+    R = w.shape[-1]
+    one = np.broadcast_to(64 * np.eye(R, dtype=w.dtype), w.shape[:-1] + (R, R))
+    return np.concatenate([w[..., None, :], one], axis=-2)
+
+
 def planar(planes: np.ndarray) -> np.ndarray:
     """(n, Hp, Wp, P) planes → (P, n·Hp·Wp) contiguous (fast gathers)."""
     return np.ascontiguousarray(np.moveaxis(planes, -1, 0)).reshape(planes.shape[-1], -1)

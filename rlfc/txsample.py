@@ -25,7 +25,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .txpredict import DISP_BITS, TB, W_BITS
+from .txpredict import DISP_BITS, TB, W_BITS, mode_weights
 
 CV_MAX = 32766          # largest image side OpenCV's remap accepts (< SHRT_MAX)
 SMALL = 64              # (blocks × references) up to which every reference is sampled (fewer calls)
@@ -231,7 +231,7 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
     other = np.flatnonzero(np.asarray(modes) != 0)
     if other.size:
         ty, tx = np.divmod(other, n8x)
-        w = 64 * (np.arange(R)[None, :] == np.asarray(modes)[other, None] - 1)
+        w = mode_weights(weights)[np.asarray(modes)[other]]
         p = predict(atlas, np.broadcast_to(slots, (other.size, R)), w, dy.reshape(R, -1)[:, other].T,
                     dx.reshape(R, -1)[:, other].T, ty * TB, tx * TB)
         out.reshape(n8y, TB, n8x, TB, P)[ty, :, tx] = p

@@ -22,7 +22,7 @@ from formats.errors import FormatError, UnsupportedError
 from ..kernels import dequantize
 from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
-from ..txpredict import DISP_BITS, TB, planar, predict_tbs, upsample_thumb
+from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict, predict_view
@@ -76,6 +76,7 @@ class TxDecoder(ProfileDecoder):
         self.nt = self.tpb ** 2
         self.nby8, self.nbx8 = self.Hp // TB, self.Wp // TB
         lay = self.lay = TxLayout.read(cfg.sub("tx"), c.read("tx.layout"), N0, self.P, name)
+        self.wmode = mode_weights(lay.weights)                   # (views, R + 1, R): weights per tb mode
         keys = np.asarray(lay.keys, np.int64)
         if keys.size * self.Hp * self.Wp > limits.max_open_pixels:
             raise FormatError(f"{name}: {keys.size} key views of {self.Hp}x{self.Wp} exceed the open-time limit of "
@@ -368,7 +369,7 @@ class TxDecoder(ProfileDecoder):
         d = self.disp[cell, loc8]
         mode = self.modes[cell, loc8]
         refs = lay.refs[views]
-        w = np.where(mode[:, None] == 0, lay.weights[views], 64 * (np.arange(MAX_REFS)[None, :] == mode[:, None] - 1))
+        w = self.wmode[views, mode]                                                       # (M, R)
         r0 = refs.clip(0)
         dpos = lay.positions[views][:, None, :] - lay.positions[r0]          # (M, 4, 2)
         if xp is NUMPY and self.atlas is not None:
@@ -537,9 +538,7 @@ class TxDecoder(ProfileDecoder):
             lay = self.lay
             refs = lay.refs[v]
             r0 = refs.clip(0)
-            R = refs.size
-            w = np.concatenate([lay.weights[v][None, :], 64 * np.eye(R, dtype=lay.weights.dtype)])
-            got = (self.key_slot[r0].clip(0), w, lay.positions[v] - lay.positions[r0])
+            got = (self.key_slot[r0].clip(0), self.wmode[v], lay.positions[v] - lay.positions[r0])
             self._ref_cache[v] = got
         return got
 
