@@ -13,12 +13,61 @@ out of an estimate that only ranks candidates: 3.3× faster than the integer pre
 """
 from __future__ import annotations
 
+import contextlib
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import numpy as np
 
 from .txlayout import MAX_REFS
 from formats.parallel import Runner
 
 from .txpredict import TB
+
+#: threads that compute the cells' costs when the encode runs in this process (``--workers 1``):
+#: OpenCV and numpy release the GIL, and one OpenCV thread per task spends about half the CPU of
+#: OpenCV's own pool splitting each small warp (BENCHMARKS.md); the costs do not depend on it
+MAP_THREADS = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1), 8)
+
+
+@contextlib.contextmanager
+def _one_cv2_thread():
+    import cv2
+
+    n = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(n)
+
+
+def _map(runner, fn, arglists: list) -> list:
+    """``runner.map(fn, arglists)``; on the serial runner, over a pool of MAP_THREADS threads
+    with one OpenCV thread each (results in order: the same values either way)."""
+    if runner.kind != "serial" or len(arglists) < 2:
+        return runner.map(fn, arglists)
+    with _one_cv2_thread():
+        if MAP_THREADS <= 1:
+            return runner.map(fn, arglists)
+        with ThreadPoolExecutor(MAP_THREADS) as ex:
+            return list(ex.map(lambda a: fn(*a), arglists))
+
+
+def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
+    """(H, W) float32 ``img`` shifted: out[y, x] = img[clip(y + dy), clip(x + dx)], edges
+    replicated; the same values as OpenCV's bilinear ``warpAffine`` (inverse map, replicated
+    border), which whole-pixel shifts (the global sweep's) take as a crop and a border copy."""
+    import cv2
+
+    h, w = img.shape
+    if dy == int(dy) and dx == int(dx) and abs(dy) < h and abs(dx) < w:
+        dy, dx = int(dy), int(dx)
+        crop = img[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)]
+        return cv2.copyMakeBorder(crop, max(-dy, 0), max(dy, 0), max(-dx, 0), max(dx, 0), cv2.BORDER_REPLICATE)
+    mat = np.float32([[1, 0, dx], [0, 1, dy]])
+    return cv2.warpAffine(img, mat, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+                          borderMode=cv2.BORDER_REPLICATE)
 
 
 def _block_sums(e: np.ndarray, nby8: int, nbx8: int) -> np.ndarray:
@@ -62,7 +111,7 @@ class Estimator:
         pairs = [(float(d), m) for d in ds for m in range(nm)]
         runner = runner or Runner()                 # (the serial runner: a loop here, no copies)
         h = self._handle(runner)
-        parts = runner.map(_global_task, [(h, m, d) for d, m in pairs])
+        parts = _map(runner, _global_task, [(h, m, d) for d, m in pairs])
         out = []
         for i in range(len(ds)):
             c = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
@@ -84,24 +133,21 @@ class Estimator:
 
     def _global_cell(self, m: int, d: float) -> np.ndarray:
         """(1 + nrefs, nloc8) costs of cell m at global disparity d."""
-        import cv2
-
         s = self.s
         views = self.cells[m]
         acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
         nr = self._nrefs(m)
+        e = np.empty((self.hp, self.wp), np.float32)
         for v in views.tolist():
             y = self._y(v)
             blend = np.zeros_like(y)
             for j in range(nr):
                 k = s.refs[v, j]
                 dy, dx = d * (s.positions[v] - s.positions[k])
-                mat = np.float32([[1, 0, dx], [0, 1, dy]])
-                p = cv2.warpAffine(self._y(k), mat, (self.wp, self.hp),
-                                   flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REPLICATE)
-                acc[1 + j] += _block_sums((y - p) ** 2, self.nby8, self.nbx8)
-                blend += p * (s.weights[v, j] / 64.0)
-            acc[0] += _block_sums((y - blend) ** 2, self.nby8, self.nbx8)
+                p = _shift(self._y(k), dy, dx)
+                acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
+                blend += p * (s.weights[v, j] / 64.0)          # (in float64, then rounded)
+            acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
         return acc[:1 + nr]
 
     def costs_maps(self, d16: np.ndarray, runner=None) -> np.ndarray:
@@ -110,7 +156,7 @@ class Estimator:
         nm = len(self.cells)
         runner = runner or Runner()
         h = self._handle(runner)
-        parts = runner.map(_maps_task, [(h, m, d16[m]) for m in range(nm)])
+        parts = _map(runner, _maps_task, [(h, m, d16[m]) for m in range(nm)])
         out = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
         for m in range(nm):
             out[m, :1 + self._nrefs(m)] = parts[m]
@@ -130,6 +176,8 @@ class Estimator:
         dpix = np.repeat(np.repeat(d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16, TB, 0), TB, 1)
         gy = np.arange(self.hp, dtype=np.float32)[:, None]
         gx = np.arange(self.wp, dtype=np.float32)[None, :]
+        e = np.empty((self.hp, self.wp), np.float32)
+        wp = np.empty_like(e)
         for v in views.tolist():
             r = s.refs[v, :nr]
             y = self._y(v)
@@ -139,9 +187,9 @@ class Estimator:
             for j in range(nr):               # each reference alone, and their blend
                 p = cv2.remap(self._y(r[j]), gx + dpix * dpos[j, 1], gy + dpix * dpos[j, 0], cv2.INTER_LINEAR,
                               borderMode=cv2.BORDER_REPLICATE)
-                acc[1 + j] += _block_sums((y - p) ** 2, self.nby8, self.nbx8)
-                blend += p * np.float32(wb[j])
-            acc[0] += _block_sums((y - blend) ** 2, self.nby8, self.nbx8)
+                acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
+                blend += np.multiply(p, np.float32(wb[j]), out=wp)
+            acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
         return acc
 
 
