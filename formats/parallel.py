@@ -21,6 +21,7 @@ a worker that dies (out of memory, killed) is a :class:`WorkerError`.
 """
 from __future__ import annotations
 
+import contextlib
 import os
 import pickle
 import tempfile
@@ -32,6 +33,23 @@ from .errors import ParameterError, WorkerError
 
 MAX_WORKERS = 256
 CONNECT_TIMEOUT = "20s"          # how long a --scheduler address is tried
+#: threads of :meth:`Runner.map_threaded` in this process: the cores this process may use (at
+#: most 8). OpenCV and numpy release the GIL in the encoder's tasks, and one OpenCV thread per
+#: task spends about half the CPU of OpenCV's own pool splitting each small warp (BENCHMARKS.md)
+LOCAL_THREADS = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1), 8)
+
+
+@contextlib.contextmanager
+def one_cv2_thread():
+    """OpenCV's thread pool off (one thread) inside the block, restored after it."""
+    import cv2
+
+    n = cv2.getNumThreads()
+    cv2.setNumThreads(1)
+    try:
+        yield
+    finally:
+        cv2.setNumThreads(n)
 
 
 class Runner:
@@ -55,6 +73,27 @@ class Runner:
             if done:
                 done(1)
         return out
+
+    def map_threaded(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None,
+                     threads: int | None = None) -> list:
+        """:meth:`map` for tasks that release the GIL (OpenCV, large numpy arrays): in this
+        process, on a pool of ``threads`` (default LOCAL_THREADS) threads with one OpenCV thread
+        each; results in order, the same values as :meth:`map`. Other runners: their own map."""
+        n = LOCAL_THREADS if threads is None else threads
+        if self.kind != "serial" or len(arglists) < 2:
+            return self.map(fn, arglists, done)
+        with one_cv2_thread():
+            if n <= 1:
+                return self.map(fn, arglists, done)
+            from concurrent.futures import ThreadPoolExecutor
+
+            out = []
+            with ThreadPoolExecutor(n) as ex:
+                for r in ex.map(lambda a: fn(*a), arglists):
+                    out.append(r)
+                    if done:
+                        done(1)
+            return out
 
     def close(self) -> None:
         pass

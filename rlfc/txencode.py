@@ -19,7 +19,7 @@ import numpy as np
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
 from formats.metrics import colour_sq_error, psnr_from_sq_error
-from formats.parallel import make_runner
+from formats.parallel import Runner, make_runner
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
@@ -661,30 +661,28 @@ class TxEncoder:
         if views is not None:            # a sample of the other views (rate control's search)
             keep = set(int(v) for v in views)
             others = [v for v in others if v in keep]
-        runner = self.runner
-        if runner is None or runner.workers == 1 or len(others) < 2:
-            done = len(self.s.keys)
-            for v in others:
-                codes[v] = self.code_view(v, self.predict_view(v, kp), s16[1], lam_n, model, keep_pixels=keep_pixels)
-                done += 1
-                if progress:
-                    progress("code views", done, n0)
-        else:               # the other views are independent given the decoded key views
+        runner = self.runner or Runner()
+        done = [len(self.s.keys)]
+
+        def tick(n):
+            done[0] += n
+            if progress:
+                progress("code views", done[0], n0)
+
+        # the other views are independent given the decoded key views: in this process on a few
+        # threads (the same integers), else on the runner's workers
+        if runner.kind == "serial" or runner.workers == 1 or len(others) < 2:
+            out = Runner().map_threaded(_code_task, [(self, kp, model, v, None, s16[1], lam_n, keep_pixels)
+                                                   for v in others], tick)
+        else:
             if self._shared is None:
                 self._shared = runner.share(self)
                 self._view_handles = dict(zip(all_others, runner.scatter([self.view_pixels(v) for v in all_others])))
             keys_h, model_h = runner.share(kp), runner.share(model)
-            done = [len(self.s.keys)]
-
-            def tick(n):
-                done[0] += n
-                if progress:
-                    progress("code views", done[0], n0)
-
             out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n,
                                            keep_pixels) for v in others], tick)
-            for v, c in zip(others, out):
-                codes[v] = c
+        for v, c in zip(others, out):
+            codes[v] = c
         return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
                 "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
                 "lam_scale": lam_scale, "j2k_hints": hints}

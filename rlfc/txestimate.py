@@ -13,10 +13,6 @@ out of an estimate that only ranks candidates: 3.3× faster than the integer pre
 """
 from __future__ import annotations
 
-import contextlib
-import os
-from concurrent.futures import ThreadPoolExecutor
-
 import numpy as np
 
 from .txlayout import MAX_REFS
@@ -24,35 +20,7 @@ from formats.parallel import Runner
 
 from .txpredict import TB
 
-#: threads that compute the cells' costs when the encode runs in this process (``--workers 1``):
-#: OpenCV and numpy release the GIL, and one OpenCV thread per task spends about half the CPU of
-#: OpenCV's own pool splitting each small warp (BENCHMARKS.md); the costs do not depend on it
-MAP_THREADS = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1), 8)
-
-
-@contextlib.contextmanager
-def _one_cv2_thread():
-    import cv2
-
-    n = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        yield
-    finally:
-        cv2.setNumThreads(n)
-
-
-def _map(runner, fn, arglists: list) -> list:
-    """``runner.map(fn, arglists)``; on the serial runner, over a pool of MAP_THREADS threads
-    with one OpenCV thread each (results in order: the same values either way)."""
-    if runner.kind != "serial" or len(arglists) < 2:
-        return runner.map(fn, arglists)
-    with _one_cv2_thread():
-        if MAP_THREADS <= 1:
-            return runner.map(fn, arglists)
-        with ThreadPoolExecutor(MAP_THREADS) as ex:
-            return list(ex.map(lambda a: fn(*a), arglists))
-
+MAP_THREADS = None      # threads for the cells' costs in-process (None: formats.parallel.LOCAL_THREADS)
 
 def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
     """(H, W) float32 ``img`` shifted: out[y, x] = img[clip(y + dy), clip(x + dx)], edges
@@ -111,7 +79,7 @@ class Estimator:
         pairs = [(float(d), m) for d in ds for m in range(nm)]
         runner = runner or Runner()                 # (the serial runner: a loop here, no copies)
         h = self._handle(runner)
-        parts = _map(runner, _global_task, [(h, m, d) for d, m in pairs])
+        parts = runner.map_threaded(_global_task, [(h, m, d) for d, m in pairs], threads=MAP_THREADS)
         out = []
         for i in range(len(ds)):
             c = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
@@ -156,7 +124,7 @@ class Estimator:
         nm = len(self.cells)
         runner = runner or Runner()
         h = self._handle(runner)
-        parts = _map(runner, _maps_task, [(h, m, d16[m]) for m in range(nm)])
+        parts = runner.map_threaded(_maps_task, [(h, m, d16[m]) for m in range(nm)], threads=MAP_THREADS)
         out = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
         for m in range(nm):
             out[m, :1 + self._nrefs(m)] = parts[m]
