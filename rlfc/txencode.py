@@ -25,7 +25,7 @@ from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
 from .kernels import dequantize
-from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse
+from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps
 from .txlayout import MAX_REFS, TxLayout
@@ -518,15 +518,26 @@ class TxEncoder:
 
     def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
         """(T, 8, 8, P) clipped reconstruction of tbs from base predictions and levels (exact
-        decoder integers)."""
-        raster = np.where(self.bypass[None, :, None], levels, levels[..., UNZIG])
-        deq = dequantize(NUMPY, raster, step16[None, :, None]).clip(-COEF_MAX, COEF_MAX)
-        blocks = deq.reshape(-1, self.P, TB, TB)
-        tr = ~self.bypass
-        if tr.any():
-            blocks[:, tr] = inverse(blocks[:, tr])
-        res = np.moveaxis(blocks, 1, -1)
-        return (base.astype(np.int64) + res).clip(self.lo, self.hi).astype(np.int32)
+        decoder integers: the clipped coefficients are below 2^40, so :func:`inverse_float`
+        carries them in float64 exactly, and so does the sum with the prediction)."""
+        T, P = levels.shape[0], self.P
+        res = np.empty((T, TB, TB, P))
+        for planes, tr in ((np.flatnonzero(~self.bypass), True), (np.flatnonzero(self.bypass), False)):
+            if planes.size == 0:
+                continue
+            lv = levels if planes.size == P else levels[:, planes]
+            deq = dequantize(NUMPY, lv[..., UNZIG] if tr else lv, step16[planes][None, :, None])
+            np.clip(deq, -COEF_MAX, COEF_MAX, out=deq)
+            blocks = deq.reshape(T, planes.size, TB, TB).astype(np.float64)
+            if tr:
+                blocks = inverse_float(blocks)
+            if planes.size == P:
+                res[...] = np.moveaxis(blocks, 1, -1)
+            else:
+                res[..., planes] = np.moveaxis(blocks, 1, -1)
+        res += base
+        np.clip(res, self.lo, self.hi, out=res)
+        return res.astype(np.int32)
 
     def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
                   orig: np.ndarray | None = None, keep_pixels: bool = True) -> ViewCode:
@@ -549,8 +560,10 @@ class TxEncoder:
         if cand.size and INTRA_ENERGY_RATIO:
             # and only where the tb's own detail (its energy about its mean, weighted as the error
             # is) is not many times the prediction residual's: intra coding pays that detail
-            oc = orig[cand].astype(np.float64)
-            ac = ((oc - oc.mean(axis=(1, 2), keepdims=True)) ** 2).sum(axis=(1, 2)) @ self.w
+            # (Σx² − (Σx)²/64 per plane: integers and sixty-fourths below 2^47, exact in float64)
+            oc = orig[cand].reshape(cand.size, TB * TB, self.P).astype(np.float64)
+            s1 = oc.sum(axis=1)
+            ac = (np.einsum("nkp,nkp->np", oc, oc) - s1 * s1 * (1 / 64)) @ self.w
             cand = cand[ac < INTRA_ENERGY_RATIO * D0_r[cand]]
         if "intra_tbs" in self.p.ablate:
             cand = cand[:0]
