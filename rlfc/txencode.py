@@ -36,8 +36,8 @@ from .txmaps import pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
 from .txstructure import build, build_intra
 from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
-                       ctx_esc, ctx_last, ctx_mag, ctx_mode, pack_streams, plane_classes, quantize_counts,
-                       tables_from_quantized, tables_to_bytes)
+                       PACK_CELLS, ctx_esc, ctx_last, ctx_mag, ctx_mode, pack_streams, plane_classes,
+                       quantize_counts, tables_from_quantized, tables_to_bytes)
 from .xp import NUMPY
 
 #: encoder decisions :attr:`TxParams.ablate` may turn off
@@ -882,9 +882,28 @@ class TxEncoder:
         streams (a lane's bytes depend on its own symbols and the tables only)."""
         q = quantize_counts(self.counts_of(res))
         tables = tables_from_quantized(q)
-        streams = []
-        for n, (lane, ctx, sym, rl, rb) in self.symbol_parts(res):
-            streams += pack_streams(n, lane, ctx, sym, rl, rb, tables)
+        streams: list = []
+        # parts are coded together until lanes × longest lane reaches PACK_CELLS (a lane's bytes
+        # depend on its own symbols only): a key view's few long row streams alone would make
+        # thousands of rANS steps of a dozen lanes each
+        held, held_lanes, held_k = [], 0, 0
+
+        def flush():
+            if held:
+                off = np.cumsum([0] + [n for n, _ in held[:-1]])
+                cat = [np.concatenate([p[i] + (o if i in (0, 3) else 0) for o, (_, p) in zip(off, held)])
+                       for i in range(5)]
+                streams.extend(pack_streams(held_lanes, *cat, tables))
+                held.clear()
+
+        for n, part in self.symbol_parts(res):
+            k = int(np.bincount(part[0], minlength=1).max()) if part[0].size else 0
+            if held and (held_lanes + n) * max(held_k, k) > PACK_CELLS:
+                flush()
+                held_lanes, held_k = 0, 0
+            held.append((n, part))
+            held_lanes, held_k = held_lanes + n, max(held_k, k)
+        flush()
         coded = self.coded_blocks(res)
         ck = self.coded_keys(res)
         keys, refs, weights, cell, intra = self.structure_of(res)

@@ -509,3 +509,19 @@ def test_a_rerun_codes_the_same_jpeg2000_key_views():
     again = enc.with_pixels(first)
     assert again["keyimg"] == first["keyimg"] and enc.psnr(again) == enc.psnr(first)
     assert all((a.modes == b.modes).all() and (a.lv == b.lv).all() for a, b in zip(first["codes"], again["codes"]))
+
+
+def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
+    """The packer codes several parts (key views' row streams, chunks of blocks) in one rANS call
+    up to PACK_CELLS; every lane's bytes are its own, so the file is the same as part by part."""
+    import rlfc.txencode as txe
+
+    lf = smooth_lf(rows=1, cols=6, c=4)
+    lf.layout = "posed"                          # six intra key views: six parts of row streams
+    out = {}
+    for cells in (1, 1 << 22):
+        monkeypatch.setattr(txe, "PACK_CELLS", cells)
+        out[cells] = tx(lf, step=2.0)
+    assert out[1].sections == out[1 << 22].sections
+    d, _ = open_encoded(lf, out[1 << 22])
+    assert (d.decode_all() == out[1 << 22].decoded).all()
