@@ -10,6 +10,9 @@ A codec asks a :class:`Runner` for two things:
   dask scatters it to every worker.
 * ``map(fn, arglists)``: ``[fn(*args) for args in arglists]`` with shared handles resolved,
   results in the order given whatever order they finish in.
+* ``map_threaded(fn, arglists)``: the same for tasks that release the GIL (OpenCV, numpy on
+  large arrays); the serial runner runs them on a few threads of this process (one OpenCV
+  thread each), the others as ``map``.
 
 Tasks must be deterministic functions of their arguments: the file an encode writes is then
 the same, byte for byte, whatever runs it (same platform and numpy build; floating-point

@@ -263,6 +263,7 @@ class TxEncoder:
         self.is_key = np.zeros(r * c, bool)
         self.is_key[self.s.keys] = True
         self.intra = (self.s.refs < 0).all(axis=1)
+        self.all_intra = bool(self.intra.all() and self.is_key.all())    # (posed captures: no prediction)
         self.key_slot = np.full(r * c, -1, np.int64)
         self.key_slot[self.s.keys] = np.arange(len(self.s.keys))
         ic = params.intra_codec
@@ -626,16 +627,25 @@ class TxEncoder:
         lam_k = self.p.lam * lam_scale * (s16[0, 0] / 16.0) ** 2
         lam_n = self.p.lam * lam_scale * (s16[1, 0] / 16.0) ** 2
         n0 = self.n0
-        keyplanes = np.zeros((len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
-        kp = self.key_source(keyplanes)
+        # the decoded key views, for the views predicted from them (none where every view is intra)
+        keyplanes = np.zeros((0 if self.all_intra else len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
+        kp = None if self.all_intra else self.key_source(keyplanes)
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
         promoted: list = []           # views coded alone as JPEG 2000 that the structure predicts
         j2k_ref = None                # (bytes, PSNR) of the first intra key as JPEG 2000
         thumb16 = None
+        pre: dict = {}                # intra keys coded ahead, together (every view intra: posed captures)
         for i, k in enumerate(self.s.keys):
-            if self.intra[k]:
+            if i == 1 and self.all_intra and len(self.s.keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
+                pre = self._code_intra_keys(self.s.keys[1:], thumb16, s16[0], lam_k, model, keep_pixels)
+            ahead = k in pre
+            if ahead:                           # (JPEG 2000 tried there too)
+                thumbs[k], codes[k], img = pre.pop(k)
+                if img is not None:
+                    keyimg[k] = img
+            elif self.intra[k]:
                 # the thumbnail's step (one per file): exact block means (flat regions need no
                 # residual at all) or the key step (textured views), whichever costs fewer bits
                 # for the first intra view; the others use the same
@@ -649,7 +659,9 @@ class TxEncoder:
                 _, thumb16, thumbs[k], codes[k] = best
             else:
                 codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=keep_pixels)
-            if self.intra[k] and self.intra_codec == "j2k":
+            if ahead:
+                pass
+            elif self.intra[k] and self.intra_codec == "j2k":
                 img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
                                                      self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None)
                 if img is not None:
@@ -662,12 +674,13 @@ class TxEncoder:
                 if img is not None:
                     keyimg[k] = img
                     promoted.append(k)
-            keyplanes[i] = codes[k].planes
+            if not self.all_intra:
+                keyplanes[i] = codes[k].planes
+                if isinstance(kp, KeyAtlas):
+                    kp.set(i, keyplanes[i])
+                else:
+                    kp = planar(keyplanes)
             codes[k].planes = None              # (kept once, in keyplanes, for this pass only)
-            if isinstance(kp, KeyAtlas):
-                kp.set(i, keyplanes[i])
-            else:
-                kp = planar(keyplanes)
             if progress:
                 progress("code views", i + 1, n0)
         others = all_others = [v for v in range(n0) if not self.is_key[v]]
@@ -699,6 +712,22 @@ class TxEncoder:
         return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
                 "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
                 "lam_scale": lam_scale, "j2k_hints": hints}
+
+    def _code_intra_keys(self, ks: list, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
+                         keep_pixels: bool) -> dict:
+        """Intra key views ``ks`` after the first (which chose the thumbnail step and the JPEG 2000
+        reference), coded as the pass would code them one by one, on a few threads: view →
+        (thumbnail levels, code, JPEG 2000 codestream or None). A view's JPEG 2000 search with no
+        hint of its own starts from the first view's (one after another, from the previous
+        view's: the order threads finish in must not matter)."""
+        first = dict(self._j2k_hints.get("last", {}))
+        for k in ks:
+            self._j2k_hints.setdefault(k, dict(first))
+        out = Runner().map_threaded(_intra_key_task, [(self, k, thumb16, s16k, lam_k, model, keep_pixels)
+                                                      for k in ks])
+        if ks:
+            self._j2k_hints["last"] = self._j2k_hints[ks[-1]]
+        return dict(zip(ks, out))
 
     #: a JPEG 2000 intra key may land this much (dB) below its transform coding's PSNR (the
     #: rate control measures the decoded views, whichever codec made them)
@@ -944,6 +973,18 @@ def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
     ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_source`)."""
     return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, enc.planes(v, pixels), keep_pixels)
+
+
+def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
+                    keep_pixels: bool) -> tuple:
+    """One intra key view that is not the first of its pass (:meth:`TxEncoder._code_intra_keys`)."""
+    lv = enc.thumb_levels(k, thumb16)
+    code = enc.code_view(k, enc.thumb_pred(lv, thumb16), s16k, lam_k, model, keep_pixels=keep_pixels)
+    img = None
+    if enc.intra_codec == "j2k":
+        img, code, _ = enc._j2k_view(k, code, len(pack_thumbs(lv[None])), enc.J2K_KEY_SLACK_DB, give_up=True)
+    code.planes = None                  # (no view is predicted from it)
+    return lv, code, img
 
 
 # -- rate control and the profile's encode ---------------------------------------------------------
