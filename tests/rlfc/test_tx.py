@@ -525,3 +525,19 @@ def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
     assert out[1].sections == out[1 << 22].sections
     d, _ = open_encoded(lf, out[1 << 22])
     assert (d.decode_all() == out[1 << 22].decoded).all()
+
+
+def test_posed_views_coded_on_threads_give_the_same_file(monkeypatch):
+    """Intra key views after the first are coded together on threads: the file may not depend on
+    how many threads there are (nor on the order they finish in)."""
+    import formats.parallel as fp
+
+    lf = smooth_lf(rows=1, cols=6)
+    lf.layout = "posed"
+    out = {}
+    for n in (1, 2, 3):
+        monkeypatch.setattr(fp, "LOCAL_THREADS", n)
+        out[n] = tx(lf, step=3.0)
+    assert out[1].sections == out[2].sections == out[3].sections
+    d, _ = open_encoded(lf, out[2])
+    assert (d.decode_all() == out[2].decoded).all()
