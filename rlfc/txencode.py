@@ -585,7 +585,11 @@ class TxEncoder:
             mode[tbi[~coded]] = MODE_SKIP
         levels = np.where((mode == MODE_RES)[:, None, None], lv_r, np.where((mode == MODE_INTRA)[:, None, None], lv_i, 0))
         base = np.where((mode == MODE_INTRA)[:, None, None, None], flat, pt)
-        rec = pt.clip(self.lo, self.hi)
+        # predictions blend decoded key views with weights summing to 64, so they are in range
+        # (the decoder relies on it too); intra predictions (thumbnails) are clipped
+        rec = pt
+        if kind:
+            np.minimum(np.maximum(rec, self.lo.astype(np.int32), out=rec), self.hi.astype(np.int32), out=rec)
         live = np.flatnonzero(mode != MODE_SKIP)
         if live.size:                      # skipped tbs are their prediction: reconstruct only the rest
             rec[live] = self._reconstruct(base[live], levels[live], step16)
