@@ -36,10 +36,12 @@ from .errors import ParameterError, WorkerError
 
 MAX_WORKERS = 256
 CONNECT_TIMEOUT = "20s"          # how long a --scheduler address is tried
-#: threads of :meth:`Runner.map_threaded` in this process: the cores this process may use (at
-#: most 8). OpenCV and numpy release the GIL in the encoder's tasks, and one OpenCV thread per
-#: task spends about half the CPU of OpenCV's own pool splitting each small warp (BENCHMARKS.md)
-LOCAL_THREADS = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1), 8)
+#: threads of :meth:`Runner.map_threaded` in this process: the cores this process may use, at
+#: most 4 (each task holds a view's temporaries: hci_antinous's encode peaks at 480 MiB on two
+#: threads against 438 MiB one after another). OpenCV and numpy release the GIL in the encoder's
+#: tasks, and one OpenCV thread per task spends about half the CPU of OpenCV's own pool splitting
+#: each small warp (BENCHMARKS.md)
+LOCAL_THREADS = min(len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1), 4)
 
 
 @contextlib.contextmanager
