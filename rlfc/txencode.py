@@ -292,9 +292,12 @@ class TxEncoder:
         """(Hp, Wp, P) int32 YCoCg-R planes of view v (edge-padded), from ``pixels`` (H, W, C)
         where given (a worker's copy), else from the light field (read when asked: the encoder
         keeps no second copy of the views)."""
-        px = self.view_pixels(v) if pixels is None else pixels
+        return to_planes(self.padded(self.view_pixels(v) if pixels is None else pixels))
+
+    def padded(self, pixels: np.ndarray) -> np.ndarray:
+        """(Hp, Wp, C) a view's (H, W, C) pixels, edges repeated to the padded size."""
         pad = ((0, self.Hp - self.h), (0, self.Wp - self.w_px), (0, 0))
-        return to_planes(np.pad(np.asarray(px), pad, mode="edge"))
+        return np.pad(np.asarray(pixels), pad, mode="edge")
 
     def view_pixels(self, v: int) -> np.ndarray:
         """(H, W, C) pixels of view v (row-major view index)."""
@@ -541,14 +544,14 @@ class TxEncoder:
         return res.astype(np.int32)
 
     def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
-                  orig: np.ndarray | None = None, keep_pixels: bool = True) -> ViewCode:
-        """Rate-distortion coding of one view against its prediction (Hp, Wp, P); ``orig`` its
-        planes (:meth:`planes`) where the caller has them; ``keep_pixels``: keep the decoded
-        pixels (else only their error)."""
+                  pixels: np.ndarray | None = None, keep_pixels: bool = True) -> ViewCode:
+        """Rate-distortion coding of one view against its prediction (Hp, Wp, P); ``pixels``
+        its (H, W, C) pixels where the caller has them (a worker's copy); ``keep_pixels``: keep
+        the decoded pixels (else only their error)."""
         key = int(self.is_key[v])
         kind = int(self.intra[v])
-        oplanes = self.planes(v) if orig is None else orig
-        orig = self._tbs(oplanes)
+        opx = self.view_pixels(v) if pixels is None else pixels
+        orig = self._tbs(self.planes(v, opx))
         pt = self._tbs(pred)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
@@ -598,7 +601,7 @@ class TxEncoder:
                      + (FLUSH_BITS * coded.sum() if not key else FLUSH_BITS * self.nby))
         planes = self._untbs(rec)
         px = self._pixels(planes)
-        sse, cnt = colour_sq_error(self._pixels(oplanes), px)
+        sse, cnt = colour_sq_error(opx, px)            # (the planes' pixels: YCoCg-R is exact)
         lv = levels[live]
         lv = lv.astype(np.int16 if lv.size == 0 or np.abs(lv).max() < 1 << 15 else np.int32)
         return ViewCode(mode.astype(np.int8), live, lv, coded, px if keep_pixels else None,
@@ -752,9 +755,7 @@ class TxEncoder:
             budget where the search found one, else None; with ``give_up=False`` the search
             does not stop at the transform path's size, so the size is there for reference).
         """
-        dt = self.dtype
-        planes = self.planes(v)
-        orig = self._pixels(planes)
+        orig = self.view_pixels(v)
         budget = tx_code.sse * 10 ** (slack_db / 10)
         target = self._code_psnr(tx_code)
         tx_bytes = tx_code.bits / 8 + extra_bytes
@@ -765,7 +766,7 @@ class TxEncoder:
         # where OpenJPEG lands for this view, kept across the passes of rate control (a view not
         # searched before starts from the last view's)
         hint = self._j2k_hints.setdefault(v, dict(self._j2k_hints.get("last", {})))
-        found = smallest_j2k(from_planes(planes, dt), budget, err, target, tx_bytes if give_up else math.inf, hint)
+        found = smallest_j2k(self.padded(orig), budget, err, target, tx_bytes if give_up else math.inf, hint)
         self._j2k_hints["last"] = hint
         if found is None or len(found[0]) >= tx_bytes:
             return None, tx_code, (len(found[0]) if found is not None else None)
@@ -976,7 +977,7 @@ def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.
                step16: np.ndarray, lam: float, keep_pixels: bool) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
     ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_source`)."""
-    return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, enc.planes(v, pixels), keep_pixels)
+    return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels)
 
 
 def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
