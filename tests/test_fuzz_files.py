@@ -167,3 +167,13 @@ def test_lfn_colour_of_nearly_transparent_pixels_is_zero():
     px = r.to_pixels(rgba)
     assert px[0, :2].tolist() == [[0, 0, 0, 0], [0, 0, 0, 0]]
     assert px[0, 2].tolist() == [255, 128, 0, 0]
+
+
+@pytest.mark.parametrize("step", [16001, 1 << 20])
+def test_thumbnail_levels_beyond_any_block_mean_are_refused(step):
+    """tools.fuzz seed 59: a lossless 16-bit file whose thumbnail step was raised to 16001 made
+    levels × step overflow the int32 upsampling (the JavaScript reader, in doubles, disagreed)."""
+    meta, secs = split_file((GOLDEN / "rlfc_tx2_lossless_ga16.lfc").read_bytes())
+    meta["config"]["tx"]["thumb_step16"] = step
+    with pytest.raises(FormatError, match="thumbnail level times the thumbnail step"):
+        open_decoder(open_lfc(_rebuild(meta, secs)))

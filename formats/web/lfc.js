@@ -688,6 +688,13 @@ export class TxDecoder {
     const intraCoded = this.codedKeys.filter((k) => this.intra[k]);
     this.thumbOf = new Map(intraCoded.map((k, i) => [k, i]));
     this.thumbs = await this._readThumbs(await file.read("tx.thumbs"), intraCoded.length);
+    for (const th of this.thumbs) {                        // a level is a rounded block mean over the step
+      for (const t of th) {
+        if (Math.abs(t) * this.thumbStep > 16 * (this.peak + 1) + this.thumbStep) {
+          throw new FormatError(`${name}: tx.thumbs: a thumbnail level times the thumbnail step exceeds the sample range`);
+        }
+      }
+    }
     await this._readIndex(await file.read("tx.index"));
     let imgOff = 0;
     this.imgRange = new Map();

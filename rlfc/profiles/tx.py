@@ -98,6 +98,10 @@ class TxDecoder(ProfileDecoder):
         self.thumbs = unpack_thumbs(c.read("tx.thumbs"), (len(intra), self.nby8, self.nbx8, self.P),
                                     f"{name}: tx.thumbs")
         self.thumb_of = {k: i for i, k in enumerate(intra)}
+        # a level is a rounded block mean over the step: larger products are no block mean (and
+        # would overflow the int32 upsampling)
+        if self.thumbs.size and int(np.abs(self.thumbs).max()) * lay.thumb_step16 > 16 * (peak + 1) + lay.thumb_step16:
+            raise FormatError(f"{name}: tx.thumbs: a thumbnail level times the thumbnail step exceeds the sample range")
         nloc = self.nby * self.nbx
         is_key = np.zeros(N0, bool)
         is_key[keys] = True

@@ -144,3 +144,20 @@ def test_views_coded_alone_as_jpeg2000_agree(tmp_path):
     path.write_bytes(blob)
     differ = assert_same_planes(path, tmp_path / "out", exact=False)
     assert differ <= 0.001 * d.rows * d.cols * d.height * d.width * d.P
+
+
+def test_thumbnail_levels_beyond_any_block_mean_are_refused_as_in_python(tmp_path):
+    """tools.fuzz seed 59: a thumbnail step raised to 16001 (Python's int32 upsampling overflowed,
+    JavaScript's doubles did not); both readers now refuse the file with the same words."""
+    from tools.fuzz import split_file
+    from tests.test_fuzz_files import _rebuild
+
+    meta, secs = split_file((GOLDEN / "rlfc_tx2_lossless_ga16.lfc").read_bytes())
+    meta["config"]["tx"]["thumb_step16"] = 16001
+    p = tmp_path / "thumb.lfc"
+    p.write_bytes(_rebuild(meta, secs))
+    info = run_js(p, tmp_path / "out")
+    words = "thumbnail level times the thumbnail step"
+    assert not info["ok"] and info["name"] == "FormatError" and words in info["message"], info
+    with pytest.raises(Exception, match=words):
+        open_decoder(open_lfc(p))
