@@ -22,6 +22,7 @@ from .txpredict import TB
 
 MAP_THREADS = None      # threads for the cells' costs in-process (None: formats.parallel.LOCAL_THREADS)
 
+
 def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
     """(H, W) float32 ``img`` shifted: out[y, x] = img[clip(y + dy), clip(x + dx)], edges
     replicated; the same values as OpenCV's bilinear ``warpAffine`` (inverse map, replicated
