@@ -254,6 +254,7 @@ class TxEncoder:
         self.pcs = plane_classes(ch)
         self.peak = int(np.iinfo(lf.views.dtype).max)
         self.lo, self.hi, self.flat = plane_limits(ch, self.peak)
+        self.lo32, self.hi32 = self.lo.astype(np.int32), self.hi.astype(np.int32)
         self.w = rgb_mse_weights(ch)
         self.bypass = np.full(ch, params.lossless) | (self.pcs == 2)       # alpha is always exact
         spacing = params.key_spacing or auto_spacing(r, c)
@@ -395,6 +396,12 @@ class TxEncoder:
 
     def thumb_pred(self, levels: np.ndarray, thumb16: int) -> np.ndarray:
         return upsample_thumb((levels * thumb16 + 8) >> 4, self.Hp, self.Wp)
+
+    def code_intra(self, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
+                   keep_pixels: bool) -> tuple[np.ndarray, ViewCode]:
+        """(thumbnail levels, transform coding) of intra key view k against its thumbnail."""
+        lv = self.thumb_levels(k, thumb16)
+        return lv, self.code_view(k, self.thumb_pred(lv, thumb16), s16k, lam_k, model, keep_pixels=keep_pixels)
 
     # -- coding one view ---------------------------------------------------------------------
     def _tbs(self, img: np.ndarray) -> np.ndarray:
@@ -592,7 +599,7 @@ class TxEncoder:
         # (the decoder relies on it too); intra predictions (thumbnails) are clipped
         rec = pt
         if kind:
-            np.minimum(np.maximum(rec, self.lo.astype(np.int32), out=rec), self.hi.astype(np.int32), out=rec)
+            np.minimum(np.maximum(rec, self.lo32, out=rec), self.hi32, out=rec)
         live = np.flatnonzero(mode != MODE_SKIP)
         if live.size:                      # skipped tbs are their prediction: reconstruct only the rest
             rec[live] = self._reconstruct(base[live], levels[live], step16)
@@ -658,17 +665,14 @@ class TxEncoder:
                 # for the first intra view; the others use the same
                 best = None
                 for t16 in ([thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})):
-                    lv = self.thumb_levels(k, t16)
-                    c = self.code_view(k, self.thumb_pred(lv, t16), s16[0], lam_k, model, keep_pixels=keep_pixels)
+                    lv, c = self.code_intra(k, t16, s16[0], lam_k, model, keep_pixels)
                     cost = c.bits + 8 * len(pack_thumbs(lv[None]))
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
             else:
                 codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=keep_pixels)
-            if ahead:
-                pass
-            elif self.intra[k] and self.intra_codec == "j2k":
+            if not ahead and self.intra[k] and self.intra_codec == "j2k":
                 img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
                                                      self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None)
                 if img is not None:
@@ -920,23 +924,21 @@ class TxEncoder:
         # parts are coded together until lanes × longest lane reaches PACK_CELLS (a lane's bytes
         # depend on its own symbols only): a key view's few long row streams alone would make
         # thousands of rANS steps of a dozen lanes each
-        held, held_lanes, held_k = [], 0, 0
+        held: list = []                                  # (lanes, longest lane, part)
 
         def flush():
             if held:
-                off = np.cumsum([0] + [n for n, _ in held[:-1]])
-                cat = [np.concatenate([p[i] + (o if i in (0, 3) else 0) for o, (_, p) in zip(off, held)])
+                off = np.cumsum([0] + [n for n, _, _ in held[:-1]])
+                cat = [np.concatenate([p[i] + (o if i in (0, 3) else 0) for o, (_, _, p) in zip(off, held)])
                        for i in range(5)]
-                streams.extend(pack_streams(held_lanes, *cat, tables))
+                streams.extend(pack_streams(sum(n for n, _, _ in held), *cat, tables))
                 held.clear()
 
         for n, part in self.symbol_parts(res):
             k = int(np.bincount(part[0], minlength=1).max()) if part[0].size else 0
-            if held and (held_lanes + n) * max(held_k, k) > PACK_CELLS:
+            if held and (sum(h[0] for h in held) + n) * max(k, *(h[1] for h in held)) > PACK_CELLS:
                 flush()
-                held_lanes, held_k = 0, 0
-            held.append((n, part))
-            held_lanes, held_k = held_lanes + n, max(held_k, k)
+            held.append((n, k, part))
         flush()
         coded = self.coded_blocks(res)
         ck = self.coded_keys(res)
@@ -983,8 +985,7 @@ def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.
 def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
                     keep_pixels: bool) -> tuple:
     """One intra key view that is not the first of its pass (:meth:`TxEncoder._code_intra_keys`)."""
-    lv = enc.thumb_levels(k, thumb16)
-    code = enc.code_view(k, enc.thumb_pred(lv, thumb16), s16k, lam_k, model, keep_pixels=keep_pixels)
+    lv, code = enc.code_intra(k, thumb16, s16k, lam_k, model, keep_pixels)
     img = None
     if enc.intra_codec == "j2k":
         img, code, _ = enc._j2k_view(k, code, len(pack_thumbs(lv[None])), enc.J2K_KEY_SLACK_DB, give_up=True)

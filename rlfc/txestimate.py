@@ -20,8 +20,6 @@ from formats.parallel import Runner
 
 from .txpredict import TB
 
-MAP_THREADS = None      # threads for the cells' costs in-process (None: formats.parallel.LOCAL_THREADS)
-
 
 def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
     """(H, W) float32 ``img`` shifted: out[y, x] = img[clip(y + dy), clip(x + dx)], edges
@@ -80,7 +78,7 @@ class Estimator:
         pairs = [(float(d), m) for d in ds for m in range(nm)]
         runner = runner or Runner()                 # (the serial runner: a loop here, no copies)
         h = self._handle(runner)
-        parts = runner.map_threaded(_global_task, [(h, m, d) for d, m in pairs], threads=MAP_THREADS)
+        parts = runner.map_threaded(_global_task, [(h, m, d) for d, m in pairs])
         out = []
         for i in range(len(ds)):
             c = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
@@ -125,7 +123,7 @@ class Estimator:
         nm = len(self.cells)
         runner = runner or Runner()
         h = self._handle(runner)
-        parts = runner.map_threaded(_maps_task, [(h, m, d16[m]) for m in range(nm)], threads=MAP_THREADS)
+        parts = runner.map_threaded(_maps_task, [(h, m, d16[m]) for m in range(nm)])
         out = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
         for m in range(nm):
             out[m, :1 + self._nrefs(m)] = parts[m]

@@ -4,6 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
+import formats.parallel as fp
 from rlfc import txestimate
 from rlfc.txstructure import build
 
@@ -32,7 +33,7 @@ def test_threads_give_the_serial_maps(monkeypatch):
     out = {}
     before = cv2.getNumThreads()
     for n in (1, 2):
-        monkeypatch.setattr(txestimate, "MAP_THREADS", n)
+        monkeypatch.setattr(fp, "LOCAL_THREADS", n)
         out[n] = txestimate.estimate_maps(luma, s, max_disparity=8)
     for a, b in zip(out[1], out[2]):
         assert np.array_equal(a, b)
