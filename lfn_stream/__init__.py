@@ -6,13 +6,33 @@ Public API:
     to_sections, LfnCodec — pack a trained network for an .lfc file; the codec plug-in
     LfnRenderer — render from a file or any prefix of it (fractional / per-pixel sizes)
     encode_tiles, open_tiles, TiledLfnRenderer — tile sets: one network per region of camera space
+
+Names load on first use (PEP 562), so that ``import lfn_stream`` and the codec plug-in cost no
+torch import until a network is built, trained or rendered (every ``lfcodec`` command loads
+each codec to list its options).
 """
-from .codec import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnCodec, encode_tiles, to_sections
-from .config import LfnConfig
-from .model import NestedLFN, OccupancyNet
-from .render import LfnRenderer
-from .tiles import TiledLfnRenderer, open_tiles
-from .train import TrainOptions, train
+from __future__ import annotations
+
+import importlib
+
+#: public name → the submodule that defines it
+_WHERE = {"LfnConfig": "config", "CODEC_ID": "config", "CODEC_VERSION": "config", "MOVED_KEYS": "config",
+          "NestedLFN": "model", "OccupancyNet": "model", "TrainOptions": "training", "train": "training",
+          "to_sections": "codec", "LfnCodec": "codec", "encode_tiles": "codec", "LfnRenderer": "render",
+          "TiledLfnRenderer": "tiles", "open_tiles": "tiles"}
 
 __all__ = ["LfnConfig", "NestedLFN", "OccupancyNet", "TrainOptions", "train", "to_sections", "LfnRenderer",
            "encode_tiles", "open_tiles", "TiledLfnRenderer", "LfnCodec", "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]
+
+
+def __getattr__(name: str):
+    mod = _WHERE.get(name)
+    if mod is None:
+        raise AttributeError(f"module 'lfn_stream' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{mod}", __name__), name)
+    globals()[name] = value          # later lookups skip this function
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(__all__))

@@ -1,22 +1,28 @@
 """LFN as an lfcodec codec plug-in (entry point ``lfn`` in the ``lfcodec.codecs`` group):
-config + sections for the container (the codec never opens files)."""
+config + sections for the container (the codec never opens files). Importing it does not
+import torch (the CLI loads every codec to list its options); the network's modules load
+when a method first needs them."""
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from formats.codec_api import Codec, EncodeOptions, Encoded
 from formats.errors import ParameterError
 
-from .config import LfnConfig
-from .evaluate import display_ladder, sample_rays, size_psnr
-from .model import NestedLFN, OccupancyNet
-from .pack import step_bytes, stream_sections
-from .render import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnRenderer
+from .config import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnConfig
+
+if TYPE_CHECKING:                      # (annotations only: these modules import torch)
+    from .model import NestedLFN, OccupancyNet
+    from .render import LfnRenderer
 
 
 def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: str = "fp16"):
     """(config, sections) of a trained network for :func:`formats.lfcfile.write_lfc` (with
     ``more=MOVED_KEYS``: the cameras and evaluation lists go after the network)."""
+    from .pack import step_bytes, stream_sections
+
     cfg: LfnConfig = model.cfg
     sections = stream_sections(model, occ, dtype)
     config = {"network": cfg.to_dict(), "norm": info["norm"], "weights": dtype, "train": {
@@ -35,6 +41,7 @@ def heldout_report(lf, config: dict, sections, info: dict) -> dict:
     from formats.lfcfile import lfc_bytes, open_lfc
 
     from .evaluate import evaluate
+    from .render import LfnRenderer
 
     blob = lfc_bytes(CODEC_ID, CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
     r = LfnRenderer(open_lfc(blob), device="cpu")
@@ -58,7 +65,7 @@ def _setup(lf, p: dict):
 
     from formats.transform import resize_lightfield
 
-    from .train import TrainOptions
+    from .training import TrainOptions
 
     if not isinstance(lf.views, np.ndarray):          # a ViewStack (zarr, dask, ...): read it all
         lf = dataclasses.replace(lf, views=np.asarray(lf.views))
@@ -90,6 +97,8 @@ def finish_network(full, lf, model, occ, info: dict, opts, weights: str, progres
         progress("display ladder", 0, 1)
     # measured on training rays: held-out views stay unseen for evaluation (measuring on half of them
     # instead gave no fewer drops on the other half; BENCHMARKS.md)
+    from .evaluate import display_ladder, sample_rays, size_psnr
+
     rays, targets = sample_rays(lf, info["train_views"], info["norm"], seed=opts.seed)
     info["display"] = display_ladder(size_psnr(model, rays, targets, model.cfg), model.cfg)
     config, sections = to_sections(model, occ, info, weights)
@@ -163,7 +172,7 @@ class LfnCodec(Codec):
     description = "light field network with continuous levels of detail, streamed by network size"
 
     def encode(self, lf, options: EncodeOptions, progress=None) -> Encoded:
-        from .train import train
+        from .training import train
 
         if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
             raise ParameterError("light field networks take no --target-psnr/--target-bpp/--lossless "
@@ -188,6 +197,8 @@ class LfnCodec(Codec):
         return Encoded(config, sections, None, notes=notes, summary=summary, more=MOVED_KEYS)
 
     def open(self, f, **kw) -> LfnRenderer:
+        from .render import LfnRenderer
+
         return LfnRenderer(f, **kw)
 
     set_suffix = ".json"      # a tile set's manifest (lfn_stream.tiles)

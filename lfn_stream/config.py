@@ -6,6 +6,11 @@ from dataclasses import asdict, dataclass
 
 from formats.errors import ParameterError
 
+CODEC_ID = "lfn"
+CODEC_VERSION = 3          # 3: steps in one section, cameras in meta.more; 2: sizes named *_neurons (1: *_width)
+#: metadata a renderer of the first bytes does not need, stored after the network (meta.more)
+MOVED_KEYS = ("scene.c2w", "scene.positions", "scene.names_z", "config.train")
+
 #: on-wire keys of codec version 1 (files written before the network's width was renamed)
 V1_KEYS = {"min_width": "min_neurons", "max_width": "max_neurons", "occupancy_width": "occupancy_neurons"}
 

@@ -20,7 +20,7 @@ from .pack import step_name, step_offsets
 from .rays import view_rays
 from .render import LfnRenderer
 from .sat import area_downsample
-from .train import targets_of
+from .training import targets_of
 
 
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:

@@ -14,16 +14,12 @@ from formats.lfcfile import LfcFile, check_codec_version
 from formats.lightfield import LightField, read_geometry
 from formats.schema import Fields, read_vector
 
-from .config import LfnConfig
+from .config import CODEC_ID, CODEC_VERSION, LfnConfig
 from .pack import base_values, occ_values, step_bytes, step_name, step_offsets, unpack_network
 from .cameras import captured_poses, grid_pose, orbit_pose, scene_pivot, stereo_poses
 from .rays import camera_rays, view_rays
 
-CODEC_ID = "lfn"
 ALPHA_MIN = 2.0 ** -20   # below it a pixel's colour is 0 (invisible at 16 bits; exact in float32 and float64)
-CODEC_VERSION = 3          # 3: steps in one section, cameras in meta.more; 2: sizes named *_neurons (1: *_width)
-#: metadata a renderer of the first bytes does not need, stored after the network (meta.more)
-MOVED_KEYS = ("scene.c2w", "scene.positions", "scene.names_z", "config.train")
 
 OCC_BATCH = 16384   # rays per occupancy-net call: ~2 MiB of activations (one 65536-ray call ran ~4x slower)
 MAX_SIZE_PASSES = 16  # an all-integer size map with at most this many sizes runs one fused pass per size

@@ -94,9 +94,9 @@ def train_tiles(lf, cfg, opts, tiles: int, band: float = DEFAULT_BAND, progress=
 
     Returns:
         {"centres": (K, 3), "band": band, "tiles": [(model, occ, info) per tile], "train_views",
-        "test_views"} — info as :func:`lfn_stream.train.train` returns it.
+        "test_views"} — info as :func:`lfn_stream.training.train` returns it.
     """
-    from .train import split_views, train
+    from .training import split_views, train
 
     train_v, test_v = split_views(lf, opts.holdout)
     if opts.train_views is not None:

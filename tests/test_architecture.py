@@ -60,3 +60,21 @@ def test_the_checks_would_fail(tmp_path):
     f = tmp_path / "x.py"
     f.write_text("import rlfc.decoder\nfrom tools.common import log\nfrom .y import z\n")
     assert _imports(f) == {"rlfc", "tools"}
+
+
+def test_cli_start_imports_no_torch():
+    """Every ``lfcodec`` command builds a parser that loads each codec to list its options; an
+    RLFC command must not pay torch's import (about 1.3 s on the 2-core box): the LFN plug-in
+    and ``lfn_stream`` load torch only when a network is built, trained or rendered."""
+    import subprocess
+    import sys
+
+    code = ("import sys, lfn_stream, lfn_stream.codec\n"
+            "from formats.cli import build_parser\n"
+            "build_parser().parse_args(['info', 'x.lfc'])\n"
+            "assert 'torch' not in sys.modules, 'torch imported'\n"
+            "assert lfn_stream.LfnConfig().max_neurons > 0 and 'torch' not in sys.modules\n"
+            "lfn_stream.NestedLFN\n"
+            "assert 'torch' in sys.modules\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr

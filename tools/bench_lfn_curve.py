@@ -29,7 +29,7 @@ from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
 from lfn_stream.evaluate import prefix_bytes
 from lfn_stream.sat import area_downsample
-from lfn_stream.train import targets_of
+from lfn_stream.training import targets_of
 from tools.common import log, machine
 
 

@@ -30,7 +30,7 @@ from lfn_stream.codec import encode_tiles
 from lfn_stream.evaluate import evaluate
 from lfn_stream.render import CODEC_ID, CODEC_VERSION, LfnRenderer
 from lfn_stream.tiles import open_tiles
-from lfn_stream.train import split_views
+from lfn_stream.training import split_views
 from tools.common import log, machine
 
 
