@@ -25,7 +25,7 @@ from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb
 from ..txmaps import unpack_maps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
-from ..txsample import KeyAtlas, _predict_dense, predict as remap_predict, predict_view
+from ..txsample import KeyAtlas, block_refs, predict as remap_predict, predict_block, predict_view
 from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
@@ -129,6 +129,10 @@ class TxDecoder(ProfileDecoder):
         self._io = threading.Lock()
         self._tby = np.repeat(np.arange(self.tpb), self.tpb)       # tbs of a block, raster order
         self._tbx = np.tile(np.arange(self.tpb), self.tpb)
+        self._tb_off = self._tby * self.nbx8 + self._tbx           # their raster indices from the first
+        self._tb_y = (self._tby * TB).astype(np.float32)           # their pixel origins in the block
+        self._tb_x = (self._tbx * TB).astype(np.float32)
+        self._blockref_cache: dict = {}
         if c.info("tx.blocks").length != off[-1] + PAD:
             raise FormatError(f"{name}: section 'tx.blocks' has {c.info('tx.blocks').length} bytes, the index "
                               f"says {off[-1] + PAD}")
@@ -546,6 +550,15 @@ class TxDecoder(ProfileDecoder):
             self._ref_cache[v] = got
         return got
 
+    def _block_refs(self, v: int):
+        """:func:`rlfc.txsample.block_refs` of view v (cached; None where its references lie in
+        more than one atlas group)."""
+        got = self._blockref_cache.get(v, False)
+        if got is False:
+            slots, wmode, dpos = self._view_refs(v)
+            got = self._blockref_cache[v] = block_refs(self.atlas, slots, wmode, dpos)
+        return got
+
     def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
         """One request, lean: the prediction of the block's nt tbs from every reference at once
         (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
@@ -555,19 +568,21 @@ class TxDecoder(ProfileDecoder):
         if self.is_key[view]:
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
-        slots, wmode, dpos = self._view_refs(view)
         cell = self.lay.cell[view]
-        ty = by * tpb + self._tby                                           # (nt,) raster within the block
-        tx = bx * tpb + self._tbx
-        loc8 = ty * self.nbx8 + tx
-        d = self.disp[cell, loc8]
-        dd = d[:, None, None] * dpos[None]                                  # (nt, R, 2)
-        args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[self.modes[cell, loc8]], dd[..., 0], dd[..., 1],
-                ty * TB, tx * TB)
-        if self.atlas is not None:                          # the remap kernel, every reference at once
-            out = _predict_dense(self.atlas, *args)
-        else:                                               # (key views too large for OpenCV)
-            out = predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
+        loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
+        refs = self._block_refs(view) if self.atlas is not None else None
+        if refs is not None:                                # the remap kernel, every reference at once
+            out = predict_block(self.atlas, refs, self.disp[cell, loc8], self.modes[cell, loc8],
+                                self._tb_y + np.float32(by * B), self._tb_x + np.float32(bx * B))
+        else:                  # references in several atlas groups, or key views too large for OpenCV
+            slots, wmode, dpos = self._view_refs(view)
+            ty = by * tpb + self._tby
+            tx = bx * tpb + self._tbx
+            dd = self.disp[cell, loc8][:, None, None] * dpos[None]          # (nt, R, 2)
+            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[self.modes[cell, loc8]], dd[..., 0],
+                    dd[..., 1], ty * TB, tx * TB)
+            out = remap_predict(self.atlas, *args) if self.atlas is not None else \
+                predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
         loc = by * self.nbx + bx
         if level == 0 and self.coded[view, loc]:
             vv = np.array([view])

@@ -192,6 +192,32 @@ def test_decode_without_the_remap_atlas_is_the_same():
     assert (d.decode_block(1, 2, 1, 2) == one).all()
 
 
+def test_single_blocks_with_key_views_in_several_atlas_groups(monkeypatch):
+    """Key views stacked in several OpenCV images (views taller than 32 766 / keys px, e.g.
+    2048² views with more than 15 key views): every single block equals the whole view, also
+    where a view's references lie in different groups (the single-block path used to sample
+    the first group only: wrong pixels, silently)."""
+    import rlfc.txsample as ts
+
+    lf = smooth_lf(rows=5, cols=5, h=40, w=56)
+    e = tx(lf, step=4.0)
+    monkeypatch.setattr(ts, "CV_MAX", 4 * 48)          # 4 key views (48 padded rows) per group
+    d, _ = open_encoded(lf, e)
+    assert len(d.core.atlas.groups) > 2
+    full = d.decode_all()
+    assert (full == e.decoded).all()
+    B = d.block_size
+    spans = set()
+    for v in range(lf.rows * lf.cols):
+        r, c = divmod(v, lf.cols)
+        if not d.core.is_key[v]:
+            spans.add(d.core._block_refs(v) is None)
+        for by in range(d.nby):
+            for bx in range(d.nbx):
+                assert (d.decode_block(r, c, by, bx) == full[r, c, by * B:(by + 1) * B, bx * B:(bx + 1) * B]).all()
+    assert spans == {True, False}                      # views with references in one group and in several
+
+
 @pytest.mark.parametrize("bad", [0, -1, 257, 1.5, "2", True, None])
 def test_bad_thread_counts_are_parameter_errors(bad):
     from formats.errors import ParameterError
