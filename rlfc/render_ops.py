@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import cvremap
+
 TILE = 8               # the geometry's block: tile extents and block maps are per 8×8 pixels
 
 
@@ -64,7 +66,7 @@ class NumpyOps:
         bicubic (Keys, a = −0.75; taps past the buffer repeat its edge)."""
         import cv2
 
-        out = cv2.remap(buf, X, Y, cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        out = cvremap.remap(buf, X, Y, cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR)
         return out.reshape(*Y.shape, buf.shape[2])
 
     def tile_ranges(self, planes):

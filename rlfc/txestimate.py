@@ -18,6 +18,7 @@ import numpy as np
 from .txlayout import MAX_REFS
 from formats.parallel import Runner
 
+from . import cvremap
 from .txpredict import TB
 
 
@@ -32,6 +33,9 @@ def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
         dy, dx = int(dy), int(dx)
         crop = img[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)]
         return cv2.copyMakeBorder(crop, max(-dy, 0), max(dy, 0), max(-dx, 0), max(dx, 0), cv2.BORDER_REPLICATE)
+    if max(h, w) > cvremap.SIDE:        # (OpenCV's warps address images below 32767 px a side)
+        gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
+        return cvremap.remap(img, gx + np.float32(dx), gy + np.float32(dy), cv2.INTER_LINEAR)
     mat = np.float32([[1, 0, dx], [0, 1, dy]])
     return cv2.warpAffine(img, mat, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REPLICATE)
@@ -152,8 +156,7 @@ class Estimator:
             wb = s.weights[v, :nr] / 64.0
             blend = np.zeros_like(y)
             for j in range(nr):               # each reference alone, and their blend
-                p = cv2.remap(self._y(r[j]), gx + dpix * dpos[j, 1], gy + dpix * dpos[j, 0], cv2.INTER_LINEAR,
-                              borderMode=cv2.BORDER_REPLICATE)
+                p = cvremap.remap(self._y(r[j]), gx + dpix * dpos[j, 1], gy + dpix * dpos[j, 0], cv2.INTER_LINEAR)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
                 blend += np.multiply(p, np.float32(wb[j]), out=wp)
             acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)

@@ -102,11 +102,16 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     nzmask = mag > 0
     last = np.where(nzmask.any(-1), 63 - np.argmax(nzmask[..., ::-1], axis=-1) + 1, 0)       # (S, nt, P)
     parts = []                                 # (lane, order, ctx, sym)
+    # sort keys within a lane: modes, then last positions, then magnitudes, then escapes (a key
+    # row stream of a wide view holds thousands of tbs: the offsets follow nt and P)
+    o_last = nt
+    o_mag = o_last + nt * P
+    o_esc = o_mag + nt * P * 64
     lane_t = np.repeat(np.arange(S), nt)
     prev = np.concatenate([np.full((S, 1), 3), modes[:, :-1]], axis=1)
     parts.append((lane_t, np.tile(np.arange(nt), S), ctx_mode(kind[:, None], prev).reshape(-1), modes.reshape(-1)))
     s_, t_, p_ = np.nonzero(np.broadcast_to((modes != MODE_SKIP)[:, :, None], (S, nt, P)))
-    parts.append((s_, 1000 + t_ * P + p_, ctx_last(pcs[p_], modes[s_, t_], key[s_]), last[s_, t_, p_]))
+    parts.append((s_, o_last + t_ * P + p_, ctx_last(pcs[p_], modes[s_, t_], key[s_]), last[s_, t_, p_]))
     # magnitudes: group g = (s, t, p) with last > 0; j = 0..last-1 at scan position last-1-j
     gs, gt, gp = np.nonzero(last > 0)
     gl = last[gs, gt, gp]
@@ -122,12 +127,12 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     prev2 = np.concatenate([[False, False], nz])[:n] & (j >= 2)
     nb = np.where(first, 0, 1 + prev1.astype(np.int64) + prev2)
     pc = pcs[gp[grp]]
-    order = 10_000 + ((gt[grp] * P + gp[grp]) * 64 + j)
+    order = o_mag + ((gt[grp] * P + gp[grp]) * 64 + j)
     parts.append((gs[grp], order, ctx_mag(pc, BAND[pos], key[gs[grp]], nb), sym))
     esc = sym == ESC
     r = m[esc] - ESC - np.where(first[esc], 1, 0)
     k = bucket_of(r)
-    parts.append((gs[grp][esc], 1_000_000 + order[esc], ctx_esc(pc[esc]), k))
+    parts.append((gs[grp][esc], order[esc] + (o_esc - o_mag), ctx_esc(pc[esc]), k))
     if counts_only:
         return count_symbols(np.concatenate([x[2] for x in parts]), np.concatenate([x[3] for x in parts]))
     lane = np.concatenate([x[0] for x in parts])
@@ -143,7 +148,7 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     el = np.repeat(gs[grp][esc], kk)
     eb = np.arange(int(kk.sum())) - np.repeat(np.cumsum(kk) - kk, kk)
     ebits = (np.repeat(suffix, kk) >> eb) & 1
-    eord = np.repeat(1_000_000 + order[esc], kk) * 64 + eb
+    eord = np.repeat(order[esc] + (o_esc - o_mag), kk) * 64 + eb
     rl = np.concatenate([sign_lane, el])
     rord = np.concatenate([sign_ord * 64, eord])
     rbits = np.concatenate([sign_bits, ebits])

@@ -152,6 +152,7 @@ class TxDecoder(ProfileDecoder):
         self._rows_ok = np.zeros((N0, self.nby), bool)            # (view, block row): its key rows are decoded
         self._keys_all = keys.size == 0
         self._key_lock = threading.RLock()
+        self._in_keys = threading.local()              # .active: this thread is decoding key rows
         self._thumb_up: dict = {}
         self._reach = self._reach_rows()
 
@@ -236,6 +237,13 @@ class TxDecoder(ProfileDecoder):
         predicted from, keys in coding order (a key is predicted from keys before it). Block rows
         of transform-coded keys are parsed together (:meth:`_parse_streams`), in groups of about
         KEY_PARSE_TBS tbs (whole keys)."""
+        self._in_keys.active = True
+        try:
+            self._decode_key_rows_now(need)
+        finally:
+            self._in_keys.active = False
+
+    def _decode_key_rows_now(self, need: np.ndarray) -> None:
         lay, B, nby = self.lay, self.block_size, self.nby
         keys = [int(k) for k in lay.keys]
         need = need & ~self._key_done
@@ -363,7 +371,11 @@ class TxDecoder(ProfileDecoder):
     @property
     def kp(self) -> np.ndarray:
         """(P, n_keys·Hp·Wp) planar key views (the gather layout of ``predict_tbs``), built on
-        first use."""
+        first use. While this thread decodes key rows (a predicted key view, without the remap
+        atlas: views too large for OpenCV), the rows decoded so far, uncached: the rows a key
+        samples are decoded before it."""
+        if getattr(self._in_keys, "active", False):
+            return planar(self.keyplanes)
         self.decode_keys()
         if self._kp is None:
             self._kp = planar(self.keyplanes)

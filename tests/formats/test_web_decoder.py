@@ -146,6 +146,19 @@ def test_views_coded_alone_as_jpeg2000_agree(tmp_path):
     assert differ <= 0.001 * d.rows * d.cols * d.height * d.width * d.P
 
 
+def test_wide_views_agree(tmp_path):
+    """Key-view row streams of more than 1000 8×8 blocks (views wider than 4000 px): the
+    JavaScript decoder reads the same planes."""
+    from tests.rlfc.helpers import open_encoded
+    from tests.rlfc.test_tx import _wide_lf, tx
+
+    lf = _wide_lf(8, 4400)
+    _, blob = open_encoded(lf, tx(lf, step=4.0))
+    path = tmp_path / "wide.lfc"
+    path.write_bytes(blob)
+    assert_same_planes(path, tmp_path / "out")
+
+
 def test_thumbnail_levels_beyond_any_block_mean_are_refused_as_in_python(tmp_path):
     """tools.fuzz seed 59: a thumbnail step raised to 16001 (Python's int32 upsampling overflowed,
     JavaScript's doubles did not); both readers now refuse the file with the same words."""

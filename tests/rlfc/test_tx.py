@@ -218,6 +218,37 @@ def test_single_blocks_with_key_views_in_several_atlas_groups(monkeypatch):
     assert spans == {True, False}                      # views with references in one group and in several
 
 
+def _wide_lf(h: int, w: int, channels: int = 3):
+    """A 2×2 grid of h × w views: a horizontal pattern moving 2 px per view step."""
+    from formats.lightfield import LightField, grid_positions
+
+    base = np.sin(np.arange(w) / 40.0)[None, :] * 60 + 120 + np.arange(h)[:, None]
+    views = np.stack([np.stack([np.roll(base, 2 * (r + c), axis=1) for c in range(2)]) for r in range(2)])
+    views = np.clip(np.repeat(views[..., None], channels, axis=-1), 0, 255).astype(np.uint8)
+    return LightField(views=views, positions=grid_positions(2, 2), layout="grid")
+
+
+@pytest.mark.parametrize("w", [4400, 32800])
+def test_wide_views_encode_and_decode(w):
+    """A key view's row stream of a view wider than 4000 px holds more than 1000 8×8 blocks:
+    the encoder used to order its symbols by keys that assumed fewer (the file did not decode).
+    Views wider than OpenCV addresses (32767 px) used to stop the encoder's map estimation with
+    an OpenCV assertion, and their predicted key views sent the decoder into endless recursion."""
+    lf = _wide_lf(8, w, 3 if w < 10000 else 1)
+    e = tx(lf, step=4.0)
+    d, _ = open_encoded(lf, e)
+    assert (d.core.atlas is None) == (w > 32766)
+    full = d.decode_all()
+    assert (full == e.decoded).all() and psnr_rgb(lf.views, full) > 40
+    B = d.block_size
+    for r, c, bx in ((0, 1, 3), (1, 1, d.nbx - 1), (1, 0, d.nbx // 2)):
+        assert (d.decode_block(r, c, 0, bx) == full[r, c, :B, bx * B:(bx + 1) * B]).all()
+    v, by, bx = np.array([1, 2, 3, 1]), np.zeros(4, np.int64), np.array([0, 5, d.nbx - 1, d.nbx // 3])
+    assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
+    img = d.renderer().render(0.5, 0.5)
+    assert img.shape == full.shape[2:] and psnr_rgb(full[0, 0], img) > 20
+
+
 @pytest.mark.parametrize("bad", [0, -1, 257, 1.5, "2", True, None])
 def test_bad_thread_counts_are_parameter_errors(bad):
     from formats.errors import ParameterError
