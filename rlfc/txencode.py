@@ -1091,13 +1091,30 @@ def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list
 
 def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
     """Encode with the ``tx`` profile (rate control for a PSNR or bpp target); the views
-    that are not key views are coded where ``options.workers`` / ``options.scheduler`` say."""
+    that are not key views are coded where ``options.workers`` / ``options.scheduler`` say. A
+    PSNR target that no lossy setting reaches gets the lossless file (a note says so)."""
     from .ratecontrol import check_targets
+
+    import dataclasses
+
+    from formats.metrics import psnr_rgb
 
     check_targets(options.target_psnr, options.target_bpp)
     params = _params_from(options)
     with make_runner(options.workers, options.scheduler) as runner:
-        return _encode_tx(lf, options, params, progress, runner)
+        out = _encode_tx(lf, options, params, progress, runner)
+        if options.target_psnr is not None and out.target_met is False and not params.lossless:
+            # no lossy setting reaches the target (8-bit views above ~55 dB: the finest quantizer
+            # step is 1): the lossless file does, and is then the smallest file that does
+            closest = psnr_rgb(lf.views, out.decoded)
+            exact = _encode_tx(lf, dataclasses.replace(options, target_psnr=None, lossless=True),
+                               dataclasses.replace(params, lossless=True), progress, runner)
+            exact.notes = [f"no lossy setting reaches {options.target_psnr:g} dB (the finest quantizer gives "
+                           f"{closest:.2f} dB): the file is lossless (exact)"] + exact.notes
+            exact.trace = out.trace + exact.trace
+            exact.target_met = True
+            return exact
+        return out
 
 
 def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:

@@ -106,6 +106,19 @@ def test_noise_costs_about_raw(rng):
     assert (d.decode_all() == noise).all() and len(blob) <= noise.nbytes * 1.15 + 4096
 
 
+def test_a_psnr_target_beyond_every_lossy_setting_gets_the_lossless_file(rng):
+    """8-bit noise at 60 dB: the finest quantizer step (1) reaches about 51 dB, so the file is
+    the lossless one (exact: the target is met) and the encoder says why."""
+    noise = make_lf(rng.integers(0, 256, (3, 3, 32, 32, 3)).astype(np.uint8))
+    e = encode(noise, EncodeOptions(profile="tx", target_psnr=60))
+    d, _ = open_encoded(noise, e)
+    assert e.target_met is True and d.core.lay.bypass.all()
+    assert (d.decode_all() == noise.views).all() and (e.decoded == noise.views).all()
+    assert any("no lossy setting reaches 60 dB" in n and "lossless" in n for n in e.notes)
+    near = encode(noise, EncodeOptions(profile="tx", target_psnr=45))      # reachable: stays lossy
+    assert near.target_met and not any("lossless" in n for n in near.notes) and psnr_rgb(noise.views, near.decoded) < 60
+
+
 def test_posed_captures_are_coded_view_by_view():
     lf = smooth_lf(rows=1, cols=4)
     lf.layout = "posed"
