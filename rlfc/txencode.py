@@ -1072,20 +1072,26 @@ def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list
     if ps - target <= TRIM_DB or any(c is None or c.px is None for c in res["codes"]):
         return res
     best, lo = res, (0.0, ps)
-    q = (target + 0.03 - ps) / TRIM_SLOPE
+    miss = None                        # the smallest log2 multiplier that missed the target
+    q = min(max((target + 0.03 - ps) / TRIM_SLOPE, 0.1), 4.0)
     for _ in range(TRIM_TRIES):
-        q = min(max(q, 0.1), 4.0)
+        if miss is not None and not lo[0] < q < miss:        # the secant left the bracket: bisect it
+            q = (lo[0] + miss) / 2
+        if q - lo[0] < 1 / 64:
+            break
         r = enc.run(res["step"], res["model"], progress, keep_pixels=True, lam_scale=2.0 ** q)
         p = enc.psnr(r)
         trace.append({"step": res["step"], "lam_scale": 2.0 ** q, "psnr_rgb": p, "bpp": None, "refined": True})
-        slope = min((p - lo[1]) / (q - lo[0]) if q != lo[0] else TRIM_SLOPE, -0.05)
+        slope = min((p - lo[1]) / (q - lo[0]), -0.05)
         if p >= target:
             if q > math.log2(best.get("lam_scale", 1.0)):
                 best = r
             if p - target <= TRIM_DB:
                 break
             lo = (q, p)
-        q = lo[0] + (target + 0.03 - lo[1]) / slope
+        else:
+            miss = q if miss is None else min(miss, q)
+        q = min(lo[0] + (target + 0.03 - lo[1]) / slope, 4.0)
     return best
 
 
