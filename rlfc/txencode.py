@@ -12,13 +12,13 @@ Key views use a finer step (Δ / key_ratio): every other view is predicted from 
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
-from formats.metrics import colour_sq_error, psnr_from_sq_error
+from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb
 from formats.parallel import Runner, make_runner
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
@@ -1101,20 +1101,16 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
     PSNR target that no lossy setting reaches gets the lossless file (a note says so)."""
     from .ratecontrol import check_targets
 
-    import dataclasses
-
-    from formats.metrics import psnr_rgb
-
     check_targets(options.target_psnr, options.target_bpp)
     params = _params_from(options)
     with make_runner(options.workers, options.scheduler) as runner:
         out = _encode_tx(lf, options, params, progress, runner)
         if options.target_psnr is not None and out.target_met is False and not params.lossless:
-            # no lossy setting reaches the target (8-bit views above ~55 dB: the finest quantizer
+            # no lossy setting reaches the target (8-bit views above 50-59 dB: the finest quantizer
             # step is 1): the lossless file does, and is then the smallest file that does
             closest = psnr_rgb(lf.views, out.decoded)
-            exact = _encode_tx(lf, dataclasses.replace(options, target_psnr=None, lossless=True),
-                               dataclasses.replace(params, lossless=True), progress, runner)
+            exact = _encode_tx(lf, replace(options, target_psnr=None, lossless=True),
+                               replace(params, lossless=True), progress, runner)
             exact.notes = [f"no lossy setting reaches {options.target_psnr:g} dB (the finest quantizer gives "
                            f"{closest:.2f} dB): the file is lossless (exact)"] + exact.notes
             exact.trace = out.trace + exact.trace
