@@ -6,7 +6,7 @@ import dataclasses
 import numpy as np
 
 from formats.codec_api import Codec, EncodeOptions, Encoded
-from formats.errors import ParameterError
+from formats.errors import ParameterError, UnsupportedError
 
 from .decoder import RlfcDecoder
 from .header import CODEC_ID, CODEC_VERSION
@@ -33,6 +33,9 @@ class RlfcCodec(Codec):
     description = "random-access key-view light-field codec (after Pratapa & Manocha, I3D 2019)"
 
     def encode(self, lf, options: EncodeOptions, progress=None) -> Encoded:
+        if np.dtype(lf.views.dtype) not in (np.uint8, np.uint16):
+            raise UnsupportedError(f"the rlfc codec codes 8- and 16-bit integer views; these are "
+                                   f"{np.dtype(lf.views.dtype).name} (convert them to 8- or 16-bit integers first)")
         pid = choose_profile(lf, options.profile)
         if pid != "tx" and not isinstance(lf.views, np.ndarray):     # only tx reads views as it codes them
             lf = dataclasses.replace(lf, views=np.asarray(lf.views))

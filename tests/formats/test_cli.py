@@ -137,6 +137,20 @@ def test_bad_input_one_line_exit_2(args, needle):
     assert err.strip().count("\n") == 0 and needle in err and "Traceback" not in err
 
 
+def test_float_image_folder_is_one_line_exit_2(tmp_path):
+    """A folder of float TIFFs (HDR) reads as float32 views: no codec here codes them, and the
+    command says so in one line instead of a numpy traceback."""
+    import cv2
+
+    for i in range(4):
+        cv2.imwrite(str(tmp_path / f"v{i}.tif"), np.full((12, 16, 3), 0.25 * i, np.float32))
+    for codec in ("rlfc", "lfn"):
+        code, out, err = _run("encode", str(tmp_path), str(tmp_path / "x.lfc"), "--grid", "2x2", "--codec", codec,
+                              "--quiet")
+        assert code == 2 and err.strip().count("\n") == 0 and "Traceback" not in err, (codec, err)
+        assert "16-bit" in err
+
+
 def test_bad_block_and_level_requests(encoded):
     for args, needle in ((["--block", "9,0,0,0"], "outside"), (["--block", "0,0,99,0"], "outside"),
                          (["--block", "1,2,3"], "4 non-negative"), (["--block", "0,0,0,0", "--level", "9"], "level")):

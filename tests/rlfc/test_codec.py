@@ -130,6 +130,18 @@ def test_float_views_are_unsupported():
         roundtrip(lf)
 
 
+@pytest.mark.parametrize("profile", ["auto", "tx", "dcp", "bise"])
+def test_float_views_are_unsupported_by_every_profile(profile):
+    """Float views (an HDR TIFF folder reads as float32) used to reach the tx encoder and stop
+    there with numpy's ValueError: the codec refuses them, typed, before any work."""
+    from formats.codec_api import EncodeOptions
+    from rlfc import encode
+
+    lf = make_lf(np.zeros((2, 2, 8, 8, 3), np.float32))
+    with pytest.raises(UnsupportedError, match="8- and 16-bit integer views; these are float32"):
+        encode(lf, EncodeOptions(profile=profile, target_psnr=40))
+
+
 @pytest.mark.parametrize("kw", [dict(block_size=3), dict(quant=0.5), dict(tree_height=-1), dict(threshold=-1),
                                 dict(top_codec="png"), dict(profile="nope")])
 def test_bad_params(kw):
