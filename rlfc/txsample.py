@@ -25,12 +25,14 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
+from . import cvremap
 from .txpredict import DISP_BITS, TB, W_BITS, mode_weights
 
-CV_MAX = 32766          # largest image side OpenCV's remap accepts (< SHRT_MAX)
+CV_MAX = cvremap.SIDE   # largest image side OpenCV's remap accepts (< SHRT_MAX)
 SMALL = 64              # (blocks × references) up to which every reference is sampled (fewer calls)
 _E = np.arange(TB, dtype=np.float32)
 _F16 = np.float32(1.0 / (1 << DISP_BITS))
+_Z = np.zeros(TB, np.float32)
 
 
 class KeyAtlas:
@@ -241,21 +243,34 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
 def _predict_dense(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarray:
     """:func:`predict` for a few blocks (one random-access request): every reference sampled,
     weight 0 or not, in about a third of the numpy calls (calls, not pixels, cost here)."""
-    M, R = slots.shape
     Y = ((y0[:, None] << DISP_BITS) + disp_y).astype(np.float32) * _F16                 # (M, R)
     X = ((x0[:, None] << DISP_BITS) + disp_x).astype(np.float32) * _F16
-    rows = np.minimum(np.maximum(Y[..., None] + _E, 0), atlas.hp - 1) + (slots * atlas.hp).astype(np.float32)[..., None]
-    cols = np.minimum(np.maximum(X[..., None] + _E, 0), atlas.wp - 1)
-    n = M * R
-    mr = np.broadcast_to(rows.reshape(n, TB, 1), (n, TB, TB)).reshape(n, TB * TB)        # (M·R, 64) rows
-    mc = np.broadcast_to(cols.reshape(n, 1, TB), (n, TB, TB)).reshape(n, TB * TB)
-    smp = cv2.remap(atlas.groups[0], mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    np.floor(smp, out=smp)                                                               # atlas + 0.5: rounded
-    acc = np.matmul(weights.astype(smp.dtype)[:, None, :], smp.reshape(M, R, -1))        # (M, 1, 64·C) integers
-    out = acc.reshape(M, TB * TB, atlas.C)[..., :atlas.P].astype(np.int32)
+    rows0 = (slots * atlas.hp).astype(np.float32)[:, :, None, None]
+    return _sample_blend(atlas, atlas.groups[0], Y, X, rows0, weights.astype(atlas.ftype)[:, None, :])
+
+
+def _sample_blend(atlas: KeyAtlas, src: np.ndarray, Y, X, rows0, w) -> np.ndarray:
+    """The kernel of the few-block paths: every reference's 8×8 window at (Y, X) (M, R)
+    float32 pixels, rows clamped to its key view and offset by ``rows0`` (broadcast to
+    (M, R, 1, 1): its first row in ``src``), columns clamped, sampled bilinearly in one remap
+    call, rounded (the atlas holds planes + 0.5), blended with ``w`` (M, 1, R) weights summing
+    to 64 and rounded: (M, 8, 8, P) int32."""
+    mr = Y[:, :, None, None] + _E[:, None]                                 # (M, R, 8, 1)
+    np.minimum(np.maximum(mr, 0, out=mr), np.float32(atlas.hp - 1), out=mr)
+    mr = mr + _Z                                                           # (M, R, 8, 8)
+    mr += rows0
+    mc = X[:, :, None] + _E                                                # (M, R, 8)
+    np.minimum(np.maximum(mc, 0, out=mc), np.float32(atlas.wp - 1), out=mc)
+    mc = mc[:, :, None, :] + _Z[:, None]                                   # (M, R, 8, 8)
+    M, R = Y.shape
+    smp = cv2.remap(src, mc.reshape(M * R, TB * TB), mr.reshape(M * R, TB * TB), cv2.INTER_LINEAR,
+                    borderMode=cv2.BORDER_REPLICATE)
+    np.floor(smp, out=smp)                                                 # atlas + 0.5: rounded
+    acc = np.matmul(w, smp.reshape(M, R, -1))                              # (M, 1, 64·C) integers
+    out = acc.reshape(M, TB, TB, atlas.C)[..., :atlas.P].astype(np.int32)
     out += 1 << (W_BITS - 1)
     out >>= W_BITS
-    return out.reshape(M, TB, TB, atlas.P)
+    return out
 
 
 def block_refs(atlas: KeyAtlas, slots: np.ndarray, weights_by_mode: np.ndarray, dpos: np.ndarray):
@@ -281,8 +296,6 @@ def block_refs(atlas: KeyAtlas, slots: np.ndarray, weights_by_mode: np.ndarray, 
             np.asarray(weights_by_mode, src.dtype)[:, None, :])
 
 
-_Z = np.zeros(TB, np.float32)
-
 
 def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
     """:func:`predict` of the few 8×8 blocks of one view that one random-access request
@@ -297,27 +310,11 @@ def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
     Returns:
         (M, 8, 8, P) int32.
     """
-    src, rowbase, dpy, dpx, wm = refs
-    d = np.asarray(disp).astype(np.float32)[:, None]                       # (nt, 1)
+    src, rows0, dpy, dpx, wm = refs
+    d = np.asarray(disp).astype(np.float32)[:, None]                       # (M, 1)
     Y = d * dpy
     Y += y0[:, None]
     X = d * dpx
     X += x0[:, None]
-    mr = Y[:, :, None, None] + _E[:, None]                                 # (nt, R, 8, 1)
-    np.minimum(np.maximum(mr, 0, out=mr), np.float32(atlas.hp - 1), out=mr)
-    mr = mr + _Z                                                           # (nt, R, 8, 8)
-    mr += rowbase
-    mc = X[:, :, None] + _E                                                # (nt, R, 8)
-    np.minimum(np.maximum(mc, 0, out=mc), np.float32(atlas.wp - 1), out=mc)
-    mc = mc[:, :, None, :] + _Z[:, None]                                   # (nt, R, 8, 8)
-    n = mr.shape[0] * mr.shape[1]
-    smp = cv2.remap(src, mc.reshape(n, TB * TB), mr.reshape(n, TB * TB), cv2.INTER_LINEAR,
-                    borderMode=cv2.BORDER_REPLICATE)
-    np.floor(smp, out=smp)                                                 # atlas + 0.5: rounded
-    w = wm[modes]                                                          # (nt, 1, R)
-    acc = np.matmul(w, smp.reshape(w.shape[0], w.shape[2], -1))            # (nt, 1, 64·C) integers
-    out = acc.reshape(-1, TB, TB, atlas.C)[..., :atlas.P].astype(np.int32)
-    out += 1 << (W_BITS - 1)
-    out >>= W_BITS
-    return out
+    return _sample_blend(atlas, src, Y, X, rows0, wm[modes])
 
