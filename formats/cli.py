@@ -726,7 +726,8 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--target-bpp", type=float, default=None, metavar="X", help="best quality with bpp <= X")
     g.add_argument("--lossless", action="store_true", help="bit-exact decode")
     e.add_argument("--min-view-psnr", type=float, default=None, metavar="DB",
-                   help="also report whether every view reaches DB (warns when one does not)")
+                   help="every view at least DB: the tx profile raises the pooled PSNR target until the worst view "
+                        "meets it (other profiles and --target-bpp: reported only); warns when a view does not")
     e.add_argument("--workers", type=int, default=1, metavar="N",
                    help="code views on N local worker processes (default 1; the file is the same for any N)")
     e.add_argument("--scheduler", default=None, metavar="ADDRESS",

@@ -18,7 +18,7 @@ import numpy as np
 
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
-from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb
+from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb, psnr_views
 from formats.parallel import Runner, make_runner
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
@@ -1098,25 +1098,66 @@ def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list
 def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
     """Encode with the ``tx`` profile (rate control for a PSNR or bpp target); the views
     that are not key views are coded where ``options.workers`` / ``options.scheduler`` say. A
-    PSNR target that no lossy setting reaches gets the lossless file (a note says so)."""
+    PSNR target that no lossy setting reaches gets the lossless file (a note says so). A
+    per-view floor (``min_view_psnr``, without a bpp target) raises the pooled PSNR target until
+    the worst view meets it (at most FLOOR_TRIES more encodes; a note says what it took)."""
     from .ratecontrol import check_targets
 
     check_targets(options.target_psnr, options.target_bpp)
     params = _params_from(options)
+    floor = options.min_view_psnr
+    if floor is not None and not 0 < floor <= 200:
+        raise ParameterError(f"the per-view PSNR floor must be within 0..200 dB, got {floor!r}")
     with make_runner(options.workers, options.scheduler) as runner:
-        out = _encode_tx(lf, options, params, progress, runner)
-        if options.target_psnr is not None and out.target_met is False and not params.lossless:
-            # no lossy setting reaches the target (8-bit views above 50-59 dB: the finest quantizer
-            # step is 1): the lossless file does, and is then the smallest file that does
-            closest = psnr_rgb(lf.views, out.decoded)
-            exact = _encode_tx(lf, replace(options, target_psnr=None, lossless=True),
-                               replace(params, lossless=True), progress, runner)
-            exact.notes = [f"no lossy setting reaches {options.target_psnr:g} dB (the finest quantizer gives "
-                           f"{closest:.2f} dB): the file is lossless (exact)"] + exact.notes
-            exact.trace = out.trace + exact.trace
-            exact.target_met = True
-            return exact
+        if floor is None or params.lossless or options.target_bpp is not None or params.step is not None:
+            return _encode_psnr(lf, options, params, progress, runner)
+        target = min(max(options.target_psnr if options.target_psnr is not None else floor, floor, 10.0), 200.0)
+        trace, seen = [], []
+        for tries in range(FLOOR_TRIES + 1):
+            out = _encode_psnr(lf, replace(options, target_psnr=target), params, progress, runner)
+            trace += out.trace
+            worst = float(psnr_views(_views_array(lf), out.decoded).min())
+            if worst >= floor or tries == FLOOR_TRIES or out.summary.get("params", {}).get("lossless"):
+                break
+            seen.append((target, worst))
+            # the worst view follows the pooled target about 1:1 at first; then by the secant
+            # through the last two encodes (slope kept within 1/4 … 3/2)
+            slope = 1.0 if len(seen) < 2 else (seen[-1][1] - seen[-2][1]) / (seen[-1][0] - seen[-2][0])
+            target = min(target + (floor - worst + 0.05) / min(max(slope, 0.25), 1.5), 200.0)
+        out.trace = trace
+        if worst >= floor and target > (options.target_psnr or -math.inf) + 1e-9:
+            out.notes = [f"the per-view floor of {floor:g} dB took a pooled target of {target:.2f} dB (worst view "
+                         f"{worst:.2f} dB)"] + out.notes
+        elif worst < floor:
+            out.target_met = False
         return out
+
+
+#: more encodes, each at a higher pooled target, that a per-view PSNR floor may take
+FLOOR_TRIES = 3
+
+
+def _views_array(lf) -> np.ndarray:
+    """The light field's views as one array (a lazy view stack is read)."""
+    return lf.views if isinstance(lf.views, np.ndarray) else np.asarray(lf.views)
+
+
+def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:
+    """One encode for ``options``' target; a PSNR target that no lossy setting reaches gets the
+    lossless file."""
+    out = _encode_tx(lf, options, params, progress, runner)
+    if options.target_psnr is not None and out.target_met is False and not params.lossless:
+        # no lossy setting reaches the target (8-bit views above 50-59 dB: the finest quantizer
+        # step is 1): the lossless file does, and is then the smallest file that does
+        closest = psnr_rgb(_views_array(lf), out.decoded)
+        exact = _encode_tx(lf, replace(options, target_psnr=None, lossless=True),
+                           replace(params, lossless=True), progress, runner)
+        exact.notes = [f"no lossy setting reaches {options.target_psnr:g} dB (the finest quantizer gives "
+                       f"{closest:.2f} dB): the file is lossless (exact)"] + exact.notes
+        exact.trace = out.trace + exact.trace
+        exact.target_met = True
+        return exact
+    return out
 
 
 def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:

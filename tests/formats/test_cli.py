@@ -128,6 +128,8 @@ def _run(*args):
     (["encode", str(SAMPLE), "x.lfc", "--workers", "0"], "--workers"),
     (["encode", str(SAMPLE), "x.lfc", "--scheduler", "nowhere"], "address"),
     (["encode", str(SAMPLE), "x.lfc", "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "not both"),
+    (["encode", str(SAMPLE), "x.lfc", "--min-view-psnr", "nan"], "floor"),
+    (["encode", str(SAMPLE), "x.lfc", "--min-view-psnr", "1e11"], "floor"),
     (["view", "nope.lfc"], "no such file"),
     (["view", "README.md", "--port", "70000"], "--port"),
 ])
