@@ -18,7 +18,7 @@ import numpy as np
 
 from formats.codec_api import EncodeOptions, Encoded
 from formats.errors import ParameterError
-from formats.metrics import colour_sq_error, psnr_from_sq_error, psnr_rgb, psnr_views
+from formats.metrics import colour_sq_error, finite, psnr_from_sq_error
 from formats.parallel import Runner, make_runner
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
@@ -851,6 +851,11 @@ class TxEncoder:
         return psnr_from_sq_error(w * np.array([c[v].sse for v in done]), w * np.array([c[v].cnt for v in done]),
                                   float(self.peak))
 
+    def view_psnrs(self, res: dict) -> np.ndarray:
+        """(views,) colour PSNR of each view of a run over every view (inf where exact; exactly
+        :func:`formats.metrics.psnr_views` of its decoded views)."""
+        return np.array([psnr_from_sq_error(c.sse, c.cnt, float(self.peak)) for c in res["codes"]])
+
     # -- symbols and packing -----------------------------------------------------------------
     SYMBOL_CHUNK = 1024        # random-access blocks turned into symbols at a time (bounds memory)
 
@@ -1116,7 +1121,7 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
         for tries in range(FLOOR_TRIES + 1):
             out = _encode_psnr(lf, replace(options, target_psnr=target), params, progress, runner)
             trace += out.trace
-            worst = float(psnr_views(_views_array(lf), out.decoded).min())
+            worst = _or_inf(out.summary["psnr_view_min"])
             if worst >= floor or tries == FLOOR_TRIES or out.summary.get("params", {}).get("lossless"):
                 break
             seen.append((target, worst))
@@ -1137,9 +1142,9 @@ def encode_tx(lf, options: EncodeOptions, progress=None) -> Encoded:
 FLOOR_TRIES = 3
 
 
-def _views_array(lf) -> np.ndarray:
-    """The light field's views as one array (a lazy view stack is read)."""
-    return lf.views if isinstance(lf.views, np.ndarray) else np.asarray(lf.views)
+def _or_inf(psnr: float | None) -> float:
+    """A summary's PSNR (None where exact) as a number."""
+    return math.inf if psnr is None else psnr
 
 
 def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:
@@ -1149,7 +1154,7 @@ def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner)
     if options.target_psnr is not None and out.target_met is False and not params.lossless:
         # no lossy setting reaches the target (8-bit views above 50-59 dB: the finest quantizer
         # step is 1): the lossless file does, and is then the smallest file that does
-        closest = psnr_rgb(_views_array(lf), out.decoded)
+        closest = out.summary["psnr_rgb"]
         exact = _encode_tx(lf, replace(options, target_psnr=None, lossless=True),
                            replace(params, lossless=True), progress, runner)
         exact.notes = [f"no lossy setting reaches {options.target_psnr:g} dB (the finest quantizer gives "
@@ -1293,7 +1298,9 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                                                         "lam_scale": res.get("lam_scale", 1.0),
                                                         "key_ratio": enc.key_ratio()},
                             "key_views": len(enc.structure_of(res)[0]),
-                            "views_coded_alone": len(res.get("promoted", ())), **runner.describe()})
+                            "views_coded_alone": len(res.get("promoted", ())),
+                            "psnr_rgb": finite(enc.psnr(res)), "psnr_view_min": finite(float(enc.view_psnrs(res).min())),
+                            **runner.describe()})
 
 
 __all__ = ["TxParams", "TxEncoder", "encode_tx", "Model", "default_counts"]
