@@ -71,31 +71,36 @@ class Runner:
         task that reads them runs when the runner can arrange it."""
         return list(objs)
 
-    def map(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None) -> list:
+    def map(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None,
+            take: Callable[[int, Any], Any] | None = None) -> list:
+        """``[fn(*args) for args in arglists]``; ``done(1)`` after each task; ``take(i, result)``,
+        where given, is called as each result arrives and its value is kept instead (so that
+        a caller can move a large result where it belongs before the next one arrives)."""
         out = []
-        for args in arglists:
-            out.append(fn(*args))
+        for i, args in enumerate(arglists):
+            r = fn(*args)
+            out.append(take(i, r) if take else r)
             if done:
                 done(1)
         return out
 
     def map_threaded(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None,
-                     threads: int | None = None) -> list:
+                     threads: int | None = None, take: Callable[[int, Any], Any] | None = None) -> list:
         """:meth:`map` for tasks that release the GIL (OpenCV, large numpy arrays): in this
         process, on a pool of ``threads`` (default LOCAL_THREADS) threads with one OpenCV thread
         each; results in order, the same values as :meth:`map`. Other runners: their own map."""
         n = LOCAL_THREADS if threads is None else threads
         if self.kind != "serial" or len(arglists) < 2:
-            return self.map(fn, arglists, done)
+            return self.map(fn, arglists, done, take)
         with one_cv2_thread():
             if n <= 1:
-                return self.map(fn, arglists, done)
+                return self.map(fn, arglists, done, take)
             from concurrent.futures import ThreadPoolExecutor
 
             out = []
             with ThreadPoolExecutor(n) as ex:
-                for r in ex.map(lambda a: fn(*a), arglists):
-                    out.append(r)
+                for i, r in enumerate(ex.map(lambda a: fn(*a), arglists)):
+                    out.append(take(i, r) if take else r)
                     if done:
                         done(1)
             return out
@@ -189,7 +194,7 @@ class PoolRunner(Runner):
             pickle.dump(obj, f, protocol=pickle.HIGHEST_PROTOCOL)
         return _Shared(path)
 
-    def map(self, fn, arglists, done=None):
+    def map(self, fn, arglists, done=None, take=None):
         from concurrent.futures import as_completed
         from concurrent.futures.process import BrokenProcessPool
 
@@ -198,7 +203,8 @@ class PoolRunner(Runner):
         out: list = [None] * len(futs)
         try:
             for f in as_completed(futs):
-                out[index[f]] = f.result()
+                i = index[f]
+                out[i] = take(i, f.result()) if take else f.result()
                 if done:
                     done(1)
         except BrokenProcessPool as e:
@@ -240,7 +246,7 @@ class DaskRunner(Runner):
     def scatter(self, objs):
         return self.client.scatter(list(objs), hash=False)
 
-    def map(self, fn, arglists, done=None):
+    def map(self, fn, arglists, done=None, take=None):
         from distributed import as_completed
 
         futs = [self.client.submit(fn, *args, pure=False) for args in arglists]
@@ -248,7 +254,8 @@ class DaskRunner(Runner):
         out: list = [None] * len(futs)
         try:
             for f in as_completed(futs, loop=self.client.loop):      # (this client's loop: it may not be the default)
-                out[index[f.key]] = f.result()
+                i = index[f.key]
+                out[i] = take(i, f.result()) if take else f.result()
                 if done:
                     done(1)
         finally:

@@ -178,21 +178,31 @@ def encode_lanes(ctx: np.ndarray, sym: np.ndarray, lengths: np.ndarray, tables: 
         return out
     lengths = np.asarray(lengths, dtype=np.int64)
     C, A = tables.freq.shape
-    fc_t = ((tables.freq << 32) | tables.cum[:, :A]).reshape(-1)          # freq << 32 | cum per (ctx, sym)
+    # freq << 16 | cum per (ctx, sym) in one int32 (freq ≤ M = 2^12, cum < M): 4 bytes a cell
+    fc_t = ((tables.freq << 16) | tables.cum[:, :A]).astype(np.int32).reshape(-1)
     for a in range(0, S, chunk):
         idx = np.arange(a, min(S, a + chunk))
         order = idx[np.argsort(-lengths[idx], kind="stable")]        # active lanes form a prefix
         ln = lengths[order]
         K = int(ln[0]) if ln.size else 0
         n = order.size
-        # step-major: row k holds every lane's k-th symbol (contiguous slices per step)
-        ci, si = ctx[order, :K].astype(np.int64).T, sym[order, :K].astype(np.int64).T      # (K, n)
-        valid = np.arange(K)[:, None] < ln[None, :]
+        ci, si = ctx[order, :K], sym[order, :K]                         # (n, K), the callers' dtypes
+        valid = np.arange(K)[None, :] < ln[:, None]
         if (((ci < 0) | (ci >= C) | (si < 0) | (si >= A)) & valid).any():
             raise ValueError("a context or symbol outside the tables")
-        fc = fc_t[np.where(valid, ci * A + si, 0)]
-        if ((fc >> 32)[valid] == 0).any():
+        cell = ci.astype(np.int32)                                     # (ctx·A + sym), 0 where unused
+        del ci
+        cell *= A
+        cell += si
+        del si
+        cell[~valid] = 0
+        # step-major: row k holds every lane's k-th symbol (contiguous slices per step)
+        cell = np.ascontiguousarray(cell.T)                            # (K, n)
+        fc = fc_t[cell]
+        del cell
+        if (((fc >> 16) == 0) & valid.T).any():
             raise ValueError("a symbol with frequency 0 in its context cannot be coded")
+        del valid
         cnt = np.searchsorted(-ln, -np.arange(K), side="left").tolist()  # lanes with ln > k: the first m
         cap = 2 * K + STATE_BYTES
         buf = np.zeros((n, cap), dtype=np.uint8)
@@ -204,7 +214,7 @@ def encode_lanes(ctx: np.ndarray, sym: np.ndarray, lengths: np.ndarray, tables: 
             if m == 0:
                 continue
             w = fc[k, :m]
-            f = w >> 32
+            f = (w >> 16).astype(np.int64)
             xm = x[:m]
             xmax = _XMAX_SCALE * f
             for _ in range(2):                                     # at most two bytes out per symbol
@@ -216,7 +226,7 @@ def encode_lanes(ctx: np.ndarray, sym: np.ndarray, lengths: np.ndarray, tables: 
                 buf[r, wp[r]] = (xm[e] & 255).astype(np.uint8)
                 xm[e] >>= 8
             q, rem = np.divmod(xm, f)
-            x[:m] = (q << PROB_BITS) + rem + (w & 0xFFFFFFFF)
+            x[:m] = (q << PROB_BITS) + rem + (w & 0xFFFF)
         wp -= STATE_BYTES                                          # flush: x little-endian first
         sh = 8 * np.arange(STATE_BYTES)
         buf[rows[:, None], wp[:, None] + np.arange(STATE_BYTES)] = ((x[:, None] >> sh) & 255).astype(np.uint8)

@@ -362,14 +362,14 @@ class TxEncoder:
         return float(self.steps16(step)[1, 0]) / 16 * math.sqrt(wp0)
 
     # -- prediction ------------------------------------------------------------------------
-    def key_source(self, keyplanes: np.ndarray):
-        """What :meth:`predict_view` samples, for a pass whose key views are not decoded yet
-        (``keyplanes`` all zero; the pass stores each key as it is decoded): an empty
-        :class:`rlfc.txsample.KeyAtlas` (the remap kernel) where OpenCV can take the views, else
-        their planar copy."""
+    def key_source(self, n_keys: int):
+        """What :meth:`predict_view` samples, for a pass whose ``n_keys`` key views are not decoded
+        yet (the pass stores each key as it is decoded): an empty :class:`rlfc.txsample.KeyAtlas`
+        (the remap kernel) where OpenCV can take the views, else the planar copy of an all-zero
+        int32 stack (the pass rebuilds it as keys arrive)."""
         if not KeyAtlas.fits(self.Hp, self.Wp, self.P):
-            return planar(keyplanes)
-        return KeyAtlas(len(keyplanes), self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P))
+            return planar(np.zeros((n_keys, self.Hp, self.Wp, self.P), np.int32))
+        return KeyAtlas(n_keys, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P))
 
     def predict_view(self, v: int, kp) -> np.ndarray:
         """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``
@@ -398,8 +398,9 @@ class TxEncoder:
         return upsample_thumb((levels * thumb16 + 8) >> 4, self.Hp, self.Wp)
 
     def code_intra(self, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
-                   keep_pixels: bool) -> tuple[np.ndarray, ViewCode]:
-        """(thumbnail levels, transform coding) of intra key view k against its thumbnail."""
+                   keep_pixels: bool | np.ndarray) -> tuple[np.ndarray, ViewCode]:
+        """(thumbnail levels, transform coding) of intra key view k against its thumbnail
+        (``keep_pixels``: as :meth:`code_view`)."""
         lv = self.thumb_levels(k, thumb16)
         return lv, self.code_view(k, self.thumb_pred(lv, thumb16), s16k, lam_k, model, keep_pixels=keep_pixels)
 
@@ -411,7 +412,20 @@ class TxEncoder:
     def _untbs(self, t: np.ndarray) -> np.ndarray:
         return t.reshape(self.nby8, self.nbx8, TB, TB, -1).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, -1)
 
+    #: tbs quantized at once (the quantizer's float64 temporaries are ~70 bytes per coefficient;
+    #: every tb's decisions are its own, so the chunks change no result)
+    QUANT_TBS = 1024
+
     def _quantize(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
+        """:meth:`_quantize_tbs` in chunks of QUANT_TBS tbs (bounded temporaries)."""
+        T = r.shape[0]
+        if T <= self.QUANT_TBS:
+            return self._quantize_tbs(r, step16, lam, model, key, mode_cls)
+        parts = [self._quantize_tbs(r[a:a + self.QUANT_TBS], step16, lam, model, key, mode_cls)
+                 for a in range(0, T, self.QUANT_TBS)]
+        return tuple(np.concatenate(x) for x in zip(*parts))
+
+    def _quantize_tbs(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
         """RDO quantization of tbs' residuals r (T, 8, 8, P) → (levels (T, P, 64) scan order,
         cost J (T,), distortion-if-skipped D0 (T,), must_code (T,) bool, model bits R (T,)).
 
@@ -551,10 +565,11 @@ class TxEncoder:
         return res.astype(np.int32)
 
     def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
-                  pixels: np.ndarray | None = None, keep_pixels: bool = True) -> ViewCode:
+                  pixels: np.ndarray | None = None, keep_pixels: bool | np.ndarray = True) -> ViewCode:
         """Rate-distortion coding of one view against its prediction (Hp, Wp, P); ``pixels``
         its (H, W, C) pixels where the caller has them (a worker's copy); ``keep_pixels``: keep
-        the decoded pixels (else only their error)."""
+        the decoded pixels (else only their error); an (H, W, C) array: write them there and
+        keep that (the pass's one buffer of decoded views)."""
         key = int(self.is_key[v])
         kind = int(self.intra[v])
         opx = self.view_pixels(v) if pixels is None else pixels
@@ -611,7 +626,12 @@ class TxEncoder:
         sse, cnt = colour_sq_error(opx, px)            # (the planes' pixels: YCoCg-R is exact)
         lv = levels[live]
         lv = lv.astype(np.int16 if lv.size == 0 or np.abs(lv).max() < 1 << 15 else np.int32)
-        return ViewCode(mode.astype(np.int8), live, lv, coded, px if keep_pixels else None,
+        if isinstance(keep_pixels, np.ndarray):
+            keep_pixels[...] = px
+            px = keep_pixels
+        elif not keep_pixels:
+            px = None
+        return ViewCode(mode.astype(np.int8), live, lv, coded, px,
                         planes if key else None, bits, sse, cnt)
 
     def _pixels(self, planes: np.ndarray) -> np.ndarray:
@@ -633,17 +653,27 @@ class TxEncoder:
         ``lam_scale`` multiplies λ (rate control's trim between two quantizer steps).
 
         Returns:
-            dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), rec
-            (N0, Hp, Wp, P) int32 decoded planes.
+            dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), and
+            with ``keep_pixels`` pixels: the (N0, H, W, C) decoded views, which the codes' ``px``
+            are views of (one buffer: no per-view copies to gather at the end).
         """
         s16 = self.steps16(step)
+        pix = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype) if keep_pixels else None
+
+        def px_slot(v):             # where view v's decoded pixels go (in this process)
+            return pix[v] if pix is not None else False
+
         hints = {k: dict(h) for k, h in self._j2k_hints.items()}     # (a rerun of this pass starts from them)
         lam_k = self.p.lam * lam_scale * (s16[0, 0] / 16.0) ** 2
         lam_n = self.p.lam * lam_scale * (s16[1, 0] / 16.0) ** 2
         n0 = self.n0
         # the decoded key views, for the views predicted from them (none where every view is intra)
-        keyplanes = np.zeros((0 if self.all_intra else len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
-        kp = None if self.all_intra else self.key_source(keyplanes)
+        # the decoded key views, for the views predicted from them (none where every view is
+        # intra): sampled from an atlas (filled key by key), else from a planar copy of an int32 stack
+        n_keys = 0 if self.all_intra else len(self.s.keys)
+        kp = None if self.all_intra else self.key_source(n_keys)
+        keyplanes = None if kp is None or isinstance(kp, KeyAtlas) else \
+            np.zeros((n_keys, self.Hp, self.Wp, self.P), np.int32)
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
@@ -653,7 +683,7 @@ class TxEncoder:
         pre: dict = {}                # intra keys coded ahead, together (every view intra: posed captures)
         for i, k in enumerate(self.s.keys):
             if i == 1 and self.all_intra and len(self.s.keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
-                pre = self._code_intra_keys(self.s.keys[1:], thumb16, s16[0], lam_k, model, keep_pixels)
+                pre = self._code_intra_keys(self.s.keys[1:], thumb16, s16[0], lam_k, model, pix)
             ahead = k in pre
             if ahead:                           # (JPEG 2000 tried there too)
                 thumbs[k], codes[k], img = pre.pop(k)
@@ -665,13 +695,15 @@ class TxEncoder:
                 # for the first intra view; the others use the same
                 best = None
                 for t16 in ([thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})):
-                    lv, c = self.code_intra(k, t16, s16[0], lam_k, model, keep_pixels)
+                    # (several candidates: each keeps its own pixels, gathered at the end)
+                    lv, c = self.code_intra(k, t16, s16[0], lam_k, model,
+                                            px_slot(k) if thumb16 is not None else keep_pixels)
                     cost = c.bits + 8 * len(pack_thumbs(lv[None]))
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
             else:
-                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=keep_pixels)
+                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=px_slot(k))
             if not ahead and self.intra[k] and self.intra_codec == "j2k":
                 img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
                                                      self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None)
@@ -685,13 +717,12 @@ class TxEncoder:
                 if img is not None:
                     keyimg[k] = img
                     promoted.append(k)
-            if not self.all_intra:
+            if isinstance(kp, KeyAtlas):
+                kp.set(i, codes[k].planes)
+            elif keyplanes is not None:
                 keyplanes[i] = codes[k].planes
-                if isinstance(kp, KeyAtlas):
-                    kp.set(i, keyplanes[i])
-                else:
-                    kp = planar(keyplanes)
-            codes[k].planes = None              # (kept once, in keyplanes, for this pass only)
+                kp = planar(keyplanes)
+            codes[k].planes = None              # (kept once, in the atlas or keyplanes, for this pass only)
             if progress:
                 progress("code views", i + 1, n0)
         others = all_others = [v for v in range(n0) if not self.is_key[v]]
@@ -709,33 +740,56 @@ class TxEncoder:
         # the other views are independent given the decoded key views: in this process on a few
         # threads (the same integers), else on the runner's workers
         if runner.kind == "serial" or runner.workers == 1 or len(others) < 2:
-            out = Runner().map_threaded(_code_task, [(self, kp, model, v, None, s16[1], lam_n, keep_pixels)
+            out = Runner().map_threaded(_code_task, [(self, kp, model, v, None, s16[1], lam_n, px_slot(v))
                                                    for v in others], tick)
         else:
             if self._shared is None:
                 self._shared = runner.share(self)
                 self._view_handles = dict(zip(all_others, runner.scatter([self.view_pixels(v) for v in all_others])))
             keys_h, model_h = runner.share(kp), runner.share(model)
+
+            def take(i, c):             # a worker's decoded pixels go into the pass's buffer as they arrive
+                if pix is not None and c.px is not None:
+                    pix[others[i]] = c.px
+                    c.px = pix[others[i]]
+                return c
+
             out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n,
-                                           keep_pixels) for v in others], tick)
+                                           keep_pixels) for v in others], tick, take)
         for v, c in zip(others, out):
             codes[v] = c
-        return {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
-                "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
-                "lam_scale": lam_scale, "j2k_hints": hints}
+        res = {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
+               "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
+               "lam_scale": lam_scale, "j2k_hints": hints}
+        if pix is not None:
+            res["pixels"] = pix
+            self._gather_pixels(res)
+        return res
+
+    @staticmethod
+    def _gather_pixels(res: dict) -> None:
+        """Copy into ``res["pixels"]`` the decoded views that live elsewhere (JPEG 2000 views,
+        workers' results) and make their codes' ``px`` views of it."""
+        pix = res["pixels"]
+        for v, c in enumerate(res["codes"]):
+            if c is not None and c.px is not None and not np.may_share_memory(c.px, pix):
+                pix[v] = c.px
+                c.px = pix[v]
 
     def _code_intra_keys(self, ks: list, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
-                         keep_pixels: bool) -> dict:
+                         keep_pixels: np.ndarray | None) -> dict:
         """Intra key views ``ks`` after the first (which chose the thumbnail step and the JPEG 2000
-        reference), coded as the pass would code them one by one, on a few threads: view →
+        reference), coded as the pass would code them one by one, on a few threads (``keep_pixels``:
+        the pass's buffer of decoded views, or None to keep none): view →
         (thumbnail levels, code, JPEG 2000 codestream or None). A view's JPEG 2000 search with no
         hint of its own starts from the first view's (one after another, from the previous
         view's: the order threads finish in must not matter)."""
         first = dict(self._j2k_hints.get("last", {}))
         for k in ks:
             self._j2k_hints.setdefault(k, dict(first))
-        out = Runner().map_threaded(_intra_key_task, [(self, k, thumb16, s16k, lam_k, model, keep_pixels)
-                                                      for k in ks])
+        out = Runner().map_threaded(_intra_key_task, [(self, k, thumb16, s16k, lam_k, model,
+                                                       keep_pixels[k] if isinstance(keep_pixels, np.ndarray) else
+                                                       keep_pixels) for k in ks])
         if ks:
             self._j2k_hints["last"] = self._j2k_hints[ks[-1]]
         return dict(zip(ks, out))
@@ -820,13 +874,10 @@ class TxEncoder:
 
     def decoded(self, res: dict) -> np.ndarray:
         """(R, C, H, W, Ch) pixels of a run (the run again, keeping pixels, where it kept none:
-        the same integers)."""
+        the same integers): the run's buffer, with the views coded after it (promoted views)."""
         res = self.with_pixels(res)
-        out = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
-        for i, c in enumerate(res["codes"]):
-            out[i] = c.px
-            c.px = None                       # one copy of the decoded views, not two
-        return out.reshape(self.lf.views.shape)
+        self._gather_pixels(res)
+        return res["pixels"].reshape(self.lf.views.shape)
 
     def with_pixels(self, res: dict) -> dict:
         """``res``, or the same run again keeping the decoded pixels where it kept none (the
@@ -933,7 +984,7 @@ class TxEncoder:
 
         def flush():
             if held:
-                off = np.cumsum([0] + [n for n, _, _ in held[:-1]])
+                off = np.cumsum([0] + [n for n, _, _ in held[:-1]]).tolist()      # (python ints keep the lanes' types)
                 cat = [np.concatenate([p[i] + (o if i in (0, 3) else 0) for o, (_, _, p) in zip(off, held)])
                        for i in range(5)]
                 streams.extend(pack_streams(sum(n for n, _, _ in held), *cat, tables))
@@ -981,14 +1032,15 @@ class TxEncoder:
 
 
 def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
-               step16: np.ndarray, lam: float, keep_pixels: bool) -> ViewCode:
+               step16: np.ndarray, lam: float, keep_pixels) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
-    ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_source`)."""
+    ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_source`); ``keep_pixels`` as
+    :meth:`TxEncoder.code_view`."""
     return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels)
 
 
 def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
-                    keep_pixels: bool) -> tuple:
+                    keep_pixels) -> tuple:
     """One intra key view that is not the first of its pass (:meth:`TxEncoder._code_intra_keys`)."""
     lv, code = enc.code_intra(k, thumb16, s16k, lam_k, model, keep_pixels)
     img = None

@@ -92,8 +92,9 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
         pcs: (P,) plane classes.
 
     Returns:
-        (lane, ctx, sym) flat int64 arrays in decode order per lane (lanes ascending), and
-        (rlane, bits) flat arrays of raw bits (0/1) in order per lane; with ``counts_only``,
+        (lane, ctx, sym) flat int32, int16, int16 arrays in decode order per lane (lanes
+        ascending), and (rlane, bits) flat int32, uint8 arrays of raw bits (0/1) in order per
+        lane; with ``counts_only``,
         their (N_CTX, ALPHABET) counts only (:func:`count_symbols`: no ordering, no raw bits).
     """
     S, nt, P, _ = levels.shape
@@ -153,10 +154,13 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     rord = np.concatenate([sign_ord * 64, eord])
     rbits = np.concatenate([sign_bits, ebits])
     ro = np.lexsort((rord, rl))
-    return lane[o], ctx[o], syms[o], rl[ro], rbits[ro]
+    # compact types (12 bytes a symbol, 5 a raw bit, not 24 and 16): the packer holds many
+    # parts at once
+    return (lane[o].astype(np.int32), ctx[o].astype(np.int16), syms[o].astype(np.int16),
+            rl[ro].astype(np.int32), rbits[ro].astype(np.uint8))
 
 
-PACK_CELLS = 1 << 22          # lanes × longest lane coded at once (two int64 matrices of this size)
+PACK_CELLS = 1 << 22          # lanes × longest lane coded at once (two int32 matrices of this size)
 
 
 def pack_streams(S: int, lane, ctx, sym, rlane, rbits, tables: Tables) -> list[bytes]:
@@ -191,8 +195,8 @@ def _pack_group(S: int, lane, ctx, sym, rlane, rbits, tables: Tables) -> list[by
     K = int(counts.max(initial=0))
     starts = np.cumsum(counts) - counts
     col = np.arange(lane.size) - starts[lane]
-    C = np.zeros((S, max(K, 1)), np.int64)
-    Y = np.zeros((S, max(K, 1)), np.int64)
+    C = np.zeros((S, max(K, 1)), np.int32)           # (contexts and symbols are small: 4 bytes a cell)
+    Y = np.zeros((S, max(K, 1)), np.int32)
     C[lane, col], Y[lane, col] = ctx, sym
     rc = np.bincount(rlane, minlength=S)
     rs = np.cumsum(rc) - rc

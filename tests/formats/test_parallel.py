@@ -46,6 +46,23 @@ def test_pool_shares_objects_keeps_order_and_passes_typed_errors():
             r.map(_fail, [(i,) for i in range(4)])
 
 
+def test_take_sees_each_result_as_it_arrives_and_its_value_is_kept():
+    """``take(i, result)`` (the encoder moves each view's pixels into one buffer with it): called
+    once per task with the task's index, on every runner, and its value replaces the result."""
+    seen = []
+
+    def take(i, r):
+        seen.append(i)
+        return (i, r)
+
+    want = [(i, i * 3) for i in range(5)]
+    assert Runner().map(_scale, [(i, 3) for i in range(5)], take=take) == want
+    assert Runner().map_threaded(_scale, [(i, 3) for i in range(5)], threads=2, take=take) == want
+    with PoolRunner(2) as r:
+        assert r.map(_scale, [(i, 3) for i in range(5)], take=take) == want
+    assert sorted(seen) == sorted(list(range(5)) * 3)
+
+
 @pytest.fixture(scope="module")
 def small_lf():
     lf = read_scene(SAMPLE)

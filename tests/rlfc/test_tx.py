@@ -633,3 +633,41 @@ def test_posed_views_coded_on_threads_give_the_same_file(monkeypatch):
     assert out[1].sections == out[2].sections == out[3].sections
     d, _ = open_encoded(lf, out[2])
     assert (d.decode_all() == out[2].decoded).all()
+
+
+def test_quantizer_in_chunks_equals_one_call(rng, monkeypatch):
+    """The RDO quantizer runs over QUANT_TBS tbs at a time (bounded temporaries); every tb's
+    decisions are its own, so chunks of 7 tbs give what one call over all of them gives."""
+    import rlfc.txencode as T
+    from formats.scenes import read_scene
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(profile="tx")), None, 10.0, None)
+    model = T.Model(T.default_counts())
+    r = np.rint(rng.laplace(0, 6, (50, 8, 8, enc.P)) * (rng.random((50, 1, 1, 1)) < 0.7)).astype(np.int32)
+    s16 = enc.steps16(6.0)[1]
+    lam = enc.p.lam * (s16[0] / 16.0) ** 2
+    for mode_cls in (0, 1):
+        whole = enc._quantize(r, s16, lam, model, 0, mode_cls)
+        monkeypatch.setattr(T.TxEncoder, "QUANT_TBS", 7)
+        parts = enc._quantize(r, s16, lam, model, 0, mode_cls)
+        monkeypatch.undo()
+        assert whole[0].any() and len(whole) == len(parts) == 5
+        for a, b in zip(whole, parts):
+            assert a.shape == b.shape and np.array_equal(a, b)
+
+
+def test_a_pass_keeps_one_buffer_of_decoded_views():
+    """With pixels kept, every view's decoded pixels are a view of one (N, H, W, C) buffer of the
+    pass (no per-view copies to gather), and the encode's decoded views are that buffer."""
+    import rlfc.txencode as T
+    from formats.scenes import read_scene
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    res = enc.run(2.5, T.Model(T.default_counts()), keep_pixels=True)
+    pix = res["pixels"]
+    assert res["keyimg"] and pix.shape == (lf.rows * lf.cols,) + lf.views.shape[2:]
+    assert all(np.shares_memory(c.px, pix) for c in res["codes"])
+    dec = enc.decoded(res)
+    assert np.shares_memory(dec, pix) and dec.shape == lf.views.shape
