@@ -435,7 +435,7 @@ class TxEncoder:
         skip the search (its result is known: nothing coded)."""
         T = r.shape[0]
         P = self.P
-        levels = np.zeros((T, P, 64), np.int64)
+        levels = np.zeros((T, P, 64), np.int32)          # (|levels| < 2^22: coefficients < 2^21·8)
         J = np.zeros(T)
         D0 = np.zeros(T)
         must = np.zeros(T, bool)
@@ -593,10 +593,9 @@ class TxEncoder:
             cand = cand[ac < INTRA_ENERGY_RATIO * D0_r[cand]]
         if "intra_tbs" in self.p.ablate:
             cand = cand[:0]
-        lv_i = np.zeros_like(lv_r)
         J_int, R_i = np.full(T, np.inf), np.zeros(T)
-        if cand.size:
-            lv_i[cand], J_c, _, _, R_i[cand] = self._quantize(orig[cand] - flat[cand], step16, lam, model, key, 1)
+        if cand.size:                 # (levels of the candidates only: lv_c[i] is tb cand[i]'s)
+            lv_c, J_c, _, _, R_i[cand] = self._quantize(orig[cand] - flat[cand], step16, lam, model, key, 1)
             J_int[cand] = J_c + lam * mb[MODE_INTRA]
         Jm = np.stack([J_skip, J_res, J_int])
         mode = Jm.argmin(0)
@@ -608,23 +607,26 @@ class TxEncoder:
             J_coded = Jm.min(0)[tbi].sum(1) + lam * (FLUSH_BITS + mb[mode[tbi]].sum(1))
             coded = J_coded < J_skip[tbi].sum(1)
             mode[tbi[~coded]] = MODE_SKIP
-        levels = np.where((mode == MODE_RES)[:, None, None], lv_r, np.where((mode == MODE_INTRA)[:, None, None], lv_i, 0))
-        base = np.where((mode == MODE_INTRA)[:, None, None, None], flat, pt)
+        # the levels and bases of the tbs that are not skipped (residual or intra)
+        live = np.flatnonzero(mode != MODE_SKIP)
+        intra = mode[live] == MODE_INTRA
+        lv = lv_r[live]
+        if intra.any():
+            lv[intra] = lv_c[np.searchsorted(cand, live[intra])]
+        base = np.where(intra[:, None, None, None], flat[:live.size], pt[live])
         # predictions blend decoded key views with weights summing to 64, so they are in range
         # (the decoder relies on it too); intra predictions (thumbnails) are clipped
         rec = pt
         if kind:
             np.minimum(np.maximum(rec, self.lo32, out=rec), self.hi32, out=rec)
-        live = np.flatnonzero(mode != MODE_SKIP)
         if live.size:                      # skipped tbs are their prediction: reconstruct only the rest
-            rec[live] = self._reconstruct(base[live], levels[live], step16)
+            rec[live] = self._reconstruct(base, lv, step16)
         coded = np.zeros(nb, bool) | coded
         bits = float(np.where(mode == MODE_RES, R_r, np.where(mode == MODE_INTRA, R_i, 0.0)).sum() + mb[mode].sum()
                      + (FLUSH_BITS * coded.sum() if not key else FLUSH_BITS * self.nby))
         planes = self._untbs(rec)
         px = self._pixels(planes)
         sse, cnt = colour_sq_error(opx, px)            # (the planes' pixels: YCoCg-R is exact)
-        lv = levels[live]
         lv = lv.astype(np.int16 if lv.size == 0 or np.abs(lv).max() < 1 << 15 else np.int32)
         if isinstance(keep_pixels, np.ndarray):
             keep_pixels[...] = px
