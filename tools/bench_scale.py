@@ -104,28 +104,8 @@ def run_one(scene: Path, n: int, workers: int, target: float) -> dict:
             "worker_x_raw": peak_worker / raw, "worker_above_floor_x_raw": max(peak_worker - floor, 0) / raw}
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--data", default="../shared/data", help="the shared data folder")
-    ap.add_argument("--scene", default="hci_antinous")
-    ap.add_argument("--grids", default="5,9,17")
-    ap.add_argument("--workers", default="1,2")
-    ap.add_argument("--target-psnr", type=float, default=40.0)
-    ap.add_argument("--out", default="docs/bench/scale")
-    a = ap.parse_args(argv)
-    scene = Path(a.data) / a.scene
-    out = Path(a.out)
-    out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for n in [int(x) for x in a.grids.split(",")]:
-        for w in [int(x) for x in a.workers.split(",")]:
-            r = run_one(scene, n, w, a.target_psnr)
-            log(f"{a.scene} {n}x{n} workers {w}: {r['wall_s']:.0f} s, parent {r['peak_parent_mib']:.0f} MiB "
-                f"({r['parent_x_raw']:.1f}x raw), worker {r['peak_worker_mib']:.0f} MiB, {r['bytes']} B, "
-                f"{r['psnr']:.2f} dB")
-            rows.append(r)
-            (out / "scale.json").write_text(json.dumps({"scene": a.scene, "target_psnr": a.target_psnr,
-                                                        "machine": machine(), "runs": rows}, indent=1))
+def write_outputs(rows: list, scene: str, target: float, out: Path) -> None:
+    """scale.md and (with matplotlib) scale.png from the runs ``rows``."""
     md = ["| grid | raw MiB | workers | wall s | CPU s (parent + workers) | peak parent MiB (× raw; above floor × raw) "
           "| peak worker MiB | bytes | PSNR dB | passes |", "|" + "---|" * 10]
     for r in rows:
@@ -148,7 +128,7 @@ def main(argv=None) -> int:
                 ax[1].plot([r["mpix"] for r in rs], [r["peak_worker_mib"] for r in rs], "s--", label=f"largest of {w} workers")
         rs = [r for r in rows if r["workers"] == rows[0]["workers"]]
         ax[1].plot([r["mpix"] for r in rs], [4 * r["raw_mib"] for r in rs], "k:", label="4x raw input")
-        ax[0].set(xlabel="Mpix (all views)", ylabel="encode wall s", title=f"{a.scene} grids @ {a.target_psnr:g} dB")
+        ax[0].set(xlabel="Mpix (all views)", ylabel="encode wall s", title=f"{scene} grids @ {target:g} dB")
         ax[1].set(xlabel="Mpix (all views)", ylabel="peak resident MiB")
         for x in ax:
             x.legend(fontsize=8)
@@ -157,6 +137,36 @@ def main(argv=None) -> int:
         fig.savefig(out / "scale.png", dpi=110)
     except ImportError:
         log("matplotlib missing: no plot")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--data", default="../shared/data", help="the shared data folder")
+    ap.add_argument("--scene", default="hci_antinous")
+    ap.add_argument("--grids", default="5,9,17")
+    ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--target-psnr", type=float, default=40.0)
+    ap.add_argument("--out", default="docs/bench/scale")
+    ap.add_argument("--plot-only", action="store_true", help="remake scale.md and scale.png from OUT/scale.json")
+    a = ap.parse_args(argv)
+    scene = Path(a.data) / a.scene
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    if a.plot_only:
+        got = json.loads((out / "scale.json").read_text())
+        write_outputs(got["runs"], got["scene"], got["target_psnr"], out)
+        return 0
+    rows = []
+    for n in [int(x) for x in a.grids.split(",")]:
+        for w in [int(x) for x in a.workers.split(",")]:
+            r = run_one(scene, n, w, a.target_psnr)
+            log(f"{a.scene} {n}x{n} workers {w}: {r['wall_s']:.0f} s, parent {r['peak_parent_mib']:.0f} MiB "
+                f"({r['parent_x_raw']:.1f}x raw), worker {r['peak_worker_mib']:.0f} MiB, {r['bytes']} B, "
+                f"{r['psnr']:.2f} dB")
+            rows.append(r)
+            (out / "scale.json").write_text(json.dumps({"scene": a.scene, "target_psnr": a.target_psnr,
+                                                        "machine": machine(), "runs": rows}, indent=1))
+    write_outputs(rows, a.scene, a.target_psnr, out)
     return 0
 
 
