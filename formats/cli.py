@@ -656,11 +656,18 @@ def cmd_decode(a) -> int:
             paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
         else:
             prog = _Progress(a.quiet)
-            views = d.decode_all(level=level)
+            # decoded and written one row of views at a time: a large light field is never held
+            # whole (a decoder that decodes several views at once does a row in one call)
+            many = getattr(d, "decode_views", None)
             paths = []
-            for r in range(d.rows):   # write row by row for the progress bar
-                paths += write_views(outdir, views[r:r + 1], rows=[r], filename=name)
-                prog("write views", r + 1, d.rows)
+            for r in range(d.rows):
+                if many is not None:
+                    row = many(np.arange(r * d.cols, (r + 1) * d.cols), level=level)[None]
+                else:
+                    row = np.stack([d.decode_view(r, c, level=level) for c in range(d.cols)])[None]
+                paths += write_views(outdir, row, rows=[r], filename=name)
+                del row
+                prog("decode views", r + 1, d.rows)
             prog.close()
             # the layout file, so that the folder encodes again as the same scene
             layout = write_layout(outdir, f.scene, name)

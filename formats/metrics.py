@@ -38,21 +38,32 @@ def _psnr_from_mse(m: float, peak: float) -> float:
     return float("inf") if m == 0 else 10.0 * math.log10(peak * peak / m)
 
 
+#: elements of the views a metric converts to float64 at once (16 MiB): whole light fields
+#: are measured a few views at a time, so a metric never holds a float copy of them
+CHUNK_ELEMENTS = 1 << 21
+
+
+def _views_per_chunk(view_elements: int) -> int:
+    return max(1, CHUNK_ELEMENTS // max(int(view_elements), 1))
+
+
 def _sq_err_per_view(ref: np.ndarray, dec: np.ndarray, mask: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """(per-view sum of squared errors, per-view element count), float64, chunked."""
+    """(per-view sum of squared errors, per-view element count), float64, a few views at a time."""
     r, d = _flat(ref), _flat(dec).reshape(_flat(ref).shape)
     sse = np.zeros(r.shape[0])
     cnt = np.zeros(r.shape[0])
-    for i in range(0, r.shape[0], 8):
-        e = r[i:i + 8].astype(np.float64) - d[i:i + 8]
-        e = e * e
+    k = _views_per_chunk(np.prod(r.shape[1:]))
+    for i in range(0, r.shape[0], k):
+        e = r[i:i + k].astype(np.float64)
+        e -= d[i:i + k]
+        e *= e
         if mask is not None:
-            m = mask[i:i + 8][..., None]
-            e = e * m
-            cnt[i:i + 8] = m.sum(axis=(1, 2, 3)) * r.shape[-1]
+            m = mask[i:i + k][..., None]
+            e *= m
+            cnt[i:i + k] = m.sum(axis=(1, 2, 3)) * r.shape[-1]
         else:
-            cnt[i:i + 8] = np.prod(r.shape[1:])
-        sse[i:i + 8] = e.sum(axis=(1, 2, 3))
+            cnt[i:i + k] = np.prod(r.shape[1:])
+        sse[i:i + k] = e.sum(axis=(1, 2, 3))
     return sse, cnt
 
 
@@ -118,9 +129,11 @@ def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
     sums = np.zeros(3)
     flat_r = _flat(ref)
     flat_d = _flat(dec).reshape(flat_r.shape)
-    for i in range(0, flat_r.shape[0], 8):
-        d = (to_planes(flat_r[i:i + 8, ..., :3]) - to_planes(flat_d[i:i + 8, ..., :3])).astype(np.float64)
-        sums += (d * d).reshape(-1, 3).sum(0)
+    k = _views_per_chunk(np.prod(flat_r.shape[1:3]) * 3)
+    for i in range(0, flat_r.shape[0], k):
+        d = (to_planes(flat_r[i:i + k, ..., :3]) - to_planes(flat_d[i:i + k, ..., :3])).astype(np.float64)
+        d *= d
+        sums += d.reshape(-1, 3).sum(0)
     n = flat_r[..., 0].size
     ps = [_psnr_from_mse(s / n, peak) for s in sums]
     if any(math.isinf(p) for p in ps):
@@ -155,6 +168,15 @@ def finite(x):
     return x
 
 
+def _equal(ref: np.ndarray, dec: np.ndarray) -> bool:
+    """``np.array_equal`` of two light fields, a few views at a time (no whole-size mask)."""
+    r, d = _flat(ref), _flat(dec)
+    if r.shape != d.shape:
+        return False
+    k = _views_per_chunk(np.prod(r.shape[1:]))
+    return all(np.array_equal(r[i:i + k], d[i:i + k]) for i in range(0, r.shape[0], k))
+
+
 def quality_report(ref: np.ndarray, dec: np.ndarray, *, with_ssim: bool = True) -> dict:
     """Every quality figure of a decode, JSON-able (inf → None, exactness as booleans).
 
@@ -170,11 +192,11 @@ def quality_report(ref: np.ndarray, dec: np.ndarray, *, with_ssim: bool = True) 
         "psnr_view_mean": finite(float(np.mean(per_view[np.isfinite(per_view)]))) if np.isfinite(per_view).any()
         else None,
         "views_exact": int(np.isinf(per_view).sum()),
-        "exact": bool(np.array_equal(ref[..., cs], dec[..., cs])),
+        "exact": _equal(ref[..., cs], dec[..., cs]),
     }
     if ref.shape[-1] in (2, 4):
         out["psnr_visible"] = finite(psnr_visible(ref, dec))
-        out["alpha_exact"] = bool(np.array_equal(ref[..., -1], dec[..., -1]))
+        out["alpha_exact"] = _equal(ref[..., -1:], dec[..., -1:])
         out["psnr_alpha"] = finite(psnr_alpha(ref, dec))
     if with_ssim:
         out["ssim"] = ssim(ref, dec)

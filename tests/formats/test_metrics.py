@@ -1,0 +1,29 @@
+"""Metrics measure a light field a few views at a time; the chunking changes no figure."""
+import numpy as np
+import pytest
+
+import formats.metrics as M
+
+
+@pytest.mark.parametrize("channels,dtype", [(1, np.uint8), (2, np.uint16), (3, np.uint8), (4, np.uint16)])
+def test_quality_report_in_chunks_equals_one_chunk(channels, dtype, monkeypatch):
+    rng = np.random.default_rng(channels)
+    peak = np.iinfo(dtype).max
+    ref = rng.integers(0, peak, (3, 4, 9, 7, channels), endpoint=True).astype(dtype)
+    dec = ref.copy()
+    noisy = rng.random(ref.shape) < 0.3
+    dec[noisy] = rng.integers(0, peak, int(noisy.sum()), endpoint=True).astype(dtype)
+    dec[1, 2] = ref[1, 2]                                    # one exact view
+    whole = M.quality_report(ref, dec, with_ssim=False)
+    monkeypatch.setattr(M, "CHUNK_ELEMENTS", 5)              # one view at a time
+    small = M.quality_report(ref, dec, with_ssim=False)
+    assert small == whole and whole["views_exact"] == 1 and whole["exact"] is False
+    assert M.quality_report(ref, ref.copy(), with_ssim=False)["exact"] is True
+    if channels in (2, 4):
+        assert whole["alpha_exact"] is False
+        d2 = dec.copy()
+        d2[..., -1] = ref[..., -1]
+        assert M.quality_report(ref, d2, with_ssim=False)["alpha_exact"] is True
+    # the pooled PSNR is the one every view's squared errors give
+    sse, cnt = M.colour_sq_error(ref, dec)
+    assert whole["psnr_rgb"] == pytest.approx(M.psnr_from_sq_error(np.array([sse]), np.array([cnt]), peak))
