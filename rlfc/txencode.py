@@ -275,6 +275,7 @@ class TxEncoder:
         self.intra_codec = ic
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
+        self._block_means: dict = {}              # intra view → (nby8, nbx8, P) float64 block means
         if progress:
             progress("disparity", 0, None)
         n_maps = len(self.s.cell_views)
@@ -390,8 +391,12 @@ class TxEncoder:
         return p.reshape(self.nby8, self.nbx8, TB, TB, self.P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, self.P)
 
     def thumb_levels(self, v: int, thumb16: int) -> np.ndarray:
-        """(nby8, nbx8, P) thumbnail levels of an intra view: block means / step, rounded."""
-        o = self.planes(v).astype(np.float64).reshape(self.nby8, TB, self.nbx8, TB, self.P).mean(axis=(1, 3))
+        """(nby8, nbx8, P) thumbnail levels of an intra view: block means / step, rounded (the
+        block means of each view are computed once: every pass asks for them again)."""
+        o = self._block_means.get(v)
+        if o is None:
+            o = self._block_means[v] = self.planes(v).astype(np.float64).reshape(self.nby8, TB, self.nbx8, TB,
+                                                                       self.P).mean(axis=(1, 3))
         return np.rint(o * 16 / thumb16).astype(np.int64)
 
     def thumb_pred(self, levels: np.ndarray, thumb16: int) -> np.ndarray:

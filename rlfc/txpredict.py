@@ -98,8 +98,14 @@ def upsample_thumb(thumb: np.ndarray, hp: int, wp: int, xp=NUMPY):
     xa, xb, fx = axis(wp, tx)
     t = thumb.astype(np.int32)
     s = 1 << F
+    # separable: the horizontal pass on the thumbnail's rows, then the rows gathered (the same
+    # integers as gathering first: a row gather commutes with the horizontal blend)
     fxv = fx.astype(np.int32)[None, :, None]
-    top = t[ya][:, xa] * (s - fxv) + t[ya][:, xb] * fxv
-    bot = t[yb][:, xa] * (s - fxv) + t[yb][:, xb] * fxv
+    h = t[:, xa] * (s - fxv)
+    h += t[:, xb] * fxv                                          # (ty, wp, P)
     fyv = fy.astype(np.int32)[:, None, None]
-    return (top * (s - fyv) + bot * fyv + (1 << (2 * F - 1))) >> (2 * F)
+    out = h[ya] * (s - fyv)
+    out += h[yb] * fyv
+    out += 1 << (2 * F - 1)
+    out >>= 2 * F
+    return out

@@ -108,3 +108,27 @@ def test_whole_view_in_raster_bands_is_predict_tbs(P, lo, hi, bits, cv_max, monk
                       disp[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
     ref = ref.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(hp, wp, P)
     assert got.dtype == np.int32 and np.array_equal(got, ref)
+
+
+def test_thumbnail_upsampling_is_the_bilinear_formula():
+    """upsample_thumb (separable) gives, pixel by pixel, the module doc's formula: pixel y
+    samples thumbnail row (2y − 7)/16, clamped, bilinear in 1/16 with one rounding."""
+    from rlfc.txpredict import upsample_thumb
+
+    rng = np.random.default_rng(5)
+    for ty, tx, P in [(1, 1, 1), (2, 3, 4), (5, 9, 3)]:
+        th = rng.integers(-(1 << 17), 1 << 17, (ty, tx, P))
+        hp, wp = 8 * ty, 8 * tx
+        got = upsample_thumb(th, hp, wp)
+        q = lambda n: 2 * np.arange(n) - 7                               # noqa: E731
+        qy, qx = q(hp), q(wp)
+        y0, x0, fy, fx = qy >> 4, qx >> 4, qy & 15, qx & 15
+        cy = lambda i: np.clip(i, 0, ty - 1)                             # noqa: E731
+        cx = lambda i: np.clip(i, 0, tx - 1)                             # noqa: E731
+        a = th[cy(y0)][:, cx(x0)]
+        b = th[cy(y0)][:, cx(x0 + 1)]
+        c = th[cy(y0 + 1)][:, cx(x0)]
+        d = th[cy(y0 + 1)][:, cx(x0 + 1)]
+        fy, fx = fy[:, None, None], fx[None, :, None]
+        want = ((a * (16 - fx) + b * fx) * (16 - fy) + (c * (16 - fx) + d * fx) * fy + 128) >> 8
+        assert got.dtype == np.int32 and np.array_equal(got, want)
