@@ -660,15 +660,23 @@ def cmd_decode(a) -> int:
             # whole (a decoder that decodes several views at once does a row in one call)
             many = getattr(d, "decode_views", None)
             paths = []
-            for r in range(d.rows):
-                if many is not None:
-                    row = many(np.arange(r * d.cols, (r + 1) * d.cols), level=level)[None]
-                else:
-                    row = np.stack([d.decode_view(r, c, level=level) for c in range(d.cols)])[None]
-                paths += write_views(outdir, row, rows=[r], filename=name)
-                del row
-                prog("decode views", r + 1, d.rows)
-            prog.close()
+            try:
+                for r in range(d.rows):
+                    if many is not None:
+                        row = many(np.arange(r * d.cols, (r + 1) * d.cols), level=level)[None]
+                    else:
+                        row = np.stack([d.decode_view(r, c, level=level) for c in range(d.cols)])[None]
+                    paths += write_views(outdir, row, rows=[r], filename=name)
+                    del row
+                    prog("decode views", r + 1, d.rows)
+            except BaseException:
+                # a file that fails part-way (a damaged stream in a later row) leaves no views of
+                # it behind: a folder holding only some views would pass for a whole decode
+                for p in paths:
+                    Path(p).unlink(missing_ok=True)
+                raise
+            finally:
+                prog.close()
             # the layout file, so that the folder encodes again as the same scene
             layout = write_layout(outdir, f.scene, name)
         if not a.quiet:

@@ -112,6 +112,28 @@ def test_progressive_decode_levels(profile, top, view, tmp_path):
     assert main(["decode", str(enc), str(tmp_path / "bad"), "--level", str(top + 1), "--quiet"]) == 2
 
 
+def test_decode_that_fails_part_way_leaves_no_views(encoded, tmp_path, monkeypatch, capsys):
+    """Views are decoded and written a row at a time; a file that fails at a later row (a
+    damaged stream) leaves none of its views in the folder, and says why in one line."""
+    from formats.errors import ChecksumError
+    from rlfc.decoder import RlfcDecoder
+
+    calls = []
+    real = RlfcDecoder.decode_views
+
+    def fail_third_row(self, views=None, *a, **k):
+        calls.append(1)
+        if len(calls) == 3:
+            raise ChecksumError("dino.lfc: section 'tx.blocks' is corrupt (test)")
+        return real(self, views, *a, **k)
+
+    monkeypatch.setattr(RlfcDecoder, "decode_views", fail_third_row)
+    out = tmp_path / "part"
+    assert main(["decode", str(encoded), str(out), "--quiet"]) == 2
+    assert "corrupt" in capsys.readouterr().err and len(calls) == 3
+    assert not any(out.iterdir())
+
+
 def _run(*args):
     r = subprocess.run([sys.executable, "-m", "formats.cli", *args], capture_output=True, text=True, cwd=ROOT)
     return r.returncode, r.stdout, r.stderr
