@@ -1257,13 +1257,15 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
 
+    # (a first pass measures the entropy model; its codes are dropped before the pass that
+    # uses the model, so the two passes' levels never exist at once)
     if params.lossless:
-        res = run(1.0)
-        res = enc.run(1.0, enc.model_of(res), progress, keep_pixels=True)
+        measured = enc.model_of(run(1.0))
+        res = enc.run(1.0, measured, progress, keep_pixels=True)
     elif options.target_psnr is None and options.target_bpp is None:
         step = params.step if params.step is not None else 8.0 * scale
-        res = run(step)
-        res = enc.run(step, enc.model_of(res), progress, keep_pixels=True)
+        measured = enc.model_of(run(step))
+        res = enc.run(step, measured, progress, keep_pixels=True)
     else:
         models: dict = {}                     # step → the entropy model measured there
 
