@@ -656,16 +656,11 @@ def cmd_decode(a) -> int:
             paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
         else:
             prog = _Progress(a.quiet)
-            # decoded and written one row of views at a time: a large light field is never held
-            # whole (a decoder that decodes several views at once does a row in one call)
-            many = getattr(d, "decode_views", None)
+            # decoded and written one row of views at a time: a large light field is never held whole
             paths = []
             try:
                 for r in range(d.rows):
-                    if many is not None:
-                        row = many(np.arange(r * d.cols, (r + 1) * d.cols), level=level)[None]
-                    else:
-                        row = np.stack([d.decode_view(r, c, level=level) for c in range(d.cols)])[None]
+                    row = d.decode_views(np.arange(r * d.cols, (r + 1) * d.cols), level=level)[None]
                     paths += write_views(outdir, row, rows=[r], filename=name)
                     del row
                     prog("decode views", r + 1, d.rows)

@@ -97,6 +97,11 @@ class Decoder(abc.ABC):
     def decode_view(self, row: int, col: int, level: float = 0) -> np.ndarray:
         """One view: (H, W, C) pixels."""
 
+    def decode_views(self, views, level: float = 0) -> np.ndarray:
+        """Whole views by flat index (row · cols + col): (n, H, W, C) pixels (a codec that
+        decodes several views together overrides this)."""
+        return np.stack([self.decode_view(*divmod(int(v), self.cols), level) for v in np.ravel(views)])
+
     def decode_all(self, level: float = 0) -> np.ndarray:
         """The whole light field: (rows, cols, H, W, C) pixels."""
         return np.stack([np.stack([self.decode_view(r, c, level) for c in range(self.cols)])

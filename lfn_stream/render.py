@@ -497,9 +497,6 @@ class LfnRenderer(Decoder):
         """Full-size pixels of one view at a level (0 = the largest available network)."""
         return self.to_pixels(self.render(row, col, self.neurons_at(level), scale=1.0))
 
-    def decode_all(self, level: float = 0) -> np.ndarray:
-        return np.stack([np.stack([self.decode_view(r, c, level) for c in range(self.cols)]) for r in range(self.rows)])
-
     def decode_block(self, *a, **k):
         raise UnsupportedError("block random access is an RLFC feature; an LFN renders rays (use --view)")
 

@@ -363,18 +363,18 @@ class TxEncoder:
         return float(self.steps16(step)[1, 0]) / 16 * math.sqrt(wp0)
 
     # -- prediction ------------------------------------------------------------------------
-    def key_source(self, n_keys: int):
+    def key_atlas(self, n_keys: int) -> KeyAtlas | None:
         """What :meth:`predict_view` samples, for a pass whose ``n_keys`` key views are not decoded
         yet (the pass stores each key as it is decoded): an empty :class:`rlfc.txsample.KeyAtlas`
-        (the remap kernel) where OpenCV can take the views, else the planar copy of an all-zero
-        int32 stack (the pass rebuilds it as keys arrive)."""
+        (the remap kernel), or None where OpenCV cannot take the views (the pass then samples a
+        planar copy of the key views: :func:`rlfc.txpredict.planar`)."""
         if not KeyAtlas.fits(self.Hp, self.Wp, self.P):
-            return planar(np.zeros((n_keys, self.Hp, self.Wp, self.P), np.int32))
+            return None
         return KeyAtlas(n_keys, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P))
 
     def predict_view(self, v: int, kp) -> np.ndarray:
         """(Hp, Wp, P) int32 prediction of a view with references from decoded key views ``kp``
-        (:meth:`key_source`: an atlas, or planar planes); the same integers either way."""
+        (:meth:`key_atlas`: an atlas, or planar planes); the same integers either way."""
         s = self.s
         m = s.cell[v]
         d, mode = self.disp[m], self.modes[m]
@@ -674,13 +674,15 @@ class TxEncoder:
         lam_k = self.p.lam * lam_scale * (s16[0, 0] / 16.0) ** 2
         lam_n = self.p.lam * lam_scale * (s16[1, 0] / 16.0) ** 2
         n0 = self.n0
-        # the decoded key views, for the views predicted from them (none where every view is intra)
         # the decoded key views, for the views predicted from them (none where every view is
-        # intra): sampled from an atlas (filled key by key), else from a planar copy of an int32 stack
-        n_keys = 0 if self.all_intra else len(self.s.keys)
-        kp = None if self.all_intra else self.key_source(n_keys)
-        keyplanes = None if kp is None or isinstance(kp, KeyAtlas) else \
-            np.zeros((n_keys, self.Hp, self.Wp, self.P), np.int32)
+        # intra): sampled from an atlas (filled key by key), else (views OpenCV cannot take) from
+        # a planar copy of an int32 stack, rebuilt as keys arrive
+        kp = keyplanes = None
+        if not self.all_intra:
+            kp = self.key_atlas(len(self.s.keys))
+            if kp is None:
+                keyplanes = np.zeros((len(self.s.keys), self.Hp, self.Wp, self.P), np.int32)
+                kp = planar(keyplanes)
         codes: list = [None] * n0
         thumbs = {}
         keyimg = {}
@@ -1041,8 +1043,8 @@ class TxEncoder:
 def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
                step16: np.ndarray, lam: float, keep_pixels) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
-    ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_source`); ``keep_pixels`` as
-    :meth:`TxEncoder.code_view`."""
+    ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_atlas`, or planar planes);
+    ``keep_pixels`` as :meth:`TxEncoder.code_view`."""
     return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels)
 
 
