@@ -80,9 +80,12 @@ def test_remap_prediction_of_no_blocks():
 @pytest.mark.parametrize("P,lo,hi,bits,cv_max", [(3, -255, 255, 9, None), (1, 0, 255, 8, None), (4, -255, 255, 9, None),
                                                  (2, 0, 65535, 16, None), (3, -65535, 65535, 17, None),
                                                  (3, -255, 255, 9, 100)])
-def test_whole_view_in_raster_bands_is_predict_tbs(P, lo, hi, bits, cv_max, monkeypatch):
+@pytest.mark.parametrize("reach", [40, 4000, 1 << 20])
+def test_whole_view_in_raster_bands_is_predict_tbs(P, lo, hi, bits, cv_max, reach, monkeypatch):
     """predict_view (blend blocks in raster bands, the others by the block kernel) gives every
-    block predict_tbs's integers; bands of a few block rows, keys across atlas groups."""
+    block predict_tbs's integers; bands of a few block rows, keys across atlas groups;
+    displacements within a few pixels, far past the key views (clamped rows, replicated
+    columns), and at the format's largest disparity."""
     import rlfc.txsample as ts
 
     if cv_max:
@@ -97,7 +100,9 @@ def test_whole_view_in_raster_bands_is_predict_tbs(P, lo, hi, bits, cv_max, monk
         atlas.set(s, keys[s])
     slots = rng.choice(n_keys, R, replace=False)
     weights = np.array([30, 0, 20, 14])                  # one reference unused by the blend
-    disp = rng.integers(-40, 40, n8y * n8x)
+    disp = rng.integers(-reach, reach, n8y * n8x)
+    if reach == 40:
+        disp[:2 * n8x] = 0                               # a band whose rows need no clamp
     modes = np.where(rng.random(n8y * n8x) < 0.3, rng.integers(1, R + 1, n8y * n8x), 0)
     dpos = rng.integers(-2, 3, (R, 2))
     got = ts.predict_view(atlas, slots, weights, disp, modes, dpos, n8y, n8x)
