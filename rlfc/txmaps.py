@@ -1,7 +1,9 @@
 """The ``tx.maps`` section: the shared disparity map, per-map corrections and prediction modes,
 entropy-coded with rANS (:mod:`rlfc.rans`) and decoded once when a file is opened.
 
-Layout: u8 version (2; 1 = the first files, whose tables were built in float arithmetic); varint byte lengths of the tables and of each stream; the tables
+Layout: u8 version (3; 2 = the escape digits of one shared context; 1 = the first files,
+whose tables were built in float arithmetic); varint byte lengths of the tables and of each
+stream; the tables
 (:func:`rlfc.txsyntax.tables_to_bytes` layout over this module's contexts); the shared map's
 stream; one stream per map.
 
@@ -12,8 +14,10 @@ clamp(e, −31, 31) + 31, context by the activity |a − c| + |b − c| (0, 1..1
 Per map, one stream: for each block in raster order the correction (disparity − shared),
 symbol clamp(c, −31, 31) + 31, context (left ≠ 0) + 2·(above ≠ 0); then for each block the
 mode (0 blend, 1 + j reference j), context 5·left + above (missing: 0).
-An escape (symbol 0 for e or c <= −31, 62 for >= 31) is followed by three 6-bit digits
-(contexts ESC_DIGIT) of the zig-zag value of the excess (|e| − 31), most significant first.
+An escape (symbol 0 for e or c <= −31, 62 for >= 31) is followed by three 6-bit digits of the
+excess |e| − 31, most significant first, each digit position in its own context
+(CTX_DIGIT + position; versions 1-2: all three in CTX_DIGIT, where the high digits, nearly
+always 0, and the low one, nearly uniform, shared one table: 21% of stanford_chess's maps).
 """
 from __future__ import annotations
 
@@ -25,14 +29,23 @@ from .rans import LaneDecoder, ScalarDecoder, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
 from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
-VERSION = 2
+VERSION = 3
 R = 31
 CTX_BASE = 0                 # 3 activity classes
 CTX_CORR = 3                 # 4: left nonzero + 2 · above nonzero
 CTX_MODE = 7                 # 25: 5·left + above
-CTX_DIGIT = 32               # escape digits
-N_CTX = 33
+CTX_DIGIT = 32               # escape digits: one context per digit position (versions 1-2: one for all)
+N_CTX = 35
 ALPHABET = 64
+
+
+def _n_ctx(version: int) -> int:
+    return N_CTX if version >= 3 else CTX_DIGIT + 1
+
+
+def _digit_ctx(version: int, k: int) -> int:
+    """Context of escape digit k (0 = most significant)."""
+    return CTX_DIGIT + k if version >= 3 else CTX_DIGIT
 
 
 def _med(a, b, c):
@@ -41,7 +54,8 @@ def _med(a, b, c):
 
 
 def _escape(e):
-    """Symbol and escape digits of values e (arrays): digits = zig-zag(|e| − R) in 3×6 bits."""
+    """Symbol and escape digits of values e (arrays): digits of |e| − R in 3×6 bits, most
+    significant first (the sign is the symbol's)."""
     sym = np.clip(e, -R, R) + R
     esc = np.abs(e) >= R
     x = np.abs(e) - R
@@ -69,8 +83,12 @@ def _neighbours(v: np.ndarray):
     return a, b, c
 
 
-def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tuple[int, int]) -> bytes:
-    """Section bytes of the shared map (nloc,), per-map disparities and modes (n_maps, nloc)."""
+def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tuple[int, int],
+              version: int = VERSION) -> bytes:
+    """Section bytes of the shared map (nloc,), per-map disparities and modes (n_maps, nloc).
+    ``version``: 3 (what the encoder writes) or 2 (the previous layout; tests of old files)."""
+    if version not in (2, VERSION):
+        raise ValueError(f"maps version must be 2 or {VERSION}, got {version}")
     ny, nx = shape
     lanes = []                                           # per stream: list of (ctx, sym)
     b = base.reshape(ny, nx).astype(np.int64)
@@ -79,18 +97,18 @@ def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tupl
     pred[0, 0] = 0
     e = (b - pred).reshape(-1)
     ctx0 = _activity(a_, b_, c_).reshape(-1) + CTX_BASE
-    lanes.append(_with_escapes(ctx0, e))
+    lanes.append(_with_escapes(ctx0, e, version))
     corr = (disp - base[None, :]).astype(np.int64)
     for m in range(disp.shape[0]):
         cm = corr[m].reshape(ny, nx)
         left = np.concatenate([np.zeros((ny, 1), np.int64), cm[:, :-1]], 1) != 0
         up = np.concatenate([np.zeros((1, nx), np.int64), cm[:-1]], 0) != 0
-        cc, cs = _with_escapes((CTX_CORR + left + 2 * up).reshape(-1), cm.reshape(-1))
+        cc, cs = _with_escapes((CTX_CORR + left + 2 * up).reshape(-1), cm.reshape(-1), version)
         mo = modes[m].reshape(ny, nx).astype(np.int64)
         ml = np.concatenate([np.zeros((ny, 1), np.int64), mo[:, :-1]], 1)
         mu = np.concatenate([np.zeros((1, nx), np.int64), mo[:-1]], 0)
         lanes.append((np.concatenate([cc, (CTX_MODE + 5 * ml + mu).reshape(-1)]), np.concatenate([cs, mo.reshape(-1)])))
-    counts = np.zeros((N_CTX, ALPHABET), np.int64)
+    counts = np.zeros((_n_ctx(version), ALPHABET), np.int64)
     for c, s in lanes:
         np.add.at(counts, (c, s), 1)
     q = quantize_counts(counts)
@@ -102,19 +120,20 @@ def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tupl
         C[i, :len(c)], S[i, :len(s)] = c, s
     streams = encode_lanes(C, S, np.array([len(c) for c, _ in lanes]), tables)
     tb = tables_to_bytes(q)
-    return bytes([VERSION]) + varints(np.array([len(tb)] + [len(x) for x in streams])) + tb + b"".join(streams)
+    return bytes([version]) + varints(np.array([len(tb)] + [len(x) for x in streams])) + tb + b"".join(streams)
 
 
-def _with_escapes(ctx: np.ndarray, v: np.ndarray):
+def _with_escapes(ctx: np.ndarray, v: np.ndarray, version: int):
     """(ctx, sym) in order, each escape followed by its three digits."""
     sym, esc, dig = _escape(v)
     n = 1 + 3 * esc
     pos = np.cumsum(n) - n
-    out_c = np.full(int(n.sum()), CTX_DIGIT, np.int64)
+    out_c = np.zeros(int(n.sum()), np.int64)
     out_s = np.zeros(int(n.sum()), np.int64)
     out_c[pos], out_s[pos] = ctx, sym
     ei = pos[esc]
     for k in range(3):
+        out_c[ei + 1 + k] = _digit_ctx(version, k)
         out_s[ei + 1 + k] = dig[esc, k]
     return out_c, out_s
 
@@ -124,8 +143,9 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     ny, nx = shape
     nloc = ny * nx
     raw = bytes(data)
-    if not raw or raw[0] not in (1, VERSION):
+    if not raw or raw[0] not in (1, 2, VERSION):
         raise FormatError(f"{what}: unknown maps version")
+    ver = raw[0]
     b = np.frombuffer(raw, np.uint8)
     ends = np.flatnonzero(b[1:] < 128)
     if ends.size < n_maps + 2:
@@ -135,7 +155,7 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     if (lens < 0).any() or head + int(lens.sum()) != len(raw):
         raise FormatError(f"{what}: stream lengths do not add up to the section")
     pos = head + int(lens[0])
-    tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], N_CTX, ALPHABET, what), raw[0])
+    tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
     # the shared map: one stream, sequential (MED needs the decoded neighbours)
     d = ScalarDecoder(raw[pos:pos + int(lens[1])], tables)
     base = np.zeros((ny, nx), np.int64)
@@ -146,7 +166,7 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
         bb = vals[i - nx] if y else a
         c = vals[i - nx - 1] if (x and y) else bb if y else a
         s = d.get(CTX_BASE + (0 if a == c and bb == c else (1 if abs(a - c) + abs(bb - c) <= 16 else 2)))
-        e = _unescape_scalar(d, s, what)
+        e = _unescape_scalar(d, s, what, ver)
         vals[i] = (0 if i == 0 else _med(int(a), int(bb), int(c))) + e
     if not d.done(int(lens[1])):
         raise FormatError(f"{what}: the shared map's stream is malformed")
@@ -172,8 +192,8 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
             if esc.any():
                 el = np.flatnonzero(esc)
                 x_ = np.zeros(el.size, np.int64)
-                for _ in range(3):
-                    x_ = (x_ << 6) | dec.step(el, np.full(el.size, CTX_DIGIT))
+                for k in range(3):
+                    x_ = (x_ << 6) | dec.step(el, np.full(el.size, _digit_ctx(ver, k)))
                 corr[el, i] = np.sign(s[el] - R) * (R + x_)
         for i in range(nloc):
             y, x = divmod(i, nx)
@@ -190,14 +210,14 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     return disp, modes
 
 
-def _unescape_scalar(d: ScalarDecoder, s: int, what: str) -> int:
+def _unescape_scalar(d: ScalarDecoder, s: int, what: str, version: int) -> int:
     if s > 2 * R:
         raise FormatError(f"{what}: undefined map symbol {s}")
     if s not in (0, 2 * R):
         return s - R
     x = 0
-    for _ in range(3):
-        x = (x << 6) | d.get(CTX_DIGIT)
+    for k in range(3):
+        x = (x << 6) | d.get(_digit_ctx(version, k))
     return (R + x) * (1 if s == 2 * R else -1)
 
 

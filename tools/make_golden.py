@@ -12,6 +12,7 @@ samples/dino_crop/PROVENANCE.md), and derived 16-bit grey+alpha / RGBA variants.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 from pathlib import Path
@@ -90,8 +91,42 @@ def rlfc_fixtures() -> dict:
         "rlfc_tx2_lossless_ga16": (v["ga16"], dict(profile="tx", block_size=16, quant=1)),
         "rlfc_tx2_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=16, step=5.0, key_spacing=2)),
         "rlfc_tx2_lossy_rgba8": (v["rgba8"], dict(profile="tx", block_size=8, step=4.0, key_spacing=3)),
+        # tx.maps version 3 (one context per escape digit position), with escapes: the maps'
+        # corrections pushed far off on a third of the blocks (see far_maps)
+        "rlfc_tx3_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=8, step=5.0, key_spacing=3)),
     })
-    return {name: (encode(lf_of(views), **kw), lf_of(views)) for name, (views, kw) in specs.items()}
+    out = {}
+    for name, (views, kw) in specs.items():
+        if name == "rlfc_tx3_lossy_rgb8":
+            with far_maps():
+                out[name] = (encode(lf_of(views), **kw), lf_of(views))
+        else:
+            out[name] = (encode(lf_of(views), **kw), lf_of(views))
+    return out
+
+
+@contextlib.contextmanager
+def far_maps():
+    """The tx encoder's maps, with a third of the blocks' disparities moved 31..4999 sixteenths of
+    a pixel per view step off (deterministic): corrections that escape, with all three escape
+    digits in use, which the sample's small parallax never makes."""
+    import rlfc.txencode as te
+
+    real = te.estimate_maps
+
+    def far(*a, **k):
+        base, disp, modes = real(*a, **k)
+        rng = np.random.default_rng(3)
+        hit = rng.random(disp.shape) < 1 / 3
+        disp = disp.copy()
+        disp[hit] += rng.choice([-1, 1], int(hit.sum())) * rng.integers(31, 5000, int(hit.sum()))
+        return base, disp, modes
+
+    te.estimate_maps = far
+    try:
+        yield
+    finally:
+        te.estimate_maps = real
 
 
 #: LFN fixtures this tool writes (name: codec version). ``lfn_tiny_rgba8`` (codec version 1: one

@@ -738,8 +738,10 @@ export class TxDecoder {
 
   async _readMaps(raw) {
     const what = "tx.maps", nMaps = this.nMaps, ny = this.nby8, nx = this.nbx8, nloc = ny * nx, R = 31;
-    if (!raw.length || (raw[0] !== 2 && raw[0] !== 1)) throw new FormatError(`${what}: unknown maps version`);
-    if (raw[0] !== 2) throw new UnsupportedError(`${what}: version 1 maps (float tables) are not read here`);
+    if (!raw.length || raw[0] < 1 || raw[0] > 3) throw new FormatError(`${what}: unknown maps version`);
+    if (raw[0] === 1) throw new UnsupportedError(`${what}: version 1 maps (float tables) are not read here`);
+    // version 3: each escape digit position has its own context (32 + position); version 2: all in 32
+    const ver = raw[0], digitCtx = (i) => (ver >= 3 ? 32 + i : 32);
     let p = 1, cnt = 0;
     while (cnt < nMaps + 2) {
       if (p >= raw.length) throw new FormatError(`${what}: truncated stream lengths`);
@@ -748,12 +750,12 @@ export class TxDecoder {
     const lens = unvarints(raw.subarray(1, p), nMaps + 2, what);
     if (lens.some((x) => x < 0) || p + lens.reduce((a, b) => a + b, 0) !== raw.length) throw new FormatError(`${what}: stream lengths do not add up to the section`);
     let pos = p + lens[0];
-    const tables = await readTables(raw.subarray(p, pos), 33, 64, what);
+    const tables = await readTables(raw.subarray(p, pos), ver >= 3 ? 35 : 33, 64, what);
     const unesc = (d, s) => {
       if (s > 2 * R) throw new FormatError(`${what}: undefined map symbol ${s}`);
       if (s !== 0 && s !== 2 * R) return s - R;
       let x = 0;
-      for (let i = 0; i < 3; i++) x = x * 64 + d.get(32);
+      for (let i = 0; i < 3; i++) x = x * 64 + d.get(digitCtx(i));
       return (R + x) * (s === 2 * R ? 1 : -1);
     };
     const base = new Float64Array(nloc);

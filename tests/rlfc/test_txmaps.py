@@ -1,0 +1,66 @@
+"""tx.maps: the shared map, per-map corrections and modes round-trip through pack_maps /
+unpack_maps in the current layout (version 3: one context per escape digit position) and in
+the previous one (version 2, files written before it), escapes of every size included;
+malformed sections raise FormatError."""
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from formats.errors import FormatError
+from rlfc import txmaps
+
+
+def _maps(rng, n_maps, ny, nx, spread, big):
+    """Disparity maps (1/16 px) near a smooth base, some blocks far off (escapes: corrections
+    of 31 or more), and modes 0..4."""
+    nloc = ny * nx
+    base = np.cumsum(rng.integers(-3, 4, nloc)).astype(np.int64)
+    corr = np.where(rng.random((n_maps, nloc)) < 0.3, rng.integers(-spread, spread + 1, (n_maps, nloc)), 0)
+    far = rng.random((n_maps, nloc)) < big
+    corr[far] = rng.integers(-(1 << 17), 1 << 17, int(far.sum()))        # all three escape digits in use
+    modes = np.where(rng.random((n_maps, nloc)) < 0.1, rng.integers(0, 5, (n_maps, nloc)), 0)
+    return base, base[None, :] + corr, modes
+
+
+@settings(max_examples=25, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), n_maps=st.integers(0, 4), ny=st.integers(1, 9), nx=st.integers(1, 9),
+       version=st.sampled_from([2, 3]), big=st.sampled_from([0.0, 0.05, 0.5]))
+def test_maps_round_trip(seed, n_maps, ny, nx, version, big):
+    rng = np.random.default_rng(seed)
+    base, disp, modes = _maps(rng, n_maps, ny, nx, 80, big)
+    data = txmaps.pack_maps(base, disp, modes, (ny, nx), version=version)
+    assert data[0] == version
+    d2, m2 = txmaps.unpack_maps(data, n_maps, (ny, nx), 5, "t")
+    if n_maps:
+        assert np.array_equal(d2, disp) and np.array_equal(m2, modes)
+
+
+def test_escape_digits_in_their_own_contexts_cost_less():
+    """Maps with many large corrections (a wide-baseline grid's cells disagree by more than two
+    pixels per view step): version 3 codes the escape digits per position, smaller than
+    version 2's one shared table, and the encoder writes version 3."""
+    rng = np.random.default_rng(5)
+    base, disp, modes = _maps(rng, 24, 40, 40, 40, 0.0)
+    corr = disp - base[None, :]
+    far = rng.random(corr.shape) < 0.08
+    corr[far] = np.sign(rng.standard_normal(int(far.sum()))).astype(np.int64) * (31 + rng.geometric(0.02, int(far.sum())))
+    disp = base[None, :] + corr
+    v2 = txmaps.pack_maps(base, disp, modes, (40, 40), version=2)
+    v3 = txmaps.pack_maps(base, disp, modes, (40, 40))
+    assert v3[0] == txmaps.VERSION == 3
+    assert len(v3) < 0.97 * len(v2)
+    for data in (v2, v3):
+        d2, m2 = txmaps.unpack_maps(data, 24, (40, 40), 5, "t")
+        assert np.array_equal(d2, disp) and np.array_equal(m2, modes)
+
+
+def test_bad_maps_sections_are_refused():
+    rng = np.random.default_rng(1)
+    base, disp, modes = _maps(rng, 2, 4, 4, 80, 0.2)
+    good = txmaps.pack_maps(base, disp, modes, (4, 4))
+    for bad in (b"", bytes([4]) + good[1:], bytes([0]) + good[1:], good[:len(good) // 2]):
+        with pytest.raises(FormatError):
+            txmaps.unpack_maps(bad, 2, (4, 4), 5, "t")
+    with pytest.raises(ValueError):
+        txmaps.pack_maps(base, disp, modes, (4, 4), version=1)
