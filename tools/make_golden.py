@@ -109,10 +109,12 @@ def rlfc_fixtures() -> dict:
 def far_maps():
     """The tx encoder's maps, with a third of the blocks' disparities moved 31..4999 sixteenths of
     a pixel per view step off (deterministic): corrections that escape, with all three escape
-    digits in use, which the sample's small parallax never makes."""
+    digits in use, which the sample's small parallax never makes. Yields a dict that holds the
+    last maps made (``base``, ``disp``)."""
     import rlfc.txencode as te
 
     real = te.estimate_maps
+    made: dict = {}
 
     def far(*a, **k):
         base, disp, modes = real(*a, **k)
@@ -120,11 +122,12 @@ def far_maps():
         hit = rng.random(disp.shape) < 1 / 3
         disp = disp.copy()
         disp[hit] += rng.choice([-1, 1], int(hit.sum())) * rng.integers(31, 5000, int(hit.sum()))
+        made.update(base=base, disp=disp)
         return base, disp, modes
 
     te.estimate_maps = far
     try:
-        yield
+        yield made
     finally:
         te.estimate_maps = real
 

@@ -177,29 +177,18 @@ def test_thumbnail_levels_beyond_any_block_mean_are_refused_as_in_python(tmp_pat
         open_decoder(open_lfc(p))
 
 
-def test_disparity_escapes_agree(tmp_path, monkeypatch):
+def test_disparity_escapes_agree(tmp_path):
     """Maps whose corrections escape (cells that disagree by two pixels or more per view step,
     every escape digit position in use: tx.maps version 3, one context per digit position):
     the JavaScript decoder reads the same maps, so the same planes."""
-    import rlfc.txencode as te
     from tests.rlfc.helpers import open_encoded
     from tests.rlfc.test_tx import _wide_lf, tx
+    from tools.make_golden import far_maps
 
-    real = te.estimate_maps
-    made = {}
-
-    def far_off(*a, **k):
-        base, disp, modes = real(*a, **k)
-        rng = np.random.default_rng(3)
-        far = rng.random(disp.shape) < 0.3
-        disp = disp.copy()
-        disp[far] += rng.choice([-1, 1], int(far.sum())) * rng.integers(31, 5000, int(far.sum()))
-        made.update(base=base, disp=disp)
-        return base, disp, modes
-
-    monkeypatch.setattr(te, "estimate_maps", far_off)
     lf = _wide_lf(40, 96)
-    d, blob = open_encoded(lf, tx(lf, step=4.0))
+    with far_maps() as made:
+        e = tx(lf, step=4.0)
+    d, blob = open_encoded(lf, e)
     raw = bytes(d.file.container.read("tx.maps"))
     corr = np.abs(made["disp"] - made["base"][None, :])
     assert raw[0] == 3 and (corr >= 31).sum() > 20 and (corr >= 31 + 4096).any()   # escapes, all digits
