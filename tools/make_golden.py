@@ -97,10 +97,7 @@ def rlfc_fixtures() -> dict:
     })
     out = {}
     for name, (views, kw) in specs.items():
-        if name == "rlfc_tx3_lossy_rgb8":
-            with far_maps():
-                out[name] = (encode(lf_of(views), **kw), lf_of(views))
-        else:
+        with far_maps() if name == "rlfc_tx3_lossy_rgb8" else contextlib.nullcontext():
             out[name] = (encode(lf_of(views), **kw), lf_of(views))
     return out
 
