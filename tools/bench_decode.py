@@ -4,7 +4,8 @@ Usage:
     python -m tools.bench_decode FILE.lfc [FILE.lfc ...] [--data ../shared/data] [--rounds 3]
         [--batch 20000] [--single 400] [--threads 1,2] [--against OLD_CHECKOUT] [--out docs/bench/decode]
 
-Each file's scene is ``DATA/<file stem>`` (the originals, for PSNR and the JPEG 2000 peer).
+Each file's scene is ``DATA/<file stem>`` (the originals, for PSNR and the JPEG 2000 peer; the
+peer is cached by the file's content, so files of one scene at several rates each get theirs).
 Before measuring, every view is coded with JPEG 2000 (imagecodecs/OpenJPEG) at the PSNR our
 file reaches on that view, so both decoders deliver the same quality. Then, per round, one
 fresh process per file (and per code version with ``--against``: the same measurements with
@@ -116,7 +117,7 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
         tj.append(min(b))
     r["view_s"], r["j2k_view_s"] = statistics.median(tv), statistics.median(tj)
     sv, sy, sx = rng.integers(0, n, n_single), rng.integers(0, d.nby, n_single), rng.integers(0, d.nbx, n_single)
-    for i in range(20):
+    for i in range(min(20, n_single)):                                  # warm-up
         d.decode_block(*divmod(int(sv[i]), d.cols), int(sy[i]), int(sx[i]))
     lat = []
     for i in range(n_single):
@@ -139,9 +140,12 @@ def _prepare_peer(path: Path, data: Path, cache: Path) -> dict:
     from formats.scenes import read_scene
     from rlfc import RlfcDecoder
 
-    out = cache / (path.stem + ".peer.pkl")
-    if out.exists() and out.stat().st_mtime > path.stat().st_mtime:
-        return {"file": str(out), **json.loads((cache / (path.stem + ".peer.json")).read_text())}
+    import hashlib
+
+    key = f"{path.stem}_{hashlib.sha1(path.read_bytes()).hexdigest()[:16]}"   # files of one scene differ
+    out = cache / (key + ".peer.pkl")
+    if out.exists() and (cache / (key + ".peer.json")).exists():
+        return {"file": str(out), **json.loads((cache / (key + ".peer.json")).read_text())}
     log(f"{path.name}: coding every view with JPEG 2000 at our per-view PSNR")
     d = RlfcDecoder(open_lfc(str(path)))
     n = d.rows * d.cols
@@ -161,7 +165,7 @@ def _prepare_peer(path: Path, data: Path, cache: Path) -> dict:
         pickle.dump({"blobs": blobs, "views": views}, fh)
     meta = {"psnr_ours": float(np.mean(ours)), "psnr_j2k": float(np.mean(got)), "j2k_bytes": sum(map(len, blobs)),
             "views": views, "profile": d.profile, "geometry": f"{d.rows}x{d.cols} x {d.height}x{d.width}x{d.channels}"}
-    (cache / (path.stem + ".peer.json")).write_text(json.dumps(meta))
+    (cache / (key + ".peer.json")).write_text(json.dumps(meta))
     return {"file": str(out), **meta}
 
 

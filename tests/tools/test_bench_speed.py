@@ -86,3 +86,25 @@ def test_bench_lfn_runs_end_to_end(tmp_path):
     assert r["config"]["min_neurons"] == 4 and r["config"]["max_neurons"] == 8
     assert all(np.isfinite(x["psnr"]) for x in r["lod"])
     assert [x["bytes"] for x in r["lod"]] == sorted(x["bytes"] for x in r["lod"])
+
+
+def test_bench_rate_speed_reports_a_curve_per_grid(tmp_path, monkeypatch):
+    """The rate/speed curve: each target encoded by the command line, measured by bench_decode
+    against its own JPEG 2000 peer (peers are cached by file content: the two files of one scene
+    get two peers), with the coded-block share beside the speeds."""
+    from tools import bench_rate_speed
+
+    _tiny(tmp_path)
+    monkeypatch.setattr(bench_decode.tempfile, "gettempdir", lambda: str(tmp_path))
+    out = tmp_path / "rs"
+    assert bench_rate_speed.main(["tiny", "--data", str(tmp_path / "data"), "--targets", "34,44", "--rounds", "1",
+                                  "--batch", "200", "--single", "10", "--threads", "1", "--out", str(out)]) == 0
+    rows = json.loads((out / "rate_speed.json").read_text())["rows"]
+    assert [r["target"] for r in rows] == [34.0, 44.0]
+    lo, hi = rows
+    assert lo["psnr"] >= 34 and hi["psnr"] >= 44 and hi["bpp"] > lo["bpp"]
+    assert hi["j2k_bytes"] > lo["j2k_bytes"]                 # each file's own peer, at its own PSNR
+    for r in rows:
+        assert 0 <= r["coded_share"] <= 1 and r["views"] == 9 and r["key_views"] >= 1
+        assert r["speed"]["batch_mpix_t1"] > 0 and r["j2k_view_mpix"] > 0
+    assert "| tiny | 44 |" in (out / "rate_speed.md").read_text()
