@@ -159,7 +159,7 @@ def _prepare_peer(path: Path, data: Path, cache: Path) -> dict:
         blobs.append(b)
         got.append(float(psnr_views(ref[i:i + 1], imagecodecs.jpeg2k_decode(b).reshape(ref[i:i + 1].shape))[0]))
     keys = set(np.flatnonzero(d.core.is_key).tolist()) if hasattr(d.core, "is_key") else set()
-    cand = [i for i in range(n) if i not in keys]
+    cand = [i for i in range(n) if i not in keys] or list(range(n))        # (every view may be a key)
     views = [cand[int(k)] for k in np.linspace(0, len(cand) - 1, 6).round().astype(int)]
     with open(out, "wb") as fh:
         pickle.dump({"blobs": blobs, "views": views}, fh)

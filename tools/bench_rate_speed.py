@@ -14,7 +14,8 @@ blocks of views that are not key views that carry a residual stream (the coded b
 the rANS parse pays for) and the bytes of those streams.
 
 Writes ``rate_speed.json``, ``rate_speed.md`` and ``rate_speed.png`` under ``--out`` (and each
-target's ``decode.{json,md,png}`` under ``--out/T<T>``).
+target's ``decode.{json,md,png}`` under ``--out/T<T>``; a target measured before on these
+grids is read back from there unless ``--remeasure``).
 """
 from __future__ import annotations
 
@@ -61,7 +62,7 @@ def coded_blocks(path: Path) -> dict:
     nk = ~np.asarray(core.is_key)
     coded = np.asarray(core.coded)[nk]
     span = (np.asarray(core.end) - np.asarray(core.start))[nk]
-    return {"coded_share": float(coded.mean()), "stream_bytes": int(span[coded].sum()),
+    return {"coded_share": float(coded.mean()) if coded.size else None, "stream_bytes": int(span[coded].sum()),
             "key_views": int((~nk).sum()), "views": int(nk.size)}
 
 
@@ -74,7 +75,8 @@ def curve_table(rows: list[dict], threads: list[int]) -> list[str]:
         s = r["speed"]
         out.append("| " + " | ".join([
             r["grid"], f"{r['target']:g}", f"{r['bpp']:.4f} ({r['bytes'] / r['j2k_bytes']:.2f}×)",
-            f"{100 * r['coded_share']:.0f}%", f"{r['stream_bytes']:,}"] + [
+            f"{100 * r['coded_share']:.0f}%" if r["coded_share"] is not None else "– (every view a key)",
+            f"{r['stream_bytes']:,}"] + [
             f"{s.get(f'batch_mpix_t{t}', float('nan')):.1f}" for t in threads] + [
             f"{s['single_p50_us']:.0f}", f"{s['view_mpix']:.1f} ({r['j2k_view_mpix']:.1f})",
             f"{s['all_s_t1']:.2f} s ({s['all_vs_j2k_t1']:.2f}×)" if "all_s_t1" in s else "–"]) + " |")
@@ -125,6 +127,7 @@ def main(argv=None) -> int:
     ap.add_argument("--single", type=int, default=400)
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--out", required=True)
+    ap.add_argument("--remeasure", action="store_true", help="measure targets whose OUT/T<T>/decode.json exists again")
     a = ap.parse_args(argv)
     out = Path(a.out)
     files = Path(a.files) if a.files else out / "files"
@@ -139,9 +142,11 @@ def main(argv=None) -> int:
             reps[g] = encode(data, g, t, p)
             paths.append(p)
         tdir = out / f"T{t:g}"
-        bench_decode.main([*map(str, paths), "--data", str(data), "--rounds", str(a.rounds), "--batch", str(a.batch),
-                           "--single", str(a.single), "--threads", a.threads, "--out", str(tdir)])
-        res = json.loads((tdir / "decode.json").read_text())["results"]
+        done = tdir / "decode.json"
+        if a.remeasure or not done.exists() or set(a.grids) - set(json.loads(done.read_text())["results"]):
+            bench_decode.main([*map(str, paths), "--data", str(data), "--rounds", str(a.rounds), "--batch",
+                               str(a.batch), "--single", str(a.single), "--threads", a.threads, "--out", str(tdir)])
+        res = json.loads(done.read_text())["results"]
         for g, p in zip(a.grids, paths):
             r, rep = res[g], reps[g]
             px = r["new"]["view_mpix"] * 1e6 * r["new"]["view_ms"] / 1e3          # pixels of one view

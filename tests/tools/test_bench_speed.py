@@ -105,6 +105,6 @@ def test_bench_rate_speed_reports_a_curve_per_grid(tmp_path, monkeypatch):
     assert lo["psnr"] >= 34 and hi["psnr"] >= 44 and hi["bpp"] > lo["bpp"]
     assert hi["j2k_bytes"] > lo["j2k_bytes"]                 # each file's own peer, at its own PSNR
     for r in rows:
-        assert 0 <= r["coded_share"] <= 1 and r["views"] == 9 and r["key_views"] >= 1
+        assert (r["coded_share"] is None or 0 <= r["coded_share"] <= 1) and r["views"] == 9 and r["key_views"] >= 1
         assert r["speed"]["batch_mpix_t1"] > 0 and r["j2k_view_mpix"] > 0
     assert "| tiny | 44 |" in (out / "rate_speed.md").read_text()
