@@ -456,6 +456,43 @@ def test_lambda_trim_spends_a_psnr_margin_between_quantizer_steps():
     assert T._trim_lambda(enc, res, ps - 0.5 * T.TRIM_DB, None, []) is res
 
 
+class _SteepEncoder:
+    """Stands in for TxEncoder in the rate search's last steps: PSNR falls 7 dB per octave of
+    the step (hci_antinous at 36 dB, where the prior slope says 2.5), steps on the 1/16 grid."""
+
+    def __init__(self):
+        self.runs = []
+
+    def grid_step(self, step):
+        return round(step * 16) / 16
+
+    def model_of(self, r):
+        return None
+
+    def run(self, step, model, progress=None, keep_pixels=False):
+        self.runs.append(step)
+        return {"step": step}
+
+    def psnr(self, r):
+        return 38.46 - 7.0 * math.log2(r["step"] / 61.68)
+
+
+def test_close_in_takes_the_largest_step_that_meets_the_target_between_two_full_passes():
+    """The sampled search's step missed on every view (34.6 dB at step 90.6), the prior slope's
+    finer step overshot (38.5 dB at 61.7): the secant between the two full passes closes in."""
+    import rlfc.txencode as T
+
+    enc, trace = _SteepEncoder(), []
+    res = T._close_in(enc, {"step": 61.68}, (math.log2(90.625), 34.63), 36.0, None, trace)
+    assert 36.0 <= enc.psnr(res) <= 36.0 + T.TRIM_DB and res["step"] > 61.68
+    assert len(enc.runs) <= T.CLOSE_TRIES and len(trace) == len(enc.runs)
+    assert all(61.68 < s < 90.625 and s == enc.grid_step(s) for s in enc.runs)
+    # within TRIM_DB of the target already: nothing to do
+    enc2 = _SteepEncoder()
+    ok = {"step": 61.68 * 2 ** ((38.46 - 36.05) / 7.0)}
+    assert T._close_in(enc2, ok, (math.log2(90.625), 34.63), 36.0, None, []) is ok and not enc2.runs
+
+
 def test_ablate_switches_decode_the_closed_loop_and_are_recorded():
     """Each lever ``tools/ablation_tx.py`` turns off gives a valid file: it decodes to the
     encoder's closed loop, records what was turned off, and changes what the lever decides."""
