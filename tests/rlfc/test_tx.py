@@ -640,6 +640,30 @@ def test_a_rerun_codes_the_same_jpeg2000_key_views():
     assert all((a.modes == b.modes).all() and (a.lv == b.lv).all() for a, b in zip(first["codes"], again["codes"]))
 
 
+def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
+    """A pass whose intra key is JPEG 2000 has no symbols of its own in the intra contexts; the
+    next pass's model counts the key's transform trial there (not the file's tables: the pack
+    counts the streams it writes), so the next trial of the intra key is decided with real costs."""
+    import rlfc.txencode as T
+    from formats.scenes import read_scene
+    from rlfc.txsyntax import ctx_mode
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    res = enc.run(2.5, T.Model(T.default_counts()))
+    k = enc.s.keys[0]
+    assert enc.intra[k] and k in res["keyimg"] and k not in enc.coded_keys(res)
+    tc = res["trial_counts"]
+    rows = [ctx_mode(1, p) for p in range(4)]                      # the intra key's mode contexts
+    assert tc[rows].sum() == enc.nby * enc.nbx * enc.nt              # one mode symbol per tb of the key
+    assert enc.counts_of(res)[rows].sum() == 0                      # the file has none there
+    m = enc.model_of(res)
+    bare = T.Model(enc.counts_of(res) + T.default_counts() * 1e-3)
+    assert not np.allclose(m.mode[1], bare.mode[1]) and np.allclose(m.mode[0], bare.mode[0])
+    cfg, secs = enc.pack(res)                                       # tables from the streams only
+    assert secs == enc.pack({**res, "trial_counts": None})[1]
+
+
 def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
     """The packer codes several parts (key views' row streams, chunks of blocks) in one rANS call
     up to PACK_CELLS; every lane's bytes are its own, so the file is the same as part by part."""
