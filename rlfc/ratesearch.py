@@ -57,6 +57,7 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
     best = None                        # (q, result) preferred feasible
     closest = None                     # (|value - target|, q, result) when nothing is feasible
     width_before = [float("inf"), float("inf")]
+    extended = 0                       # steps taken past the points seen, without a bracket
     snap = snap or (lambda q: q)
 
     def seen(q):
@@ -105,6 +106,7 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
             width_before = [width, width_before[0]]
             if not a < qn < b or stalled:
                 qn = (a + b) / 2
+        want = qn                                          # (unclamped: its side of the nearest point)
         raw = min(max(qn, lo), hi)
         qn = snap(raw)
         if seen(qn):                                       # the grid point is known already
@@ -116,9 +118,18 @@ def secant_search(evaluate: Callable[[float], tuple[float, Any]], q0: float, tar
                     if not qn < b - 1e-9 or seen(qn):
                         break                              # no grid point inside the bracket
             else:
-                qn = next_point(near[0][0], 1 if raw >= near[0][0] else -1)
-                if seen(qn):
-                    break                                  # nothing new to learn (at a bound)
+                # no bracket yet: step past every point seen on that side, by the prior slope's
+                # jump, doubled each time (points near the target can disagree by their noise:
+                # the secant alone would stop there as if at a bound)
+                d = 1 if want >= near[0][0] else -1
+                ext = max(p[0] for p in pts) if d > 0 else min(p[0] for p in pts)
+                jump = max(abs(aim - near[0][1]) / abs(slope0), min_width) * 2.0 ** extended
+                extended += 1
+                qn = snap(min(max(ext + d * jump, lo), hi))
+                if seen(qn) or (qn - ext) * d <= 1e-9:
+                    qn = next_point(ext, d)
+                    if seen(qn):
+                        break                              # nothing new to learn (at a bound)
         q = qn
     if best is not None:
         return SearchResult(True, best[0], best[1], pts)

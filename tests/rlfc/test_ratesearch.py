@@ -92,3 +92,22 @@ def test_snapped_search_moves_off_a_known_point_without_a_bracket():
     r = secant_search(f, 3.0, 40.0, feasible_above=True, slope0=-2.5, lo=0, hi=9, tol=0.03, snap=snap)
     assert calls[:2] == [16, 15]               # the secant's step (0.008 octave) snaps back to 16
     assert r.found and round(2.0 ** r.q / unit) == 15
+
+
+def test_points_that_disagree_near_the_target_do_not_end_the_search():
+    """The bundled dino_crop at 36 dB with a JPEG 2000 key (2026-11-26): steps 58.1, 57.3 and 58.1
+    − 1/16 all gave 35.90–35.97 dB, the finer one lower. The secant through them pointed back at
+    points already seen and the search stopped as if at a bound: "the finest quantizer misses",
+    and the CLI wrote a lossless file of 1.5 MB. Without a bracket it now steps past the points
+    seen, by jumps that double, until it finds a feasible step."""
+    edge = math.log2(56.6)
+    calls = []
+
+    def f(q):                                   # a plateau just under 36 dB above step 56.6
+        calls.append(q)
+        v = 36.02 + 2.5 * (edge - q) if q <= edge else 35.93 + 0.03 * math.sin(400 * q)
+        return v, {"q": q}
+    r = secant_search(f, math.log2(58.125), 36.0, feasible_above=True, slope0=-2.5, lo=0, hi=9, tol=0.03,
+                      snap=_grid(1 / 16))
+    assert r.found and r.q <= edge and f(r.q)[0] >= 36.0
+    assert len(calls) <= 10
