@@ -696,9 +696,10 @@ class TxEncoder:
                 pre = self._code_intra_keys(self.s.keys[1:], thumb16, s16[0], lam_k, model, pix)
             ahead = k in pre
             if ahead:                           # (JPEG 2000 tried there too)
-                thumbs[k], codes[k], img = pre.pop(k)
+                thumbs[k], codes[k], img, tc = pre.pop(k)
                 if img is not None:
                     keyimg[k] = img
+                    trial_counts = tc if trial_counts is None else trial_counts + tc
             elif self.intra[k]:
                 # the thumbnail's step (one per file): exact block means (flat regions need no
                 # residual at all) or the key step (textured views), whichever costs fewer bits
@@ -726,10 +727,13 @@ class TxEncoder:
                     j2k_ref = (size, self._code_psnr(codes[k]))
             elif not self.intra[k] and self.intra_codec == "j2k" and self._j2k_worth_trying(codes[k], j2k_ref):
                 # a predicted key that costs more than coding it alone becomes an intra key
+                trial = codes[k]
                 img, codes[k], _ = self._j2k_view(k, codes[k], 0.0, self.J2K_KEY_SLACK_DB)
                 if img is not None:
                     keyimg[k] = img
                     promoted.append(k)
+                    tc = self._key_counts(k, trial)
+                    trial_counts = tc if trial_counts is None else trial_counts + tc
             if isinstance(kp, KeyAtlas):
                 kp.set(i, codes[k].planes)
             elif keyplanes is not None:
@@ -794,7 +798,8 @@ class TxEncoder:
         """Intra key views ``ks`` after the first (which chose the thumbnail step and the JPEG 2000
         reference), coded as the pass would code them one by one, on a few threads (``keep_pixels``:
         the pass's buffer of decoded views, or None to keep none): view →
-        (thumbnail levels, code, JPEG 2000 codestream or None). A view's JPEG 2000 search with no
+        (thumbnail levels, code, JPEG 2000 codestream or None, symbol counts of the transform
+        trial where JPEG 2000 won, else None). A view's JPEG 2000 search with no
         hint of its own starts from the first view's (one after another, from the previous
         view's: the order threads finish in must not matter)."""
         first = dict(self._j2k_hints.get("last", {}))
@@ -992,7 +997,7 @@ class TxEncoder:
 
     def model_of(self, res: dict) -> Model:
         """The entropy model the next pass decides with: this pass's symbol counts, plus those
-        of the transform trials of intra keys that JPEG 2000 coded. Without them the intra
+        of the transform trials of key views that JPEG 2000 coded. Without them the intra
         contexts had no counts: the next pass's trial of the intra key, with costs from the
         smoothing alone, could code it at a much lower quality, which JPEG 2000 then matched
         (hci_antinous at step 84.9: the intra key 32.3 dB instead of 37.6, every view 2.2 dB
@@ -1074,11 +1079,14 @@ def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_
                     keep_pixels) -> tuple:
     """One intra key view that is not the first of its pass (:meth:`TxEncoder._code_intra_keys`)."""
     lv, code = enc.code_intra(k, thumb16, s16k, lam_k, model, keep_pixels)
-    img = None
+    img = tc = None
     if enc.intra_codec == "j2k":
+        trial = code
         img, code, _ = enc._j2k_view(k, code, len(pack_thumbs(lv[None])), enc.J2K_KEY_SLACK_DB, give_up=True)
+        if img is not None:             # (the next pass's model counts the transform trial)
+            tc = enc._key_counts(k, trial)
     code.planes = None                  # (no view is predicted from it)
-    return lv, code, img
+    return lv, code, img, tc
 
 
 # -- rate control and the profile's encode ---------------------------------------------------------

@@ -644,7 +644,8 @@ def test_a_rerun_codes_the_same_jpeg2000_key_views():
 def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
     """A pass whose intra key is JPEG 2000 has no symbols of its own in the intra contexts; the
     next pass's model counts the key's transform trial there (not the file's tables: the pack
-    counts the streams it writes), so the next trial of the intra key is decided with real costs."""
+    counts the streams it writes), so the next trial of the intra key is decided with real costs.
+    The same holds for predicted keys coded alone as JPEG 2000 and for intra keys coded ahead."""
     import rlfc.txencode as T
     from formats.scenes import read_scene
     from rlfc.txsyntax import ctx_mode
@@ -660,9 +661,18 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
     assert enc.counts_of(res)[rows].sum() == 0                      # the file has none there
     m = enc.model_of(res)
     bare = T.Model(enc.counts_of(res) + T.default_counts() * 1e-3)
-    assert not np.allclose(m.mode[1], bare.mode[1]) and np.allclose(m.mode[0], bare.mode[0])
+    assert not np.allclose(m.mode[1], bare.mode[1])
+    promoted = [v for v in res["promoted"] if not enc.intra[v]]       # predicted keys JPEG 2000 coded alone
+    assert np.allclose(m.mode[0], bare.mode[0]) == (not promoted)
     cfg, secs = enc.pack(res)                                       # tables from the streams only
     assert secs == enc.pack({**res, "trial_counts": None})[1]
+    # intra keys coded ahead on threads (posed captures) hand their trial's counts back too
+    s16 = enc.steps16(2.5)
+    lv, code, img, tc2 = T._intra_key_task(enc, k, res["thumb16"], s16[0], enc.p.lam * (s16[0, 0] / 16) ** 2,
+                                           enc.model_of(res), False)
+    assert (img is None) == (tc2 is None)
+    if img is not None:
+        assert tc2[rows].sum() == enc.nby * enc.nbx * enc.nt
 
 
 def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
