@@ -675,6 +675,35 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
         assert tc2[rows].sum() == enc.nby * enc.nbx * enc.nt
 
 
+def test_the_thumbnail_step_is_chosen_by_distortion_and_bits(monkeypatch):
+    """The first intra key tries two thumbnail steps (exact block means, the key step) and keeps
+    the one of least colour squared error + λ·bits. By bits alone, a model measured at another
+    step picked hci_antinous's coarse thumbnail at 30.4 dB over 36.1 dB at step 120.5."""
+    import rlfc.txencode as T
+    from formats.scenes import read_scene
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "tx"})), None, 10.0, None)
+    real = enc.code_intra
+
+    def coarse_is_cheap_and_bad(k, t16, *a, **kw):      # the key step's thumbnail: no bits, 100x the error
+        lv, c = real(k, t16, *a, **kw)
+        if t16 != 16:
+            c.bits, c.sse = 0.0, c.sse * 100
+        return lv, c
+    monkeypatch.setattr(enc, "code_intra", coarse_is_cheap_and_bad)
+    assert enc.steps16(8.0)[0, 0] != 16
+    assert enc.run(8.0, T.Model(T.default_counts()))["thumb16"] == 16
+
+    def coarse_is_cheap_and_as_good(k, t16, *a, **kw):
+        lv, c = real(k, t16, *a, **kw)
+        if t16 != 16:
+            c.bits = 0.0
+        return lv, c
+    monkeypatch.setattr(enc, "code_intra", coarse_is_cheap_and_as_good)
+    assert enc.run(8.0, T.Model(T.default_counts()))["thumb16"] != 16
+
+
 def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
     """The packer codes several parts (key views' row streams, chunks of blocks) in one rANS call
     up to PACK_CELLS; every lane's bytes are its own, so the file is the same as part by part."""
