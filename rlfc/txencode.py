@@ -275,6 +275,7 @@ class TxEncoder:
         self.intra_codec = ic
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
+        self._map_cost: dict = {}                 # predicted key → bytes of its own map (_map_bytes)
         self._block_means: dict = {}              # intra view → (nby8, nbx8, P) float64 block means
         if progress:
             progress("disparity", 0, None)
@@ -729,10 +730,12 @@ class TxEncoder:
                     trial_counts = tc if trial_counts is None else trial_counts + tc
                 if j2k_ref is None and size is not None:
                     j2k_ref = (size, self._code_psnr(codes[k]))
-            elif not self.intra[k] and self.intra_codec == "j2k" and self._j2k_worth_trying(codes[k], j2k_ref):
-                # a predicted key that costs more than coding it alone becomes an intra key
+            elif (not self.intra[k] and self.intra_codec == "j2k"
+                  and self._j2k_worth_trying(codes[k], j2k_ref, self._map_bytes(k))):
+                # a predicted key that costs more than coding it alone (its streams and the map
+                # that only it uses) becomes an intra key
                 trial = codes[k]
-                img, codes[k], _ = self._j2k_view(k, codes[k], 0.0, self.J2K_KEY_SLACK_DB)
+                img, codes[k], _ = self._j2k_view(k, codes[k], self._map_bytes(k), self.J2K_KEY_SLACK_DB)
                 if img is not None:
                     keyimg[k] = img
                     promoted.append(k)
@@ -862,12 +865,30 @@ class TxEncoder:
         """Colour PSNR (dB) of one coded view."""
         return 10 * math.log10(float(self.peak) ** 2 * code.cnt / max(code.sse, 1e-30))
 
-    def _j2k_worth_trying(self, code: ViewCode, ref: tuple | None) -> bool:
-        """Whether a view coded as ``code`` might be smaller as JPEG 2000, from ``ref`` = (bytes,
-        PSNR) of the run's intra key as JPEG 2000: about twice the bytes per 6 dB."""
+    def _j2k_worth_trying(self, code: ViewCode, ref: tuple | None, extra_bytes: float = 0.0) -> bool:
+        """Whether a view coded as ``code`` (plus ``extra_bytes`` of side information it alone
+        needs) might be smaller as JPEG 2000, from ``ref`` = (bytes, PSNR) of the run's intra key
+        as JPEG 2000: about twice the bytes per 6 dB."""
         if ref is None or code.sse <= 0:
             return False
-        return code.bits / 8 >= self.J2K_TRY_SHARE * ref[0] * 2.0 ** ((self._code_psnr(code) - ref[1]) / 6.0)
+        return code.bits / 8 + extra_bytes >= self.J2K_TRY_SHARE * ref[0] * 2.0 ** ((self._code_psnr(code) - ref[1]) / 6.0)
+
+    def _map_bytes(self, k: int) -> float:
+        """Bytes of the maps section that predicted key k's own map costs (its cell holds k
+        alone: coded alone as JPEG 2000, the key frees it), measured once by packing the maps
+        without it; 0 where the cell has other views."""
+        got = self._map_cost.get(k)
+        if got is None:
+            c = int(self.s.cell[k])
+            got = 0.0
+            if c >= 0 and list(self.s.cell_views[c]) == [k]:
+                shape = (self.nby8, self.nbx8)
+                disp, modes = self.disp.copy(), self.modes.copy()
+                disp[c], modes[c] = self.base, 0
+                got = float(len(pack_maps(self.base, self.disp, self.modes, shape)) -
+                            len(pack_maps(self.base, disp, modes, shape)))
+            self._map_cost[k] = got
+        return got
 
     def promote_views(self, res: dict, limits=None) -> list:
         """Code as JPEG 2000 every view that is not a key view whose transform coding is larger

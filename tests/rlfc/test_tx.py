@@ -675,6 +675,34 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
         assert tc2[rows].sum() == enc.nby * enc.nbx * enc.nt
 
 
+def test_a_predicted_key_weighs_its_own_map_against_jpeg2000():
+    """A predicted key coded alone as JPEG 2000 frees its map (its cell holds it alone): the
+    comparison counts those bytes, measured by packing the maps without it. Left out, an honest
+    estimate of the key's streams kept hci_antinous's vignetted variant's 8 predicted keys and
+    their maps: 0.0203 bpp against 0.0136 with the keys coded alone."""
+    import rlfc.txencode as T
+    from formats.scenes import read_scene
+    from rlfc.txmaps import pack_maps
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    keys = list(enc.s.keys)
+    predicted = [k for k in keys if not enc.intra[k]]
+    other = int(np.flatnonzero(~enc.is_key)[0])
+    assert predicted and enc._map_bytes(keys[0]) == 0 and enc._map_bytes(other) == 0
+    k = predicted[0]
+    c = int(enc.s.cell[k])
+    disp, modes = enc.disp.copy(), enc.modes.copy()
+    disp[c], modes[c] = enc.base, 0
+    shape = (enc.nby8, enc.nbx8)
+    want = len(pack_maps(enc.base, enc.disp, enc.modes, shape)) - len(pack_maps(enc.base, disp, modes, shape))
+    assert enc._map_bytes(k) == want and enc._map_cost[k] == want
+    code = T.ViewCode(np.zeros(1, np.int8), np.zeros(0, np.int64), np.zeros((0, 3, 64), np.int16),
+                      np.zeros(1, bool), None, bits=8000.0, sse=1e6, cnt=1e5)
+    ref = (1250.0, enc._code_psnr(code))                # JPEG 2000 of the intra key: 1 250 bytes there
+    assert not enc._j2k_worth_trying(code, ref) and enc._j2k_worth_trying(code, ref, 200.0)
+
+
 def test_the_thumbnail_step_is_chosen_by_distortion_and_bits(monkeypatch):
     """The first intra key tries two thumbnail steps (exact block means, the key step) and keeps
     the one of least colour squared error + λ·bits. By bits alone, a model measured at another
