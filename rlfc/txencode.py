@@ -691,6 +691,10 @@ class TxEncoder:
         j2k_ref = None                # (bytes, PSNR) of the first intra key as JPEG 2000
         thumb16 = None
         trial_counts = None           # symbols of the transform trials of keys coded as JPEG 2000
+
+        def add_trial(tc):
+            nonlocal trial_counts
+            trial_counts = tc if trial_counts is None else trial_counts + tc
         pre: dict = {}                # intra keys coded ahead, together (every view intra: posed captures)
         for i, k in enumerate(self.s.keys):
             if i == 1 and self.all_intra and len(self.s.keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
@@ -700,7 +704,7 @@ class TxEncoder:
                 thumbs[k], codes[k], img, tc = pre.pop(k)
                 if img is not None:
                     keyimg[k] = img
-                    trial_counts = tc if trial_counts is None else trial_counts + tc
+                    add_trial(tc)
             elif self.intra[k]:
                 # the thumbnail's step (one per file): exact block means (flat regions need no
                 # residual at all) or the key step (textured views), whichever costs less (colour
@@ -726,8 +730,7 @@ class TxEncoder:
                                                      self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None)
                 if img is not None:
                     keyimg[k] = img
-                    tc = self._key_counts(k, trial)
-                    trial_counts = tc if trial_counts is None else trial_counts + tc
+                    add_trial(self._key_symbols(k, trial, True))
                 if j2k_ref is None and size is not None:
                     j2k_ref = (size, self._code_psnr(codes[k]))
             elif (not self.intra[k] and self.intra_codec == "j2k"
@@ -739,8 +742,7 @@ class TxEncoder:
                 if img is not None:
                     keyimg[k] = img
                     promoted.append(k)
-                    tc = self._key_counts(k, trial)
-                    trial_counts = tc if trial_counts is None else trial_counts + tc
+                    add_trial(self._key_symbols(k, trial, True))
             if isinstance(kp, KeyAtlas):
                 kp.set(i, codes[k].planes)
             elif keyplanes is not None:
@@ -970,13 +972,8 @@ class TxEncoder:
         of a high-rate light field never all exist at once. ``counts_only``: each part's symbol
         counts instead (no ordering, no raw bits)."""
         tbi = self._ra_tbs()
-        nrow = self.nbx * self.nt
         for k in self.coded_keys(res):                   # key rows: lanes of nbx·nt tbs
-            c = res["codes"][k]
-            modes = c.modes[tbi].astype(np.int64).reshape(self.nby, nrow)
-            levels = c.levels(tbi.reshape(-1)).reshape(self.nby, nrow, self.P, 64)
-            yield self.nby, block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])),
-                                          np.ones(self.nby, np.int64), self.pcs, counts_only)
+            yield self.nby, self._key_symbols(k, res["codes"][k], counts_only)
         sv, sl = stream_order(self.coded_blocks(res))     # location-major, views ascending
         for a in range(0, sv.size, self.SYMBOL_CHUNK):
             v_, l_ = sv[a:a + self.SYMBOL_CHUNK], sl[a:a + self.SYMBOL_CHUNK]
@@ -990,14 +987,15 @@ class TxEncoder:
             yield v_.size, block_symbols(modes, levels, self.intra[v_].astype(np.int64), np.zeros(v_.size, np.int64),
                                          self.pcs, counts_only)
 
-    def _key_counts(self, k: int, c: ViewCode) -> np.ndarray:
-        """Symbol counts of key view k coded as ``c`` (its row streams)."""
+    def _key_symbols(self, k: int, c: ViewCode, counts_only: bool = False):
+        """The symbols of key view k coded as ``c``: one lane per block row (nbx·nt tbs), as
+        :func:`rlfc.txsyntax.block_symbols` gives them (``counts_only``: their counts)."""
         tbi = self._ra_tbs()
         nrow = self.nbx * self.nt
         modes = c.modes[tbi].astype(np.int64).reshape(self.nby, nrow)
         levels = c.levels(tbi.reshape(-1)).reshape(self.nby, nrow, self.P, 64)
         return block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])), np.ones(self.nby, np.int64),
-                             self.pcs, True)
+                             self.pcs, counts_only)
 
     def counts_of(self, res: dict) -> np.ndarray:
         """(N_CTX, ALPHABET) symbol counts of a run (part by part)."""
@@ -1109,7 +1107,7 @@ def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_
         trial = code
         img, code, _ = enc._j2k_view(k, code, len(pack_thumbs(lv[None])), enc.J2K_KEY_SLACK_DB, give_up=True)
         if img is not None:             # (the next pass's model counts the transform trial)
-            tc = enc._key_counts(k, trial)
+            tc = enc._key_symbols(k, trial, True)
     code.planes = None                  # (no view is predicted from it)
     return lv, code, img, tc
 
