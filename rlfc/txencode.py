@@ -275,7 +275,7 @@ class TxEncoder:
         self.intra_codec = ic
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
-        self._map_cost: dict = {}                 # predicted key → bytes of its own map (_map_bytes)
+        self._map_cost: dict = {}                 # predicted key → bytes of its own map; "all": the section (_map_bytes)
         self._block_means: dict = {}              # intra view → (nby8, nbx8, P) float64 block means
         if progress:
             progress("disparity", 0, None)
@@ -887,8 +887,9 @@ class TxEncoder:
                 shape = (self.nby8, self.nbx8)
                 disp, modes = self.disp.copy(), self.modes.copy()
                 disp[c], modes[c] = self.base, 0
-                got = float(len(pack_maps(self.base, self.disp, self.modes, shape)) -
-                            len(pack_maps(self.base, disp, modes, shape)))
+                if "all" not in self._map_cost:
+                    self._map_cost["all"] = len(pack_maps(self.base, self.disp, self.modes, shape))
+                got = float(self._map_cost["all"] - len(pack_maps(self.base, disp, modes, shape)))
             self._map_cost[k] = got
         return got
 
