@@ -111,7 +111,8 @@ def size_psnr(model, rays, targets, cfg: LfnConfig) -> np.ndarray:
     model.eval()
     out = []
     with torch.no_grad():
-        x, t = torch.as_tensor(rays), torch.as_tensor(targets)
+        dev = next(model.parameters()).device          # the model's device (a GPU where it was trained)
+        x, t = torch.as_tensor(rays).to(dev), torch.as_tensor(targets).to(dev)
         for w in range(cfg.min_neurons, cfg.max_neurons + 1):
             mse = float(((model(x, float(w)) - t) ** 2).mean())
             out.append(10 * math.log10(1 / max(mse, 1e-12)))

@@ -92,12 +92,14 @@ def box_mean_frac(sat: np.ndarray, view, y, x, k) -> np.ndarray:
     return tot / ((y1 - y0) * (x1 - x0))[:, None]
 
 
-def box_mean_frac_torch(sat, view, y, x, k: float):
-    """:func:`box_mean_frac` on torch tensors, one real side ``k`` for all rays (SAT as float64)."""
+def box_mean_frac_torch(sat, view, y, x, k):
+    """:func:`box_mean_frac` on torch tensors (SAT as float64): ``k`` is one real side for all
+    rays, or a float64 tensor (M,) of sides, one per ray."""
     import torch
 
     h, w = sat.shape[1] - 1, sat.shape[2] - 1
-    y0, y1, x0, x1 = _frac_bounds(torch, y.double(), x.double(), max(float(k), 1.0), h, w)
+    k = torch.clamp(k, min=1.0) if torch.is_tensor(k) else max(float(k), 1.0)
+    y0, y1, x0, x1 = _frac_bounds(torch, y.double(), x.double(), k, h, w)
 
     def at(yf, xf):
         i = torch.clamp(torch.floor(yf).long(), max=h - 1)

@@ -34,7 +34,8 @@ class TrainOptions:
 
     Attributes:
         steps: optimizer steps; batch: rays per step (each of the two terms).
-        lr: Adam learning rate (cosine decay to lr/20).
+        lr: Adam learning rate (cosine decay to lr/20 over ``steps``, or over ``time_limit_s``
+            seconds where that ends the run first).
         holdout: every k-th view is held out for evaluation (0 = none); ``train_views`` overrides.
         device: "cpu" or "cuda"; seed: RNG seed; checkpoint: path of a .npz to save/resume.
         checkpoint_every: steps between checkpoints.
@@ -42,6 +43,10 @@ class TrainOptions:
         lod_levels: the random-level term's rays are split into this many groups, each at its
             own level drawn from one of as many equal slices of the width range (stratified), so
             that every step trains levels across the whole range.
+        lod_one_pass: run the random-level term as one pass with a size per ray
+            (:meth:`NestedLFN.forward_lod`, targets boxed per ray) instead of one pass per group:
+            the same loss up to float rounding, fewer and larger kernels (what a GPU wants; on
+            the CPU the per-group passes do fewer multiply-adds). None = on CUDA devices only.
     """
 
     steps: int = 2000
@@ -55,6 +60,7 @@ class TrainOptions:
     lod_weight: float = 1.0
     lod_levels: int = 8
     train_views: list | None = None
+    lod_one_pass: bool | None = None
     time_limit_s: float | None = None
     history: list = field(default_factory=list)
 
@@ -174,10 +180,16 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
     sat_t = torch.from_numpy(sat.astype(np.float64)).to(dev)
     gen = torch.Generator(device=dev)
     gen.manual_seed(opts.seed)
+    one_pass = dev.type == "cuda" if opts.lod_one_pass is None else bool(opts.lod_one_pass)
+    group = torch.arange(opts.batch, device=dev) % opts.lod_levels      # row r of the level term: group r mod K
     t0 = time.perf_counter()
     step = start
     for step in range(start, opts.steps):
-        lr = opts.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * step / max(opts.steps, 1))))
+        # cosine decay over the run: by steps, or by time where a time limit ends the run sooner
+        done = step / max(opts.steps, 1)
+        if opts.time_limit_s:
+            done = max(done, min((time.perf_counter() - t0) / opts.time_limit_s, 1.0))
+        lr = opts.lr * (0.05 + 0.95 * 0.5 * (1 + math.cos(math.pi * done)))
         for gr in opt.param_groups:
             gr["lr"] = lr
         v, y, x = tsampler.sample(opts.batch, gen)
@@ -190,12 +202,19 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
         K = opts.lod_levels
         u = (np.arange(K) + rng.uniform(size=K)) / K
         v2, y2, x2 = tsampler.sample(opts.batch, gen)
-        sq = 0.0
-        for k in range(K):      # strided groups: the sampler returns foreground rays first, then background
-            wlev = float(cfg.min_neurons + u[k] * (cfg.max_neurons - cfg.min_neurons))
-            vk, yk, xk = v2[k::K], y2[k::K], x2[k::K]
-            tgt2 = (box_mean_frac_torch(sat_t, vk, yk, xk, 1.0 / cfg.scale_of(wlev)) / peak).float()
-            sq = sq + ((model(rays[vk, yk, xk], wlev) - tgt2) ** 2).sum()
+        wlevs = [float(cfg.min_neurons + u[k] * (cfg.max_neurons - cfg.min_neurons)) for k in range(K)]
+        if one_pass:            # group k = rows k::K, as below, each row at its group's size
+            lv_host = np.array([[w, 1.0 / cfg.scale_of(w)] for w in wlevs])
+            lv_dev = torch.from_numpy(lv_host).to(dev, non_blocking=False)[group]      # (batch, 2)
+            tgt2 = (box_mean_frac_torch(sat_t, v2, y2, x2, lv_dev[:, 1]) / peak).float()
+            wr = lv_dev[:, 0].float()
+            sq = ((model.forward_lod(rays[v2, y2, x2], wr) - tgt2) ** 2).sum()
+        else:
+            sq = 0.0
+            for k in range(K):  # strided groups: the sampler returns foreground rays first, then background
+                vk, yk, xk = v2[k::K], y2[k::K], x2[k::K]
+                tgt2 = (box_mean_frac_torch(sat_t, vk, yk, xk, 1.0 / cfg.scale_of(wlevs[k])) / peak).float()
+                sq = sq + ((model(rays[vk, yk, xk], wlevs[k]) - tgt2) ** 2).sum()
         loss = loss + opts.lod_weight * sq / (opts.batch * cfg.out_features)
         if occ is not None:
             lab = (tgt[:, 3] > 0).float()
@@ -210,7 +229,7 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
                 progress(step, lv)
         if ck is not None and (step + 1) % opts.checkpoint_every == 0:
             _save(ck, model, occ, opt, step + 1)
-        if opts.time_limit_s and step % 50 == 0 and time.perf_counter() - t0 > opts.time_limit_s:
+        if opts.time_limit_s and time.perf_counter() - t0 > opts.time_limit_s:
             break
     if ck is not None:
         _save(ck, model, occ, opt, step + 1)

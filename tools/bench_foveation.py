@@ -101,10 +101,11 @@ def main(argv=None) -> int:
     ap.add_argument("--outer", type=float, default=0.5)
     ap.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 16])
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--device", default="cpu", help="torch device the networks run on (cpu, cuda)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
-    r = LfnRenderer(open_lfc(a.file), device="cpu")
+    r = LfnRenderer(open_lfc(a.file), device=a.device)
     rows = []
     for v in a.views:
         row, col = divmod(v, r.cols)
@@ -141,7 +142,7 @@ def main(argv=None) -> int:
             res[f"snap_{k}"] = measures(img, t_s)
         log(json.dumps(res))
         rows.append(res)
-    out = {"file": a.file, "machine": machine(), "threads": a.threads, "inner": a.inner, "outer": a.outer,
+    out = {"file": a.file, "machine": machine(), "device": a.device, "threads": a.threads, "inner": a.inner, "outer": a.outer,
            "neurons": [r.cfg.min_neurons, r.neurons], "views": rows}
     if a.out:
         with open(a.out, "w") as f:

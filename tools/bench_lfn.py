@@ -23,7 +23,7 @@ from formats.lfcfile import open_lfc, write_lfc
 from formats.lightfield import LightField
 from tools.common import log
 from lfn_stream import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
-from lfn_stream.evaluate import evaluate, prefix_bytes
+from lfn_stream.evaluate import display_ladder, evaluate, prefix_bytes, sample_rays, size_psnr
 from lfn_stream.pack import step_bytes
 from lfn_stream.rays import view_rays
 
@@ -38,6 +38,14 @@ def load(scene: str, resolution: int, split: str = "train") -> LightField:
 
     lf = read_scene(scene, split=split)
     return resize_lightfield(lf, resolution) if resolution else lf
+
+
+def with_test_views(lf: LightField, test_lf: LightField) -> LightField:
+    """One posed light field of the training views followed by a separate test split's views."""
+    return LightField(views=np.concatenate([lf.views, test_lf.views], 1),
+                      positions=np.concatenate([lf.positions, test_lf.positions], 1),
+                      c2w=np.concatenate([lf.c2w, test_lf.c2w], 1), focal=lf.focal, principal=lf.principal,
+                      layout="posed")
 
 
 def export(lf: LightField, path: str) -> None:
@@ -60,6 +68,8 @@ def main(argv=None) -> int:
     ap.add_argument("--holdout", type=int, default=4)
     ap.add_argument("--test-scene", default=None, help="held-out views from another file (e.g. transforms_test)")
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--lod-levels", type=int, default=TrainOptions.lod_levels,
+                    help="levels trained per step (stratified over the width range)")
     ap.add_argument("--no-single-scale", action="store_true")
     ap.add_argument("--time-limit", type=float, default=None, help="stop each training after this many seconds")
     ap.add_argument("--export", default=None, help="write the (resized) scene as .npz and stop")
@@ -80,7 +90,7 @@ def main(argv=None) -> int:
 
     def fit(lod_weight):
         opts = TrainOptions(steps=a.steps, batch=a.batch, lr=a.lr, holdout=holdout, device=a.device,
-                            lod_weight=lod_weight, time_limit_s=a.time_limit)
+                            lod_weight=lod_weight, time_limit_s=a.time_limit, lod_levels=a.lod_levels)
         t = time.perf_counter()
         m, o, info = train(lf, cfg, opts, progress=lambda s, l: log(f"  step {s} loss {l:.5f}") if s % 1000 == 0 else None)
         info["train_s"] = time.perf_counter() - t
@@ -90,18 +100,20 @@ def main(argv=None) -> int:
     def eval_set(info):
         if test_lf is None:
             return lf, np.asarray(info["test_views"]), np.asarray(info["train_views"]), None
-        both = LightField(views=np.concatenate([lf.views, test_lf.views], 1),
-                          positions=np.concatenate([lf.positions, test_lf.positions], 1),
-                          c2w=np.concatenate([lf.c2w, test_lf.c2w], 1), focal=lf.focal, principal=lf.principal,
-                          layout="posed")
+        both = with_test_views(lf, test_lf)
         n = lf.cols
         return both, np.arange(n, n + test_lf.cols), np.arange(n), both
 
     log("training the continuous-LOD network")
     model, occ, info = fit(1.0)
+    # the display ladder, as `lfcodec train` measures it (training rays; held-out views unseen)
+    rays_d, targets_d = sample_rays(lf, info["train_views"], info["norm"], seed=0)
+    info["display"] = display_ladder(size_psnr(model.to(a.device), rays_d, targets_d, cfg), cfg)
+    model.cpu()
+    ev_lf, test_v, train_v, geom_lf = eval_set(info)
+    info["test_views"] = [int(v) for v in test_v]         # views of the file's geometry (the test split's too)
     config, sections = to_sections(model, occ, info)
     path = out / "lfn.lfc"
-    ev_lf, test_v, train_v, geom_lf = eval_set(info)
     write_lfc(path, CODEC_ID, CODEC_VERSION, config, (geom_lf or lf).geometry(), sections, more=MOVED_KEYS)
     f = open_lfc(path)
     r = LfnRenderer(f, device=a.device)
@@ -113,6 +125,7 @@ def main(argv=None) -> int:
     results["params"] = model.n_params()
     results["delta_bytes_at_max_neurons"] = step_bytes(cfg, cfg.max_neurons - 1)
     results["first_renderable_bytes"] = prefix_bytes(r, float(cfg.min_neurons))   # header + meta + base + occ
+    results["display_ladder"] = info["display"]
     results["lod"] = evaluate(r, ev_lf, test_v, train_v, levels)
     # checks: stream == trained model (fp16), prefix == full file at that level
     x = torch.from_numpy(view_rays(ev_lf, int(test_v[0]), 0.5, info["norm"]["centre"], info["norm"]["radius"]).reshape(-1, 6))

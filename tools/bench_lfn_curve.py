@@ -68,14 +68,19 @@ def main(argv=None) -> int:
     ap.add_argument("scene", help="the scene folder the network was trained on (or a .npz of tools.bench_lfn)")
     ap.add_argument("--scale", type=float, default=0.5, help="display scale relative to the views (default 0.5)")
     ap.add_argument("--views", type=int, default=10, help="held-out views scored (default 10, the first ones)")
+    ap.add_argument("--test-scene", default=None,
+                    help="the separate test split the file's held-out views come from (tools.bench_lfn --test-scene)")
+    ap.add_argument("--device", default="cpu", help="torch device the network runs on (cpu, cuda)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--out", default=None, help="write the results as JSON")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
-    from tools.bench_lfn import load
+    from tools.bench_lfn import load, with_test_views
 
-    r = LfnRenderer(open_lfc(a.file), device="cpu")
+    r = LfnRenderer(open_lfc(a.file), device=a.device)
     lf = load(a.scene, max(r.height, r.width))
+    if a.test_scene:
+        lf = with_test_views(lf, load(a.test_scene, max(r.height, r.width), split="test"))
     if (lf.height, lf.width) != (r.height, r.width):
         raise SystemExit(f"{a.scene}: views are {lf.height}x{lf.width}, the file's {r.height}x{r.width}")
     tr = r.file.full_meta()["config"]["train"]

@@ -451,6 +451,30 @@ def test_stratified_levels_see_foreground_and_background_at_every_size():
     assert all(abs(a - 0.5) < 0.15 for a in alpha), alpha
 
 
+def test_level_term_in_one_pass_is_the_per_group_loss():
+    """lod_one_pass (the GPU default) trains each ray of the level term at its group's size in one
+    forward_lod pass, with per-ray box sides: the same loss as one pass per group, so the same
+    network up to float rounding; and the per-ray box sides equal the scalar ones."""
+    lf = _half_transparent_lf()
+    cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=12, occupancy_neurons=8)
+    runs = []
+    for one in (False, True):
+        opts = TrainOptions(steps=30, batch=512, holdout=0, lod_levels=4, lod_one_pass=one)
+        m, o, _ = train(lf, cfg, opts)
+        runs.append((m, opts.history))
+    (m0, h0), (m1, h1) = runs
+    assert [s for s, _ in h0] == [s for s, _ in h1]
+    assert np.allclose([v for _, v in h0], [v for _, v in h1], rtol=1e-4, atol=1e-6)
+    for a, b in zip(m0.parameters(), m1.parameters()):
+        assert torch.allclose(a, b, atol=1e-4), float((a - b).abs().max())
+    sat = torch.from_numpy(summed_area_table(np.arange(2 * 9 * 7 * 4).reshape(2, 9, 7, 4)).astype(np.float64))
+    v, y, x = torch.tensor([0, 1, 1, 0]), torch.tensor([0, 4, 8, 3]), torch.tensor([6, 2, 0, 3])
+    sides = torch.tensor([1.0, 2.5, 3.75, 0.5], dtype=torch.float64)
+    got = box_mean_frac_torch(sat, v, y, x, sides)
+    for i in range(4):
+        assert torch.allclose(got[i], box_mean_frac_torch(sat, v[i:i + 1], y[i:i + 1], x[i:i + 1], float(sides[i]))[0])
+
+
 def test_display_ladder_and_display_neurons():
     """config.display: sizes that beat every smaller one by the margin (base and full always);
     a renderer shows the largest listed size its bytes reach; a bad ladder is a FormatError."""
