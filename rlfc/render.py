@@ -30,7 +30,28 @@ from .render_ops import make_ops
 ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
 ROBUST_MARGIN = 0.5     # a more detailed disparity candidate must halve the disagreement to win
 ROBUST_STEP = 4         # the choice is made on every 4th pixel (the frame is rendered once, at full size)
+ROBUST_FLOOR = 1e-6     # disagreements (luma variance, planes' units²) below this are 0: a box mean by
+                        # running sums leaves ±1e-16 where the sources agree exactly, and a tie at zero
+                        # must keep the smoother candidate on every backend (numpy/OpenCV and torch)
 
+
+
+def robust_choice(ops, costs):
+    """Index of the chosen candidate per grid point from the candidates' disagreements
+    (``costs``, smoothest candidate first, each (h, w) on ``ops``' arrays): a later candidate
+    replaces the choice where its disagreement is below ROBUST_MARGIN times the best so far.
+    Disagreements below ROBUST_FLOOR count as 0, so exact agreement is a tie that keeps the
+    smoother candidate whatever rounding residue each backend leaves."""
+    best = choice = None
+    for k, cost in enumerate(costs):
+        cost = cost * (cost >= ROBUST_FLOOR)
+        if best is None:
+            best, choice = cost, ops.zeros_int(tuple(cost.shape))
+        else:
+            win = cost < best * ROBUST_MARGIN
+            best = ops.where(win, cost, best)
+            choice[win] = k
+    return choice
 
 class Renderer:
     """Renders views at continuous grid positions from an :class:`rlfc.decoder.RlfcDecoder`.
@@ -283,26 +304,18 @@ class Renderer:
         S = ROBUST_STEP
         full = [ops.const(H, W, float(np.median(blk))), med, disp]
         ys, xs = ops.sub(yy, S), ops.sub(xx, S)
-        best = None
-        choice = None
         subs = [ops.sub(D, S) for D in full]          # every candidate's samples in one call
         allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in full for r, c, _ in src],
                                              [ys + D * float(s - r) for D in subs for r, _, _ in src],
                                              [xs + D * float(t - c) for D in subs for _, c, _ in src]), 0)
         n = len(src)
         ws = [w for _, _, w in src]
+        costs = []
         for k in range(len(full)):
             smp = allsmp[k * n:(k + 1) * n]
             acc = ops.wsum(smp, ws)
-            cost = ops.wsum(ops.sq_dev(smp, acc), ws)
-            cost = ops.blur(cost, max(1, ROBUST_WINDOW // S))
-            if best is None:
-                best, choice = cost, ops.zeros_int(tuple(cost.shape))
-            else:
-                win = cost < best * ROBUST_MARGIN
-                best = ops.where(win, cost, best)
-                choice[win] = k
-        return ops.choose(choice, S, H, W, full)
+            costs.append(ops.blur(ops.wsum(ops.sq_dev(smp, acc), ws), max(1, ROBUST_WINDOW // S)))
+        return ops.choose(robust_choice(ops, costs), S, H, W, full)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
         """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row
