@@ -30,25 +30,34 @@ from .render_ops import make_ops
 ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
 ROBUST_MARGIN = 0.5     # a more detailed disparity candidate must halve the disagreement to win
 ROBUST_STEP = 4         # the choice is made on every 4th pixel (the frame is rendered once, at full size)
+ROBUST_TIE = 1e-4       # relative: a candidate must beat the margin by more than rounding (disagreements
+                        # exactly at the margin, e.g. one of two differing samples gone, are ties)
+SNAP = 1e-9             # views: a camera this close to a row/column of views is on it
 ROBUST_FLOOR = 1e-6     # disagreements (luma variance, planes' units²) below this are 0: a box mean by
                         # running sums leaves ±1e-16 where the sources agree exactly, and a tie at zero
                         # must keep the smoother candidate on every backend (numpy/OpenCV and torch)
 
 
 
+def _snap(f: float) -> float:
+    """A fraction of a view step within SNAP of 0 or 1 is 0 or 1."""
+    return 0.0 if f < SNAP else 1.0 if f > 1.0 - SNAP else f
+
+
 def robust_choice(ops, costs):
     """Index of the chosen candidate per grid point from the candidates' disagreements
     (``costs``, smoothest candidate first, each (h, w) on ``ops``' arrays): a later candidate
-    replaces the choice where its disagreement is below ROBUST_MARGIN times the best so far.
-    Disagreements below ROBUST_FLOOR count as 0, so exact agreement is a tie that keeps the
-    smoother candidate whatever rounding residue each backend leaves."""
+    replaces the choice where its disagreement is below ROBUST_MARGIN times the best so far, by
+    more than ROBUST_TIE (relative). Disagreements below ROBUST_FLOOR count as 0. Exact agreement,
+    and disagreements exactly at the margin, are ties that keep the smoother candidate whatever
+    rounding each backend leaves (numpy/OpenCV and torch round differently)."""
     best = choice = None
     for k, cost in enumerate(costs):
         cost = cost * (cost >= ROBUST_FLOOR)
         if best is None:
             best, choice = cost, ops.zeros_int(tuple(cost.shape))
         else:
-            win = cost < best * ROBUST_MARGIN
+            win = cost < best * (ROBUST_MARGIN * (1 - ROBUST_TIE))
             best = ops.where(win, cost, best)
             choice[win] = k
     return choice
@@ -210,8 +219,10 @@ class Renderer:
             return [(int(i) // C, int(i) % C, float(x)) for i, x in zip(sel, w / w.sum())]
         r0, c0 = int(np.clip(np.floor(s), 0, R - 1)), int(np.clip(np.floor(t), 0, C - 1))
         r1, c1 = min(r0 + 1, R - 1), min(c0 + 1, C - 1)
-        fs = float(np.clip(s - r0, 0, 1)) if r1 > r0 else 0.0
-        ft = float(np.clip(t - c0, 0, 1)) if c1 > c0 else 0.0
+        # a camera within SNAP views of a row or column of views is on it: sources of weight ~1e-16
+        # (cs + r·sin(π)) add nothing a float32 frame can hold, but cost their blocks and samples
+        fs = _snap(float(np.clip(s - r0, 0, 1))) if r1 > r0 else 0.0
+        ft = _snap(float(np.clip(t - c0, 0, 1))) if c1 > c0 else 0.0
         out = {}
         for r, c, w in ((r0, c0, (1 - fs) * (1 - ft)), (r0, c1, (1 - fs) * ft), (r1, c0, fs * (1 - ft)), (r1, c1, fs * ft)):
             if w > 0:
