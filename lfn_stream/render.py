@@ -441,20 +441,30 @@ class LfnRenderer(Decoder):
 
     def render_lod_map(self, row: int, col: int, lod: np.ndarray, quantum: float | None = None,
                        passes: int | None = None) -> np.ndarray:
-        """A full-size view where pixel (y, x) is rendered with ``lod[y, x]`` (fractional) neurons,
-        in at most ``passes`` network passes (:meth:`render_rays_lod`; None: its default);
-        ``quantum`` rounds the sizes first (None: exact). Returns (H, W, 4) float32 RGBA
-        (premultiplied)."""
-        rays = self.view_rays(row, col, 1.0).reshape(-1, 6)
-        lod = np.asarray(lod, np.float64).reshape(-1)
+        """A view where pixel (y, x) is rendered with ``lod[y, x]`` (fractional) neurons, in at
+        most ``passes`` network passes (:meth:`render_rays_lod`; None: its default); ``quantum``
+        rounds the sizes first (None: exact). The view is rendered at the size of ``lod``: the
+        views' (H, W), or any other (h, w) of the same aspect, e.g. a display's (the scale is
+        h / H). Returns (h, w, 4) float32 RGBA (premultiplied)."""
+        lod = np.asarray(lod, np.float64)
+        if lod.ndim != 2 or min(lod.shape) < 1:
+            raise ParameterError(f"lod must be an (h, w) map of sizes, got shape {lod.shape}")
+        h, w = lod.shape
+        scale = h / self.height
+        if (round(self.height * scale), round(self.width * scale)) != (h, w):
+            raise ParameterError(f"a {h}x{w} lod map is not the {self.height}x{self.width} views at one scale")
+        rays = self.view_rays(row, col, scale).reshape(-1, 6)
+        lod = lod.reshape(-1)
         if quantum:
             lod = np.round(lod / quantum) * quantum
-        return self.render_rays_lod(rays, lod, passes).reshape(self.height, self.width, 4)
+        return self.render_rays_lod(rays, lod, passes).reshape(h, w, 4)
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
-                      dither: bool = True, sizes: int = 8, frame: int = 0) -> np.ndarray:
-        """Per-pixel network sizes (H, W) around a gaze point (x, y in pixels): the full network
-        inside ``inner``·diag, falling linearly to the base network at ``outer``·diag.
+                      dither: bool = True, sizes: int = 8, frame: int = 0, scale: float = 1.0) -> np.ndarray:
+        """Per-pixel network sizes (h, w) around a gaze point (x, y in pixels of the map): the full
+        network inside ``inner``·diag, falling linearly to the base network at ``outer``·diag. The
+        map is the views' size times ``scale`` (a display's resolution; :meth:`render_lod_map`
+        renders at the map's size).
 
         - ``dither=True`` (default): each pixel takes one of ``sizes`` integer sizes (evenly
           spaced from the base to the full network): between two of them, the upper where the
@@ -466,7 +476,11 @@ class LfnRenderer(Decoder):
           networks' differences from one size to the next show as faint arcs around the gaze,
           and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.
         """
-        h, w = self.height, self.width
+        if not (isinstance(scale, (int, float, np.integer, np.floating)) and 0 < scale <= 64):
+            raise ParameterError(f"scale must be within (0, 64], got {scale!r}")
+        h, w = round(self.height * scale), round(self.width * scale)
+        if h < 1 or w < 1:
+            raise ParameterError(f"scale {scale} leaves no pixels of the {self.height}x{self.width} views")
         ys, xs = np.mgrid[0:h, 0:w] + 0.5
         diag = float(np.hypot(h, w))
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / diag

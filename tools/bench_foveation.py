@@ -102,6 +102,8 @@ def main(argv=None) -> int:
     ap.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 16])
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--device", default="cpu", help="torch device the networks run on (cpu, cuda)")
+    ap.add_argument("--scale", type=float, default=1.0,
+                    help="render at this multiple of the views' size (a display's resolution)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
@@ -109,13 +111,14 @@ def main(argv=None) -> int:
     rows = []
     for v in a.views:
         row, col = divmod(v, r.cols)
-        gaze = (r.width * 0.5, r.height * 0.5)
-        ys, xs = np.mgrid[0:r.height, 0:r.width] + 0.5
-        e = np.hypot(xs - gaze[0], ys - gaze[1]) / float(np.hypot(r.height, r.width))
+        H, W = round(r.height * a.scale), round(r.width * a.scale)
+        gaze = (W * 0.5, H * 0.5)
+        ys, xs = np.mgrid[0:H, 0:W] + 0.5
+        e = np.hypot(xs - gaze[0], ys - gaze[1]) / float(np.hypot(H, W))
         fovea, band = e < a.inner, (e >= a.inner) & (e <= a.outer)
         radius, angle = np.hypot(xs - gaze[0], ys - gaze[1]), np.arctan2(ys - gaze[1], xs - gaze[0])
-        t_full, full = timed(lambda: r.render(row, col, r.neurons, 1.0), a.rounds)
-        exact_map = r.foveation_map(gaze, a.inner, a.outer, dither=False)
+        t_full, full = timed(lambda: r.render(row, col, r.neurons, a.scale), a.rounds)
+        exact_map = r.foveation_map(gaze, a.inner, a.outer, dither=False, scale=a.scale)
         t_ex, exact = timed(lambda: r.render_lod_map(row, col, exact_map), a.rounds)
 
         def measures(img, ms, frames=None):
@@ -127,14 +130,15 @@ def main(argv=None) -> int:
                 m["frames4_psnr"] = round(psnr_in(np.mean(frames, 0), full, band), 2)
             return m
 
-        res = {"view": v, "pixels": r.height * r.width, "full_ms": round(t_full, 1),
+        res = {"view": v, "pixels": H * W, "full_ms": round(t_full, 1),
                "mean_neurons": round(float(exact_map.mean()), 2), "exact": measures(exact, t_ex)}
         lo, hi = r.neuron_range
         for k in a.sizes:
-            dmap = r.foveation_map(gaze, a.inner, a.outer, dither=True, sizes=k)
+            dmap = r.foveation_map(gaze, a.inner, a.outer, dither=True, sizes=k, scale=a.scale)
             t_d, img = timed(lambda: r.render_lod_map(row, col, dmap), a.rounds)
             frames = [img] + [r.render_lod_map(row, col, r.foveation_map(gaze, a.inner, a.outer, dither=True,
-                                                                         sizes=k, frame=f)) for f in (1, 2, 3)]
+                                                                         sizes=k, frame=f, scale=a.scale))
+                      for f in (1, 2, 3)]
             res[f"dither_{k}"] = measures(img, t_d, frames)
             levels = size_levels(lo, hi, k)
             smap = levels[np.abs(exact_map[..., None] - levels).argmin(-1)]
@@ -142,7 +146,7 @@ def main(argv=None) -> int:
             res[f"snap_{k}"] = measures(img, t_s)
         log(json.dumps(res))
         rows.append(res)
-    out = {"file": a.file, "machine": machine(), "device": a.device, "threads": a.threads, "inner": a.inner, "outer": a.outer,
+    out = {"file": a.file, "machine": machine(), "device": a.device, "scale": a.scale, "threads": a.threads, "inner": a.inner, "outer": a.outer,
            "neurons": [r.cfg.min_neurons, r.neurons], "views": rows}
     if a.out:
         with open(a.out, "w") as f:

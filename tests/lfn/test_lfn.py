@@ -298,6 +298,20 @@ def test_occupancy_really_skips_rays_and_lod_maps():
     n0 = r.rays_evaluated
     r.render_lod_map(0, 0, fov)
     assert 0 < r.rays_evaluated - n0 < rays.shape[0]        # the occupancy net skips rays here too
+    # at a display's resolution: a map at 2x the views renders the view at scale 2, pixel for pixel
+    big = r.foveation_map((16, 16), inner=0.05, outer=0.6, dither=True, sizes=3, scale=2.0)
+    assert big.shape == (32, 32) and big[16, 16] == 12
+    img = r.render_lod_map(0, 0, big).reshape(-1, 4)
+    rays2 = r.view_rays(0, 0, 2.0).reshape(-1, 6)
+    for n in (4.0, 8.0, 12.0):
+        sel = big.reshape(-1) == n
+        assert np.allclose(img[sel], r.render_rays(rays2[sel], n), atol=2e-6), n
+    for bad in (np.full((16, 15), 8.0), np.full(256, 8.0)):
+        with pytest.raises(ParameterError):
+            r.render_lod_map(0, 0, bad)
+    for bad in (0.0, -1.0, float("nan"), 1e9):
+        with pytest.raises(ParameterError):
+            r.foveation_map((8, 8), scale=bad)
     with pytest.raises(ParameterError):
         r.render_rays_lod(rays, np.full(rays.shape[0] - 1, 8.0))
 
