@@ -38,7 +38,6 @@ ROBUST_FLOOR = 1e-6     # disagreements (luma variance, planes' units²) below t
                         # must keep the smoother candidate on every backend (numpy/OpenCV and torch)
 
 
-
 def _snap(f: float) -> float:
     """A fraction of a view step within SNAP of 0 or 1 is 0 or 1."""
     return 0.0 if f < SNAP else 1.0 if f > 1.0 - SNAP else f
@@ -61,6 +60,7 @@ def robust_choice(ops, costs):
             best = ops.where(win, cost, best)
             choice[win] = k
     return choice
+
 
 class Renderer:
     """Renders views at continuous grid positions from an :class:`rlfc.decoder.RlfcDecoder`.

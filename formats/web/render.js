@@ -78,7 +78,9 @@ export class Renderer {
     const clip = (v, lo, hi) => Math.min(Math.max(v, lo), hi);
     const r0 = clip(Math.floor(s), 0, R - 1), c0 = clip(Math.floor(t), 0, C - 1);
     const r1 = Math.min(r0 + 1, R - 1), c1 = Math.min(c0 + 1, C - 1);
-    const fs = r1 > r0 ? clip(s - r0, 0, 1) : 0, ft = c1 > c0 ? clip(t - c0, 0, 1) : 0;
+    // a camera within 1e-9 views of a row or column of views is on it (rlfc.render.SNAP)
+    const snap = (f) => (f < 1e-9 ? 0 : f > 1 - 1e-9 ? 1 : f);
+    const fs = r1 > r0 ? snap(clip(s - r0, 0, 1)) : 0, ft = c1 > c0 ? snap(clip(t - c0, 0, 1)) : 0;
     const out = new Map();
     for (const [r, c, w] of [[r0, c0, (1 - fs) * (1 - ft)], [r0, c1, (1 - fs) * ft], [r1, c0, fs * (1 - ft)], [r1, c1, fs * ft]]) {
       if (w > 0) out.set(r * C + c, (out.get(r * C + c) || 0) + w);
@@ -160,7 +162,8 @@ export class Renderer {
   /** (H·W) disparities: per pixel the most photo-consistent of three candidates, smoothest
    *  first (the frame's median disparity, the map's 5×5-block median, the map), chosen on every
    *  4th pixel by the weighted variance of the sources' luma around their blend, box-averaged
-   *  over 4×4 grid points; a later candidate wins where its cost is below half the best so far.
+   *  over 4×4 grid points; a later candidate wins where its cost is below half the best so far
+   *  (by more than 1e-4 relative; costs below 1e-6 count as 0).
    *  The method and constants of rlfc.render.Renderer._consistent. */
   _consistent(s, t, src, imgs, disp) {
     const d = this.d, H = d.H, W = d.W, S = 4, f32 = Math.fround;
@@ -216,9 +219,13 @@ export class Renderer {
           blurred[i * gw + j] = f32(sum / 16);
         }
       }
+      // rlfc.render.robust_choice: below ROBUST_FLOOR is 0; a later candidate must beat the margin
+      // by more than ROBUST_TIE (exact agreement and exactly half are ties: the smoother stays)
+      const floor = f32(1e-6), margin = f32(0.5 * (1 - 1e-4));
       for (let i = 0; i < G; i++) {
-        if (k === 0) best[i] = blurred[i];
-        else if (blurred[i] < f32(best[i] * 0.5)) { best[i] = blurred[i]; choice[i] = k; }
+        const c = blurred[i] >= floor ? blurred[i] : 0;
+        if (k === 0) best[i] = c;
+        else if (c < f32(best[i] * margin)) { best[i] = c; choice[i] = k; }
       }
     });
     const out = new Float32Array(H * W);
