@@ -711,8 +711,16 @@ def _add_scene_options(e) -> None:
     e.add_argument("--quiet", action="store_true", help="no progress bars or messages")
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line errors: a bad value prints ``lfcodec CMD: error: …`` and exits with
+    2, without the usage block (``--help`` shows it); sub-commands' parsers are of this class."""
+
+    def error(self, message):
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="lfcodec", description="Light-field compression: encode, decode and inspect .lfc files.")
+    p = _Parser(prog="lfcodec", description="Light-field compression: encode, decode and inspect .lfc files.")
     p.add_argument("--version", action="version", version=f"lfcodec {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
 

@@ -55,7 +55,7 @@ NET_KEYS = ("depth", "min_neurons", "max_neurons", "occupancy_neurons")
 TRAIN_KEYS = ("steps", "batch", "lr", "holdout", "device", "checkpoint", "time_limit_s", "lod_levels")
 OPTIONS = {"tiles": int, "tile_band": float, "depth": int, "min_neurons": int, "max_neurons": int,
            "occupancy_neurons": int, "steps": int, "batch": int, "lr": float, "holdout": int, "device": str,
-           "checkpoint": str, "weights": str, "resolution": int, "lod_levels": int}
+           "checkpoint": str, "weights": str, "resolution": int, "lod_levels": int, "time_limit_s": float}
 
 
 def _setup(lf, p: dict):
@@ -223,6 +223,9 @@ class LfnCodec(Codec):
         g.add_argument("--occupancy-neurons", type=int, default=None,
                        help="lfn: occupancy net size, used when the scene has alpha (default 32; 0 = none)")
         g.add_argument("--steps", type=int, default=None, help="lfn: optimizer steps (default 2000)")
+        g.add_argument("--time-limit", dest="time_limit_s", type=float, default=None, metavar="SECONDS",
+                       help="lfn: stop training after this many seconds (the learning-rate schedule then runs "
+                            "over that time; --steps still caps the steps)")
         g.add_argument("--batch", type=int, default=None, help="lfn: rays per step (default 4096)")
         g.add_argument("--lr", type=float, default=None, help="lfn: Adam learning rate (default 0.003)")
         g.add_argument("--lod-levels", type=int, default=None,

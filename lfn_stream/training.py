@@ -234,5 +234,6 @@ def train(lf: LightField, cfg: LfnConfig, opts: TrainOptions, progress=None):
     if ck is not None:
         _save(ck, model, occ, opt, step + 1)
     info = {"norm": {"centre": centre, "radius": radius}, "train_views": train_v.tolist(),
-            "test_views": test_v.tolist(), "steps": step + 1, "train_s": time.perf_counter() - t0}
+            "test_views": test_v.tolist(), "steps": step + 1, "train_s": time.perf_counter() - t0,
+            "lr_end": opt.param_groups[0]["lr"]}
     return model.cpu(), (occ.cpu() if occ is not None else None), info

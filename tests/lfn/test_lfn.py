@@ -415,13 +415,33 @@ def test_training_learns_the_sample_scene():
 
 @pytest.mark.parametrize("args,needle", [
     (["--device", "gpu"], "--device"), (["--steps", "0"], "--steps"), (["--lr", "-1"], "--lr"),
-    (["--batch", "0"], "--batch"), (["--max-neurons", "0"], "max_neurons")])
+    (["--batch", "0"], "--batch"), (["--max-neurons", "0"], "max_neurons"), (["--time-limit", "0"], "time limit"),
+    (["--time-limit", "nan"], "time limit")])
 def test_train_bad_options_are_one_line_errors(tmp_path, capsys, args, needle):
     from formats.cli import main
 
     assert main(["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "n.lfc"), "--quiet"] + args) == 2
     err = capsys.readouterr().err
     assert needle in err and err.count("\n") == 1 and "Traceback" not in err
+
+
+def test_time_limit_ends_training_and_its_schedule(tmp_path, capsys):
+    """--time-limit stops training by time, and the cosine schedule runs over that time (a run
+    stopped early at a high learning rate is what a time limit used to give)."""
+    lf = smooth_lf(rows=2, cols=3, h=12, w=12)
+    cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=8, occupancy_neurons=0)
+    _, _, info = train(lf, cfg, TrainOptions(steps=10 ** 7, batch=256, holdout=0, time_limit_s=0.5, lr=0.01))
+    assert info["steps"] < 10 ** 7 and info["lr_end"] < 0.1 * 0.01
+    _, _, info = train(lf, cfg, TrainOptions(steps=40, batch=256, holdout=0, lr=0.01))
+    assert info["steps"] == 40 and info["lr_end"] < 0.1 * 0.01          # by steps, as before
+    from formats.cli import main
+
+    out = tmp_path / "t.lfc"
+    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(out), "--quiet", "--json", "--depth", "2",
+                 "--min-neurons", "4", "--max-neurons", "8", "--resolution", "16", "--steps", "10000000",
+                 "--time-limit", "0.5"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert out.exists() and rep["steps"] < 10 ** 7, rep
 
 
 def test_train_refuses_a_file_that_is_not_a_checkpoint_and_cuda_without_gpu(tmp_path, capsys):
