@@ -19,7 +19,6 @@ Usage:
 from __future__ import annotations
 
 import argparse
-import json
 import math
 
 import numpy as np
@@ -30,7 +29,7 @@ from lfn_stream import LfnRenderer
 from lfn_stream.evaluate import prefix_bytes
 from lfn_stream.sat import area_downsample
 from lfn_stream.training import targets_of
-from tools.common import log, machine
+from tools.common import log, machine, write_json
 
 
 def curve(r: LfnRenderer, lf, views, scale: float) -> np.ndarray:
@@ -99,9 +98,7 @@ def main(argv=None) -> int:
         s = res[k]
         print(f"| {k} | {s['drops_over_0.1dB']} of {len(raw) - 1} | {s['worst_drop_db']:.2f} dB | "
               f"{s['mean_psnr']:.2f} | {s['first_psnr']:.2f} → {s['last_psnr']:.2f} |")
-    if a.out:
-        with open(a.out, "w") as f:
-            json.dump(res, f, indent=1)
+    write_json(a.out, res)
     return 0
 
 

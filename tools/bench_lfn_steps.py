@@ -18,7 +18,7 @@ import torch
 
 from lfn_stream import LfnConfig, TrainOptions, train
 from tools.bench_lfn import load
-from tools.common import log, machine
+from tools.common import log, machine, write_json
 
 
 def main(argv=None) -> int:
@@ -48,9 +48,7 @@ def main(argv=None) -> int:
                        "steps_per_s": round(info["steps"] / info["train_s"], 2)}
                 res["runs"].append(row)
                 log(json.dumps(row))
-    if a.out:
-        with open(a.out, "w") as f:
-            json.dump(res, f, indent=1)
+    write_json(a.out, res)
     return 0
 
 

@@ -40,6 +40,15 @@ def median_time_result(fn, repeats: int = 3):
     return statistics.median(ts), out
 
 
+def write_json(path, obj) -> None:
+    """Write a benchmark's results as indented JSON to ``path`` (nothing when path is None)."""
+    import json
+
+    if path:
+        with open(path, "w") as f:
+            json.dump(obj, f, indent=1)
+
+
 def machine() -> str:
     """CPU model, cores and library versions, for the header of every table."""
     cpu = "unknown CPU"
