@@ -97,13 +97,11 @@ def finish_network(full, lf, model, occ, info: dict, opts, weights: str, progres
         progress("display ladder", 0, 1)
     # measured on training rays: held-out views stay unseen for evaluation (measuring on half of them
     # instead gave no fewer drops on the other half; BENCHMARKS.md)
-    from .evaluate import display_ladder, sample_rays, size_psnr
+    from .evaluate import measure_display_ladder
 
-    rays, targets = sample_rays(lf, info["train_views"], info["norm"], seed=opts.seed)
     # on the training device (every size of the network on 16 384 rays: seconds on a CPU for
     # a large network, milliseconds on a GPU)
-    info["display"] = display_ladder(size_psnr(model.to(opts.device), rays, targets, model.cfg), model.cfg)
-    model.cpu()
+    info["display"] = measure_display_ladder(model, lf, info["train_views"], info["norm"], opts.seed, opts.device)
     config, sections = to_sections(model, occ, info, weights)
     summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
                "display_sizes": len(info["display"]),

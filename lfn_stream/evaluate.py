@@ -119,6 +119,18 @@ def size_psnr(model, rays, targets, cfg: LfnConfig) -> np.ndarray:
     return np.asarray(out)
 
 
+def measure_display_ladder(model, lf: LightField, train_views, norm: dict, seed: int = 0,
+                           device: str = "cpu") -> list[int]:
+    """The display ladder of a trained network (:func:`display_ladder`), measured on
+    DISPLAY_RAYS rays of its training views (held-out views stay unseen) on ``device``; the
+    model is left on the CPU."""
+    rays, targets = sample_rays(lf, train_views, norm, seed=seed)
+    try:
+        return display_ladder(size_psnr(model.to(device), rays, targets, model.cfg), model.cfg)
+    finally:
+        model.cpu()
+
+
 def display_ladder(psnr: np.ndarray, cfg: LfnConfig, margin_db: float = DISPLAY_MARGIN_DB) -> list[int]:
     """The sizes worth displaying: the base size, then each size whose PSNR beats every smaller
     listed size's by ``margin_db``, and the full size (the whole file shows the whole network).

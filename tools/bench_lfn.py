@@ -23,7 +23,7 @@ from formats.lfcfile import open_lfc, write_lfc
 from formats.lightfield import LightField
 from tools.common import log
 from lfn_stream import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
-from lfn_stream.evaluate import display_ladder, evaluate, prefix_bytes, sample_rays, size_psnr
+from lfn_stream.evaluate import evaluate, measure_display_ladder, prefix_bytes
 from lfn_stream.pack import step_bytes
 from lfn_stream.rays import view_rays
 
@@ -107,9 +107,7 @@ def main(argv=None) -> int:
     log("training the continuous-LOD network")
     model, occ, info = fit(1.0)
     # the display ladder, as `lfcodec train` measures it (training rays; held-out views unseen)
-    rays_d, targets_d = sample_rays(lf, info["train_views"], info["norm"], seed=0)
-    info["display"] = display_ladder(size_psnr(model.to(a.device), rays_d, targets_d, cfg), cfg)
-    model.cpu()
+    info["display"] = measure_display_ladder(model, lf, info["train_views"], info["norm"], 0, a.device)
     ev_lf, test_v, train_v, geom_lf = eval_set(info)
     info["test_views"] = [int(v) for v in test_v]         # views of the file's geometry (the test split's too)
     config, sections = to_sections(model, occ, info)
