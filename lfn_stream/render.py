@@ -450,6 +450,8 @@ class LfnRenderer(Decoder):
         if lod.ndim != 2 or min(lod.shape) < 1:
             raise ParameterError(f"lod must be an (h, w) map of sizes, got shape {lod.shape}")
         h, w = lod.shape
+        if h * w > self._limits.max_view_pixels:
+            raise ParameterError(f"a {h}x{w} lod map is over the {self._limits.max_view_pixels} pixels a view may have")
         scale = h / self.height
         if (round(self.height * scale), round(self.width * scale)) != (h, w):
             raise ParameterError(f"a {h}x{w} lod map is not the {self.height}x{self.width} views at one scale")
@@ -481,6 +483,9 @@ class LfnRenderer(Decoder):
         h, w = round(self.height * scale), round(self.width * scale)
         if h < 1 or w < 1:
             raise ParameterError(f"scale {scale} leaves no pixels of the {self.height}x{self.width} views")
+        if h * w > self._limits.max_view_pixels:
+            raise ParameterError(f"scale {scale} makes a {h}x{w} map, over the {self._limits.max_view_pixels} pixels "
+                                 f"a view may have (Limits.max_view_pixels)")
         ys, xs = np.mgrid[0:h, 0:w] + 0.5
         diag = float(np.hypot(h, w))
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / diag

@@ -312,6 +312,14 @@ def test_occupancy_really_skips_rays_and_lod_maps():
     for bad in (0.0, -1.0, float("nan"), 1e9):
         with pytest.raises(ParameterError):
             r.foveation_map((8, 8), scale=bad)
+    from formats.limits import Limits
+
+    small = LfnRenderer(r.file, device="cpu", limits=Limits(max_view_pixels=32 * 32))
+    assert small.foveation_map((16, 16), scale=2.0).shape == (32, 32)      # at the cap: allowed
+    with pytest.raises(ParameterError, match="max_view_pixels"):
+        small.foveation_map((16, 16), scale=2.1)
+    with pytest.raises(ParameterError):
+        small.render_lod_map(0, 0, np.full((48, 48), 8.0))
     with pytest.raises(ParameterError):
         r.render_rays_lod(rays, np.full(rays.shape[0] - 1, 8.0))
 
