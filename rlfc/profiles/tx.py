@@ -671,6 +671,34 @@ class TorchTx:
         self.keyplanes = self.xp.asarray(dec.keyplanes)
         self.flat = self.xp.asarray(dec.flat)
         self.lo, self.hi = self.xp.asarray(dec.lo), self.xp.asarray(dec.hi)
+        # the request bookkeeping of TxDecoder._pred runs on the device, from these tables (the
+        # host's numpy indexing over every 8×8 block of a call was most of a batched GPU decode)
+        lay = dec.lay
+        r0 = lay.refs.clip(0)
+        A = self.xp.asarray
+        self.cell, self.disp, self.modes, self.wmode = A(lay.cell), A(dec.disp), A(dec.modes), A(dec.wmode)
+        self.slots = A(dec.key_slot[r0].clip(0))                                    # (views, R)
+        self.dpos = A(lay.positions[:, None, :] - lay.positions[r0])                # (views, R, 2)
+
+    def _pred(self, v, locs):
+        """As :meth:`TxDecoder._pred` of :meth:`TxDecoder._tb_coords`: ``v``, ``locs`` (n,) int64
+        device tensors of requests → (n·nt, 8, 8, P) int32, the same integers."""
+        import torch
+
+        d = self.d
+        nt, tpb = d.nt, d.tpb
+        by, bx = torch.div(locs, d.nbx, rounding_mode="floor"), locs % d.nbx
+        t = torch.arange(nt, device=locs.device)
+        ty = (by[:, None] * tpb + t // tpb).reshape(-1)
+        tx = (bx[:, None] * tpb + t % tpb).reshape(-1)
+        tv = v.repeat_interleave(nt)
+        cell = self.cell[tv]
+        loc8 = ty * d.nbx8 + tx
+        dd = self.disp[cell, loc8][:, None]
+        w = self.wmode[tv, self.modes[cell, loc8]]                                  # (M, R)
+        dpos = self.dpos[tv]
+        return predict_tbs(self.xp, self.kp, (d.Hp, d.Wp), self.slots[tv], w, dd * dpos[..., 0], dd * dpos[..., 1],
+                           ty * TB, tx * TB)
 
     def blocks(self, views, by, bx, level):
         """(M,) validated numpy requests → (M, B·B, P) int32 tensor."""
@@ -689,8 +717,8 @@ class TorchTx:
         nk = np.flatnonzero(~key)
         if nk.size:
             v, locs = views[nk], by[nk] * d.nbx + bx[nk]
-            tv, ty, tx = d._tb_coords(v, locs)
-            pred = d._pred(tv, ty, tx, xp, self.kp).reshape(nk.size, nt, TB, TB, P).to(torch.int64)
+            vl = xp.asarray(np.stack([v, locs]))                                       # one upload
+            pred = self._pred(vl[0], vl[1]).reshape(nk.size, nt, TB, TB, P).to(torch.int64)
             if level == 0:
                 have = np.flatnonzero(d.coded[v, locs])
                 if have.size:
