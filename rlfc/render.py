@@ -58,7 +58,7 @@ def robust_choice(ops, costs):
         else:
             win = cost < best * (ROBUST_MARGIN * (1 - ROBUST_TIE))
             best = ops.where(win, cost, best)
-            choice[win] = k
+            choice = ops.where(win, k, choice)          # (a masked store would sync a GPU)
     return choice
 
 
@@ -160,13 +160,52 @@ class Renderer:
         x1 = np.minimum(np.floor(xhi).astype(np.int64) + hi, W - 1) // B + 1
         # each tile needs the rectangle of blocks [y0, y1) × [x0, x1): mark the rectangles'
         # corners ±1 in a difference array, then its 2-D prefix sum is > 0 exactly on their union
+        # (one unweighted count per corner: no concatenated index or sign array, whose fresh
+        # pages cost more than the counting)
         n, n1, cell = ylo.shape[0], d.nbx + 1, (d.nby + 1) * (d.nbx + 1)
-        base = (np.arange(n) * cell)[:, None, None]
-        idx = np.concatenate([(base + y0 * n1 + x0).ravel(), (base + y1 * n1 + x1).ravel(),
-                              (base + y0 * n1 + x1).ravel(), (base + y1 * n1 + x0).ravel()])
-        sign = np.repeat(np.array([1, 1, -1, -1], np.int32), y0.size)
-        diff = np.bincount(idx, sign, n * cell).reshape(n, d.nby + 1, n1)
-        return (diff.cumsum(1).cumsum(2) > 0.5)[:, :d.nby, :d.nbx]
+        y0 = y0 * n1 + (np.arange(n) * cell)[:, None, None]
+        y1 = y1 * n1 + (np.arange(n) * cell)[:, None, None]
+        diff = np.bincount((y0 + x0).ravel(), minlength=n * cell)
+        diff += np.bincount((y1 + x1).ravel(), minlength=n * cell)
+        diff -= np.bincount((y0 + x1).ravel(), minlength=n * cell)
+        diff -= np.bincount((y1 + x0).ravel(), minlength=n * cell)
+        return (diff.reshape(n, d.nby + 1, n1).cumsum(1).cumsum(2) > 0)[:, :d.nby, :d.nbx]
+
+    def _tile_extents(self, offs, dlo, dhi):
+        """(ylo, yhi, xlo, xhi), each (n, ty, tx) float32: per 8×8 tile, the extent of the positions
+        (y + d·a, x + d·b) over its pixels (y, x), every disparity d within [``dlo``, ``dhi``]
+        and each of the n ``offs`` (a, b) = the camera minus a source view, in view steps.
+
+        Computed on the host from the per-tile disparities (floats or (ny8, nx8) maps, e.g. the
+        range of the robust choice's candidates; a map may cover more blocks than the frame), not
+        from the position planes: no device round trip in the middle of a frame, and no pass over
+        every pixel. The positions are evaluated
+        as the renderer evaluates them, in float32 (``yy + d · float(a)``: a float32 product,
+        then a float32 sum; positions are monotone in y and in d·a), at each tile's first and
+        last pixel row / column, then clamped to the image: the same extents as
+        :meth:`rlfc.render_ops.NumpyOps.tile_ranges` of those planes, the union over the range."""
+        d = self.d
+        H, W = d.height, d.width
+        ny, nx = -(-H // 8), -(-W // 8)
+        f32 = np.float32
+        dlo, dhi = (np.broadcast_to(np.atleast_2d(np.asarray(m, f32))[:ny, :nx], (ny, nx)) for m in (dlo, dhi))
+        y0 = (np.arange(ny, dtype=f32) * 8)[:, None]
+        y1 = np.minimum(y0 + 7, f32(H - 1))
+        x0 = (np.arange(nx, dtype=f32) * 8)[None, :]
+        x1 = np.minimum(x0 + 7, f32(W - 1))
+        ext = []
+        for a, b in offs:
+            ca = (dlo * f32(a), dhi * f32(a))
+            cb = (dlo * f32(b), dhi * f32(b))
+            ext.append((np.minimum(y0 + ca[0], y0 + ca[1]), np.maximum(y1 + ca[0], y1 + ca[1]),
+                        np.minimum(x0 + cb[0], x0 + cb[1]), np.maximum(x1 + cb[0], x1 + cb[1])))
+        ylo, yhi, xlo, xhi = (np.clip(np.stack([e[i] for e in ext]), 0, hi)
+                              for i, hi in ((0, H - 1), (1, H - 1), (2, W - 1), (3, W - 1)))
+        return ylo, yhi, xlo, xhi
+
+    def _needs_from_maps(self, offs, dlo, dhi, cubic: bool) -> np.ndarray:
+        """(n, nby, nbx) bool: the blocks that the positions of :meth:`_tile_extents` touch."""
+        return self._need_many(*self._tile_extents(offs, dlo, dhi), cubic)
 
     def _sample(self, view: int, Y, X, cubic: bool = False):
         """Samples (H, W, P) float32 of one view's planes at pixel positions Y, X (float32,
@@ -174,19 +213,23 @@ class Renderer:
         got = self._sample_many([view], [Y], [X], cubic)
         return got[0]
 
-    def _sample_many(self, views, Ys, Xs, cubic: bool = False):
+    def _sample_many(self, views, Ys, Xs, cubic: bool = False, needs=None):
         """Samples of several views at their pixel positions (float32 planes, clamped here to
         the image): a list of (H, W, P) (numpy) or an (S, H, W, P) tensor (torch). The blocks the
         taps touch that are not decoded yet are decoded in one batched call for all the views;
-        sampling is OpenCV's remap, or :class:`rlfc.render_ops.TorchOps` (all views at once)."""
+        sampling is OpenCV's remap, or :class:`rlfc.render_ops.TorchOps` (all views at once).
+        ``needs`` (len(views), nby, nbx) bool, when given, are the blocks to have decoded (a
+        superset of those the taps touch, e.g. from :meth:`_needs_from_maps`); else they are
+        measured on the positions."""
         d = self.d
         B, ops = d.block_size, self.ops
-        Ys = [ops.clamp(Y, d.height - 1) for Y in Ys]
-        Xs = [ops.clamp(X, d.width - 1) for X in Xs]
-        lo, hi = ops.tile_ranges(list(Ys) + list(Xs))
-        n = len(views)
-        needs = self._need_many(lo[:n], hi[:n], lo[n:], hi[n:], cubic)
-        self.blocks_requested += int(needs.sum())
+        Ys = ops.clamp_all(Ys, d.height - 1)
+        Xs = ops.clamp_all(Xs, d.width - 1)
+        if needs is None:
+            lo, hi = ops.tile_ranges(list(Ys) + list(Xs))
+            n = len(views)
+            needs = self._need_many(lo[:n], hi[:n], lo[n:], hi[n:], cubic)
+            self.blocks_requested += int(needs.sum())
         bufs, union = [], {}
         for v, need in zip(views, needs):              # a view may come several times (candidates)
             img, filled = self._view_buffer(v)
@@ -271,20 +314,29 @@ class Renderer:
         src = self._sources(s, t, aperture)
         robust = blk is not None and len(src) > 1 and self.robust
         if blk is None:
-            disp = ops.const(d.height, d.width, float(focus or 0.0))
+            dlo = dhi = np.float32(focus or 0.0)
+            disp = ops.const(d.height, d.width, float(dlo))
         else:                                       # host maps go to the device together, first
             import cv2
 
             blk = blk.astype(np.float32)
-            maps = ops.from_blocks_many([blk] + ([cv2.medianBlur(blk, 5)] if robust else []), d.height, d.width)
+            cands = [blk] + ([cv2.medianBlur(blk, 5)] if robust else [])
+            maps = ops.from_blocks_many(cands, d.height, d.width)
             disp = maps[0]
+            if robust:                              # the frame's median disparity: the third candidate
+                cands.append(np.full_like(blk, np.float32(np.median(blk))))
+            dlo, dhi = np.min(cands, axis=0), np.max(cands, axis=0)
+        # the blocks of every candidate disparity, from the host's maps: one decode call per
+        # frame and no device round trip before the frame's last copy
+        needs = self._needs_from_maps([(s - r, t - c) for r, c, _ in src], dlo, dhi, cubic=True)
+        self.blocks_requested += int(needs.sum())
         if self._grid is None:
             self._grid = ops.grid(d.height, d.width)
         if robust:
-            disp = self._consistent(s, t, src, blk, disp, maps[1])
-        return self._blend(s, t, src, disp)
+            disp = self._consistent(s, t, src, blk, disp, maps[1], needs)
+        return self._blend(s, t, src, disp, needs)
 
-    def _blend(self, s, t, src, disp):
+    def _blend(self, s, t, src, disp, needs=None):
         """(H, W, P) float32: the sources (view row, column, weight) warped to camera (s, t)
         by ``disp`` (H, W) pixels per view step (bicubic: bilinear sampling blurs what it shifts,
         0.05 to 1.4 dB lower in the leave-views-out benchmark), weighted and summed."""
@@ -295,12 +347,13 @@ class Renderer:
         for i in range(0, len(src), n):
             part = src[i:i + n]
             smp = self._sample_many([r * d.cols + c for r, c, _ in part],
-                                    [yy + disp * float(s - r) for r, c, _ in part],
-                                    [xx + disp * float(t - c) for r, c, _ in part], cubic=True)
+                                    self.ops.shifted(yy, [disp], [s - r for r, c, _ in part]),
+                                    self.ops.shifted(xx, [disp], [t - c for r, c, _ in part]), cubic=True,
+                                    needs=None if needs is None else needs[i:i + n])
             acc = self.ops.wsum(smp, [w for _, _, w in part], acc)
         return acc
 
-    def _consistent(self, s, t, src, blk, disp, med):
+    def _consistent(self, s, t, src, blk, disp, med, needs=None):
         """(H, W) disparities: per pixel the most photo-consistent of three candidates,
         smoothest first: the frame's median disparity, the map's median over 5×5 blocks (``med``
         per pixel), the file's map (``blk`` per 8×8 block, ``disp`` per pixel). The choice is made on a grid of
@@ -308,7 +361,9 @@ class Renderer:
         around their blend there, averaged over ROBUST_WINDOW² pixels; a later candidate replaces
         an earlier one where it has less than ROBUST_MARGIN times its disagreement (the maps are
         chosen for prediction bits, so on noisy captures some blocks carry disparities that fit
-        the noise). The caller renders the frame once with them."""
+        the noise). The caller renders the frame once with them. ``needs`` (len(src), nby, nbx):
+        the blocks the sources' samples touch (every candidate), measured on the positions when
+        None."""
         d, ops = self.d, self.ops
         yy, xx = self._grid
         H, W = d.height, d.width
@@ -317,15 +372,10 @@ class Renderer:
         ys, xs = ops.sub(yy, S), ops.sub(xx, S)
         subs = [ops.sub(D, S) for D in full]          # every candidate's samples in one call
         allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in full for r, c, _ in src],
-                                             [ys + D * float(s - r) for D in subs for r, _, _ in src],
-                                             [xs + D * float(t - c) for D in subs for _, c, _ in src]), 0)
-        n = len(src)
-        ws = [w for _, _, w in src]
-        costs = []
-        for k in range(len(full)):
-            smp = allsmp[k * n:(k + 1) * n]
-            acc = ops.wsum(smp, ws)
-            costs.append(ops.blur(ops.wsum(ops.sq_dev(smp, acc), ws), max(1, ROBUST_WINDOW // S)))
+                                             ops.shifted(ys, subs, [s - r for r, _, _ in src]),
+                                             ops.shifted(xs, subs, [t - c for _, c, _ in src]),
+                                             needs=None if needs is None else np.concatenate([needs] * len(full))), 0)
+        costs = ops.disagreement(allsmp, [w for _, _, w in src], max(1, ROBUST_WINDOW // S))
         return ops.choose(robust_choice(ops, costs), S, H, W, full)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:

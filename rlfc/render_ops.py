@@ -51,6 +51,27 @@ class NumpyOps:
     def clamp(self, a, hi: float):
         return np.minimum(np.maximum(a, 0, out=a), hi, out=a)
 
+    def clamp_all(self, planes, hi: float):
+        """Each plane of ``planes`` (a list here; a stacked tensor on torch) clamped to [0, hi]."""
+        return [self.clamp(a, hi) for a in planes]
+
+    def shifted(self, base, planes, offs):
+        """Positions ``base + D · o`` (float32: the product rounded, then the sum) for each
+        disparity plane D of ``planes`` and each offset o of ``offs`` (view steps), D-major: a list
+        of len(planes)·len(offs) planes here, one stacked tensor on torch."""
+        return [base + D * float(o) for D in planes for o in offs]
+
+    def disagreement(self, lum, ws, k: int):
+        """Per candidate, the box mean over k×k (:meth:`blur`) of the weighted variance of its n
+        sources' luma around their weighted mean: ``lum`` K·n planes (candidate-major), ``ws`` the n
+        weights; a list of K planes."""
+        n = len(ws)
+        costs = []
+        for i in range(0, len(lum), n):
+            smp = lum[i:i + n]
+            costs.append(self.blur(self.wsum(self.sq_dev(smp, self.wsum(smp, ws)), ws), k))
+        return costs
+
     def tile_range(self, a):
         """(min, max) over each 8×8 tile of ``a`` (H, W), numpy (ceil(H/8), ceil(W/8)); edge
         tiles cover what they hold."""
@@ -171,6 +192,35 @@ class TorchOps:
     def clamp(self, a, hi: float):
         return a.clamp_(0, hi)
 
+    def clamp_all(self, planes, hi: float):
+        if isinstance(planes, self.torch.Tensor):
+            return planes.clamp_(0, hi)
+        return [a.clamp_(0, hi) for a in planes]
+
+    def vector(self, values, dtype=None):
+        """A small vector (float32, or ``dtype``) on the device, copied from pinned memory without
+        waiting for the device's queue (a copy from pageable memory would wait for the kernels
+        queued before it)."""
+        x = self.torch.tensor(list(values), dtype=dtype or self.torch.float32)
+        if self.dev.type == "cuda":
+            return x.pin_memory().to(self.dev, non_blocking=True)
+        return x.to(self.dev)
+
+    def shifted(self, base, planes, offs):
+        """As :meth:`NumpyOps.shifted`: one (len(planes)·len(offs), H, W) tensor in two kernels."""
+        D = self.torch.stack(list(planes)) if len(planes) > 1 else planes[0][None]
+        o = self.vector(offs)
+        return (D[:, None] * o[None, :, None, None] + base[None, None]).reshape(-1, *base.shape)
+
+    def disagreement(self, lum, ws, k: int):
+        """As :meth:`NumpyOps.disagreement`, every candidate at once: ``lum`` (K·n, h, w)."""
+        n = len(ws)
+        w = self.vector(ws).view(1, n, 1, 1)
+        L = lum.reshape(-1, n, *lum.shape[1:])                        # (K, n, h, w)
+        mean = (L * w).sum(1, keepdim=True)
+        var = ((L - mean) ** 2 * w).sum(1)                             # (K, h, w)
+        return list(self.blur(var, k))
+
     def tile_ranges(self, planes):
         """As :meth:`NumpyOps.tile_ranges`: two pooling calls and one device-to-host copy."""
         F, t = self.F, self.torch
@@ -188,21 +238,29 @@ class TorchOps:
         t = self.torch
         h, w, P = bufs[0].shape
         S = len(bufs)
-        src = (t.stack(bufs) if S > 1 else bufs[0][None]).view(S * h * w, P)
-        X, Y = t.stack(Xs), t.stack(Ys)                                      # (S, H, W)
-        x0, y0 = t.floor(X), t.floor(Y)
-        fx, fy = X - x0, Y - y0
-        x0, y0 = x0.to(t.int64), y0.to(t.int64)
+        slot = {}                                  # a view sampled at several positions is stacked once
+        which = [slot.setdefault(id(b), len(slot)) for b in bufs]
+        uniq = list({id(b): b for b in bufs}.values())
+        src = (t.stack(uniq) if len(uniq) > 1 else uniq[0][None]).view(len(uniq) * h * w, P)
+        XY = t.stack([t.stack(list(Xs)) if isinstance(Xs, list) else Xs,
+                      t.stack(list(Ys)) if isinstance(Ys, list) else Ys])   # (2, S, H, W)
+        xy0 = t.floor(XY)
+        f = XY - xy0
+        xy0 = xy0.to(t.int64)
+        x0, y0 = xy0[0], xy0[1]
         if cubic:
             k = t.arange(-1, 3, device=self.dev).view(4, 1, 1, 1)
             xs = (x0[None] + k).clamp_(0, w - 1)
             ys = (y0[None] + k).clamp_(0, h - 1) * w
-            wx, wy = t.stack(keys_weights(fx)), t.stack(keys_weights(fy))    # (4, S, H, W)
+            wxy = t.stack(keys_weights(f), 1)                                # (2, 4, S, H, W)
         else:
             xs = t.stack([x0, (x0 + 1).clamp_(max=w - 1)])
             ys = t.stack([y0, (y0 + 1).clamp_(max=h - 1)]) * w
-            wx, wy = t.stack([1 - fx, fx]), t.stack([1 - fy, fy])
-        ys = ys + (t.arange(S, device=self.dev) * (h * w)).view(1, S, 1, 1)
+            wxy = t.stack([1 - f, f], 1)
+        wx, wy = wxy[0], wxy[1]
+        base = t.arange(S, device=self.dev) if which == list(range(S)) else \
+            self.vector(which, t.int64)
+        ys = ys + (base * (h * w)).view(1, S, 1, 1)
         taps = src[(ys[:, None] + xs[None]).reshape(-1)].view(*ys.shape[:1], *xs.shape, P)  # (ty, tx, S, H, W, P)
         rows = (taps * wx[None, ..., None]).sum(1)
         return (rows * wy[..., None]).sum(0)
@@ -211,8 +269,12 @@ class TorchOps:
         return samples[..., p]
 
     def wsum(self, samples, ws, acc=None):
-        # weights as Python scalars: a weight tensor would be a host-to-device copy, which waits
-        # for the device's queue in the middle of a frame
+        # two or fewer: weights as Python scalars; more: one weighted sum over a weight vector
+        # copied from pinned memory (a copy from pageable memory would wait for the device's queue)
+        if len(ws) > 2:
+            w = self.vector(ws).view(-1, *([1] * (samples.dim() - 1)))
+            out = (samples * w).sum(0)
+            return out if acc is None else acc.add_(out)
         if acc is None:
             acc = samples[0] * float(ws[0])
             samples, ws = samples[1:], ws[1:]
@@ -226,9 +288,9 @@ class TorchOps:
     def blur(self, a, k: int):
         F = self.F
         a0 = k // 2                                        # OpenCV's anchor, reflect-101 edges
-        mode = "reflect" if min(a.shape) > a0 else "replicate"     # (reflect needs a wider plane)
-        x = F.pad(a[None, None], (a0, k - 1 - a0, a0, k - 1 - a0), mode=mode)
-        return F.avg_pool2d(x, k, stride=1)[0, 0]
+        mode = "reflect" if min(a.shape[-2:]) > a0 else "replicate"     # (reflect needs a wider plane)
+        x = F.pad(a.reshape(-1, 1, *a.shape[-2:]), (a0, k - 1 - a0, a0, k - 1 - a0), mode=mode)
+        return F.avg_pool2d(x, k, stride=1).view(a.shape)              # (…, h, w): planes at once
 
     def where(self, c, a, b):
         return self.torch.where(c, a, b)

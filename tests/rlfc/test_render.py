@@ -196,3 +196,58 @@ def test_a_camera_on_a_row_of_views_within_rounding_uses_that_row_only(leave_out
     assert sorted((r, c) for r, c, _ in src) == [(1, 0), (1, 1)] and sum(w for *_, w in src) == 1.0
     assert len(ren._sources(1.0 - 1e-10, 0.5 + 1e-10, 0.0)) == 2
     assert (ren.render(1.0 + 2.2e-16, 0.5) == ren.render(1.0, 0.5)).all()
+
+
+@pytest.mark.parametrize("device", [None, "cpu"])
+def test_blocks_named_from_the_maps_cover_every_tap(leave_out, device):
+    """The blocks a frame decodes are named on the host from the block maps (the candidates'
+    range, no pass over the position planes and no device round trip): with scrambled maps
+    (−6…+6 px per view step, per block), frames rendered from a cold cache equal frames from a
+    cache holding every block, robust, fast, refocused and synthetic-aperture alike; for one
+    disparity plane the blocks named are exactly those the positions touch."""
+    _, d, _ = leave_out
+    rng = np.random.default_rng(5)
+    cold, full = d.renderer(device=device), d.renderer(device=device)
+    disp = rng.integers(-96, 97, cold._maps[0].shape) / 16.0
+    for ren in (cold, full):
+        ren._maps = (disp, *ren._maps[1:])
+    yy, xx = full.ops.grid(d.height, d.width)
+    for v in range(d.rows * d.cols):
+        full._sample(v, yy, xx, cubic=True)
+    assert full.blocks_decoded == d.rows * d.cols * d.nby * d.nbx
+    fast = d.renderer(device=device, robust=False)
+    fast._maps = cold._maps
+    for ren in (cold, fast):                  # frames never measure positions on the device
+        ren.ops.tile_ranges = lambda planes: pytest.fail("a frame measured its positions")
+    for s, t, focus, ap in ((0.4, 0.7, None, 0.0), (1.3, 0.2, None, 0.0), (0.5, 1.5, None, 0.0),
+                            (1.0, 1.0, 2.5, 1.2), (0.2, 1.9, -3.0, 0.0)):
+        want = full.ops.to_numpy(full.render_planes(s, t, focus, ap))
+        assert (cold.ops.to_numpy(cold.render_planes(s, t, focus, ap)) == want).all()
+        full.robust = False
+        assert (fast.ops.to_numpy(fast.render_planes(s, t, focus, ap))
+                == full.ops.to_numpy(full.render_planes(s, t, focus, ap))).all()
+        full.robust = True
+    assert 0 < cold.blocks_decoded < full.blocks_decoded
+    # per tile, the extents from the maps are exactly those of the clamped positions: of one
+    # plane, and over the robust choice's three candidates their union (min of lows, max of highs)
+    import cv2
+
+    from rlfc.render_ops import NumpyOps
+
+    npo = NumpyOps()
+    blk = fast._block_map(0.4, 0.7).astype(np.float32)
+    cands = [blk, cv2.medianBlur(blk, 5), np.full_like(blk, np.median(blk))]
+    gy, gx = npo.grid(d.height, d.width)
+    for r, c in ((0, 0), (0, 1), (1, 0), (1, 1)):
+        a, b = 0.4 - r, 0.7 - c
+        ext = []
+        for m in cands:
+            D = npo.from_blocks(m, d.height, d.width)
+            lo, hi = npo.tile_ranges([npo.clamp(gy + D * float(a), d.height - 1),
+                                      npo.clamp(gx + D * float(b), d.width - 1)])
+            ext.append((lo[0], hi[0], lo[1], hi[1]))
+            got = fast._tile_extents([(a, b)], m, m)
+            assert all((g[0] == e).all() for g, e in zip(got, ext[-1]))
+        got = fast._tile_extents([(a, b)], np.min(cands, 0), np.max(cands, 0))
+        for i, f in enumerate((np.minimum, np.maximum, np.minimum, np.maximum)):
+            assert (got[i][0] == f.reduce([e[i] for e in ext])).all()

@@ -3,6 +3,7 @@ is produced and sane (the numbers themselves belong in BENCHMARKS.md, not in tes
 import json
 
 import numpy as np
+import pytest
 
 from formats.cli import main as cli
 from formats.scenes import write_views
@@ -68,6 +69,27 @@ def test_bench_render_reports_quality_and_speed_on_each_device(tmp_path):
     assert m["view_step"] == 1 and set(fr) == {"0.0", "0.25", "0.5", "0.75", "1.0"}
     assert fr["1.0"] == m["shifted_bicubic"] and fr["0.0"] == m["blend_no_shift"]   # integer taps: exact
     assert fr["1.0"] > fr["0.5"] > fr["0.0"]        # a scene of integer shifts: the full shift is exact
+
+
+def test_bench_render_ab_compares_two_checkouts_in_one_process(tmp_path):
+    """The side-by-side renderer benchmark against a checkout (here this one, imported a second
+    time as rlfc_old): both versions render the same frames, times and ratios reported."""
+    from pathlib import Path
+
+    from rlfc import encode
+    from tools import bench_render_ab
+    from tools.common import open_encoded
+
+    lf = smooth_lf(rows=3, cols=3, h=32, w=40)
+    (tmp_path / "f.lfc").write_bytes(open_encoded(lf, encode(lf, profile="tx", step=2.0))[1])
+    assert bench_render_ab.main([str(tmp_path / "f.lfc"), "--old", str(Path(__file__).parents[2]),
+                                 "--out", str(tmp_path / "ab.json")]) == 0
+    res = json.loads((tmp_path / "ab.json").read_text())["files"]["f"]
+    for k in ("robust", "fast"):
+        assert res[k]["max_pixel_diff"] == 0 and res[k]["new"] > 0 and res[k]["old"] > 0
+        assert res[k]["ratio_new_old"] == round(res[k]["new"] / res[k]["old"], 3)
+    with pytest.raises(SystemExit):
+        bench_render_ab.main([str(tmp_path / "f.lfc"), "--old", str(tmp_path)])
 
 
 def test_bench_lfn_runs_end_to_end(tmp_path):
