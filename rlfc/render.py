@@ -179,11 +179,11 @@ class Renderer:
         Computed on the host from the per-tile disparities (floats or (ny8, nx8) maps, e.g. the
         range of the robust choice's candidates; a map may cover more blocks than the frame), not
         from the position planes: no device round trip in the middle of a frame, and no pass over
-        every pixel. The positions are evaluated
-        as the renderer evaluates them, in float32 (``yy + d · float(a)``: a float32 product,
-        then a float32 sum; positions are monotone in y and in d·a), at each tile's first and
-        last pixel row / column, then clamped to the image: the same extents as
-        :meth:`rlfc.render_ops.NumpyOps.tile_ranges` of those planes, the union over the range."""
+        every pixel. The positions are evaluated as the renderer evaluates them, in float32
+        (``yy + d · float(a)``: a float32 product, then a float32 sum; positions are monotone
+        in y and in d·a), at each tile's first and last pixel row / column, then clamped to the
+        image: the same extents as :meth:`rlfc.render_ops.NumpyOps.tile_ranges` of those
+        planes, the union over the range (tested)."""
         d = self.d
         H, W = d.height, d.width
         ny, nx = -(-H // 8), -(-W // 8)
