@@ -22,6 +22,10 @@ class NumpyBackend:
     def zeros(self, shape, dtype=np.int64):
         return np.zeros(shape, dtype=dtype)
 
+    def repeat(self, a, n: int):
+        """Each element of 1-D ``a`` n times in a row."""
+        return np.repeat(a, n)
+
     def where(self, c, a, b):
         return np.where(c, a, b)
 
@@ -86,6 +90,9 @@ class TorchBackend:
 
     def zeros(self, shape, dtype=None):
         return self.t.zeros(shape, device=self.device, dtype=dtype or self.t.int64)
+
+    def repeat(self, a, n: int):
+        return a.repeat_interleave(n)
 
     def where(self, c, a, b):
         return self.t.where(c, a, b)

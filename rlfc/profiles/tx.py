@@ -125,7 +125,6 @@ class TxDecoder(ProfileDecoder):
         self.end = np.full((N0, nloc), -1, np.int64)
         self.start[sv, sl], self.end[sv, sl] = off[nk:-1], off[nk + 1:]
         self.coded = coded
-        self._ref_cache: dict = {}
         self._io = threading.Lock()
         self._tby = np.repeat(np.arange(self.tpb), self.tpb)       # tbs of a block, raster order
         self._tbx = np.tile(np.arange(self.tpb), self.tpb)
@@ -141,6 +140,9 @@ class TxDecoder(ProfileDecoder):
         self.key_slot = np.full(N0, -1, np.int64)
         self.key_slot[keys] = np.arange(keys.size)
         self.is_key = self.key_slot >= 0
+        r0 = lay.refs.clip(0)                                  # per view: its references' key slots
+        self.ref_slots = self.key_slot[r0].clip(0)              # (views, R) (any valid slot at weight 0)
+        self.ref_dpos = lay.positions[:, None, :] - lay.positions[r0]     # (views, R, 2) position offsets
         self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
         self._kp = None
         fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
@@ -381,30 +383,26 @@ class TxDecoder(ProfileDecoder):
             self._kp = planar(self.keyplanes)
         return self._kp
 
-    def _pred(self, views, ty, tx, xp=NUMPY, kp=None):
-        """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
-        lay = self.lay
-        cell = lay.cell[views]
-        loc8 = ty * self.nbx8 + tx
-        d = self.disp[cell, loc8]
-        mode = self.modes[cell, loc8]
-        refs = lay.refs[views]
-        w = self.wmode[views, mode]                                                       # (M, R)
-        r0 = refs.clip(0)
-        dpos = lay.positions[views][:, None, :] - lay.positions[r0]          # (M, 4, 2)
-        if xp is NUMPY and self.atlas is not None:
-            return remap_predict(self.atlas, self.key_slot[r0].clip(0), w, d[:, None] * dpos[..., 0],
-                                 d[:, None] * dpos[..., 1], ty * TB, tx * TB)
-        A = xp.asarray
-        return predict_tbs(xp, self.kp if kp is None else kp, (self.Hp, self.Wp), A(self.key_slot[r0].clip(0)),
-                           A(w), A(d[:, None] * dpos[..., 0]), A(d[:, None] * dpos[..., 1]), A(ty * TB), A(tx * TB))
+    def pred_tables(self):
+        """The tables :func:`pred_inputs` reads: (cell (views,), disp and modes (maps, 8×8 blocks),
+        wmode (views, R + 1, R), ref_slots (views, R), ref_dpos (views, R, 2)), numpy."""
+        return self.lay.cell, self.disp, self.modes, self.wmode, self.ref_slots, self.ref_dpos
 
-    def _tb_coords(self, views, locs):
-        by, bx = np.divmod(locs, self.nbx)
-        t = np.arange(self.nt)
+    def _pred(self, views, ty, tx):
+        """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
+        args = pred_inputs(self.pred_tables(), self.nbx8, views, ty, tx)
+        if self.atlas is not None:
+            return remap_predict(self.atlas, *args)
+        return predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
+
+    def _tb_coords(self, views, locs, xp=NUMPY):
+        """(views, ty, tx) of every 8×8 block of blocks ``locs`` (flat) of ``views``, block by
+        block in raster order within each; numpy, or the tensors of ``xp``."""
+        by, bx = locs // self.nbx, locs % self.nbx
+        t = xp.arange(self.nt)
         ty = (by[:, None] * self.tpb + t // self.tpb).reshape(-1)
         tx = (bx[:, None] * self.tpb + t % self.tpb).reshape(-1)
-        return np.repeat(views, self.nt), ty, tx
+        return xp.repeat(views, self.nt), ty, tx
 
     def _residual(self, views, parsed):
         """(S, nt, 8, 8, P) int32 residuals of parsed streams of ``views``: the nonzero
@@ -550,17 +548,10 @@ class TxDecoder(ProfileDecoder):
         return out.reshape(views.size, B * B, self.P)
 
     def _view_refs(self, v: int):
-        """Per-view constants of the scalar path (cached): reference key slots (R,), weights
-        per tb mode (R + 1, R) (mode 0: the view's blend weights; mode k: all 64 on reference
-        k − 1), position offsets (R, 2)."""
-        got = self._ref_cache.get(v)
-        if got is None:
-            lay = self.lay
-            refs = lay.refs[v]
-            r0 = refs.clip(0)
-            got = (self.key_slot[r0].clip(0), self.wmode[v], lay.positions[v] - lay.positions[r0])
-            self._ref_cache[v] = got
-        return got
+        """Per-view constants of the scalar path: reference key slots (R,), weights per tb mode
+        (R + 1, R) (mode 0: the view's blend weights; mode k: all 64 on reference k − 1),
+        position offsets (R, 2)."""
+        return self.ref_slots[v], self.wmode[v], self.ref_dpos[v]
 
     def _block_refs(self, v: int):
         """:func:`rlfc.txsample.block_refs` of view v (cached; None where its references lie in
@@ -655,6 +646,21 @@ class TxDecoder(ProfileDecoder):
                 "blocks_per_view": self.nby * self.nbx}
 
 
+def pred_inputs(tables, nbx8: int, views, ty, tx):
+    """The arguments (slots, weights, disp_y, disp_x, y0, x0) of
+    :func:`rlfc.txpredict.predict_tbs` for 8×8 blocks (ty, tx) of ``views`` (M,), from
+    :meth:`TxDecoder.pred_tables` (numpy arrays, or their copies on a torch device with torch
+    requests): each block's map cell, disparity and mode, its view's reference slots, the mode's
+    weights, and the displacements (disparity × position offset, 1/16 pixel)."""
+    cell_of, disp, modes, wmode, ref_slots, ref_dpos = tables
+    cell = cell_of[views]
+    loc8 = ty * nbx8 + tx
+    d = disp[cell, loc8][:, None]
+    dpos = ref_dpos[views]                                                          # (M, R, 2)
+    return (ref_slots[views], wmode[views, modes[cell, loc8]], d * dpos[..., 0], d * dpos[..., 1],
+            ty * TB, tx * TB)
+
+
 class TorchTx:
     """The same planes on a torch device: key views, maps and tables copied once; streams are
     parsed on the CPU (rANS lanes), prediction, dequantization and the inverse transform run
@@ -671,34 +677,16 @@ class TorchTx:
         self.keyplanes = self.xp.asarray(dec.keyplanes)
         self.flat = self.xp.asarray(dec.flat)
         self.lo, self.hi = self.xp.asarray(dec.lo), self.xp.asarray(dec.hi)
-        # the request bookkeeping of TxDecoder._pred runs on the device, from these tables (the
-        # host's numpy indexing over every 8×8 block of a call was most of a batched GPU decode)
-        lay = dec.lay
-        r0 = lay.refs.clip(0)
-        A = self.xp.asarray
-        self.cell, self.disp, self.modes, self.wmode = A(lay.cell), A(dec.disp), A(dec.modes), A(dec.wmode)
-        self.slots = A(dec.key_slot[r0].clip(0))                                    # (views, R)
-        self.dpos = A(lay.positions[:, None, :] - lay.positions[r0])                # (views, R, 2)
+        # the request bookkeeping of a call runs on the device, from these tables (the host's
+        # numpy indexing over every 8×8 block of a call was most of a batched GPU decode)
+        self.tables = tuple(self.xp.asarray(a) for a in dec.pred_tables())
 
     def _pred(self, v, locs):
         """As :meth:`TxDecoder._pred` of :meth:`TxDecoder._tb_coords`: ``v``, ``locs`` (n,) int64
         device tensors of requests → (n·nt, 8, 8, P) int32, the same integers."""
-        import torch
-
         d = self.d
-        nt, tpb = d.nt, d.tpb
-        by, bx = torch.div(locs, d.nbx, rounding_mode="floor"), locs % d.nbx
-        t = torch.arange(nt, device=locs.device)
-        ty = (by[:, None] * tpb + t // tpb).reshape(-1)
-        tx = (bx[:, None] * tpb + t % tpb).reshape(-1)
-        tv = v.repeat_interleave(nt)
-        cell = self.cell[tv]
-        loc8 = ty * d.nbx8 + tx
-        dd = self.disp[cell, loc8][:, None]
-        w = self.wmode[tv, self.modes[cell, loc8]]                                  # (M, R)
-        dpos = self.dpos[tv]
-        return predict_tbs(self.xp, self.kp, (d.Hp, d.Wp), self.slots[tv], w, dd * dpos[..., 0], dd * dpos[..., 1],
-                           ty * TB, tx * TB)
+        args = pred_inputs(self.tables, d.nbx8, *d._tb_coords(v, locs, self.xp))
+        return predict_tbs(self.xp, self.kp, (d.Hp, d.Wp), *args)
 
     def blocks(self, views, by, bx, level):
         """(M,) validated numpy requests → (M, B·B, P) int32 tensor."""
