@@ -29,7 +29,8 @@ from .render_ops import make_ops
 
 ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
 ROBUST_MARGIN = 0.5     # a more detailed disparity candidate must halve the disagreement to win
-ROBUST_STEP = 4         # the choice is made on every 4th pixel (the frame is rendered once, at full size)
+ROBUST_STEP = 4         # the choice is made on every 4th pixel (the frame is rendered once, at full size);
+                        # it divides the maps' 8×8 blocks, so each candidate is constant over a choice's cell
 ROBUST_TIE = 1e-4       # relative: a candidate must beat the margin by more than rounding (disagreements
                         # exactly at the margin, e.g. one of two differing samples gone, are ties)
 SNAP = 1e-9             # views: a camera this close to a row/column of views is on it
@@ -376,7 +377,7 @@ class Renderer:
                                              ops.shifted(xs, subs, [t - c for _, c, _ in src]),
                                              needs=None if needs is None else np.concatenate([needs] * len(full))), 0)
         costs = ops.disagreement(allsmp, [w for _, _, w in src], max(1, ROBUST_WINDOW // S))
-        return ops.choose(robust_choice(ops, costs), S, H, W, full)
+        return ops.choose(robust_choice(ops, costs), S, H, W, subs)      # (candidates constant per cell)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:
         """A quilt for light-field displays: ``rows`` × ``cols`` views along the grid's middle row

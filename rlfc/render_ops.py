@@ -128,9 +128,12 @@ class NumpyOps:
         return np.zeros(shape, np.int64)
 
     def choose(self, sel, S: int, H: int, W: int, cands):
-        """(H, W): per pixel ``cands[k]``, k from ``sel`` (every S-th pixel) repeated S×S."""
-        k = np.repeat(np.repeat(sel, S, 0), S, 1)[:H, :W]
-        return np.choose(k, cands).astype(np.float32)
+        """(H, W) float32: per S×S cell, ``cands[k]`` at the cell's grid point, k from ``sel``
+        (both on the grid of every S-th pixel), repeated over the cell. Choosing per pixel gives
+        the same planes where every candidate is constant over each cell (the renderer's are
+        per 8×8 block, or one value, and S divides 8); here only the grid points are chosen."""
+        v = np.choose(sel, cands).astype(np.float32, copy=False)
+        return np.repeat(np.repeat(v, S, 0), S, 1)[:H, :W]
 
     def sub(self, a, S: int):
         return np.ascontiguousarray(a[::S, ::S])
@@ -299,11 +302,10 @@ class TorchOps:
         return self.torch.zeros(shape, dtype=self.torch.int64, device=self.dev)
 
     def choose(self, sel, S: int, H: int, W: int, cands):
-        k = sel.repeat_interleave(S, 0).repeat_interleave(S, 1)[:H, :W]
-        out = cands[0].clone()
+        out = cands[0]
         for i, c in enumerate(cands[1:], 1):
-            out = self.torch.where(k == i, c, out)
-        return out
+            out = self.torch.where(sel == i, c, out)
+        return out.repeat_interleave(S, 0).repeat_interleave(S, 1)[:H, :W]
 
     def sub(self, a, S: int):
         return a[::S, ::S].contiguous()

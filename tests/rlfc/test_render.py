@@ -251,3 +251,28 @@ def test_blocks_named_from_the_maps_cover_every_tap(leave_out, device):
         got = fast._tile_extents([(a, b)], np.min(cands, 0), np.max(cands, 0))
         for i, f in enumerate((np.minimum, np.maximum, np.minimum, np.maximum)):
             assert (got[i][0] == f.reduce([e[i] for e in ext])).all()
+
+
+@pytest.mark.parametrize("device", [None, "cpu"])
+def test_the_robust_choice_is_made_per_cell(device):
+    """Choosing the disparity on the grid of every ROBUST_STEP-th pixel and repeating it over
+    each cell gives the per-pixel choice, because every candidate is constant over a cell (per
+    8×8 block maps, or one value): checked on a frame that is not a multiple of 8."""
+    from rlfc.render import ROBUST_STEP as S
+    from rlfc.render_ops import TILE, NumpyOps, make_ops
+
+    assert TILE % S == 0
+    H, W = 37, 45
+    rng = np.random.default_rng(2)
+    npo, ops = NumpyOps(), make_ops(device)
+    maps = [rng.normal(0, 3, (-(-H // 8), -(-W // 8))).astype(np.float32) for _ in range(2)]
+    full = [npo.const(H, W, 1.25)] + [npo.from_blocks(m, H, W) for m in maps]
+    sel = rng.integers(0, 3, (-(-H // S), -(-W // S)))
+    want = np.choose(np.repeat(np.repeat(sel, S, 0), S, 1)[:H, :W], full)
+    if device is None:
+        got = ops.choose(sel, S, H, W, [npo.sub(c, S) for c in full])
+    else:
+        import torch
+
+        got = ops.choose(torch.as_tensor(sel), S, H, W, [torch.as_tensor(npo.sub(c, S)) for c in full]).numpy()
+    assert got.dtype == np.float32 and (got == want).all()
