@@ -369,13 +369,13 @@ class Renderer:
         yy, xx = self._grid
         H, W = d.height, d.width
         S = ROBUST_STEP
-        full = [ops.const(H, W, float(np.median(blk))), med, disp]
         ys, xs = ops.sub(yy, S), ops.sub(xx, S)
-        subs = [ops.sub(D, S) for D in full]          # every candidate's samples in one call
-        allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in full for r, c, _ in src],
+        # the candidates on the choice's grid (only there are they sampled and chosen)
+        subs = [ops.const(*ys.shape, float(np.median(blk))), ops.sub(med, S), ops.sub(disp, S)]
+        allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in subs for r, c, _ in src],
                                              ops.shifted(ys, subs, [s - r for r, _, _ in src]),
                                              ops.shifted(xs, subs, [t - c for _, c, _ in src]),
-                                             needs=None if needs is None else np.concatenate([needs] * len(full))), 0)
+                                             needs=None if needs is None else np.concatenate([needs] * len(subs))), 0)
         costs = ops.disagreement(allsmp, [w for _, _, w in src], max(1, ROBUST_WINDOW // S))
         return ops.choose(robust_choice(ops, costs), S, H, W, subs)      # (candidates constant per cell)
 
