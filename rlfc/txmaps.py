@@ -25,9 +25,9 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import LaneDecoder, ScalarDecoder, encode_lanes
+from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, ScalarDecoder, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
-from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
+from .txsyntax import quantize_counts, slot_words, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
 VERSION = 3
 R = 31
@@ -171,43 +171,93 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     if not d.done(int(lens[1])):
         raise FormatError(f"{what}: the shared map's stream is malformed")
     pos += int(lens[1])
-    # per map: one lane each (contexts from the same lane's left and above values)
+    # per map: one stream each (contexts from the same map's left and above values), plain
+    # Python: a map's symbols depend on each other, and a few dozen maps make poor numpy lanes
     starts = pos + np.concatenate([[0], np.cumsum(lens[2:])[:-1]]).astype(np.int64)
-    buf = np.frombuffer(raw + bytes(8), np.uint8)
     disp = np.zeros((n_maps, nloc), np.int64)
     modes = np.zeros((n_maps, nloc), np.int64)
     if n_maps:
-        from .xp import NUMPY
-
-        dec = LaneDecoder(NUMPY, buf, starts, tables)
-        lanes = np.arange(n_maps)
-        corr = np.zeros((n_maps, nloc), np.int64)
-        for i in range(nloc):
-            y, x = divmod(i, nx)
-            left = (corr[:, i - 1] != 0) if x else np.zeros(n_maps, bool)
-            up = (corr[:, i - nx] != 0) if y else np.zeros(n_maps, bool)
-            s = dec.step(lanes, CTX_CORR + left + 2 * up)
-            corr[:, i] = s - R
-            esc = (s == 0) | (s == 2 * R)
-            if esc.any():
-                el = np.flatnonzero(esc)
-                x_ = np.zeros(el.size, np.int64)
-                for k in range(3):
-                    x_ = (x_ << 6) | dec.step(el, np.full(el.size, _digit_ctx(ver, k)))
-                corr[el, i] = np.sign(s[el] - R) * (R + x_)
-        for i in range(nloc):
-            y, x = divmod(i, nx)
-            ml = modes[:, i - 1] if x else np.zeros(n_maps, np.int64)
-            mu = modes[:, i - nx] if y else np.zeros(n_maps, np.int64)
-            modes[:, i] = dec.step(lanes, CTX_MODE + 5 * ml.clip(0, 4) + mu.clip(0, 4))
-            if (modes[:, i] >= n_modes).any():
-                raise FormatError(f"{what}: a prediction mode is out of range")
-        if not dec.check(starts + lens[2:]).all():
-            raise FormatError(f"{what}: a map stream is malformed")
-        disp = base.reshape(1, -1) + corr
+        words = slot_words(tables)
+        wl = getattr(tables, "_slot_word_list", None)
+        if wl is None:
+            wl = tables._slot_word_list = words.tolist()
+        for m in range(n_maps):
+            a = int(starts[m])
+            corr, mo = _map_stream(raw, a, a + int(lens[2 + m]), wl, ny, nx, n_modes, ver, what)
+            disp[m], modes[m] = corr, mo
+        disp += base.reshape(1, -1)
     if nloc and np.abs(disp).max(initial=0) > (1 << 20):
         raise FormatError(f"{what}: a disparity is out of range")
     return disp, modes
+
+
+def _map_stream(data: bytes, start: int, end: int, words: list, ny: int, nx: int, n_modes: int, ver: int,
+                what: str) -> tuple[list, list]:
+    """(corrections, modes), lists of ny·nx ints, of one map's stream ``data[start:end]``: the
+    rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined, with the one-look-up slot words of
+    :func:`rlfc.txsyntax.slot_words` (``words``, a list)."""
+    if not 1 <= n_modes <= 5:
+        raise ValueError("a map's modes are 0..4 (contexts 5·left + above)")
+    nloc = ny * nx
+    if end - start < STATE_BYTES:
+        raise FormatError(f"{what}: a map stream is shorter than its state")
+    x = int.from_bytes(data[start:start + STATE_BYTES], "little")
+    p = start + STATE_BYTES
+    corr = [0] * nloc
+    nz = [0] * (nloc + nx)                    # (correction != 0) << PROB_BITS, after a zero row
+    digits = [_digit_ctx(ver, k) << PROB_BITS for k in range(3)]
+    cbase, mbase, mask = CTX_CORR << PROB_BITS, CTX_MODE << PROB_BITS, (1 << PROB_BITS) - 1
+    i = 0
+    try:
+        for _ in range(ny):
+            left = 0
+            for _ in range(nx):
+                w = words[(cbase + left + (nz[i] << 1)) | (x & mask)]
+                x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                while x < RANS_L:
+                    x = (x << 8) | data[p]
+                    p += 1
+                s = w & 127
+                if s == R:
+                    left = 0
+                else:
+                    if s == 0 or s == 2 * R:          # an escape: three 6-bit digits of |c| − R
+                        e = 0
+                        for dc in digits:
+                            w = words[dc | (x & mask)]
+                            x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                            while x < RANS_L:
+                                x = (x << 8) | data[p]
+                                p += 1
+                            e = (e << 6) | (w & 127)
+                        corr[i] = R + e if s else -(R + e)
+                    elif s > 2 * R:
+                        raise FormatError(f"{what}: undefined map symbol {s}")
+                    else:
+                        corr[i] = s - R
+                    left = 1 << PROB_BITS
+                nz[i + nx] = left
+                i += 1
+        modes = [0] * (nloc + nx)              # after a zero row
+        i = 0
+        for _ in range(ny):
+            ml = 0
+            for _ in range(nx):
+                w = words[(mbase + ((5 * ml + modes[i]) << PROB_BITS)) | (x & mask)]
+                x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                while x < RANS_L:
+                    x = (x << 8) | data[p]
+                    p += 1
+                ml = w & 127
+                if ml >= n_modes:
+                    raise FormatError(f"{what}: a prediction mode is out of range")
+                modes[i + nx] = ml
+                i += 1
+    except IndexError:
+        raise FormatError(f"{what}: a map stream reads past the section") from None
+    if p != end or x != RANS_L:
+        raise FormatError(f"{what}: a map stream is malformed")
+    return corr, modes[nx:]
 
 
 def _unescape_scalar(d: ScalarDecoder, s: int, what: str, version: int) -> int:

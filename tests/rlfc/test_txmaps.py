@@ -64,3 +64,25 @@ def test_bad_maps_sections_are_refused():
             txmaps.unpack_maps(bad, 2, (4, 4), 5, "t")
     with pytest.raises(ValueError):
         txmaps.pack_maps(base, disp, modes, (4, 4), version=1)
+
+
+def test_every_byte_flip_of_a_maps_section_is_refused_or_in_range():
+    """The per-map streams are parsed in plain Python from the section's bytes: a flipped byte
+    anywhere (lengths, tables, streams; the last stream running off the section's end) is a
+    FormatError or a decode within the documented ranges, never another exception."""
+    rng = np.random.default_rng(3)
+    base, disp, modes = _maps(rng, 3, 5, 6, 80, 0.1)
+    good = txmaps.pack_maps(base, disp, modes, (5, 6))
+    refused = 0
+    for i in range(1, len(good)):
+        for bit in (0, 7):
+            bad = bytearray(good)
+            bad[i] ^= 1 << bit
+            try:
+                d2, m2 = txmaps.unpack_maps(bytes(bad), 3, (5, 6), 5, "t")
+            except FormatError:
+                refused += 1
+                continue
+            assert d2.shape == m2.shape == (3, 30) and m2.min() >= 0 and m2.max() <= 4
+            assert np.abs(d2).max() <= 1 << 20
+    assert refused > len(good)                          # most flips are caught
