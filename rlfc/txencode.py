@@ -28,7 +28,7 @@ from .kernels import dequantize
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps
-from .txlayout import MAX_REFS, TxLayout
+from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
@@ -47,6 +47,8 @@ INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be bea
 #: times its prediction residual's (measured on the six dense grids at 40 dB: 98.7–99.9% of the
 #: blocks that chose intra lie below 4; 0 = try every candidate)
 INTRA_ENERGY_RATIO = 4.0
+#: auto key_split: the shortest estimated key-row stream worth its own state and index entry
+KEY_SEGMENT_BYTES = 256
 FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
 PAD = 8
 
@@ -75,6 +77,9 @@ class TxParams:
             last position is the last nonzero: no rate-distortion quantization), "intra_tbs" (no
             intra 8×8 blocks), "promote" (no view coded alone as a JPEG 2000 key), "lambda_trim"
             (no λ trim between two quantizer steps).
+        key_split: streams per key-view block row (0 = chosen from the rows' estimated bytes:
+            :meth:`TxEncoder.key_split`); more streams parse faster as parallel lanes and cost
+            about 4 bytes each.
     """
 
     block_size: int = 16
@@ -87,6 +92,7 @@ class TxParams:
     intra_codec: str = "auto"
     search_sample: bool = True
     ablate: tuple = ()
+    key_split: int = 0
 
     def __post_init__(self):
         ab = self.ablate
@@ -107,17 +113,22 @@ class TxParams:
             raise ParameterError(f"lam must be within (0, 10], got {self.lam}")
         if not 0 <= self.max_disparity <= 256:
             raise ParameterError(f"max disparity must be within 0..256, got {self.max_disparity}")
+        if isinstance(self.key_split, bool) or not isinstance(self.key_split, int) or not 0 <= self.key_split <= 4096:
+            raise ParameterError(f"key_split must be 0 (auto) .. 4096, got {self.key_split!r}")
         if self.step is not None and not 1 <= self.step <= 1 << 16:
             raise ParameterError(f"step must be within 1..65536, got {self.step}")
 
 
 def params_info(p: TxParams) -> dict:
-    """The parameters as the file's configuration records them (``ablate`` only when set)."""
+    """The parameters as the file's configuration records them (``ablate`` and ``key_split``
+    only when set)."""
     d = asdict(p)
     if d["ablate"]:
         d["ablate"] = list(d["ablate"])
     else:
         del d["ablate"]
+    if not d["key_split"]:
+        del d["key_split"]
     return d
 
 
@@ -965,16 +976,16 @@ class TxEncoder:
                 coded[v] = c.coded
         return coded
 
-    def symbol_parts(self, res: dict, counts_only: bool = False):
+    def symbol_parts(self, res: dict, counts_only: bool = False, split: int = 1):
         """Every stream's symbols, in ``tx.blocks`` order (the key views' rows, then the other
         views' coded blocks, location-major), a part at a time: yields (lanes in the part,
         symbols of :func:`rlfc.txsyntax.block_symbols` with lanes numbered within the part).
         Parts are one key view, or up to SYMBOL_CHUNK blocks of the others, so that symbols
         of a high-rate light field never all exist at once. ``counts_only``: each part's symbol
-        counts instead (no ordering, no raw bits)."""
+        counts instead (no ordering, no raw bits). ``split``: streams per key row."""
         tbi = self._ra_tbs()
-        for k in self.coded_keys(res):                   # key rows: lanes of nbx·nt tbs
-            yield self.nby, self._key_symbols(k, res["codes"][k], counts_only)
+        for k in self.coded_keys(res):                   # key rows: split lanes of nbx·nt/split tbs each
+            yield self.nby * split, self._key_symbols(k, res["codes"][k], counts_only, split)
         sv, sl = stream_order(self.coded_blocks(res))     # location-major, views ascending
         for a in range(0, sv.size, self.SYMBOL_CHUNK):
             v_, l_ = sv[a:a + self.SYMBOL_CHUNK], sl[a:a + self.SYMBOL_CHUNK]
@@ -988,20 +999,35 @@ class TxEncoder:
             yield v_.size, block_symbols(modes, levels, self.intra[v_].astype(np.int64), np.zeros(v_.size, np.int64),
                                          self.pcs, counts_only)
 
-    def _key_symbols(self, k: int, c: ViewCode, counts_only: bool = False):
-        """The symbols of key view k coded as ``c``: one lane per block row (nbx·nt tbs), as
-        :func:`rlfc.txsyntax.block_symbols` gives them (``counts_only``: their counts)."""
+    def _key_symbols(self, k: int, c: ViewCode, counts_only: bool = False, split: int = 1):
+        """The symbols of key view k coded as ``c``: ``split`` lanes per block row (nbx·nt/split
+        tbs each, the row's blocks in order), as :func:`rlfc.txsyntax.block_symbols` gives them
+        (``counts_only``: their counts)."""
         tbi = self._ra_tbs()
-        nrow = self.nbx * self.nt
-        modes = c.modes[tbi].astype(np.int64).reshape(self.nby, nrow)
-        levels = c.levels(tbi.reshape(-1)).reshape(self.nby, nrow, self.P, 64)
-        return block_symbols(modes, levels, np.full(self.nby, int(self.intra[k])), np.ones(self.nby, np.int64),
+        n, seg = self.nby * split, self.nbx * self.nt // split
+        modes = c.modes[tbi].astype(np.int64).reshape(n, seg)
+        levels = c.levels(tbi.reshape(-1)).reshape(n, seg, self.P, 64)
+        return block_symbols(modes, levels, np.full(n, int(self.intra[k])), np.ones(n, np.int64),
                              self.pcs, counts_only)
 
-    def counts_of(self, res: dict) -> np.ndarray:
-        """(N_CTX, ALPHABET) symbol counts of a run (part by part)."""
+    def key_split(self, res: dict) -> int:
+        """Streams per key-view block row for the file of a run: ``TxParams.key_split`` (the
+        largest divisor of the blocks per row not above it), or, when 0, the most streams whose
+        estimated length stays at least :data:`KEY_SEGMENT_BYTES` (each costs a 3-byte state and
+        an index entry; a decoder parses a row's streams as parallel lanes)."""
+        divs = [d for d in range(1, self.nbx + 1) if self.nbx % d == 0]
+        if self.p.key_split:
+            return max(d for d in divs if d <= self.p.key_split)
+        ck = self.coded_keys(res)
+        if not ck:
+            return 1
+        row_bytes = sum(res["codes"][k].bits for k in ck) / 8 / (len(ck) * self.nby)
+        return max(d for d in divs if d == 1 or row_bytes / d >= KEY_SEGMENT_BYTES)
+
+    def counts_of(self, res: dict, split: int = 1) -> np.ndarray:
+        """(N_CTX, ALPHABET) symbol counts of a run (part by part; ``split`` streams per key row)."""
         total = None
-        for _, c in self.symbol_parts(res, counts_only=True):
+        for _, c in self.symbol_parts(res, counts_only=True, split=split):
             total = c if total is None else total + c
         return total if total is not None else count_symbols(np.zeros(0, np.int64), np.zeros(0, np.int64))
 
@@ -1034,7 +1060,8 @@ class TxEncoder:
     def pack(self, res: dict) -> tuple[dict, list]:
         """(config, sections) of a run: the tables from every part's counts, then each part's
         streams (a lane's bytes depend on its own symbols and the tables only)."""
-        q = quantize_counts(self.counts_of(res))
+        split = self.key_split(res)
+        q = quantize_counts(self.counts_of(res, split))
         tables = tables_from_quantized(q)
         streams: list = []
         # parts are coded together until lanes × longest lane reaches PACK_CELLS (a lane's bytes
@@ -1050,7 +1077,7 @@ class TxEncoder:
                 streams.extend(pack_streams(sum(n for n, _, _ in held), *cat, tables))
                 held.clear()
 
-        for n, part in self.symbol_parts(res):
+        for n, part in self.symbol_parts(res, split=split):
             k = int(np.bincount(part[0], minlength=1).max()) if part[0].size else 0
             if held and (sum(h[0] for h in held) + n) * max(k, *(h[1] for h in held)) > PACK_CELLS:
                 flush()
@@ -1059,8 +1086,8 @@ class TxEncoder:
         coded = self.coded_blocks(res)
         ck = self.coded_keys(res)
         keys, refs, weights, cell, intra = self.structure_of(res)
-        nk = len(ck) * self.nby
-        key_lengths = np.array([len(b) for b in streams[:nk]], np.int64).reshape(len(ck), self.nby)
+        nk = len(ck) * self.nby * split
+        key_lengths = np.array([len(b) for b in streams[:nk]], np.int64)
         lengths = np.array([len(b) for b in streams[nk:]], np.int64)
         ordered = streams
         intra_keys = [k for k in ck if intra[k]]
@@ -1072,7 +1099,7 @@ class TxEncoder:
             np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
         lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
-                       "j2k" if imgs else "tx", key_images)
+                       "j2k" if imgs else "tx", key_images, SPLIT_VERSION if split > 1 else VERSION, split)
         lay.check("tx encoder")
         # maps no view uses any more (every view of the cell coded alone): the shared map, no modes
         disp, modes = self.disp, self.modes

@@ -4,7 +4,7 @@ Views (flat index v = row·cols + col) have integer grid positions, up to 4 refe
 (always key views) with blend weights summing to 64, and a map (disparity + prediction mode
 per 8×8 block) shared by the views of one cell. Key views are coded in ``keys`` order, each
 from references earlier in that order (or, with none, from its thumbnail: an intra view), one
-stream per block row, so a decoder can decode them by block rows when a request first needs
+stream per block row (or ``key_split`` side by side), so a decoder can decode them by block rows when a request first needs
 them (the rows a prediction samples, and the rows those rows are predicted from); every other
 view is decoded block by block on demand from key views alone, so a block request needs the
 key-view rows around it and at most one stored stream.
@@ -21,6 +21,7 @@ from formats.schema import Fields
 
 MAX_REFS = 4
 VERSION = 2          # 2: rANS tables built in integers (1: float arithmetic)
+SPLIT_VERSION = 3    # 3: as 2, with key-view block rows coded as ``key_split`` streams each
 
 
 @dataclass(frozen=True)
@@ -39,7 +40,11 @@ class TxLayout:
         key_images: with intra_codec "j2k", one entry per intra key view in key order: the byte
             length of its JPEG 2000 codestream, or 0 when that view is transform-coded (its
             rows are in ``tx.blocks`` like any key's).
-        version: 2 (1: the first files, whose rANS tables were built in float arithmetic).
+        key_split: streams per key-view block row (a divisor of the blocks per row; 1 = one
+            stream per row). Each stream codes nbx / key_split consecutive blocks of the row, so
+            a decoder parses a key row as that many independent rANS lanes.
+        version: 2 (1: the first files, whose rANS tables were built in float arithmetic; 3: as
+            2 with ``key_split`` > 1).
     """
 
     positions: np.ndarray
@@ -54,6 +59,7 @@ class TxLayout:
     intra_codec: str = "tx"
     key_images: tuple = ()
     version: int = VERSION
+    key_split: int = 1
 
     @property
     def n_views(self) -> int:
@@ -75,7 +81,8 @@ class TxLayout:
         return {"version": int(self.version), "keys": list(map(int, self.keys)), "n_maps": int(self.n_maps),
                 "step16": self.step16.tolist(), "bypass": [bool(b) for b in self.bypass],
                 "thumb_step16": int(self.thumb_step16), "intra_codec": self.intra_codec,
-                "key_images": list(map(int, self.key_images))}
+                "key_images": list(map(int, self.key_images))} | (
+                    {"key_split": int(self.key_split)} if self.version >= SPLIT_VERSION else {})
 
     def to_bytes(self) -> bytes:
         """Section ``tx.layout``: zlib of zig-zag varints: positions (N0×2), refs (N0×4),
@@ -92,7 +99,7 @@ class TxLayout:
         from .txsections import MAX_VARINT_BYTES, inflate, unvarints
 
         where = f.where
-        version = f.int("version", choices=(1, VERSION))
+        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION))
         count = n_views * (2 + 2 * MAX_REFS + 1)
         what = f"{name}: section 'tx.layout'"
         v = unvarints(inflate(data, count * MAX_VARINT_BYTES, what), count, what)
@@ -117,8 +124,9 @@ class TxLayout:
         thumb = f.int("thumb_step16", 16, 1 << 24)
         intra_codec = f.str("intra_codec", choices=("tx", "j2k"))
         key_images = f.int_list("key_images", max_len=n_views, lo=0, hi=1 << 30)
+        key_split = f.int("key_split", 2, 1 << 16) if version >= SPLIT_VERSION else 1
         lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
-                       intra_codec, tuple(key_images), version)
+                       intra_codec, tuple(key_images), version, key_split)
         lay.check(where)
         return lay
 
@@ -141,6 +149,8 @@ class TxLayout:
         (for the others); weights sum to 64 over present references; intra views are keys;
         one JPEG 2000 length per intra key when they are JPEG 2000."""
         n = self.n_views
+        if (self.version >= SPLIT_VERSION) != (self.key_split > 1):
+            raise FormatError(f"{where}: key_split {self.key_split} needs version {SPLIT_VERSION} (and only it)")
         want = int(self.intra[list(self.keys)].sum()) if self.intra_codec == "j2k" else 0
         if len(self.key_images) != want:
             raise FormatError(f"{where}: key_images lists {len(self.key_images)} images, expected {want}")

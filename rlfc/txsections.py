@@ -6,12 +6,12 @@ LEB128 varints for signed integers).
   planes last) as varints of differences: row 0 from the left neighbour (0 before the first),
   other rows from the neighbour above.
 - ``tx.index``: the byte lengths of the key views' row streams (key order, rows top to
-  bottom) as varints; then a bitmap over (view, block) (view-major, LSB first; zero for key
-  views) of the other views' blocks that have a stream, then those streams' lengths as
-  varints, in the order of ``tx.blocks``.
-- ``tx.blocks``: the streams: each key view as one stream per row of blocks (key order, rows
-  top to bottom; a row parses like one block whose tbs are the row's blocks' tbs in order),
-  then the other views' block streams location by location (raster), views ascending.
+  bottom, a row's ``key_split`` streams left to right) as varints; then a bitmap over (view,
+  block) (view-major, LSB first; zero for key views) of the other views' blocks that have a
+  stream, then those streams' lengths as varints, in the order of ``tx.blocks``.
+- ``tx.blocks``: the streams: each key view as ``key_split`` streams per row of blocks (key
+  order, rows top to bottom; a stream parses like one block whose tbs are its blocks' tbs in
+  order), then the other views' block streams location by location (raster), views ascending.
 """
 from __future__ import annotations
 
@@ -95,14 +95,14 @@ def unpack_thumbs(data, shape: tuple, what: str) -> np.ndarray:
 
 
 def pack_index(key_lengths: np.ndarray, coded: np.ndarray, lengths: np.ndarray) -> bytes:
-    """Key row stream lengths (n_keys, nby), the other views' coded blocks (N0, nloc) bool and
+    """Key row stream lengths (n_keys·nby·key_split,), the other views' coded blocks (N0, nloc) bool and
     their stream lengths in ``tx.blocks`` order."""
     return zlib.compress(varints(key_lengths) + np.packbits(coded.reshape(-1), bitorder="little").tobytes()
                          + varints(lengths), 9)
 
 
 def unpack_index(data, n_keys: int, nby: int, n_views: int, nloc: int, is_key: np.ndarray, what: str):
-    """→ (key row lengths (n_keys, nby), coded (N0, nloc) bool, block stream lengths)."""
+    """→ (key row stream lengths (n_keys, nby: the streams per key), coded (N0, nloc) bool, block stream lengths)."""
     nb = (n_views * nloc + 7) // 8
     raw = inflate(data, (n_keys * nby + n_views * nloc) * MAX_VARINT_BYTES + nb, what)
     b = np.frombuffer(raw, np.uint8)

@@ -94,6 +94,9 @@ def rlfc_fixtures() -> dict:
         # tx.maps version 3 (one context per escape digit position), with escapes: the maps'
         # corrections pushed far off on a third of the blocks (see far_maps)
         "rlfc_tx3_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=8, step=5.0, key_spacing=3)),
+        # tx layout version 3: each key-view block row coded as key_split streams (here one per block)
+        "rlfc_txsplit_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=8, step=3.0, key_spacing=3,
+                                                    intra_codec="tx", key_split=5)),
     })
     out = {}
     for name, (views, kw) in specs.items():

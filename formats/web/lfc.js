@@ -641,8 +641,11 @@ export class TxDecoder {
     this.hi = this.pcs.map(() => this.peak);
     this.flat = this.pcs.map((c) => (c === 1 ? 0 : (this.peak + 1) / 2));
     const tx = need(cfg, "tx", "config");
-    const ver = int(tx, "version", "config.tx", 1, 2);
-    if (ver !== 2) throw new UnsupportedError(`${name}: tx version 1 files (float rANS tables) are not read here`);
+    const ver = int(tx, "version", "config.tx", 1, 3);
+    if (ver === 1) throw new UnsupportedError(`${name}: tx version 1 files (float rANS tables) are not read here`);
+    // version 3: each key-view block row is key_split streams of nbx / key_split blocks
+    this.keySplit = ver === 3 ? int(tx, "key_split", "config.tx", 2, 1 << 16) : 1;
+    if (nbx % this.keySplit) throw new FormatError(`${name}: config.tx.key_split ${this.keySplit} does not divide the ${nbx} blocks of a row`);
     this.keys = intList(tx, "keys", "config.tx", null, 0, N0 - 1);
     if (!this.keys.length || new Set(this.keys).size !== this.keys.length) throw new FormatError(`${name}: config.tx.keys is empty or repeats a view`);
     if (this.keys.length * Hp * Wp > LIMITS.openPixels) throw new FormatError(`${name}: the key views exceed the open-time limit`);
@@ -816,7 +819,7 @@ export class TxDecoder {
   }
 
   async _readIndex(data) {
-    const what = "tx.index", nk = this.codedKeys.length * this.nby, N0 = this.n0, nloc = this.nby * this.nbx;
+    const ks = this.keySplit, what = "tx.index", nk = this.codedKeys.length * this.nby * ks, N0 = this.n0, nloc = this.nby * this.nbx;
     const nb = Math.ceil(N0 * nloc / 8);
     const raw = await inflate(data, (nk + N0 * nloc) * 10 + nb, what);
     let p = 0, cnt = 0;
@@ -836,12 +839,12 @@ export class TxDecoder {
     }
     const lens = unvarints(raw.subarray(p + nb), nCoded, what);
     for (const x of keyLen.concat(lens)) if (x < 3 || x > 1 << 28) throw new FormatError(`${what}: a stream length is out of range`);
-    // offsets: key rows (coded keys × rows), then block streams location-major, views ascending
+    // offsets: key rows (coded keys × rows × segments), then block streams location-major, views ascending
     let off = 0;
     this.keyRow = new Map();
     this.codedKeys.forEach((k, i) => {
       const r = [];
-      for (let y = 0; y < this.nby; y++) { const n = keyLen[i * this.nby + y]; r.push([off, off + n]); off += n; }
+      for (let y = 0; y < this.nby * ks; y++) { const n = keyLen[i * this.nby * ks + y]; r.push([off, off + n]); off += n; }
       this.keyRow.set(k, r);
     });
     this.start = new Float64Array(N0 * nloc).fill(-1);
@@ -943,15 +946,17 @@ export class TxDecoder {
         }
       }
     }
-    const rows = this.keyRow.get(k), buf = this.file;
+    const rows = this.keyRow.get(k), buf = this.file, ks = this.keySplit, sb = this.nbx / ks;
     for (let by = 0; by < this.nby; by++) {
-      const [a, b] = rows[by];
-      const data = await buf.read("tx.blocks", a, b);
-      const parsed = parseBlock(data, 0, data.length, this.tables, this.nt * this.nbx, this.pcs, this.intra[k], 1, `key view ${k} row ${by}`);
-      for (let bx = 0; bx < this.nbx; bx++) {
-        for (let t = 0; t < this.nt; t++) {
-          const tt = bx * this.nt + t;
-          this._addResidual(img, by * B + Math.floor(t / tpb) * 8, bx * B + (t % tpb) * 8, parsed, tt, true);
+      for (let sg = 0; sg < ks; sg++) {                  // a row's streams: sb blocks each, in order
+        const [a, b] = rows[by * ks + sg];
+        const data = await buf.read("tx.blocks", a, b);
+        const parsed = parseBlock(data, 0, data.length, this.tables, this.nt * sb, this.pcs, this.intra[k], 1, `key view ${k} row ${by}`);
+        for (let j = 0; j < sb; j++) {
+          const bx = sg * sb + j;
+          for (let t = 0; t < this.nt; t++) {
+            this._addResidual(img, by * B + Math.floor(t / tpb) * 8, bx * B + (t % tpb) * 8, parsed, j * this.nt + t, true);
+          }
         }
       }
     }

@@ -106,13 +106,16 @@ class TxDecoder(ProfileDecoder):
         is_key = np.zeros(N0, bool)
         is_key[keys] = True
         ck = lay.coded_keys
-        key_len, coded, lengths = unpack_index(c.read("tx.index"), len(ck), self.nby, N0, nloc, is_key,
+        self.key_split = ks = lay.key_split
+        if self.nbx % ks:
+            raise FormatError(f"{name}: config.tx.key_split {ks} does not divide the {self.nbx} blocks of a row")
+        key_len, coded, lengths = unpack_index(c.read("tx.index"), len(ck), self.nby * ks, N0, nloc, is_key,
                                                f"{name}: tx.index")
         off = np.concatenate([[0], np.cumsum(np.concatenate([key_len.reshape(-1), lengths]))])
         nk = key_len.size
         self.row_of = {k: i for i, k in enumerate(ck)}
-        self.key_start = off[:nk].reshape(len(ck), self.nby)
-        self.key_end = off[1:nk + 1].reshape(len(ck), self.nby)
+        self.key_start = off[:nk].reshape(len(ck), self.nby, ks)        # (coded key, row, segment)
+        self.key_end = off[1:nk + 1].reshape(len(ck), self.nby, ks)
         img = lay.image_of                                    # JPEG 2000 intra keys, in key order
         img_keys = [k for k in lay.keys if k in img]
         img_off = np.concatenate([[0], np.cumsum([img[k] for k in img_keys])]).astype(np.int64)
@@ -312,12 +315,13 @@ class TxDecoder(ProfileDecoder):
         rw = np.array([r for _, r in rows], np.int64)
         kk = np.asarray(keys, np.int64)[sl]
         ci = np.array([self.row_of[int(k)] for k in kk], np.int64)
-        buf, s2, e2 = self._streams(self.key_start[ci, rw], self.key_end[ci, rw])
-        kind = self.lay.intra[kk].astype(np.int64)
-        got = self._parse_streams(buf, s2, e2, self.nt * self.nbx, kind, np.ones(kind.size, np.int64))
+        ks = self.key_split                              # streams per row: consecutive lanes, row order
+        buf, s2, e2 = self._streams(self.key_start[ci, rw].reshape(-1), self.key_end[ci, rw].reshape(-1))
+        kind = np.repeat(self.lay.intra[kk].astype(np.int64), ks)
+        got = self._parse_streams(buf, s2, e2, self.nt * self.nbx // ks, kind, np.ones(kind.size, np.int64))
         cut = np.flatnonzero(np.diff(sl)) + 1
         bounds = np.concatenate([[0], cut, [sl.size]])
-        parts = got.split(bounds)
+        parts = got.split(bounds * ks)
         return {int(sl[a]): p.reshape((b - a) * self.nbx, self.nt) for p, a, b in zip(parts, bounds[:-1], bounds[1:])}
 
     def _set_key_rows(self, slot: int, rows: np.ndarray, planes: np.ndarray) -> None:

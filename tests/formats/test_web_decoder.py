@@ -56,7 +56,7 @@ def assert_same_planes(path: Path, out: Path, exact: bool = True, chunk_budget=N
 
 
 @pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16", "rlfc_tx2_lossy_rgb8", "rlfc_tx2_lossy_rgba8",
-                                  "rlfc_tx3_lossy_rgb8"])
+                                  "rlfc_tx3_lossy_rgb8", "rlfc_txsplit_lossy_rgb8"])
 def test_golden_files_bit_exact(name, tmp_path):
     assert_same_planes(GOLDEN / f"{name}.lfc", tmp_path)
 
@@ -82,6 +82,18 @@ def test_real_capture_with_residual_blocks_bit_exact(sample_files, tmp_path):
     assert d.core.coded.sum() > 0                    # the residual path is exercised
     assert_same_planes(tx, tmp_path)
     assert_same_planes(tx, tmp_path / "small", chunk_budget=1)   # every chunk dropped after use, fetched again
+
+
+def test_key_rows_in_several_streams_bit_exact(tmp_path):
+    """tx layout version 3: each key-view block row coded as key_split streams."""
+    from formats.cli import main
+
+    f = tmp_path / "split.lfc"
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(f), "--quant", "3", "--intra-codec", "tx",
+                 "--key-split", "4", "--quiet"]) == 0
+    d = open_decoder(open_lfc(f))
+    assert d.core.key_split > 1 and d.core.coded.sum() > 0
+    assert_same_planes(f, tmp_path / "out")
 
 
 def test_jpeg2000_key_views_agree(sample_files, tmp_path):
