@@ -11,7 +11,9 @@ and code version (``--against``: the same worker with ``PYTHONPATH=OLD_CHECKOUT`
   key-view block rows decoded after it, where the decoder decodes them on demand);
 - ``next_64_blocks_ms``: then one ``decode_blocks`` call of 64 random requests;
 - ``open_all_keys_ms``: a fresh open plus every key view decoded;
-- ``open_decode_all_ms``: a fresh open plus ``decode_all``.
+- ``open_decode_all_ms``: a fresh open plus ``decode_all``;
+- ``first_frame_ms``: after a fresh open, the first frame of the default renderer at the first
+  camera of ``tools.bench_render``'s path (``open_first_frame_ms``: with the open).
 
 Prints medians over rounds; ``--out`` appends one JSON line per measurement.
 """
@@ -28,7 +30,7 @@ import time
 from pathlib import Path
 
 KEYS = ("open_ms", "first_block_ms", "key_rows_frac", "next_64_blocks_ms", "key_rows_frac_64", "open_all_keys_ms",
-        "open_decode_all_ms")
+        "open_decode_all_ms", "first_frame_ms", "open_first_frame_ms")
 
 
 def worker(path: str, seed: int) -> dict:
@@ -62,6 +64,13 @@ def worker(path: str, seed: int) -> dict:
     t = time.perf_counter()
     RlfcDecoder(open_lfc(path)).decode_all()
     out["open_decode_all_ms"] = (time.perf_counter() - t) * 1e3
+    t = time.perf_counter()
+    d3 = RlfcDecoder(open_lfc(path))
+    t1 = time.perf_counter()
+    rad = min(d3.rows, d3.cols) / 3                    # tools.bench_render's path, its first camera
+    d3.renderer(cache_mib=1024).render((d3.rows - 1) / 2, (d3.cols - 1) / 2 + rad)
+    t2 = time.perf_counter()
+    out["first_frame_ms"], out["open_first_frame_ms"] = (t2 - t1) * 1e3, (t2 - t) * 1e3
     return out
 
 
