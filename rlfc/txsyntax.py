@@ -509,10 +509,15 @@ def slot_words(tables: Tables) -> np.ndarray:
         C, A = tables.freq.shape
         if A > 128:
             raise ValueError("slot words hold alphabets of at most 128 symbols")
-        s = tables.slot.astype(np.int64)                                   # (C, M)
-        ci = np.arange(C)[:, None]
-        d = np.arange(RANS_M)[None, :] - tables.cum[ci, s]
-        got = tables._slot_words = (s | (tables.freq[ci, s] << 7) | (d << 20)).astype(np.uint32).reshape(-1)
+        f = tables.freq.reshape(-1).astype(np.int64)
+        if (tables.freq.sum(axis=1) != RANS_M).any():       # (tables always fill M slots; a guard)
+            raise ValueError("rANS table frequencies must sum to M")
+        # each symbol's word repeated over its slots (contexts and symbols in slot order), then
+        # slot − cum added: a few flat passes instead of (C, M) two-dimensional gathers
+        got = np.repeat((np.tile(np.arange(A, dtype=np.int64), C) | (f << 7)).astype(np.uint32), f)
+        start = np.repeat(tables.cum[:, :A].reshape(-1).astype(np.int64), f)
+        got |= ((np.tile(np.arange(RANS_M, dtype=np.int64), C) - start) << 20).astype(np.uint32)
+        tables._slot_words = got
     return got
 
 

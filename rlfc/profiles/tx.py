@@ -647,7 +647,7 @@ class TxDecoder(ProfileDecoder):
     def info(self) -> dict:
         lay = self.lay
         return {"key_views": len(lay.keys), "maps": lay.n_maps, "coded_blocks": int(self.coded.sum()),
-                "blocks_per_view": self.nby * self.nbx}
+                "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split}
 
 
 def pred_inputs(tables, nbx8: int, views, ty, tx):

@@ -89,3 +89,21 @@ def test_streams_packed_in_groups_are_the_same_bytes(seed, S, cells):
         assert tx.pack_streams(S, lane, ctx, sym, rl, rb, tables) == whole
     finally:
         tx.PACK_CELLS = old
+
+
+@settings(max_examples=20, deadline=None)
+@given(seed=st.integers(0, 2 ** 32 - 1), C=st.integers(1, 6), A=st.integers(1, 128))
+def test_slot_words_are_symbol_freq_and_offset_per_slot(seed, C, A):
+    """One look-up word per (context, slot): symbol | freq << 7 | (slot − cum) << 20, checked
+    against the tables' own slot, freq and cum arrays (sparse and full alphabets)."""
+    from rlfc.rans import M, Tables
+
+    rng = np.random.default_rng(seed)
+    counts = np.where(rng.random((C, A)) < 0.4, rng.integers(1, 1000, (C, A)), 0)
+    t = Tables.from_counts(counts)
+    w = tx.slot_words(t).reshape(C, M).astype(np.int64)
+    ci = np.arange(C)[:, None]
+    s = t.slot.astype(np.int64)
+    assert (w & 127 == s).all()
+    assert ((w >> 7) & 0x1FFF == t.freq[ci, s]).all()
+    assert (w >> 20 == np.arange(M)[None, :] - t.cum[ci, s]).all()
