@@ -4,10 +4,10 @@ Views (flat index v = row·cols + col) have integer grid positions, up to 4 refe
 (always key views) with blend weights summing to 64, and a map (disparity + prediction mode
 per 8×8 block) shared by the views of one cell. Key views are coded in ``keys`` order, each
 from references earlier in that order (or, with none, from its thumbnail: an intra view), one
-stream per block row (or ``key_split`` side by side), so a decoder can decode them by block rows when a request first needs
-them (the rows a prediction samples, and the rows those rows are predicted from); every other
-view is decoded block by block on demand from key views alone, so a block request needs the
-key-view rows around it and at most one stored stream.
+stream per block row (or ``key_split`` streams side by side), so a decoder can decode them by
+block rows when a request first needs them (the rows a prediction samples, and the rows those
+rows are predicted from); every other view is decoded block by block on demand from key views
+alone, so a block request needs the key-view rows around it and at most one stored stream.
 """
 from __future__ import annotations
 

@@ -44,6 +44,8 @@ _BAND8 = [8 * int(b) for b in BAND]      # band·8: the band's offset among magn
 _BAND8_ARR = np.array(_BAND8, np.int64)
 N_PC = 3          # plane classes
 _MASK = RANS_M - 1
+#: a magnitude parse finishes in plain Python once fewer lanes than this have symbols left
+TAIL_LANES = 32
 
 # context layout: one table set, contexts numbered by kind of symbol
 CTX_MODE = 0                                    # 2 kinds × 4 previous modes
@@ -474,6 +476,9 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     buf, top = dec.buf, dec.top
     offl = offs.tolist()
     for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
+        if m < TAIL_LANES:                                             # few lanes left: plain Python
+            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, first, nz, sym, x_all, p_all, buf, top, tables)
+            break
         c = c1[o:o + m]
         if k >= 1:
             o1 = offl[k - 1]
@@ -498,6 +503,39 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
         np.logical_or(s > 0, first[o:o + m], out=nz[o:o + m])
     dec.x[order], dec.ptr[order] = x_all, p_all
     return sym[sm]
+
+
+def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, first, nz, sym, x_all, p_all, buf, top, tables) -> None:
+    """:func:`_magnitudes` from step ``k`` on, where only ranks [0, m) have symbols left: each
+    lane to its end in plain Python (the same integers; a numpy step costs ~25 calls whatever
+    the lanes). Reads past the buffer are clamped as in the numpy steps (the caller's end check
+    refuses such a stream)."""
+    o0 = offl[k]
+    c1l, g1l, g2l, fl = c1[o0:].tolist(), g1[o0:].tolist(), g2[o0:].tolist(), first[o0:].tolist()
+    words = getattr(tables, "_slot_word_list", None)
+    if words is None:
+        words = tables._slot_word_list = slot_words(tables).tolist()
+    data = memoryview(buf)
+    out = []
+    for r in range(m):
+        x, p = int(x_all[r]), int(p_all[r])
+        n1 = bool(nz[offl[k - 1] + r]) if k >= 1 else False        # the lane's two previous symbols
+        n2 = bool(nz[offl[k - 2] + r]) if k >= 2 else False
+        for kk in range(k, int(lens[r])):
+            i = offl[kk] + r - o0
+            c = c1l[i] + (n1 and g1l[i]) + (n2 and g2l[i])
+            w = words[(c << PROB_BITS) | (x & _MASK)]
+            x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+            while x < RANS_L:
+                x = (x << 8) | data[p if p < top else top]
+                p += 1
+            s = w & 127
+            out.append((i, s))
+            n2, n1 = n1, s > 0 or fl[i]
+        x_all[r], p_all[r] = x, p
+    if out:
+        idx, val = np.array(out, np.int64).T
+        sym[o0 + idx] = val
 
 
 def slot_words(tables: Tables) -> np.ndarray:

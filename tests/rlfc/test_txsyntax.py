@@ -32,17 +32,24 @@ def _encode(modes, levels, kind, key, pcs):
     return tx.pack_streams(len(modes), lane, ctx, sym, rl, rb, tables), tables
 
 
-@settings(max_examples=30)
-@given(st.integers(0, 2 ** 31), st.integers(1, 25), st.sampled_from([1, 4]), st.sampled_from([1, 2, 3, 4]),
-       st.floats(0, 1), st.booleans())
-def test_streams_parse_back_exactly(seed, S, nt, P, density, big):
+@settings(max_examples=40)
+@given(st.integers(0, 2 ** 31), st.integers(1, 60), st.sampled_from([1, 4]), st.sampled_from([1, 2, 3, 4]),
+       st.floats(0, 1), st.booleans(), st.sampled_from([0, 3, 32, 10 ** 6]))
+def test_streams_parse_back_exactly(seed, S, nt, P, density, big, tail):
+    """Lanes parse back exactly whichever step the magnitudes switch to plain Python at (tail
+    = TAIL_LANES: 0 never, 10**6 from the first step), and one by one."""
     rng = np.random.default_rng(seed)
     modes, levels = _random_blocks(rng, S, nt, P, density, big)
     kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
     streams, tables = _encode(modes, levels, kind, key, pcs)
     starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
     buf = np.frombuffer(b"".join(streams) + bytes(8), np.uint8)
-    got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+    old = tx.TAIL_LANES
+    try:
+        tx.TAIL_LANES = tail
+        got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+    finally:
+        tx.TAIL_LANES = old
     assert (got.modes == modes).all() and (got.levels == levels).all()
     ones = []
     for i in range(S):
@@ -53,7 +60,9 @@ def test_streams_parse_back_exactly(seed, S, nt, P, density, big):
     assert (cat.modes == modes).all() and (cat.levels == levels).all()
 
 
-def test_malformed_streams_raise():
+@pytest.mark.parametrize("tail", [0, 32, 10 ** 6])
+def test_malformed_streams_raise(tail, monkeypatch):
+    monkeypatch.setattr(tx, "TAIL_LANES", tail)
     rng = np.random.default_rng(1)
     modes, levels = _random_blocks(rng, 20, 4, 3, 0.5, False)
     modes[:, 0] = 1
