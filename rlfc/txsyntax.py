@@ -512,9 +512,7 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, first, nz, sym, x_all, p_all,
     refuses such a stream)."""
     o0 = offl[k]
     c1l, g1l, g2l, fl = c1[o0:].tolist(), g1[o0:].tolist(), g2[o0:].tolist(), first[o0:].tolist()
-    words = getattr(tables, "_slot_word_list", None)
-    if words is None:
-        words = tables._slot_word_list = slot_words(tables).tolist()
+    words = slot_word_list(tables)
     data = memoryview(buf)
     out = []
     for r in range(m):
@@ -556,6 +554,14 @@ def slot_words(tables: Tables) -> np.ndarray:
         start = np.repeat(tables.cum[:, :A].reshape(-1).astype(np.int64), f)
         got |= ((np.tile(np.arange(RANS_M, dtype=np.int64), C) - start) << 20).astype(np.uint32)
         tables._slot_words = got
+    return got
+
+
+def slot_word_list(tables: Tables) -> list:
+    """:func:`slot_words` as a Python list (for plain-Python parsers), cached on the tables."""
+    got = getattr(tables, "_slot_word_list", None)
+    if got is None:
+        got = tables._slot_word_list = slot_words(tables).tolist()
     return got
 
 
