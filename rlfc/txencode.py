@@ -114,7 +114,7 @@ class TxParams:
         if not 0 <= self.max_disparity <= 256:
             raise ParameterError(f"max disparity must be within 0..256, got {self.max_disparity}")
         if isinstance(self.key_split, bool) or not isinstance(self.key_split, int) or not 0 <= self.key_split <= 4096:
-            raise ParameterError(f"key_split must be 0 (auto) .. 4096, got {self.key_split!r}")
+            raise ParameterError(f"key split must be 0 (auto) .. 4096 streams per key row, got {self.key_split!r}")
         if self.step is not None and not 1 <= self.step <= 1 << 16:
             raise ParameterError(f"step must be within 1..65536, got {self.step}")
 

@@ -138,3 +138,12 @@ def test_split_rows_on_every_sample_layout(kw):
     assert (full == split.decoded).all() and (full == whole.decoded).all()
     if lf.channels in (2, 4):
         assert (full[..., -1] == lf.views[..., -1]).all()
+
+
+@pytest.mark.parametrize("bad", [-1, 4097, True, 2.5, "4"])
+def test_bad_key_split_is_a_parameter_error(bad):
+    from formats.errors import ParameterError
+    from rlfc.txencode import TxParams
+
+    with pytest.raises(ParameterError, match="key split"):
+        TxParams(key_split=bad)
