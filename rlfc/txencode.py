@@ -32,7 +32,7 @@ from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
-from .txmaps import pack_maps
+from .txmaps import maps_sizes, pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
 from .txstructure import build, build_intra
 from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
@@ -890,19 +890,17 @@ class TxEncoder:
         """Bytes of the maps section that predicted key k's own map costs (its cell holds k
         alone: coded alone as JPEG 2000, the key frees it), measured once by packing the maps
         without it; 0 where the cell has other views."""
-        got = self._map_cost.get(k)
-        if got is None:
-            c = int(self.s.cell[k])
-            got = 0.0
-            if c >= 0 and list(self.s.cell_views[c]) == [k]:
-                shape = (self.nby8, self.nbx8)
+        if not self._map_cost:                   # every such key at once: one rANS pass for all variants
+            alone = [(int(v), int(self.s.cell[v])) for v in self.s.keys
+                     if self.s.cell[v] >= 0 and list(self.s.cell_views[int(self.s.cell[v])]) == [v]]
+            variants = [(self.disp, self.modes)]
+            for _, c in alone:
                 disp, modes = self.disp.copy(), self.modes.copy()
                 disp[c], modes[c] = self.base, 0
-                if "all" not in self._map_cost:
-                    self._map_cost["all"] = len(pack_maps(self.base, self.disp, self.modes, shape))
-                got = float(self._map_cost["all"] - len(pack_maps(self.base, disp, modes, shape)))
-            self._map_cost[k] = got
-        return got
+                variants.append((disp, modes))
+            sizes = maps_sizes(self.base, variants, (self.nby8, self.nbx8))
+            self._map_cost = {"all": sizes[0], **{v: float(sizes[0] - n) for (v, _), n in zip(alone, sizes[1:])}}
+        return self._map_cost.get(k, 0.0)
 
     def promote_views(self, res: dict, limits=None) -> list:
         """Code as JPEG 2000 every view that is not a key view whose transform coding is larger

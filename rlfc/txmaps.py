@@ -25,7 +25,7 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, ScalarDecoder, encode_lanes
+from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, ScalarDecoder, Tables, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
 from .txsyntax import quantize_counts, slot_word_list, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
@@ -87,6 +87,35 @@ def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tupl
               version: int = VERSION) -> bytes:
     """Section bytes of the shared map (nloc,), per-map disparities and modes (n_maps, nloc).
     ``version``: 3 (what the encoder writes) or 2 (the previous layout; tests of old files)."""
+    lanes, q = _map_lanes(base, disp, modes, shape, version)
+    streams = encode_lanes(*_lane_arrays(lanes), tables_from_quantized(q))
+    tb = tables_to_bytes(q)
+    return bytes([version]) + varints(np.array([len(tb)] + [len(x) for x in streams])) + tb + b"".join(streams)
+
+
+def maps_sizes(base: np.ndarray, variants: list, shape: tuple[int, int]) -> list[int]:
+    """``len(pack_maps(base, disp, modes, shape))`` of each (disp, modes) in ``variants``, with
+    every variant's streams rANS-coded in one call (each with its own tables: contexts offset
+    per variant), so the steps over the maps' thousands of symbols are paid once."""
+    if not variants:
+        return []
+    n_ctx = _n_ctx(VERSION)
+    per = [_map_lanes(base, d, m, shape, VERSION) for d, m in variants]
+    lanes = [(c + i * n_ctx, s) for i, (ls, _) in enumerate(per) for c, s in ls]
+    freq = np.concatenate([tables_from_quantized(q).freq for _, q in per])
+    streams = encode_lanes(*_lane_arrays(lanes), Tables(freq))
+    out, a = [], 0
+    for ls, q in per:
+        lens = [len(x) for x in streams[a:a + len(ls)]]
+        a += len(ls)
+        tb = len(tables_to_bytes(q))
+        out.append(1 + len(varints(np.array([tb] + lens))) + tb + sum(lens))
+    return out
+
+
+def _map_lanes(base, disp, modes, shape, version) -> tuple[list, np.ndarray]:
+    """The maps section's streams as (ctx, sym) lanes (the shared map, then one per map) and
+    their quantized counts."""
     if version not in (2, VERSION):
         raise ValueError(f"maps version must be 2 or {VERSION}, got {version}")
     ny, nx = shape
@@ -111,16 +140,17 @@ def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tupl
     counts = np.zeros((_n_ctx(version), ALPHABET), np.int64)
     for c, s in lanes:
         np.add.at(counts, (c, s), 1)
-    q = quantize_counts(counts)
-    tables = tables_from_quantized(q)
+    return lanes, quantize_counts(counts)
+
+
+def _lane_arrays(lanes: list):
+    """(ctx, sym, lengths) arrays of :func:`rlfc.rans.encode_lanes` from (ctx, sym) lanes."""
     K = max(len(c) for c, _ in lanes)
     C = np.zeros((len(lanes), K), np.int64)
     S = np.zeros((len(lanes), K), np.int64)
     for i, (c, s) in enumerate(lanes):
         C[i, :len(c)], S[i, :len(s)] = c, s
-    streams = encode_lanes(C, S, np.array([len(c) for c, _ in lanes]), tables)
-    tb = tables_to_bytes(q)
-    return bytes([version]) + varints(np.array([len(tb)] + [len(x) for x in streams])) + tb + b"".join(streams)
+    return C, S, np.array([len(c) for c, _ in lanes])
 
 
 def _with_escapes(ctx: np.ndarray, v: np.ndarray, version: int):
@@ -268,4 +298,4 @@ def _unescape_scalar(d: ScalarDecoder, s: int, what: str, version: int) -> int:
     return (R + x) * (1 if s == 2 * R else -1)
 
 
-__all__ = ["pack_maps", "unpack_maps", "MAX_VARINT_BYTES"]
+__all__ = ["pack_maps", "maps_sizes", "unpack_maps", "MAX_VARINT_BYTES"]

@@ -86,3 +86,17 @@ def test_every_byte_flip_of_a_maps_section_is_refused_or_in_range():
             assert d2.shape == m2.shape == (3, 30) and m2.min() >= 0 and m2.max() <= 4
             assert np.abs(d2).max() <= 1 << 20
     assert refused > len(good)                          # most flips are caught
+
+
+def test_sizes_of_many_variants_in_one_pass_equal_each_pack():
+    """maps_sizes codes several variants' streams in one rANS call (contexts offset per
+    variant): each size is exactly the length of that variant's own section."""
+    rng = np.random.default_rng(7)
+    base, disp, modes = _maps(rng, 5, 6, 7, 80, 0.1)
+    variants = [(disp, modes)]
+    for c in range(3):
+        d2, m2 = disp.copy(), modes.copy()
+        d2[c], m2[c] = base, 0
+        variants.append((d2, m2))
+    assert txmaps.maps_sizes(base, variants, (6, 7)) == [len(txmaps.pack_maps(base, d, m, (6, 7))) for d, m in variants]
+    assert txmaps.maps_sizes(base, [], (6, 7)) == []
