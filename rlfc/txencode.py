@@ -888,8 +888,9 @@ class TxEncoder:
 
     def _map_bytes(self, k: int) -> float:
         """Bytes of the maps section that predicted key k's own map costs (its cell holds k
-        alone: coded alone as JPEG 2000, the key frees it), measured once by packing the maps
-        without it; 0 where the cell has other views."""
+        alone: coded alone as JPEG 2000, the key frees it): the section's size with and without
+        that map, for every such key at once on the first call (:func:`rlfc.txmaps.maps_sizes`);
+        0 where the cell has other views."""
         if not self._map_cost:                   # every such key at once: one rANS pass for all variants
             alone = [(int(v), int(self.s.cell[v])) for v in self.s.keys
                      if self.s.cell[v] >= 0 and list(self.s.cell_views[int(self.s.cell[v])]) == [v]]

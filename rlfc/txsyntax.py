@@ -545,9 +545,7 @@ def slot_words(tables: Tables) -> np.ndarray:
         C, A = tables.freq.shape
         if A > 128:
             raise ValueError("slot words hold alphabets of at most 128 symbols")
-        f = tables.freq.reshape(-1).astype(np.int64)
-        if (tables.freq.sum(axis=1) != RANS_M).any():       # (tables always fill M slots; a guard)
-            raise ValueError("rANS table frequencies must sum to M")
+        f = tables.freq.reshape(-1).astype(np.int64)       # (each row sums to M: Tables checks it)
         # each symbol's word repeated over its slots (contexts and symbols in slot order), then
         # slot − cum added: a few flat passes instead of (C, M) two-dimensional gathers
         got = np.repeat((np.tile(np.arange(A, dtype=np.int64), C) | (f << 7)).astype(np.uint32), f)
