@@ -16,8 +16,10 @@ SIDE = 32766          # largest image side OpenCV's remap accepts (< SHRT_MAX)
 TILE = 4096           # destination tile side of the cut path
 
 
-def remap(src: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, interpolation: int) -> np.ndarray:
-    """``cv2.remap(src, mapx, mapy, interpolation, borderMode=BORDER_REPLICATE)`` for any size.
+def remap(src: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, interpolation: int,
+          out: np.ndarray | None = None) -> np.ndarray:
+    """``cv2.remap(src, mapx, mapy, interpolation, borderMode=BORDER_REPLICATE)`` for any size
+    (into ``out`` where given: an array of the result's shape and dtype).
 
     Args:
         src: (H, W) or (H, W, C) image. mapx, mapy: (h, w) float32 source columns and rows.
@@ -30,9 +32,10 @@ def remap(src: np.ndarray, mapx: np.ndarray, mapy: np.ndarray, interpolation: in
 
     h, w = mapx.shape
     if max(src.shape[0], src.shape[1], h, w) <= SIDE:
-        return cv2.remap(src, mapx, mapy, interpolation, borderMode=cv2.BORDER_REPLICATE)
+        return cv2.remap(src, mapx, mapy, interpolation, dst=out, borderMode=cv2.BORDER_REPLICATE)
     chans = src.shape[2:] if src.ndim == 3 and src.shape[2] > 1 else ()    # (OpenCV drops one channel's axis)
-    out = np.empty((h, w) + chans, src.dtype)
+    if out is None:
+        out = np.empty((h, w) + chans, src.dtype)
     for y in range(0, h, TILE):
         for x in range(0, w, TILE):
             _tile(src, mapx, mapy, interpolation, out, y, min(y + TILE, h), x, min(x + TILE, w))

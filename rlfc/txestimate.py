@@ -22,8 +22,8 @@ from . import cvremap
 from .txpredict import TB
 
 
-def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
-    """(H, W) float32 ``img`` shifted: out[y, x] = img[clip(y + dy), clip(x + dx)], edges
+def _shift(img: np.ndarray, dy: float, dx: float, out: np.ndarray | None = None) -> np.ndarray:
+    """(H, W) float32 ``img`` shifted (into ``out`` where given): out[y, x] = img[clip(y + dy), clip(x + dx)], edges
     replicated; the same values as OpenCV's bilinear ``warpAffine`` (inverse map, replicated
     border), which whole-pixel shifts (the global sweep's) take as a crop and a border copy."""
     import cv2
@@ -32,12 +32,13 @@ def _shift(img: np.ndarray, dy: float, dx: float) -> np.ndarray:
     if dy == int(dy) and dx == int(dx) and abs(dy) < h and abs(dx) < w:
         dy, dx = int(dy), int(dx)
         crop = img[max(dy, 0):h + min(dy, 0), max(dx, 0):w + min(dx, 0)]
-        return cv2.copyMakeBorder(crop, max(-dy, 0), max(dy, 0), max(-dx, 0), max(dx, 0), cv2.BORDER_REPLICATE)
+        return cv2.copyMakeBorder(crop, max(-dy, 0), max(dy, 0), max(-dx, 0), max(dx, 0), cv2.BORDER_REPLICATE,
+                                  dst=out)
     if max(h, w) > cvremap.SIDE:        # (OpenCV's warps address images below 32767 px a side)
         gy, gx = np.mgrid[0:h, 0:w].astype(np.float32)
-        return cvremap.remap(img, gx + np.float32(dx), gy + np.float32(dy), cv2.INTER_LINEAR)
+        return cvremap.remap(img, gx + np.float32(dx), gy + np.float32(dy), cv2.INTER_LINEAR, out=out)
     mat = np.float32([[1, 0, dx], [0, 1, dy]])
-    return cv2.warpAffine(img, mat, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
+    return cv2.warpAffine(img, mat, (w, h), dst=out, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REPLICATE)
 
 
@@ -67,9 +68,10 @@ class Estimator:
         self.key_slot = np.full(self.n0, -1, np.int64)
         self.key_slot[keys_order] = np.arange(len(keys_order))
 
-    def _y(self, v: int) -> np.ndarray:
-        """(Hp, Wp) float32 luma of view v."""
-        return self.luma[v].astype(np.float32)
+    def _y(self, v: int, out: np.ndarray) -> np.ndarray:
+        """(Hp, Wp) float32 luma of view v, written to ``out``."""
+        np.copyto(out, self.luma[v], casting="unsafe")
+        return out
 
     def _nrefs(self, m: int) -> int:
         return int((self.s.refs[self.cells[m][0]] >= 0).sum())
@@ -108,14 +110,14 @@ class Estimator:
         views = self.cells[m]
         acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
         nr = self._nrefs(m)
-        e = np.empty((self.hp, self.wp), np.float32)
+        y, yk, p, e, blend = (np.empty((self.hp, self.wp), np.float32) for _ in range(5))   # (reused)
         for v in views.tolist():
-            y = self._y(v)
-            blend = np.zeros_like(y)
+            self._y(v, y)
+            blend.fill(0)
             for j in range(nr):
                 k = s.refs[v, j]
                 dy, dx = d * (s.positions[v] - s.positions[k])
-                p = _shift(self._y(k), dy, dx)
+                _shift(self._y(k, yk), dy, dx, p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
                 blend += p * (s.weights[v, j] / 64.0)          # (in float64, then rounded)
             acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
@@ -147,16 +149,17 @@ class Estimator:
         dpix = np.repeat(np.repeat(d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16, TB, 0), TB, 1)
         gy = np.arange(self.hp, dtype=np.float32)[:, None]
         gx = np.arange(self.wp, dtype=np.float32)[None, :]
-        e = np.empty((self.hp, self.wp), np.float32)
-        wp = np.empty_like(e)
+        y, yk, p, e, wp, blend, mx, my = (np.empty((self.hp, self.wp), np.float32) for _ in range(8))
         for v in views.tolist():
             r = s.refs[v, :nr]
-            y = self._y(v)
+            self._y(v, y)
             dpos = (s.positions[v] - s.positions[r]).astype(np.float32)                # (nr, 2)
             wb = s.weights[v, :nr] / 64.0
-            blend = np.zeros_like(y)
+            blend.fill(0)
             for j in range(nr):               # each reference alone, and their blend
-                p = cvremap.remap(self._y(r[j]), gx + dpix * dpos[j, 1], gy + dpix * dpos[j, 0], cv2.INTER_LINEAR)
+                np.add(gx, np.multiply(dpix, dpos[j, 1], out=mx), out=mx)
+                np.add(gy, np.multiply(dpix, dpos[j, 0], out=my), out=my)
+                cvremap.remap(self._y(r[j], yk), mx, my, cv2.INTER_LINEAR, out=p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
                 blend += np.multiply(p, np.float32(wb[j]), out=wp)
             acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
@@ -226,10 +229,12 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     disp = np.where(take, own, base[None, :])
     lim = int(D * 16)
 
-    def total(dmaps):
-        return best_mode(est.costs_maps(dmaps, runner))       # (n_maps, nloc8)
+    def total(dmaps):                # (every mode's costs, the best mode's) of per-block disparities
+        f = est.costs_maps(dmaps, runner)                      # (n_maps, 1 + MAX_REFS, nloc8)
+        return f, best_mode(f)                                 # (n_maps, nloc8)
 
-    cur = total(disp)
+    full, cur = total(disp)            # (a block's costs depend on its own disparity only: every
+    #                                    block's costs at its final disparity are kept as it moves)
     # refine the shared map, then each cell's own values, from one evaluation per step and sign:
     # a block's cost depends only on its own disparity, so the costs of every cell one step
     # along (dc) are also those of the shared map's candidate for the cells that follow it.
@@ -238,16 +243,16 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     for step in (8, 8, 4, 2, 1):
         for sgn in (-1, 1):
             dc = np.clip(disp + sgn * step, -lim, lim)
-            cc = total(dc)
+            fc, cc = total(dc)
             follow = disp == base[None, :]
             gain = np.where(follow, cur - cc, 0).sum(0) > 0       # the shared map moves here
             base = np.where(gain, np.clip(base + sgn * step, -lim, lim), base)
             upd = follow & gain[None, :]
-            disp, cur = np.where(upd, dc, disp), np.where(upd, cc, cur)
+            disp, cur, full = np.where(upd, dc, disp), np.where(upd, cc, cur), np.where(upd[:, None], fc, full)
             # each cell's own value, where that pays its side cost (blocks the shared map moved
             # have taken this step already; the next, finer step refines them)
             better = ~upd & (cc + pen_delta * (dc != base[None, :]) < cur + pen_delta * (disp != base[None, :]))
-            disp, cur = np.where(better, dc, disp), np.where(better, cc, cur)
+            disp, cur, full = np.where(better, dc, disp), np.where(better, cc, cur), np.where(better[:, None], fc, full)
         if progress:
             progress("disparity", len(costs) + 2 * (5 - step.bit_length()), None)
     # regularize the shared map: the 3×3 median where it costs less than ~2 bits more overall
@@ -258,11 +263,10 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
                                 for dx in (-1, 0, 1)]), axis=0)[4].reshape(-1)
         follow = disp == base[None, :]
         cand = np.where(follow, med[None, :], disp)
-        cc = total(cand)
+        fc, cc = total(cand)
         ok = (np.where(follow, cc - cur, 0).sum(0) <= 2.0 * side_lambda) & (med != base)
         base = np.where(ok, med, base)
         upd = follow & ok[None, :]
-        disp, cur = np.where(upd, cand, disp), np.where(upd, cc, cur)
-    c = est.costs_maps(disp, runner) + pen
-    modes = c.argmin(axis=1)
+        disp, cur, full = np.where(upd, cand, disp), np.where(upd, cc, cur), np.where(upd[:, None], fc, full)
+    modes = (full + pen).argmin(axis=1)
     return base, disp, modes

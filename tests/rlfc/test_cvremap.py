@@ -27,10 +27,14 @@ def test_cut_remap_equals_opencv(interp, channels, monkeypatch):
     got = cr.remap(src, mx, my, interp)
     assert got.shape == ref.shape and got.dtype == ref.dtype
     assert np.array_equal(got, ref)
+    out = np.full_like(ref, -1)                  # into a caller's array
+    assert cr.remap(src, mx, my, interp, out=out) is out and np.array_equal(out, ref)
 
 
 def test_small_calls_are_opencv_itself():
     src = np.arange(48, dtype=np.float32).reshape(6, 8)
     gy, gx = np.mgrid[0:6, 0:8].astype(np.float32)
-    assert np.array_equal(cr.remap(src, gx + 0.25, gy, cv2.INTER_LINEAR),
-                          cv2.remap(src, gx + 0.25, gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE))
+    ref = cv2.remap(src, gx + 0.25, gy, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    assert np.array_equal(cr.remap(src, gx + 0.25, gy, cv2.INTER_LINEAR), ref)
+    out = np.full_like(ref, -1)
+    assert cr.remap(src, gx + 0.25, gy, cv2.INTER_LINEAR, out=out) is out and np.array_equal(out, ref)
