@@ -942,6 +942,9 @@ class TxEncoder:
             # the JPEG 2000 searches start where they started in that pass: the same codestreams
             self._j2k_hints = {k: dict(h) for k, h in res.get("j2k_hints", {}).items()}
             return self.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
+        if "pixels" not in res:      # every view's pixels kept in its code (key views: a posed capture)
+            res = dict(res, pixels=np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype))
+            self._gather_pixels(res)
         return res
 
     def psnr(self, res: dict) -> float:

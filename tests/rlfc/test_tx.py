@@ -800,3 +800,35 @@ def test_a_pass_keeps_one_buffer_of_decoded_views():
     assert all(np.shares_memory(c.px, pix) for c in res["codes"])
     dec = enc.decoded(res)
     assert np.shares_memory(dec, pix) and dec.shape == lf.views.shape
+
+
+def test_a_pass_that_kept_no_buffer_still_gives_its_pixels():
+    # a posed capture: every view is an intra key whose code keeps its own pixels, so a pass run
+    # without a buffer of decoded views (the rate search's) needs no second run to give them; a
+    # bpp target whose refined pass is not kept returns such a pass (it raised KeyError)
+    from formats.parallel import Runner
+    from rlfc import txencode as te
+
+    lf = smooth_lf(rows=1, cols=4)
+    lf.layout = "posed"
+    opts = EncodeOptions(profile="tx", target_bpp=1.0)
+    params = te._params_from(opts)
+    enc = te.TxEncoder(lf, params, None, te.side_lambda(lf, opts, params), Runner())
+    r = enc.run(4.0, te.Model(te.default_counts()))
+    assert "pixels" not in r and all(c.px is not None for c in r["codes"])
+    runs = []
+    orig = enc.run
+    enc.run = lambda *a, **k: runs.append(1) or orig(*a, **k)
+    got = enc.decoded(r)
+    assert not runs                                          # no second pass
+    want = enc.decoded(orig(4.0, te.Model(te.default_counts()), keep_pixels=True))
+    assert got.shape == lf.views.shape and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("target", [dict(target_bpp=2.0), dict(target_bpp=0.3), dict(target_psnr=38.0)])
+def test_posed_captures_meet_rate_targets(target):
+    lf = smooth_lf(rows=1, cols=4)
+    lf.layout = "posed"
+    e = encode(lf, EncodeOptions(profile="tx", **target))
+    d, _ = open_encoded(lf, e)
+    assert (d.decode_all() == e.decoded).all()
