@@ -160,6 +160,14 @@ def _refuse_input_overwrite(scene: Path, out: Path) -> None:
         raise ParameterError(f"{out}: refusing to write over a file of the input scene {scene}")
 
 
+def _refuse_output_over_input(inp: str, out: Path) -> None:
+    """An output that is the input file itself (under its own name, or another one: a link)."""
+    if "://" in str(inp) or not Path(inp).is_file():
+        return
+    if out.resolve() == Path(inp).resolve() or (out.exists() and os.path.samefile(out, inp)):
+        raise ParameterError(f"{out}: refusing to write over the input file {inp}")
+
+
 def cmd_encode(a, codec_id: str | None = None) -> int:
     from .codec_api import EncodeOptions
     from .lfcfile import write_lfc
@@ -308,6 +316,7 @@ def cmd_render(a) -> int:
     from .imageio import write_image
 
     out = Path(a.out)
+    _refuse_output_over_input(a.input, out)
     if a.path is not None:
         turn = turn_frames(a.path) is not None
         if a.quilt or a.turn is not None or (not turn and (a.at is not None or a.pose is not None)):
@@ -613,8 +622,14 @@ def cmd_decode(a) -> int:
 
     if a.block is not None and a.out is None:
         raise ParameterError("--block needs --out FILE.npy")
-    if a.block is None and a.outdir is None:
-        raise ParameterError("give an output folder (OUTDIR), or --block ROW,COL,BY,BX with --out FILE.npy")
+    if a.out is not None and a.outdir is not None:
+        raise ParameterError("give an output folder (OUTDIR) or --out FILE, not both")
+    if a.out is not None and a.block is None and a.view is None:
+        raise ParameterError("--out FILE goes with --view ROW,COL (one view) or --block ROW,COL,BY,BX; all views "
+                             "go to an output folder (OUTDIR)")
+    if a.block is None and a.outdir is None and a.out is None:
+        raise ParameterError("give an output folder (OUTDIR), or --view ROW,COL / --block ROW,COL,BY,BX with "
+                             "--out FILE")
     level = a.level
     if not math.isfinite(level) or level < 0:
         raise ParameterError(f"--level must be a finite number >= 0, got {level}")
@@ -625,14 +640,32 @@ def cmd_decode(a) -> int:
         t0 = time.perf_counter()
         if a.block is not None:
             r, c, by, bx = _ints(a.block, 4, "--block")
-            blk = d.decode_block(r, c, by, bx, level=level)
             out = Path(a.out)
+            _refuse_output_over_input(a.input, out)
+            blk = d.decode_block(r, c, by, bx, level=level)
             if not out.parent.exists():
                 raise ParameterError(f"{out}: folder {out.parent} does not exist")
             _save_npy(out, blk)
             if not a.quiet:
                 print(f"wrote {out}: block ({by},{bx}) of view ({r},{c}), shape {blk.shape} {blk.dtype}, "
                       f"level {a.level:g}, {1e3 * (time.perf_counter() - t0):.2f} ms")
+            return 0
+        if a.out is not None:                    # one view to one file: an image, or .npy
+            out = Path(a.out)
+            _refuse_output_over_input(a.input, out)
+            if not out.parent.exists():
+                raise ParameterError(f"{out}: folder {out.parent} does not exist")
+            r, c = _ints(a.view, 2, "--view")
+            img = d.decode_view(r, c, level=level)
+            if out.suffix.lower() == ".npy":
+                _save_npy(out, img)
+            else:
+                from .imageio import write_image
+
+                write_image(out, img)
+            if not a.quiet:
+                print(f"wrote {out}: view ({r},{c}), shape {img.shape} {img.dtype}, level {a.level:g}, "
+                      f"{time.perf_counter() - t0:.2f} s")
             return 0
         outdir = Path(a.outdir)
         if outdir.exists() and not outdir.is_dir():
@@ -754,15 +787,17 @@ def build_parser() -> argparse.ArgumentParser:
     e.set_defaults(func=cmd_encode, _groups=_add_codec_groups(e))
 
     d = sub.add_parser("decode", help="decode views, one view, or one block of an .lfc file",
-                       description="Decode an .lfc file: all views as PNG (rRR_cCC.png), one view (--view), or "
-                                   "one pixel block of one view (--block ROW,COL,BY,BX --out FILE.npy).")
+                       description="Decode an .lfc file: all views as PNG (rRR_cCC.png), one view (--view; into OUTDIR, "
+                                   "or to --out FILE.png / .npy), or one pixel block of one view (--block "
+                                   "ROW,COL,BY,BX --out FILE.npy).")
     d.add_argument("input")
     d.add_argument("outdir", nargs="?", help="output folder for PNG views (created if missing; its parent must exist)")
     d.add_argument("--view", metavar="ROW,COL", help="decode only this view")
     d.add_argument("--block", metavar="ROW,COL,BY,BX",
                    help="decode one block: view (ROW,COL), block row BY and column BX (pixels [BY*B,(BY+1)*B) x "
                         "[BX*B,(BX+1)*B))")
-    d.add_argument("--out", metavar="FILE.npy", help="where --block writes its (B, B, C) array")
+    d.add_argument("--out", metavar="FILE", help="where --block writes its (B, B, C) array (.npy), or --view its "
+                                                 "(H, W, C) view (an image by its extension, e.g. .png, or .npy)")
     d.add_argument("--level", type=float, default=0,
                    help="0 = full quality (default); larger = coarser, up to the file's levels (lfcodec info)")
     d.add_argument("--names", choices=("grid", "original"), default="grid",

@@ -98,6 +98,35 @@ def test_decode_views_view_and_block(encoded, tmp_path, capsys):
     assert main(["decode", str(encoded), "--block", "3,5,7,9", "--out", str(tmp_path / "e.npy"), "--level", "1",
                  "--quiet"]) == 0
     assert np.load(tmp_path / "e.npy").shape == (16, 16, 3)
+    # --view ROW,COL --out FILE: one view to one file, an image or an array
+    assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / "v.png"), "--quiet"]) == 0
+    assert (read_image(tmp_path / "v.png") == one).all()
+    assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / "v.npy")]) == 0
+    assert "wrote" in capsys.readouterr().out and (np.load(tmp_path / "v.npy") == one).all()
+
+
+@pytest.mark.parametrize("args", [["--block", "0,0,0,0", "--out", "{in}"], ["--view", "0,0", "--out", "{in}"],
+                                  ["--view", "0,0", "--out", "{link}"], ["--out", "{tmp}/x.png"],
+                                  ["{tmp}/d", "--view", "0,0", "--out", "{tmp}/x.png"]])
+def test_decode_refuses_outputs_that_are_the_input(encoded, tmp_path, args, capsys):
+    # the input .lfc written over by a decode (it was: --block ... --out IN.lfc replaced it)
+    f = tmp_path / "in.lfc"
+    f.write_bytes(encoded.read_bytes())
+    (tmp_path / "link.lfc").symlink_to(f)
+    before = f.read_bytes()
+    args = [x.format(**{"in": str(f), "link": str(tmp_path / "link.lfc"), "tmp": str(tmp_path)}) for x in args]
+    assert main(["decode", str(f), *args, "--quiet"]) == 2
+    assert f.read_bytes() == before and not (tmp_path / "x.png").exists()
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and ("input file" in err or "--out" in err)
+
+
+def test_render_refuses_to_write_over_its_input(encoded, tmp_path):
+    f = tmp_path / "in.png"                      # (an .lfc file however it is named)
+    f.write_bytes(encoded.read_bytes())
+    before = f.read_bytes()
+    assert main(["render", str(f), str(f), "--quiet"]) == 2
+    assert f.read_bytes() == before
 
 
 @pytest.mark.parametrize("profile,top,view", [("auto", 1, "1,1"), ("bise", 3, "0,0"), ("dcp", 1, "0,0")])
