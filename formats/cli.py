@@ -614,11 +614,44 @@ def _grid(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
+def _kept_outputs(d, outdir: Path, name, views: list, level, layouts: list, overwrite: bool) -> set:
+    """Files in ``outdir`` that a decode of ``views`` [(row, col)] would replace: the (row, col)
+    whose file already holds exactly the decoded pixels (left as they are: a decode run again);
+    any other file there (a capture's own images, a decode at another level, a layout file
+    lfcodec did not write) is a ParameterError unless ``overwrite``."""
+    from .imageio import read_image
+    from .scenes.layout import written_by_lfcodec
+    from .viewnames import output_path
+
+    same: set = set()
+    if overwrite or not outdir.is_dir():
+        return same
+    for p in layouts:
+        if p.exists() and not written_by_lfcodec(p):
+            raise ParameterError(f"{p}: exists and is not a layout file lfcodec wrote; decode to another folder, or "
+                                 f"give --overwrite to replace the files there")
+    for r, c in views:
+        p = output_path(outdir, name(r, c))
+        if not p.exists():
+            continue
+        try:
+            old = read_image(p)
+        except LfcError:
+            old = None
+        new = d.decode_view(r, c, level=level)
+        if old is None or old.size != new.size or not np.array_equal(old.reshape(new.shape), new):
+            raise ParameterError(f"{p}: exists and is not this view as decoded here; decode to another folder, or "
+                                 f"give --overwrite to replace the files there")
+        same.add((r, c))
+    return same
+
+
 def cmd_decode(a) -> int:
     from .lfcfile import open_lfc
     from .registry import open_decoder
     from .scenes import view_filename, write_layout, write_views
-    from .viewnames import png_name, unpack_names
+    from .scenes.layout import layout_paths
+    from .viewnames import output_path, png_name, unpack_names
 
     if a.block is not None and a.out is None:
         raise ParameterError("--block needs --out FILE.npy")
@@ -685,22 +718,34 @@ def cmd_decode(a) -> int:
                 return png_name(orig[r * d.cols + c])
         if a.view is not None:
             r, c = _ints(a.view, 2, "--view")
-            img = d.decode_view(r, c, level=level)
-            paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
+            if (r, c) in _kept_outputs(d, outdir, name, [(r, c)], level, [], a.overwrite):
+                paths = [outdir / png_name(name(r, c))]
+            else:
+                img = d.decode_view(r, c, level=level)
+                paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
         else:
+            keep = _kept_outputs(d, outdir, name, [(r, c) for r in range(d.rows) for c in range(d.cols)], level,
+                                 layout_paths(outdir, f.scene), a.overwrite)
             prog = _Progress(a.quiet)
             # decoded and written one row of views at a time: a large light field is never held whole
-            paths = []
+            paths, made = [], []
             try:
                 for r in range(d.rows):
-                    row = d.decode_views(np.arange(r * d.cols, (r + 1) * d.cols), level=level)[None]
-                    paths += write_views(outdir, row, rows=[r], filename=name)
+                    cs = [c for c in range(d.cols) if (r, c) not in keep]
+                    row = d.decode_views(np.asarray(cs, np.int64) + r * d.cols, level=level)[None] if cs else None
+                    for j, c in enumerate(cs):
+                        new = not output_path(outdir, name(r, c)).exists()
+                        p = write_views(outdir, row[:, j:j + 1], rows=[r], cols=[c], filename=name)[0]
+                        if new:
+                            made.append(p)
+                    paths += [output_path(outdir, name(r, c)) for c in range(d.cols)]
                     del row
                     prog("decode views", r + 1, d.rows)
             except BaseException:
-                # a file that fails part-way (a damaged stream in a later row) leaves no views of
-                # it behind: a folder holding only some views would pass for a whole decode
-                for p in paths:
+                # a file that fails part-way (a damaged stream in a later row) leaves none of the
+                # views it made behind: a folder holding only some views would pass for a whole
+                # decode (files that were there before stay)
+                for p in made:
                     Path(p).unlink(missing_ok=True)
                 raise
             finally:
@@ -793,6 +838,9 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("input")
     d.add_argument("outdir", nargs="?", help="output folder for PNG views (created if missing; its parent must exist)")
     d.add_argument("--view", metavar="ROW,COL", help="decode only this view")
+    d.add_argument("--overwrite", action="store_true",
+                   help="replace files in OUTDIR that are not the decoded views already (by default a decode "
+                        "leaves such files alone and stops: e.g. a capture's own images, under --names original)")
     d.add_argument("--block", metavar="ROW,COL,BY,BX",
                    help="decode one block: view (ROW,COL), block row BY and column BX (pixels [BY*B,(BY+1)*B) x "
                         "[BX*B,(BX+1)*B))")

@@ -18,6 +18,29 @@ def _atomic_write(path: Path, text: str) -> None:
     os.replace(tmp, path)
 
 
+def layout_paths(folder: str | os.PathLike, geometry: dict) -> list[Path]:
+    """The layout file(s) :func:`write_layout` writes in ``folder`` for ``geometry``."""
+    folder = Path(folder)
+    g = read_geometry(geometry, "scene")
+    if "baseline" in g and g["layout"] == "grid" and "c2w" not in g:
+        return [folder / "scene.json"]
+    if "splits" in g:
+        return [folder / f"transforms_{name}.json" for name, _ in g["splits"]]
+    return [folder / "transforms.json"]
+
+
+def written_by_lfcodec(path: str | os.PathLike) -> bool:
+    """Whether the layout file ``path`` is one :func:`write_layout` wrote (its ``source`` says so)."""
+    try:
+        doc = json.loads(Path(path).read_text())
+    except (OSError, ValueError, UnicodeDecodeError):
+        return False
+    return isinstance(doc, dict) and doc.get("source") == SOURCE
+
+
+SOURCE = "decoded by lfcodec"
+
+
 def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
     """Write the layout file of views saved as ``filename(row, col)`` in ``folder``.
 
@@ -38,7 +61,7 @@ def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
         if any(pattern.format(row=r, col=c) != filename(r, c) for r in range(rows) for c in range(cols)):
             pattern = [filename(r, c) for r in range(rows) for c in range(cols)]      # names, row-major
         doc = {"layout": "grid", "rows": rows, "cols": cols, "views": pattern,
-               "baseline": g["baseline"], "focal_px": fx, "source": "decoded by lfcodec"}
+               "baseline": g["baseline"], "focal_px": fx, "source": SOURCE}
         path = folder / "scene.json"
     else:
         if "c2w" in g:
@@ -53,12 +76,12 @@ def write_layout(folder: str | os.PathLike, geometry: dict, filename) -> Path:
         if "splits" in g:               # one transforms_<split>.json per recorded split, frames in order
             start, paths = 0, []
             for name, n in g["splits"]:
-                doc = {**head, "frames": frames[start:start + n], "source": "decoded by lfcodec"}
+                doc = {**head, "frames": frames[start:start + n], "source": SOURCE}
                 paths.append(folder / f"transforms_{name}.json")
                 _atomic_write(paths[-1], json.dumps(doc, indent=1, allow_nan=False) + "\n")
                 start += n
             return paths[0]
-        doc = {**head, "frames": frames, "source": "decoded by lfcodec"}
+        doc = {**head, "frames": frames, "source": SOURCE}
         path = folder / "transforms.json"
     _atomic_write(path, json.dumps(doc, indent=1, allow_nan=False) + "\n")
     return path

@@ -121,6 +121,36 @@ def test_decode_refuses_outputs_that_are_the_input(encoded, tmp_path, args, caps
     assert err.count("\n") == 1 and ("input file" in err or "--out" in err)
 
 
+def test_decode_into_a_folder_replaces_only_its_own_views(encoded, tmp_path, capsys):
+    # decoding into a capture's own folder (--names original, or a grid named as decoded views)
+    # replaced the user's images with lossy ones; now only files that already hold the decoded
+    # views are left in place (a decode run again), anything else stops it unless --overwrite
+    from formats.imageio import write_image
+
+    out = tmp_path / "v"
+    assert main(["decode", str(encoded), str(out), "--quiet"]) == 0
+    when = {p.name: p.stat().st_mtime_ns for p in out.iterdir()}
+    assert main(["decode", str(encoded), str(out), "--quiet"]) == 0                    # again: nothing rewritten
+    assert all(p.stat().st_mtime_ns == when[p.name] for p in out.iterdir() if p.suffix == ".png")
+    mine = read_image(out / "r03_c05.png")
+    theirs = np.ascontiguousarray(mine[::-1])                                          # a user's own image there
+    write_image(out / "r03_c05.png", theirs)
+    (out / "r00_c00.png").unlink()
+    for args in ([], ["--view", "3,5"]):
+        assert main(["decode", str(encoded), str(out), *args, "--quiet"]) == 2
+        assert "r03_c05.png: exists" in capsys.readouterr().err
+        assert (read_image(out / "r03_c05.png") == theirs).all() and not (out / "r00_c00.png").exists()
+    assert main(["decode", str(encoded), str(out), "--overwrite", "--quiet"]) == 0
+    assert (read_image(out / "r03_c05.png") == mine).all() and (out / "r00_c00.png").exists()
+    # a layout file lfcodec did not write is the capture's own, too
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "scene.json").write_text('{"layout": "grid", "rows": 9, "cols": 9}')
+    assert main(["decode", str(encoded), str(own), "--quiet"]) == 2
+    assert (own / "scene.json").read_text() == '{"layout": "grid", "rows": 9, "cols": 9}'
+    assert [p.name for p in own.iterdir()] == ["scene.json"]
+
+
 def test_render_refuses_to_write_over_its_input(encoded, tmp_path):
     f = tmp_path / "in.png"                      # (an .lfc file however it is named)
     f.write_bytes(encoded.read_bytes())
