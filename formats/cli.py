@@ -647,6 +647,16 @@ def _kept_outputs(d, outdir: Path, name, views: list, level, layouts: list, over
 
 
 def cmd_decode(a) -> int:
+    try:
+        return _decode(a)
+    except TruncatedError as e:
+        if a.partial and "meta.more" in str(e):     # an LFN prefix: its captured cameras come last
+            raise TruncatedError(f"{e}: the captured views need their cameras; render this prefix at a camera "
+                                 f"instead (lfcodec render --partial --pose FILE)") from None
+        raise
+
+
+def _decode(a) -> int:
     from .lfcfile import open_lfc
     from .registry import open_decoder
     from .scenes import view_filename, write_layout, write_views
@@ -853,7 +863,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "views had when encoded, as PNG (subfolders kept, e.g. images/IMG_0001.png)")
     d.add_argument("--partial", action="store_true",
                    help="accept a byte prefix of a file (a progressive download): use what its bytes hold (a light field "
-                        "network's prefix is a smaller network; its captured cameras are at the end, so give --pose)")
+                        "network's prefix is a smaller network; its captured cameras are at the end, so a prefix "
+                        "without them renders at a camera you give: lfcodec render --partial --pose)")
     d.add_argument("--quiet", action="store_true", help="no progress bars or messages")
     d.set_defaults(func=cmd_decode)
 

@@ -158,6 +158,10 @@ def test_cli_lfn_options_on_rlfc_files_and_prefix_without_partial(tmp_path, caps
     assert "--partial" in capsys.readouterr().err
     assert main(["render", str(pre), str(tmp_path / "o.png"), "--partial"]) == 2     # cameras are past the prefix
     assert "--pose FILE" in capsys.readouterr().err
+    for args in ([str(tmp_path / "dec")], [str(tmp_path / "dec"), "--view", "0,0"]):    # nor the captured views
+        assert main(["decode", str(pre), *args, "--partial"]) == 2
+        err = capsys.readouterr().err
+        assert "render --partial --pose" in err and err.count("\n") == 1 and not (tmp_path / "dec").exists()
     assert main(["info", str(pre), "--partial"]) == 0
     assert "in this prefix" in capsys.readouterr().out
 
