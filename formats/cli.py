@@ -507,12 +507,13 @@ def _render_path(a, out: Path) -> int:
             return _render_lfn_path(a, d, out)
         ren = _grid_renderer(a, d)
         cams = read_path(a.path, d.rows, d.cols)
-        for s_, t_ in cams[:, :2]:                      # every camera checked before any frame is written
-            ren.check_camera(float(s_), float(t_))
         if a.focus is not None:
             cams[:, 2] = a.focus
         if a.aperture:
             cams[:, 3] = a.aperture
+        for s_, t_, foc, ap in cams.tolist():           # every camera checked before any frame is written
+            ren.check_camera(s_, t_)
+            ren.check_optics(None if math.isnan(foc) else foc, ap)
         times = []
         with SequenceWriter(out, a.fps) as w:
             for i, (s_, t_, foc, ap) in enumerate(cams.tolist()):

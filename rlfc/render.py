@@ -286,10 +286,20 @@ class Renderer:
         file's maps, aperture), e.g. from :func:`formats.campath.read_path`; yields (H, W, C)
         frames (every camera is checked first)."""
         cams = np.asarray(cameras, dtype=np.float64).reshape(-1, 4)
-        for s, t in cams[:, :2]:
-            self.check_camera(float(s), float(t))
+        for s, t, focus, ap in cams.tolist():
+            self.check_camera(s, t)
+            self.check_optics(None if np.isnan(focus) else focus, ap)
         for s, t, focus, ap in cams.tolist():
             yield self.render(s, t, None if np.isnan(focus) else focus, ap)
+
+    def check_optics(self, focus: float | None, aperture: float) -> None:
+        """A ParameterError unless aperture >= 0 and focus (None: the file's maps) is finite and
+        within ± the views' larger side (further, every neighbour's samples leave its image)."""
+        if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
+            raise ParameterError("aperture must be >= 0 and focus finite")
+        lim = max(self.d.height, self.d.width)
+        if focus is not None and abs(focus) > lim:
+            raise ParameterError(f"focus {focus:g} is outside ±{lim} px per view step (the views' size)")
 
     def render(self, s: float, t: float, focus: float | None = None, aperture: float = 0.0) -> np.ndarray:
         """The view at grid position (s, t): (H, W, C) pixels of the file's dtype.
@@ -297,7 +307,7 @@ class Renderer:
         Args:
             s, t: row and column position in view units (0 … rows−1, 0 … cols−1, ± margin).
             focus: disparity in pixels per view step to use everywhere (refocusing; default: the
-                file's disparity maps, or 0 when it has none).
+                file's disparity maps, or 0 when it has none), within ± the views' larger side.
             aperture: synthetic-aperture radius in view steps (0 = a pinhole view).
         """
         return self.ops.to_pixels(self.render_planes(s, t, focus, aperture), self.d.dtype)
@@ -309,8 +319,7 @@ class Renderer:
         d = self.d
         ops = self.ops
         self.check_camera(s, t)
-        if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
-            raise ParameterError("aperture must be >= 0 and focus finite")
+        self.check_optics(focus, aperture)
         blk = self._block_map(s, t) if focus is None and aperture == 0 else None
         src = self._sources(s, t, aperture)
         robust = blk is not None and len(src) > 1 and self.robust

@@ -73,7 +73,10 @@ def test_cli_path_errors(grid, tmp_path, capsys):
     _, f = grid
     p = tmp_path / "far.txt"
     p.write_text("1,1\n9,1\n")                                          # the second camera is outside
-    for argv in (["--path", str(p)], ["--path", "orbit:3", "--at", "1,1"], ["--path", "orbit:3", "--quilt", "2x1"],
+    q = tmp_path / "focus.txt"
+    q.write_text("1,1\n1,1.5,2,1\n1,2,1e30,1\n")                      # the third camera's focus is absurd
+    for argv in (["--path", str(p)], ["--path", str(q)], ["--path", "orbit:3", "--focus", "1e9", "--aperture", "1"],
+                 ["--path", "orbit:3", "--at", "1,1"], ["--path", "orbit:3", "--quilt", "2x1"],
                  ["--path", "orbit:3", "--fps", "0"], ["--path", "nope"]):
         assert main(["render", str(f), str(tmp_path / "seq"), *argv, "--quiet"]) == 2, argv
         assert capsys.readouterr().err.strip()

@@ -63,6 +63,13 @@ def test_refocus_quilt_and_bad_cameras(leave_out):
     for bad in ((5.0, 0.0), (0.0, -2.0), (float("nan"), 1.0)):
         with pytest.raises(ParameterError):
             ren.render(*bad)
+    # a focus past the views' size leaves every sample off its image (1e300 overflowed into a
+    # ValueError, 1e30 drew edge pixels); at the limit it still renders
+    lim = max(d.height, d.width)
+    for focus in (1e300, -1e30, lim + 0.5):
+        with pytest.raises(ParameterError, match="focus"):
+            ren.render(1, 1, focus=focus, aperture=1.0)
+    assert ren.render(1, 1, focus=-lim, aperture=1.0).shape == (d.height, d.width, 3)
 
 
 def test_render_cli(leave_out, tmp_path, capsys):
