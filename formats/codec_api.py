@@ -21,7 +21,7 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import UnsupportedError
+from .errors import ParameterError, UnsupportedError
 
 
 @dataclass(frozen=True)
@@ -81,6 +81,25 @@ Progress = Callable[[str, int, int | None], None]
 """progress(stage, done, total): a stage name and a counter (total None when unknown)."""
 
 
+def check_integers(**kw) -> None:
+    """A ParameterError for any keyword argument that is not an integer (bools and floats
+    included: a float index would pick a view or block silently)."""
+    for k, x in kw.items():
+        if isinstance(x, bool) or not isinstance(x, (int, np.integer)):
+            raise ParameterError(f"{k} must be an integer, got {x!r}")
+
+
+def check_view_indices(views, n: int) -> np.ndarray:
+    """Flat view indices (any integer array-like) as int64, each within 0..n-1."""
+    a = np.asarray(views)
+    if a.dtype == bool or not (a.dtype.kind in "iu" or a.size == 0):
+        raise ParameterError(f"view indices must be integers, got {a.dtype} values")
+    a = a.astype(np.int64).ravel()
+    if a.size and (a.min() < 0 or a.max() >= n):
+        raise ParameterError(f"view index out of range (0..{n - 1})")
+    return a
+
+
 class Decoder(abc.ABC):
     """An opened file of one codec. Geometry attributes: rows, cols, height, width, channels,
     dtype (numpy), levels (int: valid levels are 0..levels)."""
@@ -100,7 +119,10 @@ class Decoder(abc.ABC):
     def decode_views(self, views, level: float = 0) -> np.ndarray:
         """Whole views by flat index (row · cols + col): (n, H, W, C) pixels (a codec that
         decodes several views together overrides this)."""
-        return np.stack([self.decode_view(*divmod(int(v), self.cols), level) for v in np.ravel(views)])
+        views = check_view_indices(views, self.rows * self.cols)
+        if views.size == 0:
+            return np.zeros((0, self.height, self.width, self.channels), self.dtype)
+        return np.stack([self.decode_view(*divmod(int(v), self.cols), level) for v in views])
 
     def decode_all(self, level: float = 0) -> np.ndarray:
         """The whole light field: (rows, cols, H, W, C) pixels."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from formats.codec_api import Decoder
+from formats.codec_api import Decoder, check_integers
 from formats.errors import FormatError, ParameterError, TruncatedError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
 from formats.lightfield import LightField, read_geometry
@@ -323,6 +323,7 @@ class LfnRenderer(Decoder):
         return out
 
     def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
+        check_integers(row=row, col=col)
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         try:
@@ -346,6 +347,7 @@ class LfnRenderer(Decoder):
     # -- free cameras (lfn_stream.cameras; the browser viewer uses the same formulas) ---------
     def pose(self, row: int, col: int) -> np.ndarray:
         """4×4 camera-to-world matrix of a captured view (OpenGL axes, scene units)."""
+        check_integers(row=row, col=col)
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         return self.poses[row, col].copy()

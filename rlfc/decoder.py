@@ -12,7 +12,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
-from formats.codec_api import Decoder
+from formats.codec_api import Decoder, check_integers, check_view_indices
 from formats.errors import ParameterError
 from formats.lfcfile import LfcFile, check_codec_version
 from formats.limits import DEFAULT
@@ -82,13 +82,14 @@ class RlfcDecoder(Decoder):
         return views, by, bx
 
     def check_level(self, level) -> int:
-        if isinstance(level, bool) or not isinstance(level, (int, np.integer, float)) or level != int(level) \
-                or not 0 <= int(level) <= self.levels:
+        if isinstance(level, bool) or not isinstance(level, (int, np.integer, float, np.floating)) \
+                or not np.isfinite(level) or level != int(level) or not 0 <= int(level) <= self.levels:
             raise ParameterError(f"level must be an integer within 0..{self.levels} (0 = full quality, "
                                  f"{self.levels} = coarsest), got {level!r}")
         return int(level)
 
     def view_index(self, row: int, col: int) -> int:
+        check_integers(row=row, col=col)
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         return row * self.cols + col
@@ -149,6 +150,7 @@ class RlfcDecoder(Decoder):
         Block (by, bx) covers pixels [by·B, (by+1)·B) × [bx·B, (bx+1)·B).
         """
         v = self.view_index(row, col)
+        check_integers(by=by, bx=bx)
         if not (0 <= by < self.nby and 0 <= bx < self.nbx):
             raise ParameterError(f"block ({by},{bx}) is outside the {self.nby}x{self.nbx} block grid "
                                  f"({self.height}x{self.width} px, B={self.block_size})")
@@ -170,7 +172,7 @@ class RlfcDecoder(Decoder):
         if views is None:
             views = np.arange(self.rows * self.cols)
         else:
-            views = self.requests(views, np.zeros(np.size(views), np.int64), np.zeros(np.size(views), np.int64))[0]
+            views = check_view_indices(views, self.rows * self.cols)
         threads = self._threads(threads)
         self.file.container.check_unchanged()
         H, W = self.height, self.width

@@ -88,6 +88,12 @@ class Renderer:
     def __init__(self, decoder, cache_mib: float = 256.0, margin: float = 0.5, robust: bool = True,
                  device: str | None = None):
         self.d = decoder
+        if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float, np.integer, np.floating)) \
+                or not 0 <= cache_mib < 1 << 40:
+            raise ParameterError(f"cache_mib must be a number of MiB >= 0, got {cache_mib!r}")
+        if isinstance(margin, bool) or not isinstance(margin, (int, float, np.integer, np.floating)) \
+                or not 0 <= margin <= 1e6:
+            raise ParameterError(f"margin must be a number of views >= 0, got {margin!r}")
         self.robust = bool(robust)
         self.ops = make_ops(device)
         scene = decoder.file.meta.get("scene", {}) if hasattr(decoder, "file") else {}

@@ -1,0 +1,50 @@
+"""The decoders' Python API: arguments that are not what a call takes are ParameterErrors (an
+LfcError), never an untyped exception, and never a silently different view or block (a float
+index used to pick view or block 0)."""
+import numpy as np
+import pytest
+
+from formats.errors import ParameterError
+from formats.lfcfile import open_lfc
+from formats.registry import open_decoder
+from tests.conftest import ROOT
+
+GOLDEN = ROOT / "tests" / "data" / "golden"
+
+
+@pytest.fixture(params=["rlfc_tx_lossy_rgb8.lfc", "rlfc_txsplit_lossy_rgb8.lfc", "lfn3_tiny_rgba8.lfc"])
+def dec(request):
+    with open_lfc(GOLDEN / request.param) as f:
+        yield open_decoder(f)
+
+
+@pytest.mark.parametrize("call", [
+    lambda d: d.decode_view(0.0, 0), lambda d: d.decode_view(0, 0.5), lambda d: d.decode_view(True, 0),
+    lambda d: d.decode_view(0, 0, level=float("nan")), lambda d: d.decode_view(0, 0, level=float("inf")),
+    lambda d: d.decode_view(0, 0, level="0"), lambda d: d.decode_views(np.array([0.5])),
+    lambda d: d.decode_views([True]), lambda d: d.decode_views("0"), lambda d: d.decode_views([10 ** 9]),
+])
+def test_bad_arguments_are_parameter_errors(dec, call):
+    with pytest.raises(ParameterError):
+        call(dec)
+
+
+def test_integer_arguments_of_any_integer_type(dec):
+    want = dec.decode_view(0, 1)
+    assert np.array_equal(dec.decode_view(np.int64(0), np.int32(1)), want)
+    assert np.array_equal(dec.decode_views(np.array([1], np.uint8))[0], want)
+    assert dec.decode_views([]).shape == (0, dec.height, dec.width, dec.channels)
+
+
+def test_rlfc_blocks_and_renderer_arguments():
+    with open_lfc(GOLDEN / "rlfc_tx_lossy_rgb8.lfc") as f:
+        d = open_decoder(f)
+        want = d.decode_block(0, 1, 0, 1)
+        assert np.array_equal(d.decode_block(np.int64(0), 1, np.int16(0), 1), want)
+        for bad in ((0, 1, 0.5, 1), (0, 1, 0, True), (0, 1.0, 0, 1)):
+            with pytest.raises(ParameterError):
+                d.decode_block(*bad)
+        for kw in (dict(cache_mib=float("nan")), dict(cache_mib=-1), dict(cache_mib="1"), dict(margin=-1.0),
+                   dict(margin=float("inf"))):
+            with pytest.raises(ParameterError):
+                d.renderer(**kw)
