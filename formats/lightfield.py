@@ -36,6 +36,8 @@ class LightField:
 
     def __post_init__(self) -> None:
         v = self.views
+        if not all(hasattr(v, k) for k in ("ndim", "shape", "dtype")):    # (numpy, or a lazy stack of views)
+            raise SceneError(f"views must be an array (rows, cols, H, W, C), got {type(v).__name__}")
         if v.ndim != 5:
             raise SceneError(f"views must be (rows, cols, H, W, C), got shape {v.shape}")
         if v.shape[4] not in (1, 2, 3, 4):
@@ -44,9 +46,17 @@ class LightField:
             raise SceneError(f"views must be uint8, uint16 or float32, got {v.dtype}")
         if min(v.shape) == 0:
             raise SceneError(f"light field is empty: shape {v.shape}")
-        self.positions = np.asarray(self.positions, dtype=np.float64).reshape(v.shape[0], v.shape[1], 3)
+        self.positions = _finite(self.positions, (v.shape[0], v.shape[1], 3), "positions")
+        if self.c2w is not None:
+            self.c2w = _finite(self.c2w, (v.shape[0], v.shape[1], 4, 4), "c2w")
+        if self.layout not in ("grid", "posed"):
+            raise SceneError(f"layout must be 'grid' or 'posed', got {self.layout!r}")
+        fx, fy = _finite(self.focal, (2,), "focal")
+        if not (fx > 0 and fy > 0):
+            raise SceneError(f"focal lengths must be > 0 px, got {tuple(self.focal)}")
         if self.principal is None:
             self.principal = (v.shape[3] / 2.0, v.shape[2] / 2.0)
+        _finite(self.principal, (2,), "principal")
 
     @property
     def rows(self) -> int:
@@ -127,6 +137,19 @@ def _grid_baseline(positions: np.ndarray) -> list[float] | None:
     if not (np.isfinite(bx) and np.isfinite(by)):
         return None
     return [bx, by] if np.array_equal(grid_positions(r, c, (bx, by)), positions) else None
+
+
+def _finite(x, shape: tuple, what: str) -> np.ndarray:
+    """``x`` as a float64 array of ``shape`` with finite values, else a SceneError."""
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{what} must be numbers, got {type(x).__name__}") from None
+    if a.size != int(np.prod(shape)):
+        raise SceneError(f"{what} must have shape {shape}, got {a.shape}")
+    if not np.isfinite(a).all():
+        raise SceneError(f"{what} must be finite")
+    return a.reshape(shape)
 
 
 def grid_positions(rows: int, cols: int, baseline: tuple[float, float] = (1.0, 1.0)) -> np.ndarray:

@@ -35,6 +35,8 @@ def default_quant(dtype) -> float:
 
 
 def check_targets(target_psnr=None, target_bpp=None) -> None:
+    if target_psnr is not None and target_bpp is not None:
+        raise ParameterError(f"give one rate target, a PSNR or a bpp (got {target_psnr} dB and {target_bpp} bpp)")
     if target_psnr is not None and not 10 <= target_psnr <= 200:
         raise ParameterError(f"target PSNR must be within 10..200 dB, got {target_psnr}")
     if target_bpp is not None and not target_bpp > 0:
