@@ -1,6 +1,6 @@
 """A LightField built from Python checks what a file's geometry will hold: positions, poses,
-intrinsics and layout are finite and of the views' shape (NaN positions used to encode into a
-file whose geometry does not read back), and the library's encode takes one rate target."""
+intrinsics and layout are finite and of the views' shape (NaN positions used to pass until the
+file was written, after the whole encode), and the library's encode takes one rate target."""
 import numpy as np
 import pytest
 
