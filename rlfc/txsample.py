@@ -77,7 +77,12 @@ class KeyAtlas:
         (n, b, Wp, P) integers (plus 0.5, as :meth:`set`)."""
         g, i = divmod(slot, self.per_group)
         dst = self.groups[g][i * self.hp:(i + 1) * self.hp].reshape(self.hp // b, b, self.wp, self.C)
-        dst[rows, ..., :self.P] = planes + 0.5
+        rows = np.asarray(rows)
+        if rows.size == 0:
+            return
+        cut = (np.flatnonzero(np.diff(rows) != 1) + 1).tolist()
+        for lo, hi in zip([0] + cut, cut + [rows.size]):       # runs of consecutive rows: slices, no temporaries
+            np.add(planes[lo:hi], self.ftype(0.5), out=dst[rows[lo]:rows[hi - 1] + 1, ..., :self.P], casting="unsafe")
 
     def nbytes(self) -> int:
         return sum(g.nbytes for g in self.groups)

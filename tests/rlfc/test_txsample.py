@@ -137,3 +137,22 @@ def test_thumbnail_upsampling_is_the_bilinear_formula():
         fy, fx = fy[:, None, None], fx[None, :, None]
         want = ((a * (16 - fx) + b * fx) * (16 - fy) + (c * (16 - fx) + d * fx) * fy + 128) >> 8
         assert got.dtype == np.int32 and np.array_equal(got, want)
+
+
+@pytest.mark.parametrize("planes,bits", [(3, 9), (1, 8), (4, 9), (3, 17)])
+@pytest.mark.parametrize("rows", [[0, 1, 2, 3], [3], [0, 2, 3], [1, 3], []])
+def test_set_rows_is_set_of_those_rows(planes, bits, rows):
+    # block rows stored by runs of consecutive rows: the same values as storing the whole view
+    rng = np.random.default_rng(len(rows) + planes)
+    hp, wp, b = 32, 24, 8
+    lim = 1 << (bits - 1)
+    full = rng.integers(-lim, lim, (hp, wp, planes)).astype(np.int32)
+    a, ref = KeyAtlas(3, hp, wp, planes, bits), KeyAtlas(3, hp, wp, planes, bits)
+    ref.set(1, full)
+    rows = np.asarray(rows, np.int64)
+    a.set_rows(1, rows, b, full.reshape(hp // b, b, wp, planes)[rows])
+    got = a.groups[0][hp:2 * hp].reshape(hp // b, b, wp, a.C)
+    want = ref.groups[0][hp:2 * hp].reshape(hp // b, b, wp, a.C)
+    assert np.array_equal(got[rows], want[rows])
+    rest = np.setdiff1d(np.arange(hp // b), rows)
+    assert not got[rest].any() and not a.groups[0][:hp].any() and not a.groups[0][2 * hp:].any()
