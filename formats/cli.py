@@ -160,6 +160,14 @@ def _refuse_input_overwrite(scene: Path, out: Path) -> None:
         raise ParameterError(f"{out}: refusing to write over a file of the input scene {scene}")
 
 
+def _check_out_file(out: Path) -> None:
+    """An output file's name: its folder exists and it is not itself a folder."""
+    if out.is_dir():
+        raise ParameterError(f"{out}: is a folder; give the output file's name")
+    if not out.parent.exists():
+        raise ParameterError(f"{out}: folder {out.parent} does not exist")
+
+
 def _refuse_output_over_input(inp: str, out: Path) -> None:
     """An output that is the input file itself (under its own name, or another one: a link)."""
     if "://" in str(inp) or not Path(inp).is_file():
@@ -186,8 +194,7 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     check_runner(getattr(a, "workers", 1), getattr(a, "scheduler", None))
     scene, out = Path(a.scene), Path(a.out)
     _refuse_input_overwrite(scene, out)
-    if not out.parent.exists():
-        raise ParameterError(f"{out}: folder {out.parent} does not exist")
+    _check_out_file(out)
     t0 = time.perf_counter()
     prog = _Progress(a.quiet)
     try:
@@ -327,8 +334,7 @@ def cmd_render(a) -> int:
         raise ParameterError(f"--fps must be within (0, 1000], got {a.fps}")
     if out.suffix.lower() != ".png":
         raise ParameterError(f"{out}: render writes PNG files (name it .png; a folder or .mp4 with --path)")
-    if not out.parent.exists():
-        raise ParameterError(f"{out}: folder {out.parent} does not exist")
+    _check_out_file(out)
     with _render_source(a) as (lfn, d):
         if lfn:
             return _render_lfn_still(a, d, out)
@@ -686,9 +692,8 @@ def _decode(a) -> int:
             r, c, by, bx = _ints(a.block, 4, "--block")
             out = Path(a.out)
             _refuse_output_over_input(a.input, out)
+            _check_out_file(out)
             blk = d.decode_block(r, c, by, bx, level=level)
-            if not out.parent.exists():
-                raise ParameterError(f"{out}: folder {out.parent} does not exist")
             _save_npy(out, blk)
             if not a.quiet:
                 print(f"wrote {out}: block ({by},{bx}) of view ({r},{c}), shape {blk.shape} {blk.dtype}, "
@@ -697,8 +702,7 @@ def _decode(a) -> int:
         if a.out is not None:                    # one view to one file: an image, or .npy
             out = Path(a.out)
             _refuse_output_over_input(a.input, out)
-            if not out.parent.exists():
-                raise ParameterError(f"{out}: folder {out.parent} does not exist")
+            _check_out_file(out)
             r, c = _ints(a.view, 2, "--view")
             img = d.decode_view(r, c, level=level)
             if out.suffix.lower() == ".npy":

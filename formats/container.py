@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import mmap
 import os
+import stat
 import struct
 import zlib
 from dataclasses import dataclass
@@ -202,6 +203,10 @@ class Container:
         if isinstance(source, (str, os.PathLike)):
             self.name = str(source)
             try:
+                # a FIFO would block the open until something writes to it; a device has no size
+                if not stat.S_ISREG(os.stat(source).st_mode):
+                    raise FormatError(f"{source}: not a regular file (an .lfc file is read from a file, a URL or "
+                                      f"bytes)")
                 self._file = open(source, "rb")
             except OSError as e:
                 raise FormatError(f"{source}: cannot open ({e.strerror})") from None

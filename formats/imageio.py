@@ -160,8 +160,14 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray) -> None:
     if out is None:
         raise SceneError(f"{path}: cannot write this image format ({oiio.geterror().strip()})")
     try:
-        if not out.open(str(tmp), spec) or not out.write_image(arr):
-            raise SceneError(f"{path}: write failed ({out.geterror().strip()})")
+        try:
+            if not out.open(str(tmp), spec) or not out.write_image(arr):
+                raise SceneError(f"{path}: write failed ({out.geterror().strip()})")
+        finally:
+            out.close()
+        os.replace(tmp, path)
+    except OSError as e:
+        raise SceneError(f"{path}: cannot write ({e.strerror})") from None
     finally:
-        out.close()
-    os.replace(tmp, path)
+        if os.path.lexists(tmp) and not os.path.isdir(tmp):     # (a failed write leaves no temp file)
+            os.unlink(tmp)

@@ -438,3 +438,36 @@ def test_split_all_encodes_every_split_and_decodes_them_back(tmp_path, capsys):
     (scene / "transforms_test.json").write_text(json.dumps({**doc, "camera_angle_x": 0.7}))
     assert main(["encode", str(scene), str(tmp_path / "q.lfc"), "--split", "all", "--quiet"]) == 2
     assert "intrinsics" in capsys.readouterr().err
+
+
+def test_outputs_that_are_folders_or_fifos(encoded, tmp_path, capsys):
+    # an output named like a file that is a folder: one line naming it (the message named a temp
+    # file, and a failed image write left its temp file behind); an input that is a FIFO or a
+    # device: refused before the open (a FIFO blocked the open)
+    import os
+
+    for name in ("b.npy", "v.png", "r.png", "e.lfc", "m.mp4"):
+        (tmp_path / name).mkdir()
+    for argv in (["decode", str(encoded), "--block", "0,0,0,0", "--out", str(tmp_path / "b.npy")],
+                 ["decode", str(encoded), "--view", "0,0", "--out", str(tmp_path / "v.png")],
+                 ["render", str(encoded), str(tmp_path / "r.png")],
+                 ["encode", str(SAMPLE), str(tmp_path / "e.lfc"), "--quant", "8"],
+                 ["render", str(encoded), str(tmp_path / "m.mp4"), "--path", "orbit:2"]):
+        assert main(argv + ["--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert "is a folder" in err and err.count("\n") == 1, argv
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["b.npy", "e.lfc", "m.mp4", "r.png", "v.png"]   # no temps
+    os.mkfifo(tmp_path / "f.lfc")
+    for src in (str(tmp_path / "f.lfc"), "/dev/null", str(tmp_path)):
+        assert main(["info", src]) == 2
+        assert "not a regular file" in capsys.readouterr().err
+
+
+def test_failed_image_writes_leave_no_temp_file(tmp_path):
+    from formats.errors import SceneError
+    from formats.imageio import write_image
+
+    (tmp_path / "x.png").mkdir()
+    with pytest.raises(SceneError, match="cannot write"):
+        write_image(tmp_path / "x.png", np.zeros((4, 4, 3), np.uint8))
+    assert [p.name for p in tmp_path.iterdir()] == ["x.png"]
