@@ -734,7 +734,7 @@ def _decode(a) -> int:
         if a.view is not None:
             r, c = _ints(a.view, 2, "--view")
             if (r, c) in _kept_outputs(d, outdir, name, [(r, c)], level, [], a.overwrite):
-                paths = [outdir / png_name(name(r, c))]
+                paths = [output_path(outdir, name(r, c))]
             else:
                 img = d.decode_view(r, c, level=level)
                 paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
@@ -749,8 +749,9 @@ def _decode(a) -> int:
                     cs = [c for c in range(d.cols) if (r, c) not in keep]
                     row = d.decode_views(np.asarray(cs, np.int64) + r * d.cols, level=level)[None] if cs else None
                     for j, c in enumerate(cs):
-                        new = not output_path(outdir, name(r, c)).exists()
-                        p = write_views(outdir, row[:, j:j + 1], rows=[r], cols=[c], filename=name)[0]
+                        p = output_path(outdir, name(r, c))
+                        new = not p.exists()
+                        write_views(outdir, row[:, j:j + 1], rows=[r], cols=[c], filename=name)
                         if new:
                             made.append(p)
                     paths += [output_path(outdir, name(r, c)) for c in range(d.cols)]

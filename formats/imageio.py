@@ -169,5 +169,5 @@ def write_image(path: str | os.PathLike, pixels: np.ndarray) -> None:
     except OSError as e:
         raise SceneError(f"{path}: cannot write ({e.strerror})") from None
     finally:
-        if os.path.lexists(tmp) and not os.path.isdir(tmp):     # (a failed write leaves no temp file)
+        if os.path.lexists(tmp):                                 # (a failed write leaves no temp file)
             os.unlink(tmp)
