@@ -621,6 +621,11 @@ def _grid(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
+#: what ``decode --view ROW,COL --out FILE`` writes: formats that keep every channel and bit depth
+#: (a JPEG, say, would turn a 16-bit grey + alpha view into 8-bit colour without a word)
+VIEW_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
+
+
 def _kept_outputs(d, outdir: Path, name, views: list, level, layouts: list, overwrite: bool) -> set:
     """Files in ``outdir`` that a decode of ``views`` [(row, col)] would replace: the (row, col)
     whose file already holds exactly the decoded pixels (left as they are: a decode run again);
@@ -701,6 +706,9 @@ def _decode(a) -> int:
             return 0
         if a.out is not None:                    # one view to one file: an image, or .npy
             out = Path(a.out)
+            if out.suffix.lower() not in VIEW_SUFFIXES:
+                raise ParameterError(f"{out}: --view --out writes {', '.join(VIEW_SUFFIXES)} (lossless, every channel "
+                                     f"and bit depth kept)")
             _refuse_output_over_input(a.input, out)
             _check_out_file(out)
             r, c = _ints(a.view, 2, "--view")
@@ -861,7 +869,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="decode one block: view (ROW,COL), block row BY and column BX (pixels [BY*B,(BY+1)*B) x "
                         "[BX*B,(BX+1)*B))")
     d.add_argument("--out", metavar="FILE", help="where --block writes its (B, B, C) array (.npy), or --view its "
-                                                 "(H, W, C) view (an image by its extension, e.g. .png, or .npy)")
+                                                 "(H, W, C) view (.png, .tif or .npy)")
     d.add_argument("--level", type=float, default=0,
                    help="0 = full quality (default); larger = coarser, up to the file's levels (lfcodec info)")
     d.add_argument("--names", choices=("grid", "original"), default="grid",

@@ -103,6 +103,11 @@ def test_decode_views_view_and_block(encoded, tmp_path, capsys):
     assert (read_image(tmp_path / "v.png") == one).all()
     assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / "v.npy")]) == 0
     assert "wrote" in capsys.readouterr().out and (np.load(tmp_path / "v.npy") == one).all()
+    assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / "v.tif"), "--quiet"]) == 0
+    assert (read_image(tmp_path / "v.tif") == one).all()
+    for lossy in ("v.jpg", "v.xyz", "v"):      # a JPEG would drop bit depth and channels without a word
+        assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / lossy), "--quiet"]) == 2
+        assert ".png, .tif, .tiff, .npy" in capsys.readouterr().err and not (tmp_path / lossy).exists()
 
 
 @pytest.mark.parametrize("args", [["--block", "0,0,0,0", "--out", "{in}"], ["--view", "0,0", "--out", "{in}"],
