@@ -30,7 +30,7 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from .errors import ChecksumError, FormatError, TruncatedError, UnsupportedError
+from .errors import ChecksumError, FormatError, ParameterError, TruncatedError, UnsupportedError
 
 MAGIC = b"\x89LFC\r\n\x1a\n"
 MAJOR, MINOR = 1, 0
@@ -210,6 +210,8 @@ class Container:
                 self._file = open(source, "rb")
             except OSError as e:
                 raise FormatError(f"{source}: cannot open ({e.strerror})") from None
+            except ValueError as e:             # (a NUL byte in the path)
+                raise FormatError(f"{source!r}: cannot open ({e})") from None
             size = os.fstat(self._file.fileno()).st_size
             if size == 0:
                 self._src = _BufferSource(b"")
@@ -221,7 +223,11 @@ class Container:
             self._src = source
         else:
             self.name = name or "<buffer>"
-            self._src = _BufferSource(source)
+            try:
+                self._src = _BufferSource(source)
+            except TypeError:
+                raise ParameterError(f"an .lfc file is opened from a path, a URL, bytes or a ByteRangeSource, not "
+                                     f"{type(source).__name__}") from None
         self.size = self._src.size
         self._verified: set[tuple[str, int]] = set()     # (section, chunk) verified once each
         self._parse_header()

@@ -281,3 +281,13 @@ def test_stale_temp_files_of_dead_writers_are_removed(tmp_path):
     write_lfc(tmp_path / "x.lfc", "x", 1, {}, {}, [("a", b"1")])
     assert not stale.exists() and (tmp_path / "x.lfc").exists()
     assert not list(tmp_path.glob(".x.lfc.tmp*")) or live.exists() or True
+
+
+@pytest.mark.parametrize("source", ["a\x00b.lfc", 12345, None, 1.5, [1, 2]])
+def test_sources_that_are_not_files_urls_or_bytes(source):
+    # a NUL in a path was a ValueError, a number or None a TypeError from memoryview
+    from formats.errors import LfcError
+    from formats.lfcfile import open_lfc
+
+    with pytest.raises(LfcError):
+        open_lfc(source)
