@@ -1,7 +1,8 @@
 """``lfcodec serve DIR``: a small HTTP file server with byte ranges, for local use and tests.
 
 GET and HEAD of files inside DIR (nothing outside it: paths are resolved and confined), one
-``Range: bytes=a-b`` per request (``206`` with ``Content-Range``; ``416`` when unsatisfiable),
+``Range: bytes=a-b`` per request (``206`` with ``Content-Range``; ``416`` when unsatisfiable or
+malformed; a request for several ranges gets the whole file, ``200``),
 a strong ``ETag`` from the file's size and modification time, ``If-Match`` (``412`` when the
 file changed). ``latency_s`` delays every answer, to stand for a network in benchmarks.
 
@@ -77,6 +78,8 @@ def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True, viewer
             if im is not None and im.strip() not in (etag, "*"):
                 return self._error(412)
             rng = self.headers.get("Range") if ranges else None
+            if rng is not None and "," in rng:         # several ranges: ignored (RFC 9110 allows it), the whole file
+                rng = None
             a, b, code = 0, size - 1, 200
             if rng is not None:
                 m = _RANGE.match(rng.strip())
