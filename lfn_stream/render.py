@@ -294,10 +294,25 @@ class LfnRenderer(Decoder):
                                  f"the base network), got {level!r}")
         return float(self.neurons - level)
 
+    def _scaled(self, scale) -> tuple[int, int]:
+        """(h, w) of the views at ``scale``, or a ParameterError: a finite number in (0, 64] that
+        leaves at least one pixel and at most ``Limits.max_view_pixels``."""
+        if isinstance(scale, bool) or not isinstance(scale, (int, float, np.integer, np.floating)) \
+                or not 0 < scale <= 64:
+            raise ParameterError(f"scale must be within (0, 64], got {scale!r}")
+        h, w = round(self.height * scale), round(self.width * scale)
+        if h < 1 or w < 1:
+            raise ParameterError(f"scale {scale} leaves no pixels of the {self.height}x{self.width} views")
+        if h * w > self._limits.max_view_pixels:
+            raise ParameterError(f"scale {scale} makes a {h}x{w} view, over the {self._limits.max_view_pixels} pixels "
+                                 f"a view may have (Limits.max_view_pixels)")
+        return h, w
+
     def _check(self, neurons: float) -> float:
         lo, hi = self.neuron_range
-        if not lo <= neurons <= hi:
-            raise ParameterError(f"{neurons} neurons outside the available range [{lo:g}, {hi:g}]")
+        if isinstance(neurons, bool) or not isinstance(neurons, (int, float, np.integer, np.floating)) \
+                or not lo <= neurons <= hi:
+            raise ParameterError(f"{neurons!r} neurons outside the available range [{lo:g}, {hi:g}]")
         return float(neurons)
 
     @torch.no_grad()
@@ -324,6 +339,7 @@ class LfnRenderer(Decoder):
 
     def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
         check_integers(row=row, col=col)
+        self._scaled(scale)
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         try:
@@ -338,7 +354,7 @@ class LfnRenderer(Decoder):
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
-        neurons = self.display_neurons if neurons is None else neurons
+        neurons = self.display_neurons if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         rays = self.view_rays(row, col, scale)
         h, w = rays.shape[:2]
@@ -394,8 +410,9 @@ class LfnRenderer(Decoder):
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
         c2w = self._check_pose(c2w, self.norm)
-        neurons = self.display_neurons if neurons is None else neurons
+        neurons = self.display_neurons if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
+        self._scaled(scale)
         g = self._intr
         rays = camera_rays(c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"])
         h, w = rays.shape[:2]
@@ -480,14 +497,11 @@ class LfnRenderer(Decoder):
           networks' differences from one size to the next show as faint arcs around the gaze,
           and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.
         """
-        if not (isinstance(scale, (int, float, np.integer, np.floating)) and 0 < scale <= 64):
-            raise ParameterError(f"scale must be within (0, 64], got {scale!r}")
-        h, w = round(self.height * scale), round(self.width * scale)
-        if h < 1 or w < 1:
-            raise ParameterError(f"scale {scale} leaves no pixels of the {self.height}x{self.width} views")
-        if h * w > self._limits.max_view_pixels:
-            raise ParameterError(f"scale {scale} makes a {h}x{w} map, over the {self._limits.max_view_pixels} pixels "
-                                 f"a view may have (Limits.max_view_pixels)")
+        h, w = self._scaled(scale)
+        if not (np.isfinite(gaze).all() and np.size(gaze) == 2):
+            raise ParameterError(f"gaze must be a finite (x, y) in pixels, got {gaze!r}")
+        if not (np.isfinite(inner) and np.isfinite(outer) and 0 <= inner <= outer):
+            raise ParameterError(f"inner and outer must be finite with 0 <= inner <= outer, got {inner!r}, {outer!r}")
         ys, xs = np.mgrid[0:h, 0:w] + 0.5
         diag = float(np.hypot(h, w))
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / diag

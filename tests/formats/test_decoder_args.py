@@ -48,3 +48,21 @@ def test_rlfc_blocks_and_renderer_arguments():
                    dict(margin=float("inf"))):
             with pytest.raises(ParameterError):
                 d.renderer(**kw)
+
+
+def test_lfn_camera_and_size_arguments():
+    # a NaN scale or size was a ValueError from int(); a scale of 100 rendered a view 100x the
+    # captured size (now bounded as foveation_map's: (0, 64] and Limits.max_view_pixels); a NaN
+    # gaze or inner > outer made a foveation map without a word
+    with open_lfc(GOLDEN / "lfn3_tiny_rgba8.lfc") as f:
+        d = open_decoder(f)
+        pose = d.pose(0, 0)
+        for call in (lambda: d.render_pose(pose, scale=float("nan")), lambda: d.render_pose(pose, scale=0),
+                     lambda: d.render_pose(pose, scale=100), lambda: d.render_pose(pose, neurons=float("nan")),
+                     lambda: d.render_pose(pose, neurons="8"), lambda: d.render(0, 0, scale=1e9),
+                     lambda: d.render(0, 0, neurons=float("nan")), lambda: d.foveation_map((float("nan"), 1.0)),
+                     lambda: d.foveation_map((1.0, 1.0), inner=0.9, outer=0.1)):
+            with pytest.raises(ParameterError):
+                call()
+        assert d.render(0, 0, neurons=d.neuron_range[1], scale=0.5).shape[2] == 4
+        assert d.foveation_map((10.0, 10.0)).shape == (d.height, d.width)
