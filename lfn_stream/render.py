@@ -9,6 +9,7 @@ import numpy as np
 import torch
 
 from formats.codec_api import Decoder, check_integers
+from formats.devices import torch_device
 from formats.errors import FormatError, ParameterError, TruncatedError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
 from formats.lightfield import LightField, read_geometry
@@ -156,7 +157,7 @@ class LfnRenderer(Decoder):
             occ = bytes(c.read("lfn.occ"))
         self._base, self._occ_bytes = bytes(c.read("lfn.base")), occ
         self.rays_evaluated = 0   # network evaluations so far (rays the occupancy net let through)
-        self.device = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        self.device = torch_device(device)
         self.half = self.device.type == "cuda"
         self._build()
         if not c.is_remote and (not f.moved or c.available("meta.more")):

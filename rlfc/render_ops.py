@@ -157,15 +157,11 @@ class TorchOps:
     def __init__(self, device: str | None = None):
         import torch
 
-        from formats.errors import ParameterError
+        from formats.devices import torch_device
 
         self.torch = torch
         self.F = torch.nn.functional
-        try:
-            self.dev = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if device is None else device)
-            torch.zeros(1, device=self.dev)
-        except (RuntimeError, AssertionError, ValueError) as e:
-            raise ParameterError(f"device {device!r} is not usable here ({str(e).splitlines()[0][:120]})") from None
+        self.dev = torch_device(device)
 
     def grid(self, H: int, W: int):
         t = self.torch

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from formats.devices import torch_device
 from formats.pixels import inverse_int
 
 CHUNK = 1 << 17         # requests decoded together: the device's temporaries grow with them
@@ -24,7 +25,7 @@ class TorchBlockDecoder:
 
     def __init__(self, dec, device: str | None = None):
         self.d = dec
-        self.dev = torch.device(device or ("cuda" if torch.cuda.is_available() else "cpu"))
+        self.dev = torch_device(device)
         self.core = dec.core.torch(self.dev)
         self.peak = int(np.iinfo(dec.dtype).max)
 

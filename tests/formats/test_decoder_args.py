@@ -66,3 +66,18 @@ def test_lfn_camera_and_size_arguments():
                 call()
         assert d.render(0, 0, neurons=d.neuron_range[1], scale=0.5).shape[2] == 4
         assert d.foveation_map((10.0, 10.0)).shape == (d.height, d.width)
+
+
+@pytest.mark.parametrize("device", ["bogus", 3.5] + ([] if __import__("torch").cuda.is_available() else ["cuda"]))
+def test_devices_that_cannot_be_used_are_parameter_errors(device):
+    # the torch block decoder and the LFN renderer raised torch's RuntimeError / AssertionError
+    from rlfc.torch_decode import TorchBlockDecoder
+
+    with open_lfc(GOLDEN / "rlfc_tx_lossy_rgb8.lfc") as f:
+        d = open_decoder(f)
+        with pytest.raises(ParameterError, match="not usable"):
+            TorchBlockDecoder(d, device=device)
+        with pytest.raises(ParameterError):
+            d.renderer(device=device)
+    with open_lfc(GOLDEN / "lfn3_tiny_rgba8.lfc") as f, pytest.raises(ParameterError, match="not usable"):
+        open_decoder(f, device=device)
