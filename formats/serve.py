@@ -31,10 +31,13 @@ _WEB_FILES = ("index.html", "lfc.js", "lfn.js", "tiles.js", "render.js", "viewer
 
 
 def viewer_url(base: str, name: str) -> str:
-    """The viewer page's URL for file ``name`` (relative to the served folder) on server ``base``."""
+    """The viewer page's URL for file ``name`` (relative to the served folder) on server ``base``.
+    The ``file`` parameter is the file's URL path, percent-encoded, then encoded again as a query
+    value: the page resolves it as a URL, where a raw ``#`` or ``?`` in a name would start a
+    fragment or a query."""
     from urllib.parse import quote
 
-    return f"{base.rstrip('/')}/{VIEWER_PREFIX}index.html?file=/{quote(name)}"
+    return f"{base.rstrip('/')}/{VIEWER_PREFIX}index.html?file={quote('/' + quote(name), safe='/')}"
 
 
 def make_handler(root: Path, latency_s: float = 0.0, ranges: bool = True, viewer: bool = False):

@@ -34,3 +34,22 @@ def test_view_prints_a_working_url(tmp_path):
     finally:
         p.terminate()
         p.wait(10)
+
+
+def test_viewer_url_of_names_with_url_characters(tmp_path):
+    # the page resolves its `file` parameter as a URL (as below, like the browser's new URL()):
+    # a raw '#' or '?' in a file name started a fragment or a query and the page fetched another path
+    from urllib.parse import parse_qs, urljoin, urlparse
+
+    from formats.serve import FileServer
+
+    names = ["lf.lfc", "a b é#?.lfc", "100%.lfc", "x&y=1+2.lfc"]
+    for n in names:
+        (tmp_path / n).write_bytes(GOLDEN.read_bytes())
+    with FileServer(tmp_path, viewer=True) as srv:
+        assert srv.viewer_url("lf.lfc").endswith("/_viewer/index.html?file=/lf.lfc")     # plain names unchanged
+        for n in names:
+            page = srv.viewer_url(n)
+            value = parse_qs(urlparse(page).query)["file"][0]                    # URLSearchParams.get
+            with urllib.request.urlopen(urljoin(page, value)) as r:              # new URL(value, page)
+                assert r.read() == GOLDEN.read_bytes(), n
