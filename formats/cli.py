@@ -176,6 +176,20 @@ def _refuse_output_over_input(inp: str, out: Path) -> None:
         raise ParameterError(f"{out}: refusing to write over the input file {inp}")
 
 
+def _unused_read_options(a, lf) -> list[str]:
+    """Notes for the scene options the scene's reader did not use (they used to pass in silence:
+    --grid 3x27 on a 9x9 folder with its own scene.json gave a 9x9 file)."""
+    reader, out = lf.meta.get("reader"), []
+    if a.grid is not None and reader not in ("folder", "npy") or reader == "npy" and a.grid is not None \
+            and _grid(a.grid) != (lf.rows, lf.cols):
+        out.append(f"--grid {a.grid} was not used: the scene has its own layout ({reader}, {lf.rows}x{lf.cols} views)")
+    if (a.baseline is not None or a.focal is not None) and reader in ("llff", "transforms", "npy"):
+        out.append(f"--baseline/--focal were not used: the {reader} reader takes the cameras from the scene")
+    if a.split != "train" and reader != "transforms":
+        out.append(f"--split {a.split} was not used: the scene is not a capture with transforms_<split>.json files")
+    return out
+
+
 def cmd_encode(a, codec_id: str | None = None) -> int:
     from .codec_api import EncodeOptions
     from .lfcfile import write_lfc
@@ -235,6 +249,7 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     for sp in lf.meta.get("other_splits", ()):
         notes.append(f"{scene}: split '{sp}' (transforms_{sp}.json) was not encoded; encode it with --split {sp}, "
                      f"or every split as one capture with --split all")
+    notes += _unused_read_options(a, lf)
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
         notes.append(f"{enc.summary.get('profile', codec.codec_id)} codes in this process only; "
                       "--workers/--scheduler had no effect")

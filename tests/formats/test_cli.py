@@ -476,3 +476,14 @@ def test_failed_image_writes_leave_no_temp_file(tmp_path):
     with pytest.raises(SceneError, match="cannot write"):
         write_image(tmp_path / "x.png", np.zeros((4, 4, 3), np.uint8))
     assert [p.name for p in tmp_path.iterdir()] == ["x.png"]
+
+
+def test_scene_options_the_reader_did_not_use_are_reported(tmp_path, capsys):
+    # --grid on a folder with its own scene.json, --split on a grid: they passed in silence
+    out = tmp_path / "o.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--grid", "3x27", "--split", "test", "--quant", "8", "--json",
+                 "--quiet"]) == 0
+    notes = json.loads(capsys.readouterr().out)["notes"]
+    assert any("--grid 3x27 was not used" in n for n in notes) and any("--split test was not used" in n for n in notes)
+    assert main(["encode", str(SAMPLE), str(out), "--baseline", "2", "--quant", "8", "--json", "--quiet"]) == 0
+    assert not any("not used" in n for n in json.loads(capsys.readouterr().out)["notes"])   # a grid's baseline is used
