@@ -683,9 +683,22 @@ def cmd_decode(a) -> int:
         raise
 
 
-def _decode(a) -> int:
+@contextlib.contextmanager
+def _decode_source(a):
+    """(the capture's geometry, its opened decoder) for ``decode``'s input: an .lfc file, or a
+    set of files (an LFN tile set's manifest: its views rendered by the blend). Closed on exit."""
     from .lfcfile import open_lfc
-    from .registry import open_decoder
+    from .registry import open_decoder, open_set
+
+    if _is_set(a.input):
+        with open_set(a.input, partial=a.partial) as d:
+            yield d.scene, d
+        return
+    with open_lfc(a.input, partial=a.partial) as f:
+        yield f.scene, open_decoder(f)
+
+
+def _decode(a) -> int:
     from .scenes import view_filename, write_layout, write_views
     from .scenes.layout import layout_paths
     from .viewnames import output_path, png_name, unpack_names
@@ -705,8 +718,7 @@ def _decode(a) -> int:
         raise ParameterError(f"--level must be a finite number >= 0, got {level}")
     if level == int(level):
         level = int(level)
-    with open_lfc(a.input, partial=a.partial) as f:
-        d = open_decoder(f)
+    with _decode_source(a) as (scene, d):
         t0 = time.perf_counter()
         if a.block is not None:
             r, c, by, bx = _ints(a.block, 4, "--block")
@@ -746,7 +758,6 @@ def _decode(a) -> int:
         layout = None
         name = view_filename
         if a.names == "original":
-            scene = f.scene
             if not isinstance(scene, dict) or "names_z" not in scene:
                 raise ParameterError(f"{a.input}: the file does not record its views' original names (encoded "
                                      f"from an array or by an older lfcodec); decode without --names original")
@@ -763,7 +774,7 @@ def _decode(a) -> int:
                 paths = write_views(outdir, img[None, None], rows=[r], cols=[c], filename=name)
         else:
             keep = _kept_outputs(d, outdir, name, [(r, c) for r in range(d.rows) for c in range(d.cols)], level,
-                                 layout_paths(outdir, f.scene), a.overwrite)
+                                 layout_paths(outdir, scene), a.overwrite)
             prog = _Progress(a.quiet)
             # decoded and written one row of views at a time: a large light field is never held whole
             paths, made = [], []
@@ -790,7 +801,7 @@ def _decode(a) -> int:
             finally:
                 prog.close()
             # the layout file, so that the folder encodes again as the same scene
-            layout = write_layout(outdir, f.scene, name)
+            layout = write_layout(outdir, scene, name)
         if not a.quiet:
             lname = "" if layout is None else f" and {'transforms_*.json' if layout.name.startswith('transforms_') else layout.name}"
             print(f"wrote {len(paths)} view(s){lname} to {outdir} (level "

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from formats.errors import FormatError, LfcError, ParameterError
+from formats.errors import FormatError, LfcError, ParameterError, UnsupportedError
 
 FORMAT_ID = "lfcodec-lfn-tiles"
 FORMAT_VERSION = 1
@@ -330,6 +330,35 @@ class TiledLfnRenderer:
 
     def to_pixels(self, rgba: np.ndarray) -> np.ndarray:
         return self.tile(0).to_pixels(rgba)
+
+    # -- decoding captured views (what ``lfcodec decode`` asks of a decoder) ----------------
+    @property
+    def levels(self) -> float:
+        return self.tile(0).levels
+
+    @property
+    def scene(self) -> dict:
+        """The capture's geometry (tile 0's file: every tile holds the whole capture's)."""
+        return self.tile(0).file.scene
+
+    def decode_view(self, row: int, col: int, level: float = 0) -> np.ndarray:
+        """Full-size pixels of a captured view rendered by the blend, at a level (0 = the
+        largest network every tile's bytes hold)."""
+        return self.to_pixels(self.render(row, col, self.neurons_at(level), scale=1.0))
+
+    def decode_views(self, views, level: float = 0) -> np.ndarray:
+        """Whole views by flat index (row · cols + col): (n, H, W, C) pixels."""
+        from formats.codec_api import check_view_indices
+
+        views = check_view_indices(views, self.rows * self.cols)
+        out = np.zeros((views.size, self.height, self.width, self.channels), self.dtype)
+        for i, v in enumerate(views.tolist()):
+            out[i] = self.decode_view(*divmod(v, self.cols), level)
+        return out
+
+    def decode_block(self, *a, **k):
+        raise UnsupportedError("block random access is an RLFC feature; a tile set of light field networks renders "
+                               "rays (use --view)")
 
     def info(self) -> dict:
         return {"codec": "lfn", "tiles": len(self.files), "band": self.band,

@@ -130,6 +130,18 @@ def test_cli_trains_and_renders_a_tile_set(tmp_path, capsys):
     from formats.imageio import read_image
     assert read_image(tmp_path / "v.png").shape == (128, 160, 3)
     assert len(list((tmp_path / "turn").glob("*.png"))) == 2
+    # decode: the captured views rendered by the blend, as render gives them at those cameras
+    # (decode used to read the manifest as an .lfc file: "wrong magic")
+    assert main(["render", str(out), str(tmp_path / "c.png"), "--at", "4,3", "--level", "1", "--quiet"]) == 0
+    assert main(["decode", str(out), str(tmp_path / "all"), "--level", "1", "--quiet"]) == 0
+    assert len(list((tmp_path / "all").glob("r*_c*.png"))) == 81 and (tmp_path / "all" / "scene.json").exists()
+    assert (read_image(tmp_path / "all" / "r04_c03.png") == read_image(tmp_path / "c.png")).all()
+    assert main(["decode", str(out), "--view", "4,3", "--out", str(tmp_path / "one.npy"), "--level", "1",
+                 "--quiet"]) == 0
+    assert (np.load(tmp_path / "one.npy") == read_image(tmp_path / "c.png")).all()
+    capsys.readouterr()
+    assert main(["decode", str(out), "--block", "0,0,0,0", "--out", str(tmp_path / "b.npy")]) == 2
+    assert "block random access" in capsys.readouterr().err
     # a tile set needs a .json manifest; a single file cannot hold one
     capsys.readouterr()
     assert main(["train", str(ROOT / "samples" / "dino_crop"), str(tmp_path / "t.lfc"), "--tiles", "2", *args]) == 2
