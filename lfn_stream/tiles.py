@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from formats.codec_api import Decoder
 from formats.errors import FormatError, LfcError, ParameterError, UnsupportedError
 
 FORMAT_ID = "lfcodec-lfn-tiles"
@@ -346,15 +347,8 @@ class TiledLfnRenderer:
         largest network every tile's bytes hold)."""
         return self.to_pixels(self.render(row, col, self.neurons_at(level), scale=1.0))
 
-    def decode_views(self, views, level: float = 0) -> np.ndarray:
-        """Whole views by flat index (row · cols + col): (n, H, W, C) pixels."""
-        from formats.codec_api import check_view_indices
-
-        views = check_view_indices(views, self.rows * self.cols)
-        out = np.zeros((views.size, self.height, self.width, self.channels), self.dtype)
-        for i, v in enumerate(views.tolist()):
-            out[i] = self.decode_view(*divmod(v, self.cols), level)
-        return out
+    #: whole views by flat index: the codec interface's own loop over :meth:`decode_view`
+    decode_views = Decoder.decode_views
 
     def decode_block(self, *a, **k):
         raise UnsupportedError("block random access is an RLFC feature; a tile set of light field networks renders "
