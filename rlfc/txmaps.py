@@ -27,7 +27,7 @@ from formats.errors import FormatError
 
 from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, ScalarDecoder, Tables, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
-from .txsyntax import quantize_counts, slot_word_list, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
+from .txsyntax import quantize_counts, slot_word_view, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
 VERSION = 3
 R = 31
@@ -207,7 +207,7 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     disp = np.zeros((n_maps, nloc), np.int64)
     modes = np.zeros((n_maps, nloc), np.int64)
     if n_maps:
-        wl = slot_word_list(tables)
+        wl = slot_word_view(tables)
         for m in range(n_maps):
             a = int(starts[m])
             corr, mo = _map_stream(raw, a, a + int(lens[2 + m]), wl, ny, nx, n_modes, ver, what)
@@ -218,11 +218,11 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
     return disp, modes
 
 
-def _map_stream(data: bytes, start: int, end: int, words: list, ny: int, nx: int, n_modes: int, ver: int,
+def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_modes: int, ver: int,
                 what: str) -> tuple[list, list]:
     """(corrections, modes), lists of ny·nx ints, of one map's stream ``data[start:end]``: the
     rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined, one table look-up per symbol in
-    ``words`` (:func:`rlfc.txsyntax.slot_word_list`)."""
+    ``words`` (:func:`rlfc.txsyntax.slot_word_view`)."""
     if not 1 <= n_modes <= 5:
         raise ValueError("a map's modes are 0..4 (contexts 5·left + above)")
     nloc = ny * nx
