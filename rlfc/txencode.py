@@ -1468,6 +1468,10 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             notes.append(f"{n_alone} views that are not key views cost less coded alone (JPEG 2000) than "
                          f"predicted; they are key views of this file")
     cfg, sections = enc.pack(res)
+    split = enc.key_split(res)
+    if params.key_split and split != params.key_split and enc.coded_keys(res):
+        notes.append(f"--key-split {params.key_split} does not divide the {enc.nbx} blocks of a row: the key rows "
+                     f"are {split} streams each (the largest divisor below it)")
     if lf.layout != "grid":
         notes.append("posed capture: every view is coded on its own (no inter-view prediction), so this file is "
                      "no smaller than per-view coding (JPEG 2000 or the transform path, whichever is smaller per view)")

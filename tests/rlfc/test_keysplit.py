@@ -40,6 +40,9 @@ def test_split_rows_decode_to_the_same_pixels_on_every_path(wide, one_per_row, a
     assert e.config["tx"]["version"] == 3 and e.config["tx"]["key_split"] == got   # a divisor of 9, not above
     d, blob = open_encoded(wide, e)
     assert d.core.key_start.shape[-1] == got
+    said = [x for x in e.notes if "--key-split" in x]       # a split that is not a divisor is reported
+    assert said == ([] if asked == got else [f"--key-split {asked} does not divide the 9 blocks of a row: the key "
+                                             f"rows are {got} streams each (the largest divisor below it)"])
     assert len(blob) > len(blob1)                       # each stream has its own state and length
     full = d.decode_all()
     assert (full == e.decoded).all() and (full == d1.decode_all()).all() and (e.decoded == one.decoded).all()
