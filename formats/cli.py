@@ -435,8 +435,9 @@ def _render_kind(a, codec: str) -> bool:
         used = [o for o, v in (("--pose", a.pose), ("--turn", a.turn), ("--stereo", a.stereo), ("--level", a.level),
                                ("--scale", a.scale)) if v is not None]
         if used:
-            raise ParameterError(f"{a.input}: {', '.join(used)} are options for light field network files (this is "
-                                 f"{codec}); an RLFC grid renders positions on its camera plane (--at)")
+            raise ParameterError(f"{a.input}: {', '.join(used)} {'is an option' if len(used) == 1 else 'are options'} "
+                                 f"for light field network files (this is {codec}); an RLFC grid renders positions "
+                                 f"on its camera plane (--at)")
         if a.path is not None and turn_frames(a.path) is not None:
             raise ParameterError(f"{a.input}: --path turn turns a free camera about the scene, which light field "
                                  f"network files render; an RLFC grid takes orbit, sweep or a file of cameras")

@@ -15,5 +15,9 @@ def torch_device(device: str | None = None):
         dev = torch.device(("cuda" if torch.cuda.is_available() else "cpu") if device is None else device)
         torch.zeros(1, device=dev)
     except (RuntimeError, AssertionError, ValueError, TypeError) as e:
-        raise ParameterError(f"device {device!r} is not usable here ({str(e).splitlines()[0][:120]})") from None
+        why = str(e).splitlines()[0] if str(e) else type(e).__name__
+        if why.startswith("Expected one of"):         # torch lists every device type it knows: too long to help
+            why = "not a torch device type"
+        raise ParameterError(f"device {device!r} is not usable here ({why[:120]}); a torch device is "
+                             f"cpu, cuda or cuda:N") from None
     return dev

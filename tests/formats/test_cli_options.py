@@ -73,3 +73,14 @@ def test_lfn_options_do_not_apply_to_rlfc(tiny, tmp_path, capsys):
     for opt in ("--steps", "--max-neurons", "--device"):
         assert main(["encode", str(tiny / "scene"), str(tmp_path / "x.lfc"), opt, "5", "--quiet"]) == 2
         assert "do not apply" in capsys.readouterr().err
+
+
+def test_lfn_render_options_on_an_rlfc_file_say_which(tiny, tmp_path, capsys):
+    """render's network-only options on an RLFC file: one line naming them, in plain grammar."""
+    enc = tmp_path / "r.lfc"
+    assert main(["encode", str(tiny / "scene"), str(enc), "--quiet"]) == 0
+    capsys.readouterr()
+    assert main(["render", str(enc), str(tmp_path / "a.png"), "--level", "1", "--quiet"]) == 2
+    assert "--level is an option for light field network files (this is rlfc)" in capsys.readouterr().err
+    assert main(["render", str(enc), str(tmp_path / "b.png"), "--level", "1", "--scale", "2", "--quiet"]) == 2
+    assert "--level, --scale are options for light field network files" in capsys.readouterr().err

@@ -121,7 +121,9 @@ def test_render_device_choice_and_errors(leave_out, tmp_path, capsys):
     n, t = read_image(tmp_path / "n.png").astype(int), read_image(tmp_path / "t.png")
     assert np.abs(n - t).max() <= 3
     assert main(["render", str(f), str(tmp_path / "x.png"), "--device", "abc", "--quiet"]) == 2
-    assert "device 'abc' is not usable" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "device 'abc' is not usable here (not a torch device type); a torch device is cpu, cuda or cuda:N" in err
+    assert len(err.splitlines()) == 1
 
 
 @pytest.mark.parametrize("device", [None, "cpu"])
