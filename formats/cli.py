@@ -537,7 +537,7 @@ def _render_path(a, out: Path) -> int:
             ren.check_camera(s_, t_)
             ren.check_optics(None if math.isnan(foc) else foc, ap)
         times = []
-        with SequenceWriter(out, a.fps) as w:
+        with SequenceWriter(out, a.fps, a.overwrite) as w:
             for i, (s_, t_, foc, ap) in enumerate(cams.tolist()):
                 t0 = time.perf_counter()
                 img = ren.render(s_, t_, None if math.isnan(foc) else foc, ap)
@@ -573,7 +573,7 @@ def _render_lfn_path(a, d, out: Path) -> int:
                                  f"gives positions only")
         poses = [d.grid_pose(s_, t_) for s_, t_ in cams[:, :2].tolist()]   # every camera checked first
     times = []
-    with SequenceWriter(out, a.fps) as w:
+    with SequenceWriter(out, a.fps, a.overwrite) as w:
         for i, pose in enumerate(poses):
             t0 = time.perf_counter()
             img = _lfn_frame(a, d, pose)
@@ -935,6 +935,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(the --at/--pose camera turned a full circle about the scene); OUT is then a folder (PNG "
                         "frames) or an .mp4 (ffmpeg)")
     r.add_argument("--fps", type=float, default=30.0, help="frame rate of an --path MP4 (default 30)")
+    r.add_argument("--overwrite", action="store_true",
+                   help="--path into a folder that holds frames already: replace them (and remove the earlier "
+                        "sequence's frames past the new one's end); refused without it")
     r.add_argument("--fast", action="store_true",
                    help="use the file's disparity maps as they are (about 3x faster; the default also tries "
                         "smoother disparities where the maps make the views disagree, e.g. on noisy captures)")

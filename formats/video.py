@@ -1,7 +1,8 @@
 """Writing rendered sequences: a folder of PNG frames, or an MP4 through ffmpeg when present.
 
 PNG frames keep the light field's own pixels (grey, RGBA, 16-bit), named ``frame_00000.png``…,
-each written atomically. An MP4 needs 8-bit RGB of even size: grey is repeated over R, G, B,
+each written atomically. A folder that holds frames already is refused (the two sequences would
+mix) unless ``overwrite``; then frames of the earlier sequence past the new one's end go too. An MP4 needs 8-bit RGB of even size: grey is repeated over R, G, B,
 16-bit samples keep their high byte, RGBA is composited on black, and an odd height or width
 gets one more row or column (a copy of the last). The MP4 is written to a temporary file in
 the output's folder by ffmpeg (H.264 when ffmpeg has libx264, else MPEG-4 part 2) and renamed
@@ -10,6 +11,7 @@ when complete, so an interrupted run never leaves a broken OUT.mp4.
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import subprocess
 from pathlib import Path
@@ -35,6 +37,12 @@ def video_frame(img: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(x)
 
 
+def frame_files(folder: Path) -> list:
+    """The PNG frames of a sequence in ``folder`` (``frame_NNNNN.png``), in frame order."""
+    got = [p for p in folder.glob("frame_*.png") if re.fullmatch(r"frame_\d{5,}\.png", p.name)]
+    return sorted(got, key=lambda p: int(p.stem[6:]))
+
+
 def ffmpeg_encoder() -> tuple[str, str] | None:
     """(ffmpeg path, video encoder name) or None when ffmpeg is not on PATH."""
     exe = shutil.which("ffmpeg")
@@ -56,8 +64,9 @@ class SequenceWriter:
         ParameterError: a bad frame rate or output; UnsupportedError: an MP4 without ffmpeg.
     """
 
-    def __init__(self, out: str | os.PathLike, fps: float = 30.0):
+    def __init__(self, out: str | os.PathLike, fps: float = 30.0, overwrite: bool = False):
         self.out = Path(out)
+        self.overwrite = overwrite
         if not (isinstance(fps, (int, float)) and np.isfinite(fps) and 0 < fps <= 1000):
             raise ParameterError(f"--fps must be within (0, 1000], got {fps}")
         self.fps = float(fps)
@@ -80,6 +89,11 @@ class SequenceWriter:
             self.tmp = self.out.with_name(f".{self.out.name}.tmp{os.getpid()}.mp4")
         elif self.out.exists() and not self.out.is_dir():
             raise ParameterError(f"{self.out}: exists and is not a folder")
+        elif self.out.is_dir():
+            old = frame_files(self.out)
+            if old and not overwrite:             # another run's frames: mixed in, a sequence would lie
+                raise ParameterError(f"{self.out}: holds {len(old)} frames of an earlier sequence ({old[0].name} …); "
+                                     f"give --overwrite to replace them, or another folder")
 
     def __enter__(self):
         return self
@@ -114,6 +128,12 @@ class SequenceWriter:
         return err[-1][:200] if err else f"exit code {self._proc.returncode}"
 
     def close(self, ok: bool = True) -> None:
+        if not self.mp4:
+            if ok and self.overwrite:             # an earlier, longer sequence's frames past this one's end
+                for f in frame_files(self.out):
+                    if int(f.stem[6:]) >= self.frames:
+                        f.unlink(missing_ok=True)
+            return
         if self._proc is None:
             return
         proc, self._proc = self._proc, None

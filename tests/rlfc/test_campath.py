@@ -104,3 +104,21 @@ def test_cli_path_to_mp4(grid, tmp_path):
     data = out.read_bytes()
     assert len(data) > 200 and b"ftyp" in data[:64]
     assert [x.name for x in tmp_path.iterdir()] == ["o.mp4"]            # no temporary file left
+
+
+def test_path_frames_never_mix_with_an_earlier_sequence(grid, tmp_path, capsys):
+    """A folder that holds frames already: refused (a shorter second run would leave the first
+    run's last frames in the sequence); --overwrite replaces them and removes the earlier
+    sequence's frames past the new end; other files in the folder are left alone."""
+    _, f = grid
+    out = tmp_path / "frames"
+    assert main(["render", str(f), str(out), "--path", "orbit:5", "--quiet"]) == 0
+    (out / "notes.txt").write_text("mine")
+    before = (out / "frame_00000.png").read_bytes()
+    assert main(["render", str(f), str(out), "--path", "sweep:3", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "holds 5 frames of an earlier sequence (frame_00000.png" in err and "--overwrite" in err
+    assert (out / "frame_00000.png").read_bytes() == before and len(list(out.glob("frame_*.png"))) == 5
+    assert main(["render", str(f), str(out), "--path", "sweep:3", "--overwrite", "--quiet"]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["frame_00000.png", "frame_00001.png", "frame_00002.png",
+                                                     "notes.txt"]
