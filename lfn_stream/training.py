@@ -83,6 +83,12 @@ class TrainOptions:
         if dev.type == "cuda" and not torch.cuda.is_available():
             raise ParameterError("--device cuda: this torch has no usable CUDA GPU (the README installs the CPU "
                                  "wheel; install a CUDA build of torch on a machine with a GPU)")
+        if self.checkpoint is not None:           # checked now, not at the first save after minutes of training
+            ck = Path(self.checkpoint)
+            if ck.is_dir():
+                raise ParameterError(f"{ck}: --checkpoint is a folder; name a .npz file")
+            if not ck.parent.is_dir():
+                raise ParameterError(f"{ck}: --checkpoint's folder {ck.parent} does not exist")
 
 
 def split_views(lf: LightField, holdout: int) -> tuple[np.ndarray, np.ndarray]:
@@ -118,8 +124,12 @@ def _save(path: Path, model, occ, opt, step: int) -> None:
             arrays[f"opt.{pid}.{k}"] = v.detach().cpu().numpy() if torch.is_tensor(v) else np.asarray(v)
     arrays["step"] = np.asarray(step)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
-    tmp.replace(path)
+    try:
+        np.savez(tmp, **arrays)
+        tmp.replace(path)
+    except OSError as e:                          # (a full disk, a folder removed while training)
+        tmp.unlink(missing_ok=True)
+        raise ParameterError(f"{path}: could not write the checkpoint ({e.strerror or e})") from None
 
 
 def _load(path: Path, model, occ, opt) -> int:

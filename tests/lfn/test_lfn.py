@@ -465,6 +465,11 @@ def test_train_refuses_a_file_that_is_not_a_checkpoint_and_cuda_without_gpu(tmp_
     if not torch.cuda.is_available():
         assert main(args + ["--device", "cuda"]) == 2
         assert "CUDA" in capsys.readouterr().err
+    # a checkpoint that could never be written is refused before training, not at its first save
+    for bad, why in ((tmp_path / "no" / "ck.npz", "folder"), (tmp_path, "is a folder")):
+        assert main(args + ["--checkpoint", str(bad)]) == 2
+        assert why in capsys.readouterr().err
+    assert not (tmp_path / "n.lfc").exists()
 
 
 def _half_transparent_lf():
