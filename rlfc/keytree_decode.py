@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from formats.errors import FormatError
+from formats.parallel import LOCAL_THREADS
 from formats.pixels import forward_int, to_planes
 from formats.schema import Fields
 
@@ -102,7 +103,7 @@ class KeyTreeDecoder(ProfileDecoder):
             if a + n > len(top):
                 raise FormatError(f"{name}: top-level image {i} lies outside section 'rlfc.top'")
             imgs.append(decode_image(tf.str("codec", choices=("j2k", "jxl")), bytes(top[a:a + n]),
-                                     (self.Hp, self.Wp, self.channels), self.dtype))
+                                     (self.Hp, self.Wp, self.channels), self.dtype, threads=LOCAL_THREADS))
         self.top = to_planes(np.stack(imgs))                 # (N_H, Hp, Wp, P) int32
         # the same pixels laid out per block, so a block request is one contiguous row gather
         self.top_blocks = np.ascontiguousarray(to_blocks(self.top, B)).reshape(

@@ -18,6 +18,7 @@ import threading
 import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
+from formats.parallel import LOCAL_THREADS
 
 from ..kernels import dequantize
 from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
@@ -522,7 +523,8 @@ class TxDecoder(ProfileDecoder):
         from ..topcodec import decode_image
 
         a, b = self.img_of[k]
-        img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)), (self.Hp, self.Wp, self.P), self.dtype)
+        img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)), (self.Hp, self.Wp, self.P), self.dtype,
+                           threads=LOCAL_THREADS)            # (one key at a time, under the key lock)
         B = self.block_size
         self._set_key_rows(int(self.key_slot[k]), np.arange(self.nby),
                            to_planes(img).reshape(self.nby, B, self.Wp, self.P))
