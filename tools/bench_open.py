@@ -41,6 +41,8 @@ def worker(path: str, seed: int) -> dict:
 
     rng = np.random.default_rng(seed)
     RlfcDecoder(open_lfc(path)).decode_block(0, 0, 0, 0)          # imports and caches warm
+    import rlfc.render  # noqa: F401  (the renderer's modules too: without a bytecode cache, as
+    #                    under PYTHONDONTWRITEBYTECODE, compiling them is ~9 ms of the first frame)
     out = {}
     t = time.perf_counter()
     d = RlfcDecoder(open_lfc(path))
