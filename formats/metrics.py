@@ -34,6 +34,23 @@ def _flat(a: np.ndarray) -> np.ndarray:
     return a.reshape(-1, *a.shape[-3:]) if a.ndim > 3 else a[None]
 
 
+def _pair(ref, dec) -> tuple[np.ndarray, np.ndarray]:
+    """ref and dec as arrays of views of one size (..., H, W, C) with pixels (leading axes may
+    differ: a grid against a stack), and one depth where both are unsigned (a uint8 reference
+    against uint16 pixels has no one peak): else a ParameterError, not numpy's reshape error or
+    a figure on the wrong scale."""
+    from .errors import ParameterError
+
+    ref, dec = np.asarray(ref), np.asarray(dec)
+    if ref.ndim < 3 or ref.shape[-3:] != dec.shape[-3:] or ref.size != dec.size:
+        raise ParameterError(f"metrics compare views of one shape (..., H, W, C): got {ref.shape} and {dec.shape}")
+    if ref.size == 0:
+        raise ParameterError(f"metrics need pixels: got views of shape {ref.shape}")
+    if ref.dtype.kind == dec.dtype.kind == "u" and ref.dtype != dec.dtype:
+        raise ParameterError(f"metrics compare samples of one depth: got {ref.dtype} and {dec.dtype}")
+    return ref, dec
+
+
 def _psnr_from_mse(m: float, peak: float) -> float:
     return float("inf") if m == 0 else 10.0 * math.log10(peak * peak / m)
 
@@ -71,6 +88,7 @@ def colour_sq_error(ref: np.ndarray, dec: np.ndarray) -> tuple[float, float]:
     """(sum of squared errors, element count) over the colour channels of one or more views:
     summed over views, the numbers :func:`psnr_rgb` pools (so a caller that codes views one at a
     time reaches exactly the PSNR of the whole light field)."""
+    ref, dec = _pair(ref, dec)
     cs = colour_channels(ref.shape[-1])
     sse, cnt = _sq_err_per_view(ref[..., cs], dec[..., cs])
     return float(sse.sum()), float(cnt.sum())
@@ -83,18 +101,21 @@ def psnr_from_sq_error(sse: np.ndarray, cnt: np.ndarray, peak: float) -> float:
 
 def mse(ref: np.ndarray, dec: np.ndarray) -> float:
     """Mean squared error pooled over every element given (all channels), in float64."""
+    ref, dec = _pair(ref, dec)
     sse, cnt = _sq_err_per_view(ref, dec)
     return float(sse.sum() / cnt.sum())
 
 
 def psnr_rgb(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
     """PSNR over all views, pixels and colour channels (alpha excluded), dB; inf when identical."""
+    ref, dec = _pair(ref, dec)
     cs = colour_channels(ref.shape[-1])
     return _psnr_from_mse(mse(ref[..., cs], dec[..., cs]), peak or peak_of(ref.dtype))
 
 
 def psnr_views(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> np.ndarray:
     """(N,) PSNR of each view over its colour channels (inf where a view is exact)."""
+    ref, dec = _pair(ref, dec)
     cs = colour_channels(ref.shape[-1])
     sse, cnt = _sq_err_per_view(ref[..., cs], dec[..., cs])
     peak = peak or peak_of(ref.dtype)
@@ -103,6 +124,7 @@ def psnr_views(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> n
 
 def psnr_visible(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float | None:
     """Colour PSNR over pixels whose reference alpha is > 0 (None without alpha or visible pixels)."""
+    ref, dec = _pair(ref, dec)
     c = ref.shape[-1]
     if c not in (2, 4):
         return None
@@ -116,6 +138,7 @@ def psnr_visible(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) ->
 
 def psnr_alpha(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float | None:
     """PSNR of the alpha channel alone (None without alpha; inf when exact)."""
+    ref, dec = _pair(ref, dec)
     if ref.shape[-1] not in (2, 4):
         return None
     return _psnr_from_mse(mse(ref[..., -1:], dec[..., -1:]), peak or peak_of(ref.dtype))
@@ -123,6 +146,7 @@ def psnr_alpha(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
 
 def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
     """The RLFC paper's weighted PSNR (6·Y + Co + Cg)/8 on YCoCg-R planes (grey: Y only)."""
+    ref, dec = _pair(ref, dec)
     peak = peak or peak_of(ref.dtype)
     if ref.shape[-1] in (1, 2):
         return psnr_rgb(ref[..., :1], dec[..., :1], peak)
@@ -145,6 +169,7 @@ def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
 
 def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
     """Mean SSIM over views of the colour channels (scikit-image, channel_axis=-1, data_range=peak)."""
+    ref, dec = _pair(ref, dec)
     from skimage.metrics import structural_similarity
 
     peak = peak or peak_of(ref.dtype)
@@ -183,6 +208,7 @@ def quality_report(ref: np.ndarray, dec: np.ndarray, *, with_ssim: bool = True) 
     Args:
         ref, dec: (..., H, W, C) original and decoded views, same dtype.
     """
+    ref, dec = _pair(ref, dec)
     cs = colour_channels(ref.shape[-1])
     per_view = psnr_views(ref, dec)
     out = {

@@ -27,9 +27,18 @@ class ViewStack:
     ndim = 5
 
     def __init__(self, arr, grid: tuple[int, int] | None = None):
+        if isinstance(arr, (list, tuple)):            # a list of views of one shape: stacked
+            try:
+                arr = np.stack([np.asarray(x) for x in arr]) if arr else np.zeros((0, 0, 0), np.uint8)
+            except ValueError:
+                raise SceneError("views given as a list must all have one shape") from None
         shape = tuple(int(x) for x in getattr(arr, "shape", ()))
         if not hasattr(arr, "dtype") or len(shape) not in (3, 4, 5):
-            raise SceneError(f"views must be an array of (N, H, W[, C]) or (R, C, H, W, C), got shape {shape}")
+            what = f"shape {shape}" if hasattr(arr, "shape") else type(arr).__name__
+            raise SceneError(f"views must be an array of (N, H, W[, C]) or (R, C, H, W, C), got {what}")
+        if grid is not None and not (len(grid) == 2 and all(isinstance(g, (int, np.integer)) and not
+                                                           isinstance(g, bool) and g >= 1 for g in grid)):
+            raise SceneError(f"grid must be (rows, cols) of positive integers, got {grid!r}")
         if len(shape) == 5:
             r, c = shape[:2]
             hwc = shape[2:]

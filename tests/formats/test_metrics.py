@@ -27,3 +27,20 @@ def test_quality_report_in_chunks_equals_one_chunk(channels, dtype, monkeypatch)
     # the pooled PSNR is the one every view's squared errors give
     sse, cnt = M.colour_sq_error(ref, dec)
     assert whole["psnr_rgb"] == pytest.approx(M.psnr_from_sq_error(np.array([sse]), np.array([cnt]), peak))
+
+
+def test_metrics_refuse_views_that_do_not_compare():
+    """Views of another size, no pixels, or another depth: a ParameterError each (before: numpy's
+    reshape error, nan with a warning, or a figure on the reference's peak)."""
+    from formats.errors import ParameterError
+
+    a = np.zeros((2, 4, 4, 3), np.uint8)
+    for f in (M.mse, M.psnr_rgb, M.psnr_views, M.psnr_ycocg, M.ssim, M.quality_report, M.colour_sq_error):
+        with pytest.raises(ParameterError, match="one shape"):
+            f(a, a[:, :2])
+        with pytest.raises(ParameterError, match="need pixels"):
+            f(a[:0], a[:0])
+        with pytest.raises(ParameterError, match="one depth"):
+            f(a, a.astype(np.uint16))
+    assert M.psnr_rgb(a, a.reshape(1, 2, 4, 4, 3)) == float("inf")      # a grid against a stack
+    assert M.mse(a, a.astype(np.int32)) == 0.0                            # decoded integer planes

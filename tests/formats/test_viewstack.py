@@ -83,3 +83,15 @@ def test_cli_encodes_an_npy_array_of_views(tmp_path, capsys):
     np.save(tmp_path / "f.npy", np.zeros((4, 5, 6), np.float64))
     assert main(["encode", str(tmp_path / "f.npy"), str(tmp_path / "b.lfc"), "--quiet"]) == 2
     assert "uint8 or uint16" in capsys.readouterr().err
+
+
+def test_a_list_of_views_is_stacked_and_bad_grids_are_scene_errors():
+    """A list of same-shape views works like their stack; mixed shapes, a negative or float grid
+    and a non-array are SceneErrors that say so (a list used to read as 'shape ()', and a grid of
+    (-5, -5) passed the R·C = N check)."""
+    v = np.arange(4 * 6 * 5 * 3, dtype=np.uint8).reshape(4, 6, 5, 3)
+    assert (from_array(list(v), grid=(2, 2)).views[1, 0] == v[2]).all()
+    for arr, grid, why in ((list(v[:1]) + [v[1, :3]], (1, 2), "one shape"), (v, (-2, -2), "positive"),
+                           (v, (2.0, 2), "positive"), ({}, (2, 2), "got dict")):
+        with pytest.raises(SceneError, match=why):
+            from_array(arr, grid=grid)
