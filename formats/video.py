@@ -2,8 +2,9 @@
 
 PNG frames keep the light field's own pixels (grey, RGBA, 16-bit), named ``frame_00000.png``…,
 each written atomically. A folder that holds frames already is refused (the two sequences would
-mix) unless ``overwrite``; then frames of the earlier sequence past the new one's end go too. An MP4 needs 8-bit RGB of even size: grey is repeated over R, G, B,
-16-bit samples keep their high byte, RGBA is composited on black, and an odd height or width
+mix) unless ``overwrite``; then frames of the earlier sequence past the new one's end go too.
+An MP4 needs 8-bit RGB of even size: grey is repeated over R, G, B, 16-bit samples keep their
+high byte, RGBA is composited on black, and an odd height or width
 gets one more row or column (a copy of the last). The MP4 is written to a temporary file in
 the output's folder by ffmpeg (H.264 when ffmpeg has libx264, else MPEG-4 part 2) and renamed
 when complete, so an interrupted run never leaves a broken OUT.mp4.

@@ -538,7 +538,7 @@ class TxDecoder(ProfileDecoder):
 
     # -- ProfileDecoder ---------------------------------------------------------------------
     def _key_blocks(self, views, by, bx):
-        """(M, B, B, P) blocks of key views, one flat take of pixel rows (4x faster than indexing
+        """(M, B, B, P) blocks of key views, one flat take of pixel rows (2x faster than indexing
         the (keys, Hp, Wp, P) planes with three broadcast index arrays, measured)."""
         B = self.block_size
         first = (self.key_slot[views] * self.Hp + by * B) * self.Wp + bx * B           # (M,) top-left pixel
