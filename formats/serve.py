@@ -19,6 +19,8 @@ from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from pathlib import Path
 from urllib.parse import unquote, urlsplit
 
+from .errors import ParameterError
+
 _RANGE = re.compile(r"^bytes=(\d*)-(\d*)$")
 #: the browser viewer's files (shipped in the package)
 WEB_DIR = Path(__file__).resolve().parent / "web"
@@ -127,7 +129,11 @@ class FileServer:
     def __init__(self, root, host: str = "127.0.0.1", port: int = 0, latency_s: float = 0.0, ranges: bool = True,
                  viewer: bool = False):
         self.root = Path(root)
-        self.httpd = ThreadingHTTPServer((host, port), make_handler(self.root, latency_s, ranges, viewer))
+        try:
+            self.httpd = ThreadingHTTPServer((host, port), make_handler(self.root, latency_s, ranges, viewer))
+        except OSError as e:                      # (a port in use, an address this machine does not have)
+            raise ParameterError(f"cannot listen on {host}:{port} ({e.strerror or e}); give another --port (0 "
+                                 f"picks a free one) or --host") from None
         self.httpd.daemon_threads = True
         self.host, self.port = self.httpd.server_address[:2]
         self._thread = None

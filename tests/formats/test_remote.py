@@ -201,3 +201,18 @@ def test_server_ranges(served, rng, code, body):
     assert status == code
     if body is not None:
         assert got == data[body[0]:body[1]]
+
+
+def test_serve_on_a_port_in_use_is_one_line(tmp_path, capsys):
+    """A port another server holds: a ParameterError naming host and port (before: the bare
+    'Address already in use')."""
+    from formats.cli import main
+    from formats.errors import ParameterError
+    from formats.serve import FileServer
+
+    with FileServer(tmp_path) as srv:
+        with pytest.raises(ParameterError, match=f"cannot listen on 127.0.0.1:{srv.port}"):
+            FileServer(tmp_path, port=srv.port)
+        assert main(["serve", str(tmp_path), "--port", str(srv.port)]) == 2
+        err = capsys.readouterr().err
+        assert len(err.splitlines()) == 1 and "give another --port" in err
