@@ -63,6 +63,11 @@ def robust_choice(ops, costs):
     return choice
 
 
+def _real(v) -> bool:
+    """A real number (not a bool, a string or an array)."""
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
+
+
 class Renderer:
     """Renders views at continuous grid positions from an :class:`rlfc.decoder.RlfcDecoder`.
 
@@ -283,8 +288,9 @@ class Renderer:
         """ParameterError unless (s, t) is a finite position within the grid ± ``margin``."""
         d = self.d
         for name, v, n in (("s", s, d.rows), ("t", t, d.cols)):
-            if not isinstance(v, (int, float, np.integer, np.floating)) or not np.isfinite(v) \
-                    or not -self.margin <= v <= n - 1 + self.margin:
+            if not _real(v):
+                raise ParameterError(f"camera {name} must be a number, got {v!r}")
+            if not np.isfinite(v) or not -self.margin <= v <= n - 1 + self.margin:
                 raise ParameterError(f"camera {name}={v!r} is outside the grid (0..{n - 1} ± {self.margin:g} views)")
 
     def render_path(self, cameras):
@@ -301,8 +307,10 @@ class Renderer:
     def check_optics(self, focus: float | None, aperture: float) -> None:
         """A ParameterError unless aperture >= 0 and focus (None: the file's maps) is finite and
         within ± the views' larger side (further, every neighbour's samples leave its image)."""
+        if not _real(aperture) or (focus is not None and not _real(focus)):
+            raise ParameterError(f"focus (or None) and aperture must be numbers, got {focus!r} and {aperture!r}")
         if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
-            raise ParameterError("aperture must be >= 0 and focus finite")
+            raise ParameterError(f"aperture must be >= 0 and focus finite, got focus {focus!r}, aperture {aperture!r}")
         lim = max(self.d.height, self.d.width)
         if focus is not None and abs(focus) > lim:
             raise ParameterError(f"focus {focus:g} is outside ±{lim} px per view step (the views' size)")

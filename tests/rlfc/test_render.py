@@ -70,6 +70,12 @@ def test_refocus_quilt_and_bad_cameras(leave_out):
         with pytest.raises(ParameterError, match="focus"):
             ren.render(1, 1, focus=focus, aperture=1.0)
     assert ren.render(1, 1, focus=-lim, aperture=1.0).shape == (d.height, d.width, 3)
+    # values that are not numbers say so (a string focus was numpy's TypeError; a string
+    # position "outside the grid")
+    for args, why in (((1, 1, "x"), "must be numbers"), ((1, 1, None, "1"), "must be numbers"),
+                      (("1", 1), "camera s must be a number"), ((1, True), "camera t must be a number")):
+        with pytest.raises(ParameterError, match=why):
+            ren.render(*args)
 
 
 def test_render_cli(leave_out, tmp_path, capsys):
