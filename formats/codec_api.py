@@ -89,6 +89,18 @@ def check_integers(**kw) -> None:
             raise ParameterError(f"{k} must be an integer, got {x!r}")
 
 
+def is_real(x) -> bool:
+    """A real number: a Python or numpy int or float, not a bool, a string or an array."""
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
+
+
+def check_numbers(**kw) -> None:
+    """A ParameterError for any keyword argument that is not a finite real number."""
+    for k, x in kw.items():
+        if not is_real(x) or not np.isfinite(x):
+            raise ParameterError(f"{k} must be a finite number, got {x!r}")
+
+
 def check_view_indices(views, n: int) -> np.ndarray:
     """Flat view indices (any integer array-like) as int64, each within 0..n-1."""
     a = np.asarray(views)

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from formats.codec_api import Decoder, check_integers
+from formats.codec_api import Decoder, check_integers, check_numbers
 from formats.devices import torch_device
 from formats.errors import FormatError, ParameterError, TruncatedError, UnsupportedError
 from formats.lfcfile import LfcFile, check_codec_version
@@ -381,11 +381,13 @@ class LfnRenderer(Decoder):
 
     def turn_pose(self, pose: np.ndarray, yaw: float, pitch: float = 0.0) -> np.ndarray:
         """Any camera turned about the scene's pivot, as :meth:`orbit_pose` turns a captured view."""
+        check_numbers(yaw=yaw, pitch=pitch)
         pivot, up = scene_pivot(self.poses, self.norm["centre"])
         return orbit_pose(self._check_pose(pose), pivot, up, float(yaw), float(pitch))
 
     def stereo_poses(self, pose: np.ndarray, ipd: float) -> tuple[np.ndarray, np.ndarray]:
         """(left, right) poses ``ipd`` scene units apart along ``pose``'s x axis."""
+        check_numbers(ipd=ipd)
         return stereo_poses(self._check_pose(pose), float(ipd))
 
     @staticmethod

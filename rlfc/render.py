@@ -22,6 +22,7 @@ import collections
 import numpy as np
 
 from formats.campath import assemble_quilt, quilt_positions
+from formats.codec_api import is_real
 from formats.errors import ParameterError
 
 from .render_ops import make_ops
@@ -61,11 +62,6 @@ def robust_choice(ops, costs):
             best = ops.where(win, cost, best)
             choice = ops.where(win, k, choice)          # (a masked store would sync a GPU)
     return choice
-
-
-def _real(v) -> bool:
-    """A real number (not a bool, a string or an array)."""
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool)
 
 
 class Renderer:
@@ -288,7 +284,7 @@ class Renderer:
         """ParameterError unless (s, t) is a finite position within the grid ± ``margin``."""
         d = self.d
         for name, v, n in (("s", s, d.rows), ("t", t, d.cols)):
-            if not _real(v):
+            if not is_real(v):
                 raise ParameterError(f"camera {name} must be a number, got {v!r}")
             if not np.isfinite(v) or not -self.margin <= v <= n - 1 + self.margin:
                 raise ParameterError(f"camera {name}={v!r} is outside the grid (0..{n - 1} ± {self.margin:g} views)")
@@ -307,7 +303,7 @@ class Renderer:
     def check_optics(self, focus: float | None, aperture: float) -> None:
         """A ParameterError unless aperture >= 0 and focus (None: the file's maps) is finite and
         within ± the views' larger side (further, every neighbour's samples leave its image)."""
-        if not _real(aperture) or (focus is not None and not _real(focus)):
+        if not is_real(aperture) or (focus is not None and not is_real(focus)):
             raise ParameterError(f"focus (or None) and aperture must be numbers, got {focus!r} and {aperture!r}")
         if aperture < 0 or not np.isfinite(aperture) or (focus is not None and not np.isfinite(focus)):
             raise ParameterError(f"aperture must be >= 0 and focus finite, got focus {focus!r}, aperture {aperture!r}")

@@ -46,6 +46,16 @@ def test_bad_poses(r, bad):
         r.render_pose(bad)
 
 
+@pytest.mark.parametrize("bad", ["x", float("nan"), True, None])
+def test_turns_and_eye_distances_must_be_numbers(r, bad):
+    """A yaw, pitch or ipd that is not a finite number: a ParameterError naming it (a string was
+    float()'s ValueError, NaN made a NaN pose)."""
+    for call, name in ((lambda: r.turn_pose(r.pose(1, 1), bad), "yaw"), (lambda: r.orbit_pose(1, 1, 10, bad), "pitch"),
+                       (lambda: r.stereo_poses(r.pose(1, 1), bad), "ipd")):
+        with pytest.raises(ParameterError, match=f"{name} must be a finite number"):
+            call()
+
+
 # -- lfcodec render on LFN files ------------------------------------------------------------
 GOLDEN3 = ROOT / "tests" / "data" / "golden" / "lfn3_tiny_rgba8.lfc"
 
