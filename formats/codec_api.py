@@ -49,6 +49,20 @@ class EncodeOptions:
     workers: int = 1
     scheduler: object = None
 
+    def __post_init__(self):
+        """Types only (a codec checks ranges): a string target compared with numbers deep in an
+        encode was a TypeError."""
+        for k in ("target_psnr", "target_bpp", "min_view_psnr"):
+            v = getattr(self, k)
+            if v is not None and not is_real(v):
+                raise ParameterError(f"{k} must be a number or None, got {v!r}")
+        if not isinstance(self.lossless, bool):
+            raise ParameterError(f"lossless must be true or false, got {self.lossless!r}")
+        if not isinstance(self.profile, str):
+            raise ParameterError(f"profile must be a name, got {self.profile!r}")
+        if not isinstance(self.params, dict):
+            raise ParameterError(f"params must be a dict of codec options, got {type(self.params).__name__}")
+
 
 @dataclass
 class Encoded:
@@ -99,6 +113,25 @@ def check_numbers(**kw) -> None:
     for k, x in kw.items():
         if not is_real(x) or not np.isfinite(x):
             raise ParameterError(f"{k} must be a finite number, got {x!r}")
+
+
+def check_field_types(obj) -> None:
+    """A ParameterError for any field of dataclass ``obj`` annotated ``int``, ``float``, ``bool``
+    or ``str`` (optionally ``| None``) whose value is not of that kind. int and float fields take
+    any real number (integrality and ranges are the caller's checks): what this catches is a
+    string, a list or None where a number was meant, which range tests would meet untyped."""
+    import dataclasses
+
+    want = {"int": (is_real, "a number"), "float": (is_real, "a number"),
+            "bool": (lambda v: isinstance(v, (bool, np.bool_)), "true or false"),
+            "str": (lambda v: isinstance(v, str), "a string")}
+    for f in dataclasses.fields(obj):
+        ann = (f.type if isinstance(f.type, str) else getattr(f.type, "__name__", "")).replace(" ", "")
+        optional = ann.endswith("|None")
+        test, what = want.get(ann[:-5] if optional else ann, (None, None))
+        v = getattr(obj, f.name)
+        if test is not None and not (optional and v is None) and not test(v):
+            raise ParameterError(f"{f.name} must be {what}{' or None' if optional else ''}, got {v!r}")
 
 
 def check_view_indices(views, n: int) -> np.ndarray:

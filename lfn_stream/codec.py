@@ -8,7 +8,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from formats.codec_api import Codec, EncodeOptions, Encoded
+from formats.codec_api import Codec, EncodeOptions, Encoded, is_real
 from formats.errors import ParameterError
 
 from .config import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnConfig
@@ -70,6 +70,11 @@ def _setup(lf, p: dict):
     if not isinstance(lf.views, np.ndarray):          # a ViewStack (zarr, dask, ...): read it all
         lf = dataclasses.replace(lf, views=np.asarray(lf.views))
     p = dict(p)
+    for k, v in p.items():                            # types first (range tests meet a string untyped)
+        typ = OPTIONS.get(k)
+        if v is not None and (typ in (int, float) and not is_real(v) or typ is str and not isinstance(v, str)):
+            raise ParameterError(f"--{k.replace('_', '-')} must be {'a number' if typ is not str else 'a string'}, "
+                                 f"got {v!r}")
     if p.pop("tiles", 1) == 1 and "tile_band" in p:
         raise ParameterError("--tile-band sets how tiles blend: it goes with --tiles K (K > 1)")
     p.pop("tile_band", None)

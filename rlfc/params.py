@@ -3,6 +3,7 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass
 
+from formats.codec_api import check_field_types
 from formats.errors import ParameterError
 
 PROFILES = ("bise", "dcp")
@@ -50,6 +51,7 @@ class RlfcParams:
     disp_smooth: float = 0.1
 
     def __post_init__(self) -> None:
+        check_field_types(self)           # types first: a string or a list fails range tests untyped
         if not 0 <= int(self.tree_height) <= 16 or int(self.tree_height) != self.tree_height:
             raise ParameterError(f"tree height must be an integer 0..16, got {self.tree_height}")
         if self.block_size not in (2, 4, 8, 16, 32):

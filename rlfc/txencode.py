@@ -16,7 +16,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from formats.codec_api import EncodeOptions, Encoded
+from formats.codec_api import EncodeOptions, Encoded, check_field_types, is_real
 from formats.errors import ParameterError
 from formats.metrics import colour_sq_error, finite, psnr_from_sq_error
 from formats.parallel import Runner, make_runner
@@ -95,6 +95,7 @@ class TxParams:
     key_split: int = 0
 
     def __post_init__(self):
+        check_field_types(self)           # types first: a string or a list fails range tests untyped
         ab = self.ablate
         if isinstance(ab, str) or not isinstance(ab, (tuple, list)) or not set(ab) <= set(ABLATE):
             raise ParameterError(f"ablate must be a list of {', '.join(ABLATE)}, got {ab!r}")
@@ -1159,8 +1160,8 @@ def _params_from(options: EncodeOptions) -> TxParams:
     if q is not None:
         if options.target_psnr is not None or options.target_bpp is not None or options.lossless:
             raise ParameterError("--quant cannot be combined with a target or --lossless")
-        if not q >= 1:
-            raise ParameterError(f"--quant must be >= 1 (1 = lossless), got {q}")
+        if not is_real(q) or not q >= 1:
+            raise ParameterError(f"--quant must be a number >= 1 (1 = lossless), got {q!r}")
         if q == 1:
             p["lossless"] = True
         else:

@@ -2,7 +2,7 @@
 rate control (the profile's own search, or the quantizer search), pack."""
 from __future__ import annotations
 
-from formats.codec_api import EncodeOptions, Encoded
+from formats.codec_api import EncodeOptions, Encoded, is_real
 from formats.errors import ParameterError
 
 from ..keytree import KeyTreeEncoder
@@ -33,8 +33,8 @@ def fixed_quant(lf, options: EncodeOptions) -> float:
         return 1.0
     if q is None:
         return default_quant(lf.views.dtype)
-    if not q >= 1:
-        raise ParameterError(f"--quant must be >= 1 (1 = lossless), got {q}")
+    if not is_real(q) or not q >= 1:
+        raise ParameterError(f"--quant must be a number >= 1 (1 = lossless), got {q!r}")
     return float(q)
 
 

@@ -148,5 +148,5 @@ def test_bad_key_split_is_a_parameter_error(bad):
     from formats.errors import ParameterError
     from rlfc.txencode import TxParams
 
-    with pytest.raises(ParameterError, match="key split"):
+    with pytest.raises(ParameterError, match="key.split"):
         TxParams(key_split=bad)
