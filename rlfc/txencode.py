@@ -314,6 +314,8 @@ class TxEncoder:
 
     def padded(self, pixels: np.ndarray) -> np.ndarray:
         """(Hp, Wp, C) a view's (H, W, C) pixels, edges repeated to the padded size."""
+        if self.Hp == self.h and self.Wp == self.w_px:
+            return np.asarray(pixels)                  # (np.pad copies even with nothing to add)
         pad = ((0, self.Hp - self.h), (0, self.Wp - self.w_px), (0, 0))
         return np.pad(np.asarray(pixels), pad, mode="edge")
 

@@ -39,6 +39,23 @@ def test_from_planes_split_path_is_the_same_integers(shape, dtype, rng):
         assert np.array_equal(from_planes(crop, dtype), np.clip(inverse_int(crop.copy()), 0, peak).astype(dtype))
 
 
+@pytest.mark.parametrize("shape", [(300, 256, 3), (4, 128, 128, 4), (2, 10, 10, 3), (512, 512, 3)])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_to_planes_split_path_is_the_same_integers(shape, dtype, rng):
+    """Large contiguous inputs go through OpenCV-split planes; a strided view takes the general
+    path; both give forward_int's integers."""
+    from formats.pixels import forward_int
+
+    peak = int(np.iinfo(dtype).max)
+    x = rng.integers(0, peak, shape, endpoint=True).astype(dtype)
+    x.reshape(-1, shape[-1])[:3] = [[peak] * shape[-1], [0] * shape[-1], [peak, 0, peak] + [0] * (shape[-1] - 3)]
+    ref = forward_int(x.astype(np.int32))
+    got = to_planes(x)
+    assert got.dtype == np.int32 and got.shape == x.shape and np.array_equal(got, ref)
+    crop = x[..., 1:, :]
+    assert np.array_equal(to_planes(crop), forward_int(crop.astype(np.int32)))
+
+
 @pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(c=2),
                                 dict(h=13, w=19), dict(rows=1, cols=5), dict(rows=5, cols=1)])
 def test_lossless_exact_and_decoders_agree(kw):
