@@ -642,6 +642,29 @@ def _grid(text: str) -> tuple[int, int]:
 VIEW_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
 
 
+def _one_out_file(a, what: str) -> Path:
+    """``--out`` of ``decode --view`` / ``--block``, checked before decoding: a lossless suffix (a
+    .npy array written under the name b.png fooled every image viewer), not the input, not a
+    folder, its folder present."""
+    out = Path(a.out)
+    if out.suffix.lower() not in VIEW_SUFFIXES:
+        raise ParameterError(f"{out}: {what} --out writes {', '.join(VIEW_SUFFIXES)} (lossless, every channel "
+                             f"and bit depth kept)")
+    _refuse_output_over_input(a.input, out)
+    _check_out_file(out)
+    return out
+
+
+def _write_one(out: Path, arr: np.ndarray) -> None:
+    """One decoded view or block to ``out``: a .npy array, else a lossless image."""
+    if out.suffix.lower() == ".npy":
+        _save_npy(out, arr)
+    else:
+        from .imageio import write_image
+
+        write_image(out, arr)
+
+
 def _kept_outputs(d, outdir: Path, name, views: list, level, layouts: list, overwrite: bool) -> set:
     """Files in ``outdir`` that a decode of ``views`` [(row, col)] would replace: the (row, col)
     whose file already holds exactly the decoded pixels (left as they are: a decode run again);
@@ -705,7 +728,7 @@ def _decode(a) -> int:
     from .viewnames import output_path, png_name, unpack_names
 
     if a.block is not None and a.out is None:
-        raise ParameterError("--block needs --out FILE.npy")
+        raise ParameterError("--block needs --out FILE (.npy, .png, .tif or .tiff)")
     if a.out is not None and a.outdir is not None:
         raise ParameterError("give an output folder (OUTDIR) or --out FILE, not both")
     if a.out is not None and a.block is None and a.view is None:
@@ -723,30 +746,18 @@ def _decode(a) -> int:
         t0 = time.perf_counter()
         if a.block is not None:
             r, c, by, bx = _ints(a.block, 4, "--block")
-            out = Path(a.out)
-            _refuse_output_over_input(a.input, out)
-            _check_out_file(out)
+            out = _one_out_file(a, "--block")
             blk = d.decode_block(r, c, by, bx, level=level)
-            _save_npy(out, blk)
+            _write_one(out, blk)
             if not a.quiet:
                 print(f"wrote {out}: block ({by},{bx}) of view ({r},{c}), shape {blk.shape} {blk.dtype}, "
                       f"level {a.level:g}, {1e3 * (time.perf_counter() - t0):.2f} ms")
             return 0
         if a.out is not None:                    # one view to one file: an image, or .npy
-            out = Path(a.out)
-            if out.suffix.lower() not in VIEW_SUFFIXES:
-                raise ParameterError(f"{out}: --view --out writes {', '.join(VIEW_SUFFIXES)} (lossless, every channel "
-                                     f"and bit depth kept)")
-            _refuse_output_over_input(a.input, out)
-            _check_out_file(out)
+            out = _one_out_file(a, "--view")
             r, c = _ints(a.view, 2, "--view")
             img = d.decode_view(r, c, level=level)
-            if out.suffix.lower() == ".npy":
-                _save_npy(out, img)
-            else:
-                from .imageio import write_image
-
-                write_image(out, img)
+            _write_one(out, img)
             if not a.quiet:
                 print(f"wrote {out}: view ({r},{c}), shape {img.shape} {img.dtype}, level {a.level:g}, "
                       f"{time.perf_counter() - t0:.2f} s")
@@ -895,8 +906,8 @@ def build_parser() -> argparse.ArgumentParser:
     d.add_argument("--block", metavar="ROW,COL,BY,BX",
                    help="decode one block: view (ROW,COL), block row BY and column BX (pixels [BY*B,(BY+1)*B) x "
                         "[BX*B,(BX+1)*B))")
-    d.add_argument("--out", metavar="FILE", help="where --block writes its (B, B, C) array (.npy), or --view its "
-                                                 "(H, W, C) view (.png, .tif or .npy)")
+    d.add_argument("--out", metavar="FILE", help="where --block writes its (B, B, C) block or --view its (H, W, C) "
+                                                 "view: .npy, or a lossless .png / .tif image")
     d.add_argument("--level", type=float, default=0,
                    help="0 = full quality (default); larger = coarser, up to the file's levels (lfcodec info)")
     d.add_argument("--names", choices=("grid", "original"), default="grid",

@@ -94,6 +94,12 @@ def test_decode_views_view_and_block(encoded, tmp_path, capsys):
     blk = np.load(tmp_path / "b.npy")
     assert blk.shape == (16, 16, 3) and blk.dtype == np.uint8
     assert (blk == one[32:48, 64:80]).all()
+    # or as an image (it was a .npy array written under the name b.png, which no viewer opens)
+    assert main(["decode", str(encoded), "--block", "3,5,2,4", "--out", str(tmp_path / "b.png"), "--quiet"]) == 0
+    assert (read_image(tmp_path / "b.png") == blk).all()
+    assert main(["decode", str(encoded), "--block", "3,5,2,4", "--out", str(tmp_path / "b.jpg"), "--quiet"]) == 2
+    assert "--block --out writes .png, .tif, .tiff, .npy" in capsys.readouterr().err
+    assert not (tmp_path / "b.jpg").exists()
     # the last block: 160 px wide = 10 blocks, 128 high = 8 blocks (exact), at level 1 too
     assert main(["decode", str(encoded), "--block", "3,5,7,9", "--out", str(tmp_path / "e.npy"), "--level", "1",
                  "--quiet"]) == 0
