@@ -166,6 +166,8 @@ def _check_out_file(out: Path) -> None:
         raise ParameterError(f"{out}: is a folder; give the output file's name")
     if not out.parent.exists():
         raise ParameterError(f"{out}: folder {out.parent} does not exist")
+    if not out.parent.is_dir():
+        raise ParameterError(f"{out}: {out.parent} is a file, not a folder")
 
 
 def _refuse_output_over_input(inp: str, out: Path) -> None:
@@ -766,7 +768,9 @@ def _decode(a) -> int:
         if outdir.exists() and not outdir.is_dir():
             raise ParameterError(f"{outdir}: exists and is not a folder")
         if not outdir.exists() and not outdir.absolute().parent.is_dir():     # as encode: no folders made on the way
-            raise ParameterError(f"{outdir}: folder {outdir.absolute().parent} does not exist")
+            parent = outdir.absolute().parent
+            raise ParameterError(f"{outdir}: {parent} is a file, not a folder" if parent.exists() else
+                                 f"{outdir}: folder {parent} does not exist")
         layout = None
         name = view_filename
         if a.names == "original":

@@ -78,6 +78,8 @@ class SequenceWriter:
             raise ParameterError(f"{self.out}: a camera path writes a folder of PNG frames or an .mp4 file")
         if not self.out.parent.exists():
             raise ParameterError(f"{self.out}: folder {self.out.parent} does not exist")
+        if not self.out.parent.is_dir():
+            raise ParameterError(f"{self.out}: {self.out.parent} is a file, not a folder")
         if self.mp4 and self.out.is_dir():
             raise ParameterError(f"{self.out}: is a folder; name the .mp4 file, or give a folder without .mp4 for "
                                  f"PNG frames")

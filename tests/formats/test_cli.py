@@ -493,3 +493,16 @@ def test_scene_options_the_reader_did_not_use_are_reported(tmp_path, capsys):
     assert any("--grid 3x27 was not used" in n for n in notes) and any("--split test was not used" in n for n in notes)
     assert main(["encode", str(SAMPLE), str(out), "--baseline", "2", "--quant", "8", "--json", "--quiet"]) == 0
     assert not any("not used" in n for n in json.loads(capsys.readouterr().out)["notes"])   # a grid's baseline is used
+
+
+def test_outputs_under_a_file_name_the_file(encoded, tmp_path, capsys):
+    """An output path whose folder is a file: one line saying so, before any work (encode named
+    its temp file with 'Not a directory', render --path gave the bare OS error)."""
+    f = tmp_path / "in.lfc"
+    f.write_bytes(encoded.read_bytes())
+    for argv in (["encode", str(SAMPLE), f"{f}/x.lfc"], ["decode", str(f), f"{f}/sub"],
+                 ["decode", str(f), "--view", "0,0", "--out", f"{f}/v.png"], ["render", str(f), f"{f}/x.png"],
+                 ["render", str(f), f"{f}/seq", "--path", "orbit:2"]):
+        assert main(argv + ["--quiet"]) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "is a file, not a folder" in err, (argv, err)
