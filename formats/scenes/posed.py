@@ -83,16 +83,20 @@ def read_transforms(path: Path, opts: ReadOptions = ReadOptions()) -> LightField
     if not all(isinstance(fr, dict) and isinstance(fr.get("file_path"), str) for fr in frames):
         raise SceneError(f"{path}: every frame needs a file_path string")
     files = [confine(_frame_file(path.parent, fr["file_path"]), path.parent, opts, str(path)) for fr in frames]
-    views = load_views(files, str(path), opts)
-    n, h, w = views.shape[:3]
+    # the cameras are checked before any view is read (a bad matrix used to wait for every image)
+    missing = [i for i, fr in enumerate(frames) if "transform_matrix" not in fr]
+    if missing:
+        raise SceneError(f"{path}: frame {missing[0]} has no transform_matrix")
     try:
         c2w = np.asarray([fr["transform_matrix"] for fr in frames], dtype=np.float64)
-    except (KeyError, ValueError, TypeError) as e:
-        raise SceneError(f"{path}: bad transform_matrix ({e})") from None
-    if c2w.shape != (n, 4, 4):
+    except (ValueError, TypeError):
+        raise SceneError(f"{path}: transform_matrix must be 4x4 numbers in every frame") from None
+    if c2w.shape != (len(frames), 4, 4):
         raise SceneError(f"{path}: transform_matrix must be 4x4 per frame, got {c2w.shape[1:]}")
     if not np.isfinite(c2w).all():
         raise SceneError(f"{path}: a transform_matrix holds NaN or infinite values")
+    views = load_views(files, str(path), opts)
+    n, h, w = views.shape[:3]
     if "fl_x" in cfg:
         fx = number(cfg["fl_x"], f"{path}: fl_x", positive=True)
         fy = number(cfg.get("fl_y", fx), f"{path}: fl_y", positive=True)

@@ -267,3 +267,19 @@ def test_nan_camera_matrix_is_refused(tmp_path):
         {"file_path": "a", "transform_matrix": m.tolist()}]}))
     with pytest.raises(SceneError, match="NaN"):
         read_scene(tmp_path)
+
+
+def test_bad_camera_matrices_are_refused_before_any_view_is_read(tmp_path, monkeypatch):
+    """A frame without a matrix, or one that is not 4x4 numbers: a SceneError saying which, and
+    no image read first (the reader used to load every view, then fail on numpy's message)."""
+    import formats.scenes.posed as posed
+
+    reads = []
+    monkeypatch.setattr(posed, "load_views", lambda *a, **k: reads.append(1))
+    for frames, needle in (([{"file_path": "a"}, {"file_path": "a", "transform_matrix": np.eye(4).tolist()}],
+                            "frame 0 has no transform_matrix"),
+                           ([{"file_path": "a", "transform_matrix": [[1, 2], [3]]}], "4x4 numbers in every frame")):
+        (tmp_path / "transforms.json").write_text(json.dumps({"camera_angle_x": 0.5, "frames": frames}))
+        with pytest.raises(SceneError, match=needle):
+            read_scene(tmp_path)
+    assert reads == []
