@@ -19,6 +19,7 @@ import numpy as np
 
 from . import __version__
 from .errors import LfcError, ParameterError, TruncatedError
+from .imageio import check_parent_folder
 
 
 def _ints(text: str, n: int, what: str) -> tuple[int, ...]:
@@ -164,10 +165,7 @@ def _check_out_file(out: Path) -> None:
     """An output file's name: its folder exists and it is not itself a folder."""
     if out.is_dir():
         raise ParameterError(f"{out}: is a folder; give the output file's name")
-    if not out.parent.exists():
-        raise ParameterError(f"{out}: folder {out.parent} does not exist")
-    if not out.parent.is_dir():
-        raise ParameterError(f"{out}: {out.parent} is a file, not a folder")
+    check_parent_folder(out)
 
 
 def _refuse_output_over_input(inp: str, out: Path) -> None:
@@ -767,10 +765,8 @@ def _decode(a) -> int:
         outdir = Path(a.outdir)
         if outdir.exists() and not outdir.is_dir():
             raise ParameterError(f"{outdir}: exists and is not a folder")
-        if not outdir.exists() and not outdir.absolute().parent.is_dir():     # as encode: no folders made on the way
-            parent = outdir.absolute().parent
-            raise ParameterError(f"{outdir}: {parent} is a file, not a folder" if parent.exists() else
-                                 f"{outdir}: folder {parent} does not exist")
+        if not outdir.exists():                  # as encode: no folders made on the way
+            check_parent_folder(outdir)
         layout = None
         name = view_filename
         if a.names == "original":

@@ -13,10 +13,20 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SceneError
+from .errors import ParameterError, SceneError
 
 IMAGE_EXTENSIONS = {".png", ".jpg", ".jpeg", ".tif", ".tiff", ".exr", ".bmp", ".ppm", ".pgm", ".hdr", ".webp"}
 
+
+
+def check_parent_folder(path) -> None:
+    """A ParameterError unless the folder an output ``path`` goes in exists and is a folder (no
+    folders are made on the way; a file there used to surface as a temp file's 'Not a directory')."""
+    parent = Path(path).parent
+    if not parent.exists():
+        raise ParameterError(f"{path}: folder {parent} does not exist")
+    if not parent.is_dir():
+        raise ParameterError(f"{path}: {parent} is a file, not a folder")
 
 def _oiio():
     import OpenImageIO as oiio  # imported lazily: it is slow to import

@@ -76,10 +76,9 @@ class SequenceWriter:
         self._proc = None
         if self.out.suffix.lower() in (".png", ".jpg", ".gif", ".avi", ".mov", ".mkv", ".webm"):
             raise ParameterError(f"{self.out}: a camera path writes a folder of PNG frames or an .mp4 file")
-        if not self.out.parent.exists():
-            raise ParameterError(f"{self.out}: folder {self.out.parent} does not exist")
-        if not self.out.parent.is_dir():
-            raise ParameterError(f"{self.out}: {self.out.parent} is a file, not a folder")
+        from .imageio import check_parent_folder
+
+        check_parent_folder(self.out)
         if self.mp4 and self.out.is_dir():
             raise ParameterError(f"{self.out}: is a folder; name the .mp4 file, or give a folder without .mp4 for "
                                  f"PNG frames")

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from formats.errors import ParameterError
+from formats.imageio import check_parent_folder
 from formats.lightfield import LightField
 
 from .config import LfnConfig
@@ -87,8 +88,7 @@ class TrainOptions:
             ck = Path(self.checkpoint)
             if ck.is_dir():
                 raise ParameterError(f"{ck}: --checkpoint is a folder; name a .npz file")
-            if not ck.parent.is_dir():
-                raise ParameterError(f"{ck}: --checkpoint's folder {ck.parent} does not exist")
+            check_parent_folder(ck)
 
 
 def split_views(lf: LightField, holdout: int) -> tuple[np.ndarray, np.ndarray]:
