@@ -472,9 +472,10 @@ def _lfn_device(device: str) -> str | None:
 
 def _lfn_neurons(a, d) -> float:
     """Neurons per layer of the network --level asks for (absent: the file's display size for
-    the bytes held, see LfnRenderer.display_neurons; 0 = the largest available)."""
+    the bytes held at --scale, see LfnRenderer.display_neurons_at; 0 = the largest available)."""
     if a.level is None:
-        return d.display_neurons
+        scale = 1.0 if a.scale is None else a.scale
+        return d.display_neurons_at(scale) if math.isfinite(scale) and scale > 0 else d.display_neurons
     level = a.level
     if not math.isfinite(level):
         raise ParameterError(f"--level must be a finite number, got {level}")

@@ -30,6 +30,8 @@ def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: s
         "step_bytes": [step_bytes(cfg, j, dtype) for j in (cfg.min_neurons, cfg.max_neurons - 1)]}
     if info.get("display"):
         config["display"] = [int(w) for w in info["display"]]
+    if info.get("display_scales"):
+        config["display_scales"] = [[float(sc), [int(w) for w in lad]] for sc, lad in info["display_scales"]]
     return config, sections
 
 
@@ -96,17 +98,19 @@ def _setup(lf, p: dict):
 
 
 def finish_network(full, lf, model, occ, info: dict, opts, weights: str, progress=None):
-    """(config, sections, summary) of a trained network: its display ladder (measured on training
-    rays: held-out views stay unseen), packed, and scored on the held-out views at full size."""
+    """(config, sections, summary) of a trained network: its display ladders (measured on training
+    views at four display scales: held-out views stay unseen), packed, and scored on the held-out
+    views at full size."""
     if progress:
         progress("display ladder", 0, 1)
-    # measured on training rays: held-out views stay unseen for evaluation (measuring on half of them
-    # instead gave no fewer drops on the other half; BENCHMARKS.md)
-    from .evaluate import measure_display_ladder
+    # measured on training views rendered at each display scale: held-out views stay unseen for
+    # evaluation (BENCHMARKS.md, "display ladders per scale")
+    from .evaluate import measure_display_ladders
 
-    # on the training device (every size of the network on 16 384 rays: seconds on a CPU for
+    # on the training device (every size of the network on ~80 000 pixels: seconds on a CPU for
     # a large network, milliseconds on a GPU)
-    info["display"] = measure_display_ladder(model, lf, info["train_views"], info["norm"], opts.seed, opts.device)
+    info["display"], info["display_scales"] = measure_display_ladders(model, lf, info["train_views"], info["norm"],
+                                                                      opts.device)
     config, sections = to_sections(model, occ, info, weights)
     summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
                "display_sizes": len(info["display"]),

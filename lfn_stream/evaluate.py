@@ -93,8 +93,12 @@ def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, ba
     return rows
 
 
-DISPLAY_RAYS = 16384       # rays the display ladder is measured on
-DISPLAY_MARGIN_DB = 0.1    # a size joins the ladder when it beats every smaller one by this much
+DISPLAY_RAYS = 16384       # training rays sample_rays draws by default
+DISPLAY_MARGIN_DB = 0.5    # a size joins a ladder when it beats every smaller listed one by this much
+DISPLAY_TAIL_DB = 0.1      # ... and a per-scale ladder ends at its best size when that beats the last by this
+DISPLAY_SCALES = (0.125, 0.25, 0.5, 1.0)   # display scales (of the views) a ladder is measured at
+DISPLAY_VIEWS = 10         # training views rendered per scale, evenly spread over the capture ...
+DISPLAY_PIXELS = 32768     # ... at most this many pixels per scale (fewer views at large scales)
 
 
 def size_psnr(model, rays, targets, cfg: LfnConfig) -> np.ndarray:
@@ -119,29 +123,67 @@ def size_psnr(model, rays, targets, cfg: LfnConfig) -> np.ndarray:
     return np.asarray(out)
 
 
-def measure_display_ladder(model, lf: LightField, train_views, norm: dict, seed: int = 0,
-                           device: str = "cpu") -> list[int]:
-    """The display ladder of a trained network (:func:`display_ladder`), measured on
-    DISPLAY_RAYS rays of its training views (held-out views stay unseen) on ``device``; the
-    model is left on the CPU."""
-    rays, targets = sample_rays(lf, train_views, norm, seed=seed)
+def display_samples(lf: LightField, train_views, norm: dict, scale: float):
+    """(rays (N, 6) float32, targets (N, 4) float32): up to DISPLAY_VIEWS training views, evenly
+    spread, rendered at ``scale`` (rays through the pixel centres of the scaled view, targets the
+    area-downsampled view: what a display at that scale shows and is compared with), at most
+    DISPLAY_PIXELS pixels in all (at least one view)."""
+    h, w = max(1, round(lf.height * scale)), max(1, round(lf.width * scale))
+    views = np.asarray(train_views)
+    n = max(1, min(DISPLAY_VIEWS, len(views), DISPLAY_PIXELS // (h * w)))
+    pick = views[np.linspace(0, len(views) - 1, n).round().astype(int)]
+    flat = lf.views.reshape(-1, lf.height, lf.width, lf.channels)
+    peak = float(np.iinfo(lf.views.dtype).max)
+    rays, tg = [], []
+    for v in pick:
+        r = view_rays(lf, int(v), scale, norm["centre"], norm["radius"])
+        t = area_downsample(targets_of(flat[v][None], lf.has_alpha)[0].astype(np.float32) / peak, scale)
+        rays.append(r.reshape(-1, 6))
+        tg.append(t.reshape(-1, t.shape[-1]))
+    return np.concatenate(rays), np.concatenate(tg)
+
+
+def measure_display_ladders(model, lf: LightField, train_views, norm: dict, device: str = "cpu"
+                            ) -> tuple[list[int], list[list]]:
+    """The display ladders of a trained network, measured on training views rendered at each of
+    DISPLAY_SCALES (held-out views stay unseen) on ``device``; the model is left on the CPU.
+
+    Returns:
+        (``display``: the ladder at scale 1 with the full size appended (what readers of codec
+        version 3 expect), ``display_scales``: [[scale, ladder], ...] for :data:`DISPLAY_SCALES`,
+        each ladder ending at its best size, the full size only where it is best).
+    """
     try:
-        return display_ladder(size_psnr(model.to(device), rays, targets, model.cfg), model.cfg)
+        model.to(device)
+        per_scale = []
+        for s in DISPLAY_SCALES:
+            rays, targets = display_samples(lf, train_views, norm, s)
+            psnr = size_psnr(model, rays, targets, model.cfg)
+            per_scale.append([s, display_ladder(psnr, model.cfg, full=False, tail_db=DISPLAY_TAIL_DB)])
     finally:
         model.cpu()
+    top = per_scale[-1][1]
+    return top + ([model.cfg.max_neurons] if top[-1] != model.cfg.max_neurons else []), per_scale
 
 
-def display_ladder(psnr: np.ndarray, cfg: LfnConfig, margin_db: float = DISPLAY_MARGIN_DB) -> list[int]:
+def display_ladder(psnr: np.ndarray, cfg: LfnConfig, margin_db: float = DISPLAY_MARGIN_DB,
+                   full: bool = True, tail_db: float | None = None) -> list[int]:
     """The sizes worth displaying: the base size, then each size whose PSNR beats every smaller
-    listed size's by ``margin_db``, and the full size (the whole file shows the whole network).
-    A renderer holding the steps up to size j shows the largest listed size ≤ j, so quality
-    (where ``psnr`` was measured) never falls as bytes arrive, up to the full size."""
+    listed size's by ``margin_db``; then (``tail_db``) the best size, where it lies above the
+    last listed one and beats it by ``tail_db`` (so a large margin does not leave the end of the
+    stream short of the best network); and (``full``) the full size (the whole file shows the
+    whole network). A renderer holding the steps up to size j shows the largest listed size ≤ j,
+    so quality (where ``psnr`` was measured) never falls as bytes arrive (up to the full size,
+    when it is appended)."""
     sizes, best = [cfg.min_neurons], float(psnr[0])
     for i in range(1, len(psnr)):
         if psnr[i] >= best + margin_db:
             sizes.append(cfg.min_neurons + i)
             best = float(psnr[i])
-    if sizes[-1] != cfg.max_neurons:
+    top = int(np.argmax(psnr))
+    if tail_db is not None and cfg.min_neurons + top > sizes[-1] and psnr[top] >= best + tail_db:
+        sizes.append(cfg.min_neurons + top)
+    if full and sizes[-1] != cfg.max_neurons:
         sizes.append(cfg.max_neurons)
     return sizes
 

@@ -5,6 +5,8 @@ the full network, level L the network with L fewer (fractional) neurons per laye
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 
@@ -118,6 +120,7 @@ class LfnRenderer(Decoder):
                          "radius": norm.float("radius", 1e-12, 1e12)}
             self.dtype_w = conf.str("weights", choices=("fp16", "fp32"), default="fp16")
             self.display = self._read_display(conf.obj.get("display"))
+            self.display_scales = self._read_display_scales(conf.obj.get("display_scales"))
         except ParameterError as e:
             raise FormatError(f"{c.name}: lfn network config is invalid ({e})") from None
         scene = read_geometry(f.meta.get("scene"), f"{c.name}: scene", lim)
@@ -176,6 +179,52 @@ class LfnRenderer(Decoder):
             raise ParameterError(f"display must be increasing integer sizes from {c.min_neurons} to "
                                  f"{c.max_neurons}")
         return val
+
+    def _read_display_scales(self, val) -> list[tuple[float, list[int]]] | None:
+        """``config.display_scales`` (FORMAT.md): 1..16 pairs [scale, ladder], scales strictly
+        increasing within (0, 64], each ladder strictly increasing integer sizes from min_neurons
+        up to at most max_neurons; or absent (None)."""
+        if val is None:
+            return None
+        c = self.cfg
+        bad = ParameterError(f"display_scales must be 1 to 16 pairs [scale, sizes], scales increasing within "
+                             f"(0, 64], sizes increasing integers from {c.min_neurons} up to {c.max_neurons}")
+        if not isinstance(val, list) or not 1 <= len(val) <= 16:
+            raise bad
+        out = []
+        for pair in val:
+            if not isinstance(pair, list) or len(pair) != 2:
+                raise bad
+            sc, lad = pair
+            if isinstance(sc, bool) or not isinstance(sc, (int, float)) or not 0 < sc <= 64 \
+                    or (out and sc <= out[-1][0]):
+                raise bad
+            if not isinstance(lad, list) or not 1 <= len(lad) <= c.max_neurons - c.min_neurons + 1 \
+                    or not all(isinstance(w, int) and not isinstance(w, bool) for w in lad) \
+                    or lad[0] != c.min_neurons or lad[-1] > c.max_neurons \
+                    or any(b <= a for a, b in zip(lad, lad[1:])):
+                raise bad
+            out.append((float(sc), lad))
+        return out
+
+    def display_ladder_at(self, scale: float | None = None) -> list[int] | None:
+        """The display ladder for rendering at ``scale`` (of the views): the file's ladder measured
+        at the display scale nearest ``scale`` in ratio (``config.display_scales``; the smaller
+        on a tie), else ``config.display`` (without ``scale`` too); None when the file has none."""
+        if scale is None or self.display_scales is None:
+            return self.display
+        check_numbers(scale=scale)
+        if not scale > 0:
+            raise ParameterError(f"scale must be > 0, got {scale!r}")
+        return min(self.display_scales, key=lambda p: abs(math.log(p[0] / float(scale))))[1]
+
+    def display_neurons_at(self, scale: float | None = None) -> float:
+        """The size to show from the bytes held when rendering at ``scale``: the largest size of
+        :meth:`display_ladder_at` that the held steps reach, so that quality at that scale does
+        not fall as bytes arrive and a size made for finer scales is not shown where it is
+        worse. Without ``scale``, or for a file without per-scale ladders: :attr:`display_neurons`."""
+        lad = self.display_ladder_at(scale)
+        return float(self.neurons) if lad is None else float(max(w for w in lad if w <= self.neurons))
 
     @property
     def display_neurons(self) -> float:
@@ -349,13 +398,13 @@ class LfnRenderer(Decoder):
             raise FormatError(f"{self.file.container.name}: view ({row},{col}): {e}") from None
 
     def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
-        """One view with a (fractional) network size (default :attr:`display_neurons`); scale
-        defaults to the size's own (1/8 … 1).
+        """One view with a (fractional) network size (default: :meth:`display_neurons_at` the
+        scale asked for, else :attr:`display_neurons`); scale defaults to the size's own (1/8 … 1).
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
-        neurons = self.display_neurons if neurons is None else self._check(neurons)
+        neurons = self.display_neurons_at(scale) if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         rays = self.view_rays(row, col, scale)
         h, w = rays.shape[:2]
@@ -413,7 +462,7 @@ class LfnRenderer(Decoder):
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
         c2w = self._check_pose(c2w, self.norm)
-        neurons = self.display_neurons if neurons is None else self._check(neurons)
+        neurons = self.display_neurons_at(scale) if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         self._scaled(scale)
         g = self._intr
@@ -542,10 +591,14 @@ class LfnRenderer(Decoder):
         c = self.cfg
         return {"codec": CODEC_ID, "levels": self.levels, "network": c.to_dict(), "weights": self.dtype_w,
                 "neurons_available": self.neurons, "display": self.display,
+                "display_scales": self.display_scales,
                 "summary": f"light field network, depth {c.depth}, {c.min_neurons}..{c.max_neurons} neurons per "
                            f"layer ({self.neurons} in the available bytes); levels 0..{self.levels:g} (0 = full "
                            f"network; any prefix ending after a step is a complete network), "
                            f"{self.dtype_w} weights" + (
                                "" if self.display is None else
                                f"; display ladder of {len(self.display)} sizes (shown from these bytes: "
-                               f"{self.display_neurons:g})")}
+                               f"{self.display_neurons:g})") + (
+                               "" if self.display_scales is None else
+                               "; at display scale " + ", ".join(f"{sc:g}: {self.display_neurons_at(sc):g}"
+                                                                 for sc, _ in self.display_scales))}

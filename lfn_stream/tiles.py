@@ -289,6 +289,10 @@ class TiledLfnRenderer:
     def display_neurons(self) -> float:
         return min(t.display_neurons for t in self._tiles.values())
 
+    def display_neurons_at(self, scale: float | None = None) -> float:
+        """The smallest display size of the opened tiles at ``scale`` (LfnRenderer.display_neurons_at)."""
+        return min(t.display_neurons_at(scale) for t in self._tiles.values())
+
     def neurons_at(self, level: float) -> float:
         return self.tile(0).neurons_at(level)
 

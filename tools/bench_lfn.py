@@ -23,7 +23,7 @@ from formats.lfcfile import open_lfc, write_lfc
 from formats.lightfield import LightField
 from tools.common import log
 from lfn_stream import CODEC_ID, CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, TrainOptions, to_sections, train
-from lfn_stream.evaluate import evaluate, measure_display_ladder, prefix_bytes
+from lfn_stream.evaluate import evaluate, measure_display_ladders, prefix_bytes
 from lfn_stream.pack import step_bytes
 from lfn_stream.rays import view_rays
 
@@ -106,8 +106,9 @@ def main(argv=None) -> int:
 
     log("training the continuous-LOD network")
     model, occ, info = fit(1.0)
-    # the display ladder, as `lfcodec train` measures it (training rays; held-out views unseen)
-    info["display"] = measure_display_ladder(model, lf, info["train_views"], info["norm"], 0, a.device)
+    # the display ladders, as `lfcodec train` measures them (training views; held-out views unseen)
+    info["display"], info["display_scales"] = measure_display_ladders(model, lf, info["train_views"], info["norm"],
+                                                                      a.device)
     ev_lf, test_v, train_v, geom_lf = eval_set(info)
     info["test_views"] = [int(v) for v in test_v]         # views of the file's geometry (the test split's too)
     config, sections = to_sections(model, occ, info)

@@ -7,8 +7,9 @@ area-downsampled views (premultiplied RGBA on black, as :mod:`lfn_stream.evaluat
 
 - ``raw``: a renderer that shows every size it holds (what a reader without a display ladder
   shows, and what ``--level`` asks for);
-- ``display``: a renderer that shows :attr:`LfnRenderer.display_neurons` for the bytes held (the
-  largest size of the file's display ladder, ``config.display``, that those bytes reach).
+- ``display``: a renderer at that scale that shows :meth:`LfnRenderer.display_neurons_at` for the
+  bytes held (the largest size those bytes reach of the file's ladder for the nearest display
+  scale, ``config.display_scales``, else of ``config.display``).
 
 Reports, per curve, how many steps lower the held-out PSNR by more than 0.1 dB (issue 17: none),
 the worst drop, the mean PSNR over the steps, and the bytes of the first and the last prefix.
@@ -88,9 +89,10 @@ def main(argv=None) -> int:
     log(f"{a.file}: {len(views)} held-out views at scale {a.scale}, sizes {r.cfg.min_neurons}..{r.cfg.max_neurons}")
     raw = curve(r, lf, views, a.scale)
     lo = r.cfg.min_neurons
-    shown = displayed(raw, r.display, lo)
+    ladder = r.display_ladder_at(a.scale)      # the one a renderer at this scale uses
+    shown = displayed(raw, ladder, lo)
     res = {"file": a.file, "scene": a.scene, "scale": a.scale, "views": views, "machine": machine(),
-           "display_ladder": r.display, "bytes": [prefix_bytes(r, float(w)) for w in range(lo, r.cfg.max_neurons + 1)],
+           "display_ladder": ladder, "bytes": [prefix_bytes(r, float(w)) for w in range(lo, r.cfg.max_neurons + 1)],
            "psnr_raw": raw.round(4).tolist(), "psnr_display": shown.round(4).tolist(),
            "raw": summary(raw), "display": summary(shown)}
     print("| curve | steps dropping > 0.1 dB | worst drop | mean PSNR | first → last |\n|---|---|---|---|---|")

@@ -149,6 +149,16 @@ export class LfnDecoder {
       if (!ok) throw new FormatError(`${name}: config.display must be increasing integer sizes from ${d.minN} to ${d.maxN}`);
       d.display = v;
     }
+    d.displayScales = null;                    // ladders per display scale (FORMAT.md), when the file has them
+    if (conf.display_scales !== undefined) {
+      const v = conf.display_scales;
+      const okLadder = (l) => Array.isArray(l) && l.length >= 1 && l.length <= d.maxN - d.minN + 1 && l.every(Number.isInteger)
+        && l[0] === d.minN && l[l.length - 1] <= d.maxN && l.every((w, i) => i === 0 || w > l[i - 1]);
+      const ok = Array.isArray(v) && v.length >= 1 && v.length <= 16 && v.every((p, i) => Array.isArray(p) && p.length === 2
+        && typeof p[0] === "number" && p[0] > 0 && p[0] <= 64 && (i === 0 || p[0] > v[i - 1][0]) && okLadder(p[1]));
+      if (!ok) throw new FormatError(`${name}: config.display_scales must be 1 to 16 pairs [scale, sizes], scales increasing within (0, 64], sizes increasing integers from ${d.minN} up to ${d.maxN}`);
+      d.displayScales = v;
+    }
     d.file = file;
     d._geometry((await file.fullMeta()).scene, name);     // version 3: the cameras are in meta.more
     const base = file.info("lfn.base");
@@ -246,10 +256,17 @@ export class LfnDecoder {
 
   stepValues(j) { return 6 + 3 + (this.depth - 1) * (2 * j + 1 + 3) + 4; }
 
-  /** The size to show from the steps held: the largest size of the display ladder they reach
-   *  (every held neuron without a ladder), so the picture does not get worse as bytes arrive. */
-  displayNeurons() {
-    return this.display ? Math.max(...this.display.filter((w) => w <= this.neurons)) : this.neurons;
+  /** The size to show from the steps held: the largest size they reach of the ladder measured at
+   *  the display scale nearest `scale` (config.display_scales; nearest in ratio), else of
+   *  config.display (every held neuron without a ladder), so the picture does not get worse as
+   *  bytes arrive. As LfnRenderer.display_neurons_at. */
+  displayNeurons(scale = null) {
+    let ladder = this.display;
+    if (scale !== null && scale !== undefined && this.displayScales) {
+      const dist = (p) => Math.abs(Math.log(p[0] / scale));
+      ladder = this.displayScales.reduce((a, b) => (dist(b) < dist(a) ? b : a))[1];
+    }
+    return ladder ? Math.max(...ladder.filter((w) => w <= this.neurons)) : this.neurons;
   }
 
   /** Network size a level stands for (0 = the largest available network). */

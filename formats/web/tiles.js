@@ -118,7 +118,7 @@ export class TiledLfn {
   /** Neurons held by every tile of the last camera (tile 0 before any). */
   get neurons() { return Math.min(...this._activeTiles().map((d) => d.neurons)); }
 
-  displayNeurons() { return Math.min(...this._activeTiles().map((d) => d.displayNeurons())); }
+  displayNeurons(scale = null) { return Math.min(...this._activeTiles().map((d) => d.displayNeurons(scale))); }
 
   weightBytes() { return [...this.tiles.values()].reduce((a, d) => a + d.weightBytes(), 0); }
 

@@ -176,8 +176,8 @@ async function mainLfn(dec, source, t0) {
   const draw = async (neurons = state.neurons) => {
     const p = pose();
     await dec.grow(neurons, p);              // fetches the step sections this level needs (a tile set: of the camera's tiles)
-    // beyond what the file holds: the best size of its display ladder that the held steps reach
-    const n = neurons <= dec.neurons ? neurons : dec.displayNeurons();
+    // beyond what the file holds: the best size of its display ladder (at the chosen scale) that the held steps reach
+    const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(state.scale === "auto" ? null : Number(state.scale));
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
     const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc);      // a quarter-scale preview while dragging

@@ -55,7 +55,7 @@ def orbit_c2w(n: int, radius: float = 4.0) -> np.ndarray:
 
 
 def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=True, occ=True, seed=0,
-             display=None) -> Path:
+             display=None, display_scales=None) -> Path:
     torch.manual_seed(seed)
     cfg = LfnConfig(depth=4, min_neurons=6, max_neurons=20, occupancy_neurons=8 if occ else 0)
     m = NestedLFN(cfg)
@@ -77,8 +77,8 @@ def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=Tru
         r, c = np.meshgrid(np.arange(3), np.arange(4), indexing="ij")
         pos = np.stack([c * 0.3, -r * 0.25, np.zeros_like(r, float)], -1)
         lf = LightField(views=views, positions=pos, focal=(30.0, 30.0))
-    config, sections = to_sections(m, o, {"norm": {"centre": [0.1, 0.0, 0.2], "radius": 2.5}, "display": display},
-                                   weights)
+    config, sections = to_sections(m, o, {"norm": {"centre": [0.1, 0.0, 0.2], "radius": 2.5}, "display": display,
+                                          "display_scales": display_scales}, weights)
     sections = [(n, d, 96) if n == "lfn.steps" else (n, d) for n, d, *_ in sections]   # steps span chunks
     p = tmp / f"net_{channels}_{np.dtype(dtype).name}_{weights}_{posed}.lfc"
     p.write_bytes(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS))
@@ -152,6 +152,22 @@ def test_display_ladder_shows_the_same_size_as_python(tmp_path):
         assert info["renders"][0]["shown"] == shown and info["opened"] == first
 
 
+def test_display_ladders_per_scale_show_the_same_size_as_python(tmp_path):
+    """config.display_scales: at a render scale the JS reader shows the largest size the held
+    steps reach of the ladder measured at the nearest display scale, as
+    LfnRenderer.display_neurons_at does; without a scale, config.display."""
+    scales = [[0.25, [6, 8, 9]], [1.0, [6, 7, 10, 11, 15, 18]]]
+    path = lfn_file(tmp_path, 3, posed=False, occ=False, display=[6, 7, 10, 11, 15, 18, 20], display_scales=scales)
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    for first in (9, 14, 20):
+        part = LfnRenderer(open_lfc(path), device="cpu", max_neurons=first)
+        cams = [(f"grid,1,2,display,{sc}", part.display_neurons_at(sc), sc) for sc in (0.25, 0.4, 1.0)]
+        cams.append(("grid,1,2,display,auto", part.display_neurons, None))
+        info, _ = compare(path, tmp_path / str(first), cams, [r.grid_pose(1, 2)] * 4, first=first)
+        assert [x["shown"] for x in info["renders"]] == [c[1] for c in cams]
+    assert [c[1] for c in cams] == [9, 9, 18, 20]
+
+
 def r_cfg(f):
     return LfnConfig.from_dict(f.meta["config"]["network"], f.meta["codec_version"])
 
@@ -183,6 +199,8 @@ def test_bad_networks_get_typed_errors(tmp_path):
         "version": ({**meta, "codec_version": 9}, secs, "UnsupportedError", "version 9"),
         "display": ({**meta, "config": {**meta["config"], "display": [6, 12, 9, 20]}}, secs, "FormatError",
                     "config.display"),
+        "display_scales": ({**meta, "config": {**meta["config"], "display_scales": [[0.5, [6, 21]]]}}, secs,
+                           "FormatError", "config.display_scales"),
         "radius": ({**meta, "config": {**meta["config"], "norm": {"centre": [0, 0, 0], "radius": -1}}}, secs,
                    "FormatError", "radius"),
         "named-twice": ({**meta, "codec_version": 1, "config": {**meta["config"], "network": {

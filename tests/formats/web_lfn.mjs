@@ -29,7 +29,7 @@ try {
     else { pose = dec.orbitPose(Number(a[1]), Number(a[2]), Number(a[3])); rest = a.slice(4); }
     const n = rest[0] === "max" || rest[0] === "display" ? Infinity : Number(rest[0]);
     if (rest[0] !== "display") await dec.grow(n);            // display: what the opened steps show
-    const use = rest[0] === "display" ? dec.displayNeurons() : Math.min(n, dec.neurons);
+    const use = rest[0] === "display" ? dec.displayNeurons(rest[1] === "auto" ? null : Number(rest[1])) : Math.min(n, dec.neurons);
     const r = dec.render(pose, use, rest[1] === "auto" ? null : Number(rest[1]));
     const px = dec.toPixels(r.rgba, r.h, r.w);
     fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));

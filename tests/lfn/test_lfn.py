@@ -530,8 +530,12 @@ def test_display_ladder_and_display_neurons():
 
     cfg = LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=0)
     psnr = np.array([10, 11, 10.95, 11.05, 11.2, 10, 12, 12.05, 11.5])     # sizes 4..12
-    assert display_ladder(psnr, cfg) == [4, 5, 8, 10, 12]
+    assert display_ladder(psnr, cfg, margin_db=0.1) == [4, 5, 8, 10, 12]
     assert display_ladder(psnr, cfg, margin_db=2.0) == [4, 10, 12]
+    assert display_ladder(psnr, cfg, margin_db=0.1, full=False) == [4, 5, 8, 10]
+    # the best size (11: 12.05 dB) ends the ladder only where it beats the last listed (10: 12 dB) by tail_db
+    assert display_ladder(psnr, cfg, margin_db=2.0, full=False, tail_db=0.1) == [4, 10]
+    assert display_ladder(psnr, cfg, margin_db=2.0, full=False, tail_db=0.01) == [4, 10, 11]
     lf = smooth_lf(rows=2, cols=2, h=8, w=10)
     m = _model(cfg=LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=8))
     config, sections = to_sections(m, None, {"norm": {"centre": [0, 0, 0], "radius": 1.0},
@@ -555,6 +559,93 @@ def test_display_ladder_and_display_neurons():
         config["display"] = bad
         with pytest.raises(FormatError, match="display"):
             LfnRenderer(open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections)), device="cpu")
+
+
+def test_display_ladders_per_scale():
+    """config.display_scales: a renderer at a scale shows the largest size its bytes reach of the
+    ladder measured at the nearest display scale (the full size only where listed); without a
+    scale, or for a file without them, config.display; a bad entry is a FormatError."""
+    from formats.errors import FormatError
+
+    lf = smooth_lf(rows=2, cols=2, h=8, w=10)
+    m = _model(cfg=LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=8))
+    scales = [[0.25, [4, 6]], [1.0, [4, 5, 8, 10]]]
+    config, sections = to_sections(m, None, {"norm": {"centre": [0, 0, 0], "radius": 1.0},
+                                             "display": [4, 5, 8, 10, 12], "display_scales": scales})
+    assert config["display_scales"] == scales
+    chunked = [(n, d, 40) if n == "lfn.steps" else (n, d, *rest) for n, d, *rest in sections]
+    blob = lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), chunked)
+    full = LfnRenderer(open_lfc(blob), device="cpu")
+    assert [full.display_neurons_at(s) for s in (0.1, 0.25, 0.45, 0.55, 1.0, 4.0, None)] == [6, 6, 6, 10, 10, 10, 12]
+    pose = full.pose(1, 0)
+    assert np.array_equal(full.render_pose(pose, scale=0.25), full.render_pose(pose, 6.0, 0.25))
+    assert np.array_equal(full.render(1, 0, scale=1.0), full.render(1, 0, 10.0, 1.0))
+    assert "at display scale 0.25: 6, 1: 10" in full.info()["summary"]
+    s = full.file.container.info("lfn.steps")
+    for n in range(s.offset, s.offset + s.length, 40):
+        pre = LfnRenderer(open_lfc(blob[:n], partial=True), device="cpu")
+        for sc, lad in scales:
+            assert pre.display_neurons_at(sc) == max(w for w in lad if w <= pre.neurons)
+    with pytest.raises(ParameterError, match="scale"):
+        full.display_neurons_at(0.0)
+    for bad in ([], [[1.0, [4, 12]], [0.5, [4]]], [[0.5, [5, 6]]], [[0.5, [4, 13]]], [[0, [4]]], [[0.5, [4, 4]]],
+                [[True, [4]]], [[0.5]], [[0.5, [4.0]]], "0.5", [[65, [4]]]):
+        config["display_scales"] = bad
+        with pytest.raises(FormatError, match="display_scales"):
+            LfnRenderer(open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections)), device="cpu")
+
+
+def test_measured_display_ladders_cover_every_scale():
+    """measure_display_ladders: one ladder per display scale, each from the base size upward
+    (the full size only where it measured best), and config.display ending at the full size."""
+    from lfn_stream.evaluate import DISPLAY_SCALES, display_samples, measure_display_ladders
+
+    lf = smooth_lf(rows=2, cols=3, h=16, w=20)
+    m = _model(cfg=LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=0))
+    norm = {"centre": [0, 0, 0], "radius": 1.0}
+    rays, tg = display_samples(lf, [0, 2, 5], norm, 0.5)
+    assert rays.shape == (3 * 8 * 10, 6) and tg.shape[0] == rays.shape[0]
+    display, per_scale = measure_display_ladders(m, lf, [0, 2, 5], norm)
+    assert [s for s, _ in per_scale] == list(DISPLAY_SCALES)
+    assert display[0] == 4 and display[-1] == 12 and display[:-1] == per_scale[-1][1][:len(display) - 1]
+    for _, lad in per_scale:
+        assert lad[0] == 4 and lad[-1] <= 12 and all(b > a for a, b in zip(lad, lad[1:]))
+
+
+def test_shown_quality_does_not_fall_as_bytes_arrive_on_the_sample():
+    """Issue 17's monotone rule, end to end on a small real scene: a network trained on the
+    sample (32 px, 400 steps), its ladders measured by the encoder on training views; for every
+    prefix (one more neuron each), the size the renderer shows at display scale 1/4, 1/2 and 1
+    scores on the held-out views never more than 0.1 dB below the previous prefix's, while the
+    plain sizes do fall (by ~1 dB), so the rule is doing the work."""
+    from formats.scenes import read_scene
+    from formats.transform import resize_lightfield
+    from lfn_stream.evaluate import measure_display_ladders
+    from lfn_stream.sat import area_downsample
+    from lfn_stream.training import targets_of
+
+    lf = resize_lightfield(read_scene(ROOT / "samples" / "dino_crop"), 32)
+    cfg = LfnConfig(depth=4, min_neurons=8, max_neurons=32, occupancy_neurons=0)
+    m, o, info = train(lf, cfg, TrainOptions(steps=400, batch=1024, holdout=4))
+    info["display"], info["display_scales"] = measure_display_ladders(m, lf, info["train_views"], info["norm"])
+    config, sections = to_sections(m, o, info)
+    blob = lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
+    r = LfnRenderer(open_lfc(blob), device="cpu")
+    flat = lf.views.reshape(-1, lf.height, lf.width, lf.channels)
+    for scale in (0.25, 0.5, 1.0):
+        refs = {v: area_downsample(targets_of(flat[v][None], False)[0].astype(np.float32) / 255, scale)[..., :3]
+                for v in info["test_views"]}
+
+        def heldout(n):
+            mse = [np.mean((r.render(v // lf.cols, v % lf.cols, float(n), scale)[..., :3] - refs[v]) ** 2)
+                   for v in info["test_views"]]
+            return 10 * np.log10(1 / np.mean(mse))
+
+        plain = {n: heldout(n) for n in range(8, 33)}
+        shown = [plain[int(LfnRenderer(open_lfc(blob), device="cpu", max_neurons=n).display_neurons_at(scale))]
+                 for n in range(8, 33)]
+        assert np.diff(shown).min() >= -0.1, (scale, np.round(shown, 2))
+        assert np.diff(list(plain.values())).min() < -0.3, scale
 
 
 def test_lfn_files_honour_the_limits_they_are_opened_with():
