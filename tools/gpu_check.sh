@@ -23,6 +23,8 @@ timeout $((S + 130)) python3 -m tools.bench_lfn .gpu/mitsuba128.npz --test-scene
 tail -n 9 "$R/mitsuba.log"
 el curve
 timeout 60 python3 -m tools.bench_lfn_curve "$R/mitsuba/lfn.lfc" .gpu/mitsuba128.npz --test-scene .gpu/mitsuba128_test.npz --device cuda --out "$R/mitsuba/curve.json"
+el ladder
+timeout 90 python3 -m tools.bench_lfn_ladder "$R/mitsuba/lfn.lfc" .gpu/mitsuba128.npz --test-scene .gpu/mitsuba128_test.npz --device cuda --out "$R/mitsuba/ladder.json" > "$R/mitsuba/ladder.md" 2>&1
 el steps
 timeout 120 python3 -m tools.bench_lfn_steps .gpu/mitsuba128.npz --device cuda --out "$R/steps.json"
 el decode
