@@ -109,8 +109,9 @@ def finish_network(full, lf, model, occ, info: dict, opts, weights: str, progres
 
     # on the training device (every size of the network on ~80 000 pixels: seconds on a CPU for
     # a large network, milliseconds on a GPU)
+    # (scales of the file's views: a network trained at reduced resolution renders them larger)
     info["display"], info["display_scales"] = measure_display_ladders(model, lf, info["train_views"], info["norm"],
-                                                                      opts.device)
+                                                                      opts.device, view_scale=lf.width / full.width)
     config, sections = to_sections(model, occ, info, weights)
     summary = {"steps": info["steps"], "train_s": round(info["train_s"], 1), "params": model.n_params(),
                "display_sizes": len(info["display"]),

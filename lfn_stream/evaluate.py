@@ -127,10 +127,12 @@ def display_samples(lf: LightField, train_views, norm: dict, scale: float):
     """(rays (N, 6) float32, targets (N, 4) float32): up to DISPLAY_VIEWS training views, evenly
     spread, rendered at ``scale`` (rays through the pixel centres of the scaled view, targets the
     area-downsampled view: what a display at that scale shows and is compared with), at most
-    DISPLAY_PIXELS pixels in all (at least one view)."""
+    DISPLAY_PIXELS pixels in all: fewer views at large scales, and where one view alone holds
+    more, every k-th of its pixels."""
     h, w = max(1, round(lf.height * scale)), max(1, round(lf.width * scale))
     views = np.asarray(train_views)
     n = max(1, min(DISPLAY_VIEWS, len(views), DISPLAY_PIXELS // (h * w)))
+    step = -(-(h * w) // DISPLAY_PIXELS)          # 1 unless one view is over the budget
     pick = views[np.linspace(0, len(views) - 1, n).round().astype(int)]
     flat = lf.views.reshape(-1, lf.height, lf.width, lf.channels)
     peak = float(np.iinfo(lf.views.dtype).max)
@@ -138,20 +140,26 @@ def display_samples(lf: LightField, train_views, norm: dict, scale: float):
     for v in pick:
         r = view_rays(lf, int(v), scale, norm["centre"], norm["radius"])
         t = area_downsample(targets_of(flat[v][None], lf.has_alpha)[0].astype(np.float32) / peak, scale)
-        rays.append(r.reshape(-1, 6))
-        tg.append(t.reshape(-1, t.shape[-1]))
+        rays.append(r.reshape(-1, 6)[::step])
+        tg.append(t.reshape(-1, t.shape[-1])[::step])
     return np.concatenate(rays), np.concatenate(tg)
 
 
-def measure_display_ladders(model, lf: LightField, train_views, norm: dict, device: str = "cpu"
-                            ) -> tuple[list[int], list[list]]:
-    """The display ladders of a trained network, measured on training views rendered at each of
-    DISPLAY_SCALES (held-out views stay unseen) on ``device``; the model is left on the CPU.
+def measure_display_ladders(model, lf: LightField, train_views, norm: dict, device: str = "cpu",
+                            view_scale: float = 1.0) -> tuple[list[int], list[list]]:
+    """The display ladders of a trained network, measured on training views of ``lf`` (the views
+    it trained on) rendered at each of DISPLAY_SCALES (held-out views stay unseen) on
+    ``device``; the model is left on the CPU.
 
+    Args:
+        view_scale: the size of ``lf``'s views relative to the views the file describes (a
+            network trained at reduced resolution: e.g. 0.5 for 128 px of 256 px views); the
+            ladders are stored at the file's scales (DISPLAY_SCALES × view_scale).
     Returns:
-        (``display``: the ladder at scale 1 with the full size appended (what readers of codec
-        version 3 expect), ``display_scales``: [[scale, ladder], ...] for :data:`DISPLAY_SCALES`,
-        each ladder ending at its best size, the full size only where it is best).
+        (``display``: the ladder at scale 1 of ``lf`` with the full size appended (what readers
+        that do not know ``display_scales`` use), ``display_scales``: [[scale of the file's
+        views, ladder], ...], each ladder ending at its best size, the full size only where it
+        is best).
     """
     try:
         model.to(device)
@@ -159,7 +167,7 @@ def measure_display_ladders(model, lf: LightField, train_views, norm: dict, devi
         for s in DISPLAY_SCALES:
             rays, targets = display_samples(lf, train_views, norm, s)
             psnr = size_psnr(model, rays, targets, model.cfg)
-            per_scale.append([s, display_ladder(psnr, model.cfg, full=False, tail_db=DISPLAY_TAIL_DB)])
+            per_scale.append([s * view_scale, display_ladder(psnr, model.cfg, full=False, tail_db=DISPLAY_TAIL_DB)])
     finally:
         model.cpu()
     top = per_scale[-1][1]

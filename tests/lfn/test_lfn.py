@@ -595,9 +595,10 @@ def test_display_ladders_per_scale():
             LfnRenderer(open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections)), device="cpu")
 
 
-def test_measured_display_ladders_cover_every_scale():
+def test_measured_display_ladders_cover_every_scale(monkeypatch):
     """measure_display_ladders: one ladder per display scale, each from the base size upward
     (the full size only where it measured best), and config.display ending at the full size."""
+    from lfn_stream import evaluate
     from lfn_stream.evaluate import DISPLAY_SCALES, display_samples, measure_display_ladders
 
     lf = smooth_lf(rows=2, cols=3, h=16, w=20)
@@ -605,8 +606,12 @@ def test_measured_display_ladders_cover_every_scale():
     norm = {"centre": [0, 0, 0], "radius": 1.0}
     rays, tg = display_samples(lf, [0, 2, 5], norm, 0.5)
     assert rays.shape == (3 * 8 * 10, 6) and tg.shape[0] == rays.shape[0]
-    display, per_scale = measure_display_ladders(m, lf, [0, 2, 5], norm)
-    assert [s for s, _ in per_scale] == list(DISPLAY_SCALES)
+    monkeypatch.setattr(evaluate, "DISPLAY_PIXELS", 50)        # one view, every 2nd of its 80 pixels
+    r2, t2 = display_samples(lf, [0, 2, 5], norm, 0.5)
+    assert np.array_equal(r2, rays[:80][::2]) and np.array_equal(t2, tg[:80][::2])
+    monkeypatch.undo()
+    display, per_scale = measure_display_ladders(m, lf, [0, 2, 5], norm, view_scale=0.5)
+    assert [s for s, _ in per_scale] == [s / 2 for s in DISPLAY_SCALES]     # scales of the file's views
     assert display[0] == 4 and display[-1] == 12 and display[:-1] == per_scale[-1][1][:len(display) - 1]
     for _, lad in per_scale:
         assert lad[0] == 4 and lad[-1] <= 12 and all(b > a for a, b in zip(lad, lad[1:]))
