@@ -641,6 +641,8 @@ def _grid(text: str) -> tuple[int, int]:
 #: what ``decode --view ROW,COL --out FILE`` writes: formats that keep every channel and bit depth
 #: (a JPEG, say, would turn a 16-bit grey + alpha view into 8-bit colour without a word)
 VIEW_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
+#: names that stand for one file, not a folder, as decode's OUTDIR with --view or --block
+FILE_SUFFIXES = VIEW_SUFFIXES + (".exr", ".jpg", ".jpeg", ".bmp", ".webp", ".gif", ".jp2", ".j2k", ".jxl", ".ppm")
 
 
 def _one_out_file(a, what: str) -> Path:
@@ -728,6 +730,9 @@ def _decode(a) -> int:
     from .scenes.layout import layout_paths
     from .viewnames import output_path, png_name, unpack_names
 
+    if (a.block is not None or a.view is not None) and a.out is None and a.outdir is not None \
+            and Path(a.outdir).suffix.lower() in FILE_SUFFIXES and not Path(a.outdir).is_dir():
+        a.out, a.outdir = a.outdir, None         # `decode IN one.png --view R,C`: a file, not a folder named so
     if a.block is not None and a.out is None:
         raise ParameterError("--block needs --out FILE (.npy, .png, .tif or .tiff)")
     if a.out is not None and a.outdir is not None:
@@ -899,7 +904,9 @@ def build_parser() -> argparse.ArgumentParser:
                                    "or to --out FILE.png / .npy), or one pixel block of one view (--block "
                                    "ROW,COL,BY,BX --out FILE.npy).")
     d.add_argument("input")
-    d.add_argument("outdir", nargs="?", help="output folder for PNG views (created if missing; its parent must exist)")
+    d.add_argument("outdir", nargs="?", help="output folder for PNG views (created if missing; its parent must exist); "
+                                             "with --view or --block, a name ending .png, .tif, .tiff or .npy is "
+                                             "the one file written (as --out)")
     d.add_argument("--view", metavar="ROW,COL", help="decode only this view")
     d.add_argument("--overwrite", action="store_true",
                    help="replace files in OUTDIR that are not the decoded views already (by default a decode "

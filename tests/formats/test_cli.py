@@ -111,6 +111,17 @@ def test_decode_views_view_and_block(encoded, tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out and (np.load(tmp_path / "v.npy") == one).all()
     assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / "v.tif"), "--quiet"]) == 0
     assert (read_image(tmp_path / "v.tif") == one).all()
+    # a file name given where the folder goes, with --view or --block, is that one file (it made a
+    # folder named p.png holding r03_c05.png); an existing folder of such a name stays a folder
+    assert main(["decode", str(encoded), str(tmp_path / "p.png"), "--view", "3,5", "--quiet"]) == 0
+    assert (tmp_path / "p.png").is_file() and (read_image(tmp_path / "p.png") == one).all()
+    assert main(["decode", str(encoded), str(tmp_path / "pb.npy"), "--block", "3,5,2,4", "--quiet"]) == 0
+    assert (np.load(tmp_path / "pb.npy") == blk).all()
+    assert main(["decode", str(encoded), str(tmp_path / "p.jpg"), "--view", "3,5", "--quiet"]) == 2
+    assert ".png, .tif, .tiff, .npy" in capsys.readouterr().err and not (tmp_path / "p.jpg").exists()
+    (tmp_path / "dir.png").mkdir()
+    assert main(["decode", str(encoded), str(tmp_path / "dir.png"), "--view", "3,5", "--quiet"]) == 0
+    assert (read_image(tmp_path / "dir.png" / "r03_c05.png") == one).all()
     for lossy in ("v.jpg", "v.xyz", "v"):      # a JPEG would drop bit depth and channels without a word
         assert main(["decode", str(encoded), "--view", "3,5", "--out", str(tmp_path / lossy), "--quiet"]) == 2
         assert ".png, .tif, .tiff, .npy" in capsys.readouterr().err and not (tmp_path / lossy).exists()
