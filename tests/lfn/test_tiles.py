@@ -94,6 +94,10 @@ def test_tile_set_files_are_ordinary_lfn_streams_and_render_as_a_blend(tileset):
         px = r.to_pixels(got)
         assert px.shape == (12, 12, 3) and px.dtype == np.uint8
         assert r.prefix_bytes(8.0) <= rep["bytes"]
+        # each tile carries its per-scale display ladders; the set shows the smallest tile's choice
+        for sc in (0.25, 1.0, None):
+            assert r.display_neurons_at(sc) == min(r.tile(j).display_neurons_at(sc) for j in range(3))
+        assert all(len(r.tile(j).display_scales) == 4 for j in range(3))
     for n in names:                                # each tile opens on its own, as any LFN file
         with open_lfc(str(d / n)) as f:
             t = LfnRenderer(f, device="cpu")
