@@ -62,6 +62,20 @@ def summary(p: np.ndarray) -> dict:
             "last_psnr": round(float(p[-1]), 3)}
 
 
+def open_with_scene(file: str, scene: str, test_scene: str | None, device: str):
+    """(LfnRenderer of ``file`` on ``device``, the light field it was trained on at the file's
+    resolution, the separate test split's views appended when given)."""
+    from tools.bench_lfn import load, with_test_views
+
+    r = LfnRenderer(open_lfc(file), device=device)
+    lf = load(scene, max(r.height, r.width))
+    if test_scene:
+        lf = with_test_views(lf, load(test_scene, max(r.height, r.width), split="test"))
+    if (lf.height, lf.width) != (r.height, r.width):
+        raise SystemExit(f"{scene}: views are {lf.height}x{lf.width}, the file's {r.height}x{r.width}")
+    return r, lf
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("file")
@@ -75,14 +89,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None, help="write the results as JSON")
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
-    from tools.bench_lfn import load, with_test_views
-
-    r = LfnRenderer(open_lfc(a.file), device=a.device)
-    lf = load(a.scene, max(r.height, r.width))
-    if a.test_scene:
-        lf = with_test_views(lf, load(a.test_scene, max(r.height, r.width), split="test"))
-    if (lf.height, lf.width) != (r.height, r.width):
-        raise SystemExit(f"{a.scene}: views are {lf.height}x{lf.width}, the file's {r.height}x{r.width}")
+    r, lf = open_with_scene(a.file, a.scene, a.test_scene, a.device)
     tr = r.file.full_meta()["config"]["train"]
     used = set(tr.get("display_views", []))          # views the encoder measured the ladder on: not scored
     views = [v for v in tr["test_views"] if v not in used][:a.views]

@@ -28,12 +28,11 @@ import argparse
 import numpy as np
 import torch
 
-from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
 from lfn_stream.evaluate import display_ladder, sample_rays
 from lfn_stream.sat import area_downsample
 from lfn_stream.training import targets_of
-from tools.bench_lfn_curve import displayed, summary
+from tools.bench_lfn_curve import displayed, open_with_scene, summary
 from tools.common import log, machine, write_json
 
 
@@ -79,12 +78,7 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
-    from tools.bench_lfn import load, with_test_views
-
-    r = LfnRenderer(open_lfc(a.file), device=a.device)
-    lf = load(a.scene, max(r.height, r.width))
-    if a.test_scene:
-        lf = with_test_views(lf, load(a.test_scene, max(r.height, r.width), split="test"))
+    r, lf = open_with_scene(a.file, a.scene, a.test_scene, a.device)
     tr = r.file.full_meta()["config"]["train"]
     test, train = list(tr["test_views"]), list(tr["train_views"])
     lo = r.cfg.min_neurons
