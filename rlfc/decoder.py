@@ -51,6 +51,7 @@ class RlfcDecoder(Decoder):
         self.threads = 1
         self.threads = self._threads(default_threads() if threads is None else threads)
         self.file = f
+        self.limits = limits or getattr(f, "limits", None) or DEFAULT
         hdr, cfg = RlfcHeader.read(f.full_meta(), f.container.name, limits or DEFAULT)
         self.header, self.profile = hdr, hdr.profile
         self.core = get_profile(hdr.profile).open(f.container, hdr, cfg, limits)
@@ -73,6 +74,11 @@ class RlfcDecoder(Decoder):
             raise ParameterError(f"views, by and bx must have the same length ({views.size}, {by.size}, {bx.size})")
         if any(a.size and a.dtype.kind not in "iu" for a in (views, by, bx)):
             raise ParameterError("block requests must be integers")
+        cap = self.limits.max_scene_pixels // self.block_size ** 2
+        if views.size > cap:          # checked before any request-sized array is made
+            raise ParameterError(f"{views.size} block requests would decode {views.size * self.block_size ** 2} "
+                                 f"pixels, over the {self.limits.max_scene_pixels} one call may return "
+                                 f"(Limits.max_scene_pixels): request at most {cap} blocks per call")
         views, by, bx = (a.astype(np.int64) for a in (views, by, bx))
         if views.size and (views.min() < 0 or views.max() >= self.rows * self.cols):
             raise ParameterError(f"view index out of range (0..{self.rows * self.cols - 1})")

@@ -174,6 +174,29 @@ def test_bad_requests_are_typed():
             bad()
 
 
+
+def test_too_many_block_requests_are_refused_before_allocating():
+    """A call whose output would pass Limits.max_scene_pixels (2^32 pixels: 12 GiB of RGB) is a
+    ParameterError naming the most blocks a call may ask, before any request-sized array (10^8
+    requests of 8x8 blocks were numpy's MemoryError); a caller's own limits set the cap."""
+    from formats.container import build_container
+    from formats.lfcfile import encode_meta, open_lfc
+    from formats.limits import Limits
+    from rlfc import RlfcDecoder, encode_with_params
+
+    lf = smooth_lf()
+    cfg, sections, _ = encode_with_params(lf, RlfcParams(block_size=4))
+    blob = b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, cfg, lf.geometry()), sections))
+    d = RlfcDecoder(open_lfc(blob))
+    many = np.broadcast_to(np.int8(0), (2 ** 28 + 1,))            # no memory of its own
+    with pytest.raises(ParameterError, match="request at most 268435456 blocks per call"):
+        d.decode_blocks(many, many, many)
+    small = RlfcDecoder(open_lfc(blob, limits=Limits(max_scene_pixels=100)))
+    with pytest.raises(ParameterError, match="at most 6 blocks"):
+        small.decode_blocks([0] * 7, [0] * 7, [0] * 7)
+    assert small.decode_blocks([0] * 6, [0] * 6, [0] * 6).shape == (6, 4, 4, 3)
+
+
 def test_lossy_top_level_feeds_the_closed_loop():
     lf = smooth_lf(rows=4, cols=4)
     d, n_lossy, loop = roundtrip(lf, RlfcParams(block_size=4, quant=1, tree_height=2, top_psnr=30))
