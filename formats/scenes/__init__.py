@@ -37,10 +37,9 @@ def read_npy(p: Path, grid: tuple[int, int] | None, limits: Limits = DEFAULT) ->
 
     from ..viewstack import from_array
 
-    try:
-        arr = np.load(p, mmap_mode="r", allow_pickle=False)
-    except (ValueError, OSError, EOFError) as e:
-        raise SceneError(f"{p}: not a readable .npy array of views ({type(e).__name__})") from None
+    from .common import open_npy
+
+    arr = open_npy(p, "the views")
     if arr.ndim in (3, 4, 5) and arr.dtype in (np.uint8, np.uint16):
         n = int(np.prod(arr.shape[:2])) if arr.ndim == 5 else arr.shape[0]
         hw = int(np.prod(arr.shape[-3:-1])) if arr.ndim != 3 else int(np.prod(arr.shape[1:]))

@@ -33,6 +33,34 @@ class ReadOptions:
     progress: Callable[[str, int, int], None] | None = field(default=None, compare=False)
 
 
+NPY_MAGIC = b"\x93NUMPY"
+
+
+def open_npy(p: Path, what: str) -> np.ndarray:
+    """A ``.npy`` file memory-mapped read-only (nothing is read or allocated beyond its header
+    until used: the caller checks the shape first), or a SceneError saying what it is instead:
+    not a NumPy file, Python objects (pickled data, never loaded), or a file shorter than its
+    header's shape."""
+    try:
+        with open(p, "rb") as f:
+            head = f.read(len(NPY_MAGIC))
+    except OSError as e:
+        raise SceneError(f"{p}: cannot read {what} ({e.strerror or e})") from None
+    if head != NPY_MAGIC:
+        raise SceneError(f"{p}: not a NumPy .npy file (no NumPy header); {what} must be saved with numpy.save")
+    try:
+        return np.load(p, mmap_mode="r", allow_pickle=False)
+    except ValueError as e:
+        if "pickle" in str(e) or "bject" in str(e):
+            raise SceneError(f"{p}: holds Python objects (pickled data), which lfcodec does not load; save "
+                             f"{what} as a numeric array") from None
+        if "mmap length" in str(e):
+            raise SceneError(f"{p}: shorter than the array its .npy header describes (truncated?)") from None
+        raise SceneError(f"{p}: not a readable .npy array ({e})") from None
+    except (OSError, EOFError) as e:
+        raise SceneError(f"{p}: not a readable .npy array ({type(e).__name__}: {e})") from None
+
+
 def is_image(p: Path) -> bool:
     return p.suffix.lower() in IMAGE_EXTENSIONS and p.is_file() and not p.name.startswith(".")
 

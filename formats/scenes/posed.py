@@ -14,7 +14,7 @@ from ..errors import SceneError
 from ..imageio import IMAGE_EXTENSIONS
 from ..lightfield import LightField
 from ..viewnames import relative_names
-from .common import ReadOptions, check_count, confine, is_image, load_views, number
+from .common import ReadOptions, check_count, confine, is_image, load_views, number, open_npy
 
 
 def read_llff(folder: Path, opts: ReadOptions = ReadOptions()) -> LightField:
@@ -25,13 +25,11 @@ def read_llff(folder: Path, opts: ReadOptions = ReadOptions()) -> LightField:
     rescaled to the stored images' width.
     """
     pb_path = folder / "poses_bounds.npy"
-    try:
-        pb = np.load(pb_path, allow_pickle=False)
-    except (OSError, ValueError) as e:
-        raise SceneError(f"{pb_path}: not a readable .npy array ({e})") from None
+    pb = open_npy(pb_path, "the camera poses")
     if pb.ndim != 2 or pb.shape[1] != 17 or pb.dtype.kind not in "fiu":
         raise SceneError(f"{pb_path}: expected an N x 17 numeric array, got shape {pb.shape} {pb.dtype}")
     check_count(pb.shape[0], str(pb_path), opts)
+    pb = np.array(pb, dtype=np.float64)          # read only now that its size is known
     if not np.isfinite(pb).all():
         raise SceneError(f"{pb_path}: holds NaN or infinite values")
     img_dir = folder / "images"

@@ -94,6 +94,21 @@ def test_llff_layout(tmp_path):
     np.save(tmp_path / "poses_bounds.npy", pb[:2])
     with pytest.raises(SceneError, match="2 poses"):
         read_scene(tmp_path)
+    # not NumPy, pickled objects, a header claiming far more rows than the file holds: each says
+    # what it is (numpy's message advised loading the pickle with allow_pickle), nothing allocated
+    pbp = tmp_path / "poses_bounds.npy"
+    pbp.write_bytes(b"garbage bytes here")
+    with pytest.raises(SceneError, match="not a NumPy .npy file"):
+        read_scene(tmp_path)
+    np.save(pbp, np.array(["a", "b"], dtype=object), allow_pickle=True)
+    with pytest.raises(SceneError, match="Python objects .*does not load") as e:
+        read_scene(tmp_path)
+    assert "allow_pickle" not in str(e.value)
+    hdr = "{'descr': '<f8', 'fortran_order': False, 'shape': (1000000000000, 17), }"
+    hdr += " " * (118 - len(hdr)) + "\n"
+    pbp.write_bytes(b"\x93NUMPY\x01\x00" + len(hdr).to_bytes(2, "little") + hdr.encode() + bytes(64))
+    with pytest.raises(SceneError, match="shorter than the array its .npy header describes"):
+        read_scene(tmp_path)
 
 
 def test_transforms_layout(tmp_path):
