@@ -172,13 +172,18 @@ class LfnRenderer(Decoder):
         if val is None:
             return None
         c = self.cfg
-        if not isinstance(val, list) or not 1 <= len(val) <= c.max_neurons - c.min_neurons + 1 \
-                or not all(isinstance(w, int) and not isinstance(w, bool) for w in val) \
-                or val[0] != c.min_neurons or val[-1] != c.max_neurons \
-                or any(b <= a for a, b in zip(val, val[1:])):
+        if not self._is_ladder(val) or val[-1] != c.max_neurons:
             raise ParameterError(f"display must be increasing integer sizes from {c.min_neurons} to "
                                  f"{c.max_neurons}")
         return val
+
+    def _is_ladder(self, val) -> bool:
+        """A display ladder's shape (FORMAT.md): a list of strictly increasing integer sizes from
+        min_neurons, none above max_neurons."""
+        c = self.cfg
+        return isinstance(val, list) and 1 <= len(val) <= c.max_neurons - c.min_neurons + 1 \
+            and all(isinstance(w, int) and not isinstance(w, bool) for w in val) \
+            and val[0] == c.min_neurons and val[-1] <= c.max_neurons and all(b > a for a, b in zip(val, val[1:]))
 
     def _read_display_scales(self, val) -> list[tuple[float, list[int]]] | None:
         """``config.display_scales`` (FORMAT.md): 1..16 pairs [scale, ladder], scales strictly
@@ -199,10 +204,7 @@ class LfnRenderer(Decoder):
             if isinstance(sc, bool) or not isinstance(sc, (int, float)) or not 0 < sc <= 64 \
                     or (out and sc <= out[-1][0]):
                 raise bad
-            if not isinstance(lad, list) or not 1 <= len(lad) <= c.max_neurons - c.min_neurons + 1 \
-                    or not all(isinstance(w, int) and not isinstance(w, bool) for w in lad) \
-                    or lad[0] != c.min_neurons or lad[-1] > c.max_neurons \
-                    or any(b <= a for a, b in zip(lad, lad[1:])):
+            if not self._is_ladder(lad):
                 raise bad
             out.append((float(sc), lad))
         return out
@@ -231,10 +233,9 @@ class LfnRenderer(Decoder):
         """The size to show from the bytes held: the largest size of the file's display ladder
         (``config.display``: sizes the encoder measured to beat every smaller one) that the
         held steps reach, so quality does not fall as bytes arrive; without a ladder, every
-        held neuron. What :meth:`render` and :meth:`render_pose` use when no size is given."""
-        if self.display is None:
-            return float(self.neurons)
-        return float(max(w for w in self.display if w <= self.neurons))
+        held neuron. What :meth:`render` and :meth:`render_pose` use when no size and no scale is
+        given."""
+        return self.display_neurons_at(None)
 
     def _geometry(self, scene: dict) -> LightField:
         """Geometry only: a zero-stride placeholder of the views' shape (no pixel memory; the
