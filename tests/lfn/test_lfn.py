@@ -653,6 +653,22 @@ def test_shown_quality_does_not_fall_as_bytes_arrive_on_the_sample():
         assert np.diff(list(plain.values())).min() < -0.3, scale
 
 
+def test_step_chunks_grow_with_the_largest_step():
+    """lfn.steps' checksum chunk: 2 KiB for the default network (its largest step, 2 606 bytes,
+    spans two), doubled while under half the largest step, so the header's CRC array stays
+    small for large networks (depth 8, 256 neurons: 228 CRCs instead of 455)."""
+    from lfn_stream.pack import STEP_CHUNK, steps_chunk, stream_sections
+
+    assert steps_chunk(LfnConfig()) == STEP_CHUNK == 2048
+    big = LfnConfig(depth=8, min_neurons=16, max_neurons=256)
+    assert step_bytes(big, 255, "fp16") == 7222 and steps_chunk(big) == 4096 and steps_chunk(big, "fp32") == 8192
+    assert -(-int(step_offsets(big)[-1]) // 4096) == 228
+    assert steps_chunk(LfnConfig(depth=8, min_neurons=16, max_neurons=512)) == 8192
+    assert steps_chunk(LfnConfig(depth=2, min_neurons=4, max_neurons=4)) == STEP_CHUNK      # no steps
+    m = NestedLFN(LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=0))
+    assert dict((n, rest) for n, _, *rest in stream_sections(m, None))["lfn.steps"] == [STEP_CHUNK]
+
+
 def test_lfn_files_honour_the_limits_they_are_opened_with():
     """A grid of 65 537 views (one more than the default limit) opens with larger limits, given
     to open_lfc or to the renderer, and is refused under the defaults."""
