@@ -156,10 +156,10 @@ def test_version_2_files_still_render_by_step_sections():
 
 
 def test_first_renderable_prefix_is_small():
-    """Issue 17: meta + base network + occupancy ≤ 8 KB for the default network on a 100-view
-    posed RGBA capture (the 360° captures' shape); its 21 KB of camera JSON, the view names and
-    the evaluation lists come after the network, in meta.more, and load when a captured view
-    is asked for."""
+    """Issue 17: meta + base network + occupancy ≤ 8 KB (7 608 B) for the default network on a 100-view
+    posed RGBA capture (the 360° captures' shape), with display ladders of 20 sizes at each of
+    the four display scales; its 21 KB of camera JSON, the view names and the evaluation lists
+    come after the network, in meta.more, and load when a captured view is asked for."""
     rng = np.random.default_rng(0)
     cfg = LfnConfig()                        # depth 6, 16..128 neurons, occupancy 32
     assert (cfg.depth, cfg.min_neurons, cfg.max_neurons, cfg.occupancy_neurons) == (6, 16, 128, 32)
@@ -173,8 +173,10 @@ def test_first_renderable_prefix_is_small():
     lf = LightField(views=np.zeros((1, n, 256, 256, 4), np.uint8), positions=c2w[..., :3, 3], c2w=c2w,
                     focal=(350.0, 350.0), layout="posed", meta={"names": [f"train/r_{i}.png" for i in range(n)]})
     torch.manual_seed(0)
-    info = {"norm": {"centre": [0, 0, 0], "radius": 4.0}, "train_views": list(range(0, n, 4)),
-            "test_views": list(range(1, n, 4))}
+    lad = list(range(16, 128, 6)) + [127]                       # 20 sizes: display ladders as long as
+    info = {"norm": {"centre": [0, 0, 0], "radius": 4.0}, "train_views": list(range(0, n, 4)),   # trained ones'
+            "test_views": list(range(1, n, 4)), "display": lad + [128],
+            "display_scales": [[s / 2, lad] for s in (0.125, 0.25, 0.5, 1.0)]}
     config, sections = to_sections(NestedLFN(cfg), OccupancyNet(32), info)
     blob = lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
     whole = LfnRenderer(open_lfc(blob), device="cpu")
