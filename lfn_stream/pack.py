@@ -68,7 +68,7 @@ def steps_chunk(cfg: LfnConfig, dtype: str = "fp16") -> int:
     """Checksum chunk size of ``lfn.steps`` (bytes): :data:`STEP_CHUNK`, doubled while it is
     under half the largest step, so a large step spans two or three chunks and the header's CRC
     array (4 bytes a chunk, read before any network) stays small: 455 CRCs (1 820 bytes) for a
-    depth-8, 256-neuron network at 2 KiB chunks, 227 at 4 KiB."""
+    depth-8, 256-neuron network at 2 KiB chunks, 228 at 4 KiB."""
     big, c = step_bytes(cfg, cfg.max_neurons - 1, dtype) if cfg.max_neurons > cfg.min_neurons else 0, STEP_CHUNK
     while 2 * c < big:
         c *= 2

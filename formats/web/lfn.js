@@ -141,19 +141,18 @@ export class LfnDecoder {
     d.dtypeW = conf.weights === undefined ? "fp16" : conf.weights;
     if (d.dtypeW !== "fp16" && d.dtypeW !== "fp32") throw new FormatError(`${name}: config.weights must be fp16 or fp32`);
     d.itemsize = d.dtypeW === "fp16" ? 2 : 4;
+    // a display ladder's shape (FORMAT.md): strictly increasing integer sizes from minN, none above maxN
+    const okLadder = (l) => Array.isArray(l) && l.length >= 1 && l.length <= d.maxN - d.minN + 1 && l.every(Number.isInteger)
+      && l[0] === d.minN && l[l.length - 1] <= d.maxN && l.every((w, i) => i === 0 || w > l[i - 1]);
     d.display = null;                          // the display ladder (FORMAT.md), when the file has one
     if (conf.display !== undefined) {
       const v = conf.display;
-      const ok = Array.isArray(v) && v.length >= 1 && v.length <= d.maxN - d.minN + 1 && v.every(Number.isInteger)
-        && v[0] === d.minN && v[v.length - 1] === d.maxN && v.every((w, i) => i === 0 || w > v[i - 1]);
-      if (!ok) throw new FormatError(`${name}: config.display must be increasing integer sizes from ${d.minN} to ${d.maxN}`);
+      if (!okLadder(v) || v[v.length - 1] !== d.maxN) throw new FormatError(`${name}: config.display must be increasing integer sizes from ${d.minN} to ${d.maxN}`);
       d.display = v;
     }
     d.displayScales = null;                    // ladders per display scale (FORMAT.md), when the file has them
     if (conf.display_scales !== undefined) {
       const v = conf.display_scales;
-      const okLadder = (l) => Array.isArray(l) && l.length >= 1 && l.length <= d.maxN - d.minN + 1 && l.every(Number.isInteger)
-        && l[0] === d.minN && l[l.length - 1] <= d.maxN && l.every((w, i) => i === 0 || w > l[i - 1]);
       const ok = Array.isArray(v) && v.length >= 1 && v.length <= 16 && v.every((p, i) => Array.isArray(p) && p.length === 2
         && typeof p[0] === "number" && p[0] > 0 && p[0] <= 64 && (i === 0 || p[0] > v[i - 1][0]) && okLadder(p[1]));
       if (!ok) throw new FormatError(`${name}: config.display_scales must be 1 to 16 pairs [scale, sizes], scales increasing within (0, 64], sizes increasing integers from ${d.minN} up to ${d.maxN}`);
