@@ -109,12 +109,13 @@ class Renderer:
         self.blocks_requested = 0
         self._grid = None
         core = decoder.core
+        # (map of a view → (ny8, nx8) float64 px per view step, positions, views with a map):
+        # each map read from the file when a frame first needs it
         self._maps = None
-        if hasattr(core, "lay") and getattr(core, "disp", None) is not None and core.disp.size:
+        if hasattr(core, "view_map") and core.lay.n_maps:
             lay = core.lay
-            users = np.flatnonzero(lay.cell >= 0)
-            self._maps = (core.disp.astype(np.float64) / 16.0, lay.cell, lay.positions.astype(np.float64), users,
-                          core.nby8, core.nbx8)
+            self._maps = (lambda v: core.view_map(v) / 16.0, lay.positions.astype(np.float64),
+                          np.flatnonzero(lay.cell >= 0))
 
     # -- geometry --------------------------------------------------------------------------
     def _block_map(self, s: float, t: float) -> np.ndarray | None:
@@ -122,9 +123,9 @@ class Renderer:
         nearest view predicted from key views; None without maps."""
         if self._maps is None:
             return None
-        disp, cell, pos, users, ny, nx = self._maps
+        map_of, pos, users = self._maps
         near = users[np.argmin(np.hypot(pos[users, 0] - s, pos[users, 1] - t))]
-        return disp[cell[near]].reshape(ny, nx)
+        return map_of(int(near))
 
     def disparity(self, s: float, t: float) -> np.ndarray | None:
         """(H, W) disparity in pixels per view step at camera (s, t): the map of the cell of the

@@ -1,5 +1,6 @@
 """The ``tx.maps`` section: the shared disparity map, per-map corrections and prediction modes,
-entropy-coded with rANS (:mod:`rlfc.rans`) and decoded once when a file is opened.
+entropy-coded with rANS (:mod:`rlfc.rans`): the shared map when a file is opened, each other
+map when a request first needs it (:class:`LazyMaps`).
 
 Layout: u8 version (3; 2 = the escape digits of one shared context; 1 = the first files,
 whose tables were built in float arithmetic); varint byte lengths of the tables and of each
@@ -169,53 +170,89 @@ def _with_escapes(ctx: np.ndarray, v: np.ndarray, version: int):
 
 
 def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: str):
-    """→ (per-map disparities (n_maps, nloc), modes (n_maps, nloc)), int64."""
-    ny, nx = shape
-    nloc = ny * nx
-    raw = bytes(data)
-    if not raw or raw[0] not in (1, 2, VERSION):
-        raise FormatError(f"{what}: unknown maps version")
-    ver = raw[0]
-    b = np.frombuffer(raw, np.uint8)
-    ends = np.flatnonzero(b[1:] < 128)
-    if ends.size < n_maps + 2:
-        raise FormatError(f"{what}: truncated stream lengths")
-    head = 1 + int(ends[n_maps + 1]) + 1
-    lens = unvarints(raw[1:head], n_maps + 2, what)
-    if (lens < 0).any() or head + int(lens.sum()) != len(raw):
-        raise FormatError(f"{what}: stream lengths do not add up to the section")
-    pos = head + int(lens[0])
-    tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
-    # the shared map: one stream, sequential (MED needs the decoded neighbours)
-    d = ScalarDecoder(raw[pos:pos + int(lens[1])], tables)
-    base = np.zeros((ny, nx), np.int64)
-    vals = base.reshape(-1)
-    for i in range(nloc):
-        y, x = divmod(i, nx)
-        a = vals[i - 1] if x else (vals[i - nx] if y else 0)
-        bb = vals[i - nx] if y else a
-        c = vals[i - nx - 1] if (x and y) else bb if y else a
-        s = d.get(CTX_BASE + (0 if a == c and bb == c else (1 if abs(a - c) + abs(bb - c) <= 16 else 2)))
-        e = _unescape_scalar(d, s, what, ver)
-        vals[i] = (0 if i == 0 else _med(int(a), int(bb), int(c))) + e
-    if not d.done(int(lens[1])):
-        raise FormatError(f"{what}: the shared map's stream is malformed")
-    pos += int(lens[1])
-    # per map: one stream each (contexts from the same map's left and above values), plain
-    # Python: a map's symbols depend on each other, and a few dozen maps make poor numpy lanes
-    starts = pos + np.concatenate([[0], np.cumsum(lens[2:])[:-1]]).astype(np.int64)
-    disp = np.zeros((n_maps, nloc), np.int64)
-    modes = np.zeros((n_maps, nloc), np.int64)
-    if n_maps:
-        wl = slot_word_view(tables)
-        for m in range(n_maps):
-            a = int(starts[m])
-            corr, mo = _map_stream(raw, a, a + int(lens[2 + m]), wl, ny, nx, n_modes, ver, what)
-            disp[m], modes[m] = corr, mo
-        disp += base.reshape(1, -1)
-    if nloc and np.abs(disp).max(initial=0) > (1 << 20):
-        raise FormatError(f"{what}: a disparity is out of range")
-    return disp, modes
+    """→ (per-map disparities (n_maps, nloc), modes (n_maps, nloc)), int64: every map decoded
+    (:class:`LazyMaps` decodes them one by one, as they are asked for)."""
+    return LazyMaps(data, n_maps, shape, n_modes, what).all()
+
+
+class LazyMaps:
+    """The maps of a ``tx.maps`` section, each decoded when first asked for.
+
+    Opening reads the section's lengths and tables and decodes the shared map (one stream);
+    :meth:`need` decodes the per-map streams asked for (a request touches the maps of its views
+    only: a first frame one to five of a grid's dozens). ``disp`` and ``modes`` (n_maps, nloc)
+    int64 hold the decoded maps' rows (zeros elsewhere); ``done`` (n_maps,) bool says which.
+    A map's stream is checked when it is decoded (its symbols, its end, its disparities within
+    ±2^20 and its modes at most ``max_mode[m]``): a damaged map raises
+    :class:`formats.errors.FormatError` at its first use, not at open. Not thread-safe: callers
+    that share one across threads call :meth:`need` under a lock."""
+
+    def __init__(self, data, n_maps: int, shape: tuple[int, int], n_modes: int, what: str, max_mode=None):
+        if not 1 <= n_modes <= 5:
+            raise ValueError("a map's modes are 0..4 (contexts 5·left + above)")
+        ny, nx = shape
+        nloc = ny * nx
+        raw = self.raw = bytes(data)
+        if not raw or raw[0] not in (1, 2, VERSION):
+            raise FormatError(f"{what}: unknown maps version")
+        ver = self.version = raw[0]
+        b = np.frombuffer(raw, np.uint8)
+        ends = np.flatnonzero(b[1:] < 128)
+        if ends.size < n_maps + 2:
+            raise FormatError(f"{what}: truncated stream lengths")
+        head = 1 + int(ends[n_maps + 1]) + 1
+        lens = unvarints(raw[1:head], n_maps + 2, what)
+        if (lens < 0).any() or head + int(lens.sum()) != len(raw):
+            raise FormatError(f"{what}: stream lengths do not add up to the section")
+        pos = head + int(lens[0])
+        tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
+        # the shared map: one stream, sequential (MED needs the decoded neighbours)
+        d = ScalarDecoder(raw[pos:pos + int(lens[1])], tables)
+        base = np.zeros((ny, nx), np.int64)
+        vals = base.reshape(-1)
+        for i in range(nloc):
+            y, x = divmod(i, nx)
+            a = vals[i - 1] if x else (vals[i - nx] if y else 0)
+            bb = vals[i - nx] if y else a
+            c = vals[i - nx - 1] if (x and y) else bb if y else a
+            s = d.get(CTX_BASE + (0 if a == c and bb == c else (1 if abs(a - c) + abs(bb - c) <= 16 else 2)))
+            e = _unescape_scalar(d, s, what, ver)
+            vals[i] = (0 if i == 0 else _med(int(a), int(bb), int(c))) + e
+        if not d.done(int(lens[1])):
+            raise FormatError(f"{what}: the shared map's stream is malformed")
+        pos += int(lens[1])
+        self.base = vals
+        self.starts = pos + np.concatenate([[0], np.cumsum(lens[2:])]).astype(np.int64)    # (n_maps + 1,)
+        self.words = slot_word_view(tables) if n_maps else None
+        self.shape, self.n_modes, self.what = (ny, nx), n_modes, what
+        self.max_mode = np.full(n_maps, n_modes - 1, np.int64) if max_mode is None else np.asarray(max_mode)
+        self.disp = np.zeros((n_maps, nloc), np.int64)
+        self.modes = np.zeros((n_maps, nloc), np.int64)
+        self.done = np.zeros(n_maps, bool)
+
+    def need(self, maps) -> list[int]:
+        """Decode maps ``maps`` (ints) not decoded yet; → those decoded now (ascending)."""
+        new = sorted({int(m) for m in np.asarray(maps).reshape(-1).tolist()} - set(np.flatnonzero(self.done).tolist()))
+        ny, nx = self.shape
+        for m in new:
+            # one stream per map (contexts from the same map's left and above values), plain
+            # Python: a map's symbols depend on each other, and a few dozen maps make poor numpy lanes
+            corr, mo = _map_stream(self.raw, int(self.starts[m]), int(self.starts[m + 1]), self.words, ny, nx,
+                                   self.n_modes, self.version, self.what)
+            dm = np.asarray(corr, np.int64) + self.base
+            mo = np.asarray(mo, np.int64)
+            if dm.size and np.abs(dm).max() > (1 << 20):
+                raise FormatError(f"{self.what}: a disparity is out of range")
+            if mo.size and mo.max() > self.max_mode[m]:
+                raise FormatError(f"{self.what} selects a reference a view does not have")
+            self.disp[m], self.modes[m] = dm, mo
+            self.done[m] = True
+        return new
+
+    def all(self):
+        """(disp, modes) with every map decoded."""
+        self.need(np.arange(self.done.size))
+        return self.disp, self.modes
 
 
 def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_modes: int, ver: int,
@@ -298,4 +335,4 @@ def _unescape_scalar(d: ScalarDecoder, s: int, what: str, version: int) -> int:
     return (R + x) * (1 if s == 2 * R else -1)
 
 
-__all__ = ["pack_maps", "maps_sizes", "unpack_maps", "MAX_VARINT_BYTES"]
+__all__ = ["pack_maps", "maps_sizes", "unpack_maps", "LazyMaps", "MAX_VARINT_BYTES"]

@@ -24,7 +24,7 @@ from ..kernels import dequantize
 from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb
-from ..txmaps import unpack_maps
+from ..txmaps import LazyMaps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, block_refs, predict as remap_predict, predict_block, predict_view
 from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
@@ -89,12 +89,17 @@ class TxDecoder(ProfileDecoder):
         self.lo, self.hi, self.flat = plane_limits(self.P, peak)
         self.lo_tb, self.hi_tb = (np.tile(x.astype(np.int32), TB * TB) for x in (self.lo, self.hi))   # an 8×8 tb's
         self.tables = tables_from_quantized(tables_from_bytes(c.read("tx.tables"), f"{name}: tx.tables"), lay.version)
-        self.disp, self.modes = unpack_maps(c.read("tx.maps"), lay.n_maps, (self.nby8, self.nbx8), 1 + MAX_REFS,
-                                            f"{name}: tx.maps")
+        # maps are decoded when a request first needs them (lazy, as key rows: a first frame
+        # reads a few of a grid's dozens); a map's modes may not select a reference one of its
+        # views lacks
         nrefs = (lay.refs >= 0).sum(axis=1)
         users = np.flatnonzero(lay.cell >= 0)
-        if users.size and (self.modes.max(axis=1, initial=0)[lay.cell[users]] > nrefs[users]).any():
-            raise FormatError(f"{name}: tx.maps selects a reference a view does not have")
+        max_mode = np.full(lay.n_maps, MAX_REFS, np.int64)
+        np.minimum.at(max_mode, lay.cell[users], nrefs[users])
+        self._map_store = LazyMaps(c.read("tx.maps"), lay.n_maps, (self.nby8, self.nbx8), 1 + MAX_REFS,
+                                   f"{name}: tx.maps", max_mode)
+        self._map_done = np.zeros(lay.n_maps, bool)          # set once a map's key-view reach is known too
+        self._map_lock = threading.Lock()
         intra = [int(k) for k in lay.coded_keys if lay.intra[k]]
         self.thumbs = unpack_thumbs(c.read("tx.thumbs"), (len(intra), self.nby8, self.nbx8, self.P),
                                     f"{name}: tx.thumbs")
@@ -160,30 +165,70 @@ class TxDecoder(ProfileDecoder):
         self._key_lock = threading.RLock()
         self._in_keys = threading.local()              # .active: this thread is decoding key rows
         self._thumb_up: dict = {}
-        self._reach = self._reach_rows()
+        self._reach = np.zeros((N0, self.nby), np.int64)       # rows filled as their maps are decoded
 
-    # -- key views, by block rows, on demand ------------------------------------------------------
-    def _reach_rows(self) -> np.ndarray:
-        """(N0, nby) int64: how far (pixels, up or down) the prediction of a block row of each
-        view with references samples its key views: ⌈max |disparity·Δrow| / 16⌉ + 1 (bilinear's
-        second tap) over the block row's 8×8 blocks and the view's references; 0 for views
-        without references."""
+    # -- maps, on demand ------------------------------------------------------------------------
+    @property
+    def disp(self) -> np.ndarray:
+        """(n_maps, nby8·nbx8) int64 disparities (1/16 px per view step), every map decoded."""
+        return self._maps_of(None)[0]
+
+    @property
+    def modes(self) -> np.ndarray:
+        """(n_maps, nby8·nbx8) int64 prediction modes, every map decoded."""
+        return self._maps_of(None)[1]
+
+    def view_map(self, view: int) -> np.ndarray:
+        """(nby8, nbx8) int64 disparity map (1/16 px per view step, one value per 8×8 block) that
+        predicts view ``view`` (decoded now if not yet); ``view`` must have one (``lay.cell >= 0``)."""
+        cell = int(self.lay.cell[view])
+        if cell < 0:
+            raise ValueError(f"view {view} is not predicted through a map")
+        return self._maps_of([view])[0][cell].reshape(self.nby8, self.nbx8)
+
+    def _maps_of(self, views) -> tuple[np.ndarray, np.ndarray]:
+        """(disp, modes) (n_maps, nby8·nbx8) int64 with the maps of ``views`` (ints; None: every
+        view) decoded; the other maps' rows may be zeros."""
+        if views is None:
+            if not self._map_done.all():
+                self._have_maps(np.arange(self._map_done.size))
+        else:
+            cell = self.lay.cell[views]
+            if not self._map_done[cell[cell >= 0]].all():
+                self._have_maps(cell[cell >= 0])
+        return self._map_store.disp, self._map_store.modes
+
+    def _have_maps(self, cells: np.ndarray) -> None:
+        """Decode maps ``cells`` where not done yet, and the key-view reach of their views' block
+        rows (:meth:`_reach_rows`)."""
+        with self._map_lock:
+            new = self._map_store.need(cells)
+            if new:
+                self._reach_rows(np.asarray(new, np.int64))
+                self._map_done[new] = True          # (threads read these flags without the lock)
+
+    def _reach_rows(self, maps: np.ndarray) -> None:
+        """Fill ``_reach`` (N0, nby) int64 for the views of ``maps``: how far (pixels, up or
+        down) the prediction of a block row of each view with references samples its key views:
+        ⌈max |disparity·Δrow| / 16⌉ + 1 (bilinear's second tap) over the block row's 8×8 blocks
+        and the view's references; 0 for views without references."""
         lay = self.lay
-        out = np.zeros((self.n_views, self.nby), np.int64)
-        users = np.flatnonzero(lay.cell >= 0)
-        if users.size == 0 or self.disp.shape[0] == 0:
-            return out
-        dmax = np.abs(self.disp).reshape(-1, self.nby, self.tpb * self.nbx8).max(axis=2)      # (n_maps, nby)
+        users = np.flatnonzero(np.isin(lay.cell, maps))
+        if users.size == 0:
+            return
+        dmax = np.zeros((self._map_done.size, self.nby), np.int64)                            # (n_maps, nby)
+        dmax[maps] = np.abs(self._map_store.disp[maps]).reshape(maps.size, self.nby, self.tpb * self.nbx8).max(axis=2)
         refs = lay.refs[users]
         dy = np.abs(lay.positions[users][:, None, 0] - lay.positions[refs.clip(0), 0])
         dy = np.where(refs >= 0, dy, 0).max(axis=1)                                            # (U,)
-        out[users] = -(-(dmax[lay.cell[users]] * dy[:, None]) // (1 << DISP_BITS)) + 1
-        return out
+        self._reach[users] = -(-(dmax[lay.cell[users]] * dy[:, None]) // (1 << DISP_BITS)) + 1
 
+    # -- key views, by block rows, on demand ------------------------------------------------------
     def _row_span(self, views: np.ndarray, by: np.ndarray):
         """(lo, hi) block rows of the key views that block rows ``by`` of views with references
         sample (inclusive, clipped to the view)."""
         B = self.block_size
+        self._maps_of(views)
         r = self._reach[views, by]
         return np.maximum(by * B - r, 0) // B, np.minimum((by + 1) * B - 1 + r, self.Hp - 1) // B
 
@@ -388,14 +433,16 @@ class TxDecoder(ProfileDecoder):
             self._kp = planar(self.keyplanes)
         return self._kp
 
-    def pred_tables(self):
+    def pred_tables(self, views=None):
         """The tables :func:`pred_inputs` reads: (cell (views,), disp and modes (maps, 8×8 blocks),
-        wmode (views, R + 1, R), ref_slots (views, R), ref_dpos (views, R, 2)), numpy."""
-        return self.lay.cell, self.disp, self.modes, self.wmode, self.ref_slots, self.ref_dpos
+        wmode (views, R + 1, R), ref_slots (views, R), ref_dpos (views, R, 2)), numpy; with
+        ``views``, only their maps are sure to be decoded."""
+        disp, modes = self._maps_of(views)
+        return self.lay.cell, disp, modes, self.wmode, self.ref_slots, self.ref_dpos
 
     def _pred(self, views, ty, tx):
         """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
-        args = pred_inputs(self.pred_tables(), self.nbx8, views, ty, tx)
+        args = pred_inputs(self.pred_tables(views), self.nbx8, views, ty, tx)
         if self.atlas is not None:
             return remap_predict(self.atlas, *args)
         return predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
@@ -508,7 +555,8 @@ class TxDecoder(ProfileDecoder):
         else:                           # raster bands of blend (mode 0) blocks, then the other blocks
             slots, wmode, dpos = self._view_refs(v)
             cell = self.lay.cell[v]
-            out = predict_view(self.atlas, slots, wmode[0], self.disp[cell], self.modes[cell], dpos, n8y, n8x)
+            disp, modes = self._maps_of([v])
+            out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
             by, bx = np.divmod(locs, self.nbx)
@@ -587,17 +635,20 @@ class TxDecoder(ProfileDecoder):
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
         cell = self.lay.cell[view]
+        if not self._map_done[cell]:
+            self._have_maps(np.array([cell]))
+        disp, modes = self._map_store.disp, self._map_store.modes
         loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
         refs = self._block_refs(view) if self.atlas is not None else None
         if refs is not None:                                # the remap kernel, every reference at once
-            out = predict_block(self.atlas, refs, self.disp[cell, loc8], self.modes[cell, loc8],
+            out = predict_block(self.atlas, refs, disp[cell, loc8], modes[cell, loc8],
                                 self._tb_y + np.float32(by * B), self._tb_x + np.float32(bx * B))
         else:                  # references in several atlas groups, or key views too large for OpenCV
             slots, wmode, dpos = self._view_refs(view)
             ty = by * tpb + self._tby
             tx = bx * tpb + self._tbx
-            dd = self.disp[cell, loc8][:, None, None] * dpos[None]          # (nt, R, 2)
-            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[self.modes[cell, loc8]], dd[..., 0],
+            dd = disp[cell, loc8][:, None, None] * dpos[None]          # (nt, R, 2)
+            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[modes[cell, loc8]], dd[..., 0],
                     dd[..., 1], ty * TB, tx * TB)
             out = remap_predict(self.atlas, *args) if self.atlas is not None else \
                 predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)

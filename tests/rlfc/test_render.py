@@ -223,9 +223,10 @@ def test_blocks_named_from_the_maps_cover_every_tap(leave_out, device):
     _, d, _ = leave_out
     rng = np.random.default_rng(5)
     cold, full = d.renderer(device=device), d.renderer(device=device)
-    disp = rng.integers(-96, 97, cold._maps[0].shape) / 16.0
+    core = d.core
+    disp = rng.integers(-96, 97, (core.lay.n_maps, core.nby8, core.nbx8)) / 16.0
     for ren in (cold, full):
-        ren._maps = (disp, *ren._maps[1:])
+        ren._maps = (lambda v: disp[core.lay.cell[v]], *ren._maps[1:])
     yy, xx = full.ops.grid(d.height, d.width)
     for v in range(d.rows * d.cols):
         full._sample(v, yy, xx, cubic=True)

@@ -100,3 +100,35 @@ def test_sizes_of_many_variants_in_one_pass_equal_each_pack():
         variants.append((d2, m2))
     assert txmaps.maps_sizes(base, variants, (6, 7)) == [len(txmaps.pack_maps(base, d, m, (6, 7))) for d, m in variants]
     assert txmaps.maps_sizes(base, [], (6, 7)) == []
+
+
+def test_lazy_maps_decode_each_map_when_asked_and_check_it_then():
+    """LazyMaps decodes the shared map at open and each map's stream on its first request (the
+    same values as decoding all); a damaged map is refused when it is asked for, the others
+    still decode, and a map whose modes exceed its views' references is refused."""
+    rng = np.random.default_rng(11)
+    base, disp, modes = _maps(rng, 4, 6, 5, 80, 0.1)
+    data = txmaps.pack_maps(base, disp, modes, (6, 5))
+    lm = txmaps.LazyMaps(data, 4, (6, 5), 5, "t")
+    assert not lm.done.any() and np.array_equal(lm.base, base)
+    assert lm.need([2, 2]) == [2] and lm.need([2]) == [] and lm.done.tolist() == [False, False, True, False]
+    assert np.array_equal(lm.disp[2], disp[2]) and np.array_equal(lm.modes[2], modes[2])
+    assert not lm.disp[[0, 1, 3]].any()
+    d2, m2 = lm.all()
+    assert np.array_equal(d2, disp) and np.array_equal(m2, modes)
+    # the third map's stream damaged: open and the other maps still work, the third is refused
+    bad = bytearray(data)
+    lm = txmaps.LazyMaps(data, 4, (6, 5), 5, "t")
+    a, b = int(lm.starts[2]), int(lm.starts[3])
+    bad[a:b] = bytes(b - a)
+    lm = txmaps.LazyMaps(bytes(bad), 4, (6, 5), 5, "t")
+    lm.need([0, 1, 3])
+    assert np.array_equal(lm.disp[[0, 1, 3]], disp[[0, 1, 3]])
+    with pytest.raises(FormatError):
+        lm.need([2])
+    assert not lm.done[2]
+    limit = np.array([4, 4, 4, int(modes[3].max()) - 1])
+    lm = txmaps.LazyMaps(data, 4, (6, 5), 5, "t", limit)
+    lm.need([0, 1, 2])
+    with pytest.raises(FormatError, match="reference"):
+        lm.need([3])
