@@ -273,7 +273,8 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     if a.json:
         print(_dump(report))
     elif not a.quiet:
-        quality = (f", PSNR_RGB {q:.2f} dB" if q is not None else (", exact" if report.get("exact") else ""))
+        label = "PSNR_RGB" if lf.channels >= 3 else "PSNR (grey)"       # psnr_rgb: the colour channels' PSNR
+        quality = (f", {label} {q:.2f} dB" if q is not None else (", exact" if report.get("exact") else ""))
         if report.get("psnr_heldout") is not None:
             quality += (f", held-out PSNR {report['psnr_heldout']:.2f} dB on {report['heldout_views']} views "
                         f"(nearest training view {report['psnr_heldout_nearest_view']:.2f} dB)")

@@ -305,6 +305,9 @@ def test_16bit_grey_works_like_rgb(grey16_scene, tmp_path, capsys):
     rep = json.loads(capsys.readouterr().out)
     assert rep["channels"] == 1 and rep["dtype"] == "uint16"
     assert 36 < rep["psnr_rgb"] < 48 and rep["bpp"] < 3        # default step scales with the depth
+    assert main(["encode", str(grey16_scene), str(out), "--target-psnr", "40"]) == 0
+    line = capsys.readouterr().out                      # the grey channel's PSNR, not called RGB
+    assert ", PSNR (grey) 40." in line and "RGB" not in line
     assert main(["encode", str(grey16_scene), str(out), "--target-psnr", "40", "--json", "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out)
     assert 40 <= rep["psnr_rgb"] < 40.6
