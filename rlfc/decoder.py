@@ -51,10 +51,12 @@ class RlfcDecoder(Decoder):
         self.threads = 1
         self.threads = self._threads(default_threads() if threads is None else threads)
         self.file = f
+        # the caller's limits, else those the file was opened with (as the LFN renderer): header,
+        # profile and requests are all checked against the same caps
         self.limits = limits or getattr(f, "limits", None) or DEFAULT
-        hdr, cfg = RlfcHeader.read(f.full_meta(), f.container.name, limits or DEFAULT)
+        hdr, cfg = RlfcHeader.read(f.full_meta(), f.container.name, self.limits)
         self.header, self.profile = hdr, hdr.profile
-        self.core = get_profile(hdr.profile).open(f.container, hdr, cfg, limits)
+        self.core = get_profile(hdr.profile).open(f.container, hdr, cfg, self.limits)
         self.rows, self.cols = hdr.rows, hdr.cols
         self.height, self.width, self.channels, self.dtype = hdr.height, hdr.width, hdr.channels, hdr.dtype
         self.P = hdr.planes

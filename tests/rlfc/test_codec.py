@@ -195,6 +195,12 @@ def test_too_many_block_requests_are_refused_before_allocating():
     with pytest.raises(ParameterError, match="at most 6 blocks"):
         small.decode_blocks([0] * 7, [0] * 7, [0] * 7)
     assert small.decode_blocks([0] * 6, [0] * 6, [0] * 6).shape == (6, 4, 4, 3)
+    # the limits a file was opened with hold at open too (header and profile), not only per call
+    from formats.errors import FormatError
+    with pytest.raises(FormatError, match="limit"):
+        RlfcDecoder(open_lfc(blob, limits=Limits(max_view_pixels=lf.height * lf.width - 1)))
+    with pytest.raises(FormatError, match="limit"):
+        RlfcDecoder(open_lfc(blob), limits=Limits(max_view_pixels=lf.height * lf.width - 1))
 
 
 def test_lossy_top_level_feeds_the_closed_loop():
