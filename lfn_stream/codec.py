@@ -93,8 +93,57 @@ def _setup(lf, p: dict):
     if unknown:
         raise ParameterError(f"unknown LFN option(s): {', '.join(sorted(unknown))}")
     cfg = LfnConfig(**{k: p[k] for k in NET_KEYS if k in p})
+    if "occupancy_neurons" not in p and full.has_alpha:
+        cfg = auto_occupancy(full, cfg, weights)
     opts = TrainOptions(**{k: p[k] for k in TRAIN_KEYS if k in p})
     return full, lf, cfg, opts, weights
+
+
+#: issue 17's bound on the first renderable prefix (header, meta, base network, occupancy net)
+FIRST_PREFIX_BYTES = 8192
+#: the occupancy net's size where the default (32) would pass that bound: 802 B of fp16 weights
+#: instead of 2 626, the same held-out quality, ~10% more render time (BENCHMARKS.md)
+SMALL_OCCUPANCY = 16
+
+
+def first_prefix_bytes(lf, cfg: LfnConfig, weights: str = "fp16") -> int:
+    """Bytes of the first renderable prefix of a network ``cfg`` trained on ``lf`` (the file
+    up to the end of its occupancy net, else of its base network), measured on an untrained
+    network packed with this scene's geometry and display ladders as long as trained ones (20
+    sizes at each of four display scales); the weights' values do not change their size."""
+    import torch
+
+    from formats.container import Container
+    from formats.lfcfile import lfc_bytes
+
+    from .model import NestedLFN, OccupancyNet
+
+    with torch.random.fork_rng():
+        torch.manual_seed(0)
+        model = NestedLFN(cfg)
+        occ = OccupancyNet(cfg.occupancy_neurons, cfg.in_features) if cfg.occupancy_neurons else None
+    lo, hi = cfg.min_neurons, cfg.max_neurons
+    lad = sorted({int(round(lo + (hi - 1 - lo) * i / 19)) for i in range(20)})
+    n = lf.rows * lf.cols
+    info = {"norm": {"centre": [0.0, 0.0, 0.0], "radius": 1.0}, "train_views": list(range(n)), "test_views": [],
+            "display": lad + ([hi] if lad[-1] < hi else []),
+            "display_scales": [[s, lad] for s in (0.125, 0.25, 0.5, 1.0)]}
+    config, sections = to_sections(model, occ, info, weights)
+    c = Container(lfc_bytes(CODEC_ID, CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS))
+    last = c.info("lfn.occ" if occ is not None else "lfn.base")
+    return last.offset + last.length
+
+
+def auto_occupancy(lf, cfg: LfnConfig, weights: str = "fp16") -> LfnConfig:
+    """``cfg`` with the default occupancy net (32 neurons), or a 16-neuron one where 32 would put
+    the first renderable prefix over :data:`FIRST_PREFIX_BYTES` (deep or wide base networks:
+    depth 8 × 16 neurons is 9.5 KB with 32, 7.7 KB with 16) and 16 keeps it under."""
+    import dataclasses
+
+    if cfg.occupancy_neurons <= SMALL_OCCUPANCY or first_prefix_bytes(lf, cfg, weights) <= FIRST_PREFIX_BYTES:
+        return cfg
+    small = dataclasses.replace(cfg, occupancy_neurons=SMALL_OCCUPANCY)
+    return small if first_prefix_bytes(lf, small, weights) <= FIRST_PREFIX_BYTES else cfg
 
 
 def finish_network(full, lf, model, occ, info: dict, opts, weights: str, progress=None):
@@ -232,7 +281,8 @@ class LfnCodec(Codec):
         g.add_argument("--max-neurons", type=int, default=None, help="lfn: neurons per layer of the full network "
                                                                        "(default 128)")
         g.add_argument("--occupancy-neurons", type=int, default=None,
-                       help="lfn: occupancy net size, used when the scene has alpha (default 32; 0 = none)")
+                       help="lfn: occupancy net size, used when the scene has alpha (default 32, or 16 where 32 "
+                            "would put the first renderable prefix over 8 KB; 0 = none)")
         g.add_argument("--steps", type=int, default=None, help="lfn: optimizer steps (default 2000)")
         g.add_argument("--time-limit", dest="time_limit_s", type=float, default=None, metavar="SECONDS",
                        help="lfn: stop training after this many seconds (the learning-rate schedule then runs "
@@ -259,4 +309,4 @@ class LfnCodec(Codec):
         return {k: getattr(a, k) for k in OPTIONS if getattr(a, k, None) is not None}
 
 
-__all__ = ["to_sections", "heldout_report", "LfnCodec", "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]
+__all__ = ["to_sections", "heldout_report", "first_prefix_bytes", "auto_occupancy", "LfnCodec", "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]

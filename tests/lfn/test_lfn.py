@@ -194,6 +194,34 @@ def test_first_renderable_prefix_is_small():
         "test_views"] == info["test_views"]
 
 
+def test_a_deep_base_network_gets_a_small_occupancy_net_to_keep_the_first_bytes_small():
+    """Without --occupancy-neurons, a base network deep enough that a 32-neuron occupancy net
+    would put the first renderable prefix over 8 KB (depth 8 × 16 neurons: ~9.4 KB) trains a
+    16-neuron one (~7.6 KB); the default network keeps 32; an explicit size is kept."""
+    from lfn_stream.codec import FIRST_PREFIX_BYTES, _setup, auto_occupancy, first_prefix_bytes
+
+    rng = np.random.default_rng(0)
+    n = 100
+    c2w = np.tile(np.eye(4), (1, n, 1, 1))
+    c2w[0, :, :3, 3] = rng.normal(0, 4.0, (n, 3))
+    lf = LightField(views=np.zeros((1, n, 64, 64, 4), np.uint8), positions=c2w[..., :3, 3], c2w=c2w,
+                    focal=(80.0, 80.0), layout="posed")
+    deep = LfnConfig(depth=8, max_neurons=256)
+    assert first_prefix_bytes(lf, deep) > FIRST_PREFIX_BYTES
+    small = auto_occupancy(lf, deep)
+    assert small.occupancy_neurons == 16 and first_prefix_bytes(lf, small) <= FIRST_PREFIX_BYTES
+    assert auto_occupancy(lf, LfnConfig()).occupancy_neurons == 32
+    assert _setup(lf, {"depth": 8, "max_neurons": 256, "resolution": 0})[2].occupancy_neurons == 16
+    assert _setup(lf, {"depth": 8, "max_neurons": 256, "occupancy_neurons": 32, "resolution": 0})[2] \
+        .occupancy_neurons == 32
+    # the estimate is the prefix of the file a trained network of that size writes
+    config, sections = to_sections(NestedLFN(small), OccupancyNet(16), {
+        "norm": {"centre": [0, 0, 0], "radius": 4.0}, "train_views": list(range(n)), "test_views": [],
+        "display": [16, 100, 200, 256], "display_scales": [[s, [16, 100, 200, 255]] for s in (0.125, 0.25, 0.5, 1)]})
+    c = open_lfc(lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)).container
+    assert c.info("lfn.occ").offset + c.info("lfn.occ").length <= first_prefix_bytes(lf, small)
+
+
 def test_sat_box_mean_is_exact_on_large_16bit_images():
     rng = np.random.default_rng(0)
     img = rng.integers(60000, 65536, (1, 700, 900, 2)).astype(np.uint16)
