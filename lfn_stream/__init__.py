@@ -4,6 +4,8 @@ Public API:
     LfnConfig, NestedLFN, OccupancyNet — the model
     TrainOptions, train — training on a LightField
     to_sections, LfnCodec — pack a trained network for an .lfc file; the codec plug-in
+    first_prefix_bytes, auto_occupancy — the first renderable prefix a network shape makes, and
+        the occupancy net size that keeps it within 8 KB
     LfnRenderer — render from a file or any prefix of it (fractional / per-pixel sizes)
     encode_tiles, open_tiles, TiledLfnRenderer — tile sets: one network per region of camera space
 
@@ -18,11 +20,13 @@ import importlib
 #: public name → the submodule that defines it
 _WHERE = {"LfnConfig": "config", "CODEC_ID": "config", "CODEC_VERSION": "config", "MOVED_KEYS": "config",
           "NestedLFN": "model", "OccupancyNet": "model", "TrainOptions": "training", "train": "training",
-          "to_sections": "codec", "LfnCodec": "codec", "encode_tiles": "codec", "LfnRenderer": "render",
+          "to_sections": "codec", "LfnCodec": "codec", "first_prefix_bytes": "codec",
+          "auto_occupancy": "codec", "encode_tiles": "codec", "LfnRenderer": "render",
           "TiledLfnRenderer": "tiles", "open_tiles": "tiles"}
 
 __all__ = ["LfnConfig", "NestedLFN", "OccupancyNet", "TrainOptions", "train", "to_sections", "LfnRenderer",
-           "encode_tiles", "open_tiles", "TiledLfnRenderer", "LfnCodec", "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]
+           "encode_tiles", "open_tiles", "TiledLfnRenderer", "LfnCodec", "first_prefix_bytes", "auto_occupancy",
+           "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]
 
 
 def __getattr__(name: str):
