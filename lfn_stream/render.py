@@ -590,13 +590,15 @@ class LfnRenderer(Decoder):
 
     def info(self) -> dict:
         c = self.cfg
+        first = self.file.container.info("lfn.occ" if self.occ is not None else "lfn.base")
+        first = first.offset + first.length             # header, meta, base network (+ occupancy net)
         return {"codec": CODEC_ID, "levels": self.levels, "network": c.to_dict(), "weights": self.dtype_w,
                 "neurons_available": self.neurons, "display": self.display,
-                "display_scales": self.display_scales,
+                "display_scales": self.display_scales, "first_renderable_bytes": first,
                 "summary": f"light field network, depth {c.depth}, {c.min_neurons}..{c.max_neurons} neurons per "
                            f"layer ({self.neurons} in the available bytes); levels 0..{self.levels:g} (0 = full "
-                           f"network; any prefix ending after a step is a complete network), "
-                           f"{self.dtype_w} weights" + (
+                           f"network; any prefix ending after a step is a complete network; the first renderable "
+                           f"one is {first} bytes), {self.dtype_w} weights" + (
                                "" if self.display is None else
                                f"; display ladder of {len(self.display)} sizes (shown from these bytes: "
                                f"{self.display_neurons:g})") + (

@@ -183,6 +183,8 @@ def test_first_renderable_prefix_is_small():
     first = prefix_bytes(whole, 16.0)
     c = whole.file.container
     assert first == c.info("lfn.occ").offset + c.info("lfn.occ").length <= 8192, first
+    assert whole.info()["first_renderable_bytes"] == first and f"first renderable one is {first} bytes" in \
+        whole.info()["summary"]                       # (what `lfcodec info` prints)
     assert c.info("meta").length < 1024 and "c2w" not in whole.file.meta["scene"]
     pre = LfnRenderer(open_lfc(blob[:first], partial=True), device="cpu")
     assert pre.neurons == 16 and pre.occ is not None
