@@ -309,4 +309,5 @@ class LfnCodec(Codec):
         return {k: getattr(a, k) for k in OPTIONS if getattr(a, k, None) is not None}
 
 
-__all__ = ["to_sections", "heldout_report", "first_prefix_bytes", "auto_occupancy", "LfnCodec", "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]
+__all__ = ["to_sections", "heldout_report", "first_prefix_bytes", "auto_occupancy", "LfnCodec", "CODEC_ID", "CODEC_VERSION",
+           "MOVED_KEYS"]

@@ -589,9 +589,10 @@ class LfnRenderer(Decoder):
         raise UnsupportedError("block random access is an RLFC feature; an LFN renders rays (use --view)")
 
     def info(self) -> dict:
+        from .evaluate import prefix_bytes
+
         c = self.cfg
-        first = self.file.container.info("lfn.occ" if self.occ is not None else "lfn.base")
-        first = first.offset + first.length             # header, meta, base network (+ occupancy net)
+        first = prefix_bytes(self, c.min_neurons)       # header, meta, base network (+ occupancy net)
         return {"codec": CODEC_ID, "levels": self.levels, "network": c.to_dict(), "weights": self.dtype_w,
                 "neurons_available": self.neurons, "display": self.display,
                 "display_scales": self.display_scales, "first_renderable_bytes": first,

@@ -635,7 +635,7 @@ class TxDecoder(ProfileDecoder):
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
         cell = self.lay.cell[view]
-        if not self._map_done[cell]:
+        if not self._map_done[cell]:                    # (as the rows: a scalar check, not _maps_of)
             self._have_maps(np.array([cell]))
         disp, modes = self._map_store.disp, self._map_store.modes
         loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
