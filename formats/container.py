@@ -200,6 +200,7 @@ class Container:
         self.partial = partial   # a byte prefix of a file: sections past its end are unavailable
         self._mm = None
         self._file = None
+        self._closed = False
         if isinstance(source, (str, os.PathLike)):
             self.name = str(source)
             try:
@@ -363,8 +364,8 @@ class Container:
         Returns the bytes asked for: 0 where the source is local or holds them already."""
         info = self.info(name)
         stop = min(info.length if stop is None else stop, self.available_bytes(name))
-        if not hasattr(self._src, "prefetch") or not 0 <= start < stop:
-            return 0
+        if self._closed or not hasattr(self._src, "prefetch") or not 0 <= start < stop:
+            return 0                                   # (a closed file fetches nothing; its reads say why)
         a = start // info.chunk_size * info.chunk_size
         b = min(-(-stop // info.chunk_size) * info.chunk_size, info.length)
         return self._src.prefetch(info.offset + a, info.offset + b)
@@ -410,7 +411,10 @@ class Container:
 
     def check_unchanged(self) -> None:
         """A memory-mapped file must still have the size it had when opened (a file truncated
-        under a map would kill the process with SIGBUS on the next read of a lost page)."""
+        under a map would kill the process with SIGBUS on the next read of a lost page); and a
+        closed container reads nothing more (every read and every decode call checks here)."""
+        if self._closed:
+            raise ParameterError(f"{self.name}: the file is closed")
         if self._file is not None:
             try:
                 size = os.fstat(self._file.fileno()).st_size
@@ -429,6 +433,9 @@ class Container:
         return self._src.bytes_fetched
 
     def close(self) -> None:
+        """Release the file (its map, handle or connection); reads and decodes after this raise
+        :class:`~formats.errors.ParameterError`. Closing twice is allowed."""
+        self._closed = True
         if self._mm is not None:
             try:
                 self._mm.close()

@@ -81,3 +81,21 @@ def test_devices_that_cannot_be_used_are_parameter_errors(device):
             d.renderer(device=device)
     with open_lfc(GOLDEN / "lfn3_tiny_rgba8.lfc") as f, pytest.raises(ParameterError, match="not usable"):
         open_decoder(f, device=device)
+
+
+@pytest.mark.parametrize("name", ["rlfc_tx_lossy_rgb8.lfc", "rlfc_tx2_lossless_ga16.lfc"])
+def test_a_closed_file_reads_nothing_more(name):
+    """After close (or the end of a with block), decoding through a decoder made before, or
+    making a new one, is a ParameterError saying the file is closed, not pixels read from a
+    released map or a new connection; closing twice is allowed."""
+    f = open_lfc(GOLDEN / name)
+    d = open_decoder(f)
+    want = d.decode_block(0, 1, 0, 0)
+    f.close()
+    f.close()
+    for call in (lambda: d.decode_block(0, 1, 0, 0), lambda: d.decode_view(0, 1), lambda: d.decode_blocks([1], [0], [0]),
+                 lambda: open_decoder(f)):
+        with pytest.raises(ParameterError, match="closed"):
+            call()
+    with open_lfc(GOLDEN / name) as g:
+        assert np.array_equal(open_decoder(g).decode_block(0, 1, 0, 0), want)
