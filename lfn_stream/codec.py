@@ -116,6 +116,7 @@ def first_prefix_bytes(lf, cfg: LfnConfig, weights: str = "fp16") -> int:
     from formats.container import Container
     from formats.lfcfile import lfc_bytes
 
+    from .evaluate import first_renderable_end
     from .model import NestedLFN, OccupancyNet
 
     with torch.random.fork_rng():
@@ -129,9 +130,8 @@ def first_prefix_bytes(lf, cfg: LfnConfig, weights: str = "fp16") -> int:
             "display": lad + ([hi] if lad[-1] < hi else []),
             "display_scales": [[s, lad] for s in (0.125, 0.25, 0.5, 1.0)]}
     config, sections = to_sections(model, occ, info, weights)
-    c = Container(lfc_bytes(CODEC_ID, CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS))
-    last = c.info("lfn.occ" if occ is not None else "lfn.base")
-    return last.offset + last.length
+    return first_renderable_end(Container(lfc_bytes(CODEC_ID, CODEC_VERSION, config, lf.geometry(), sections,
+                                                    more=MOVED_KEYS)))
 
 
 def auto_occupancy(lf, cfg: LfnConfig, weights: str = "fp16") -> LfnConfig:

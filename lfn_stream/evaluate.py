@@ -33,6 +33,13 @@ def _ssim(a: np.ndarray, b: np.ndarray) -> float:
     return float(structural_similarity(a, b, channel_axis=-1, data_range=1.0))
 
 
+def first_renderable_end(c) -> int:
+    """Byte where the first renderable prefix of an LFN file's container ``c`` ends: its header,
+    meta, base network and occupancy net (where it has one)."""
+    names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else [])
+    return max(c.info(nm).offset + c.info(nm).length for nm in names)
+
+
 def prefix_bytes(r: LfnRenderer, level: float) -> int:
     """Bytes of the file prefix holding the network a level needs (header, meta, base,
     occupancy, steps; version 3: up to the end of the checksum chunk holding the last step); of
@@ -43,8 +50,7 @@ def prefix_bytes(r: LfnRenderer, level: float) -> int:
         return r.prefix_bytes(level)
     c = r.file.container
     n = int(math.ceil(level - 1e-9)) - r.cfg.min_neurons
-    names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else [])
-    end = max(c.info(nm).offset + c.info(nm).length for nm in names)
+    end = first_renderable_end(c)
     if n <= 0:
         return end
     if c.has("lfn.steps"):
