@@ -11,6 +11,10 @@ Bytes are whole files (manifest included).
 
 Usage:
     python -m tools.bench_lfn_tiles SCENE --steps 1000 --tiles 4 --wide 256 [--out JSON]
+        [--device cuda] [--depth 8] [--min-neurons 16] [--time-limit S] [--lod-levels N]
+
+SCENE is a scene folder or an .npz written by ``python -m tools.bench_lfn SCENE --export`` (for
+a machine without OpenImageIO, e.g. a lent GPU machine).
 """
 from __future__ import annotations
 
@@ -24,13 +28,13 @@ import torch
 
 from formats.codec_api import EncodeOptions
 from formats.lfcfile import open_lfc, write_lfc
-from formats.scenes import read_scene
 from lfn_stream import LfnCodec
 from lfn_stream.codec import encode_tiles
 from lfn_stream.evaluate import evaluate
 from lfn_stream.render import CODEC_ID, CODEC_VERSION, LfnRenderer
 from lfn_stream.tiles import open_tiles
 from lfn_stream.training import split_views
+from tools.bench_lfn import load
 from tools.common import log, machine
 
 
@@ -43,23 +47,23 @@ def score(r, lf, holdout: int, neurons: float) -> list[dict]:
     return [{k: (round(v, 4) if isinstance(v, float) else v) for k, v in row.items()} for row in rows]
 
 
-def run_global(lf, params: dict, folder: Path, name: str) -> dict:
+def run_global(lf, params: dict, folder: Path, name: str, device: str = "cpu") -> dict:
     t = time.perf_counter()
     enc = LfnCodec().encode(lf, EncodeOptions(params=params))
     train_s = time.perf_counter() - t
     path = folder / f"{name}.lfc"
     nbytes = write_lfc(path, CODEC_ID, CODEC_VERSION, enc.config, lf.geometry(), enc.sections, more=enc.more)
     with open_lfc(str(path)) as f:
-        r = LfnRenderer(f, device="cpu")
+        r = LfnRenderer(f, device=device)
         rows = score(r, lf, params.get("holdout", 4), r.cfg.max_neurons)
     return {"model": name, "bytes": nbytes, "train_s": round(train_s, 1), "rows": rows}
 
 
-def run_tiles(lf, params: dict, folder: Path, name: str) -> dict:
+def run_tiles(lf, params: dict, folder: Path, name: str, device: str = "cpu") -> dict:
     t = time.perf_counter()
     rep = encode_tiles(lf, EncodeOptions(params=params), folder / f"{name}.json")
     train_s = time.perf_counter() - t
-    with open_tiles(folder / f"{name}.json", device="cpu") as r:
+    with open_tiles(folder / f"{name}.json", device=device) as r:
         rows = score(r, lf, params.get("holdout", 4), r.cfg.max_neurons)
         per_tile = [{"file": t["file"], "bytes": t["bytes"], "train_views": t["train_views"]} for t in rep["tiles"]]
         blended = r.tiles_rendered
@@ -79,11 +83,21 @@ def main(argv=None) -> int:
     ap.add_argument("--batch", type=int, default=4096)
     ap.add_argument("--only", nargs="*", default=None, help="global, wide, tiles, tiles_equal_compute")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--device", default="cpu", help="train and render on this torch device")
+    ap.add_argument("--depth", type=int, default=None, help="hidden layers (default: the codec's)")
+    ap.add_argument("--min-neurons", type=int, default=None, help="base network's neurons (default: the codec's)")
+    ap.add_argument("--time-limit", type=float, default=None, help="stop each network's training after S seconds")
+    ap.add_argument("--lod-levels", type=int, default=None, help="stratified levels per step (default: the codec's)")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
-    lf = read_scene(a.scene)
-    base = {"steps": a.steps, "resolution": a.resolution, "batch": a.batch, "max_neurons": a.max_neurons}
+    lf = load(a.scene, 0)
+    base = {"steps": a.steps, "resolution": a.resolution, "batch": a.batch, "max_neurons": a.max_neurons,
+            "device": a.device}
+    for key, val in (("depth", a.depth), ("min_neurons", a.min_neurons), ("time_limit_s", a.time_limit),
+                     ("lod_levels", a.lod_levels)):
+        if val is not None:
+            base[key] = val
     runs = {"global": (run_global, base),
             "wide": (run_global, {**base, "max_neurons": a.wide}),
             "tiles": (run_tiles, {**base, "tiles": a.tiles, "tile_band": a.band}),
@@ -95,7 +109,7 @@ def main(argv=None) -> int:
             if a.only and name not in a.only:
                 continue
             log(f"{name}: {params}")
-            res = fn(lf, params, Path(d), name)
+            res = fn(lf, params, Path(d), name, a.device)
             res["params"] = params
             log(json.dumps({k: v for k, v in res.items() if k != "tiles"}))
             out["results"].append(res)
