@@ -165,7 +165,10 @@ class RlfcDecoder(Decoder):
         level = self.check_level(level)
         self.file.container.check_unchanged()
         B = self.block_size
-        out = from_planes(self.core.block(v, int(by), int(bx), level).reshape(B, B, self.P), self.dtype)
+        lean = getattr(self.core, "block_pixels", None)      # a profile's one-request pixel path, where it has one
+        out = lean(v, int(by), int(bx), level) if lean is not None else None
+        if out is None:
+            out = from_planes(self.core.block(v, int(by), int(bx), level).reshape(B, B, self.P), self.dtype)
         return out[:min(B, self.height - by * B), :min(B, self.width - bx * B)]
 
     def decode_views(self, views=None, level: int = 0, planes: bool = False, threads: int | None = None

@@ -33,6 +33,7 @@ SMALL = 64              # (blocks × references) up to which every reference is 
 _E = np.arange(TB, dtype=np.float32)
 _F16 = np.float32(1.0 / (1 << DISP_BITS))
 _Z = np.zeros(TB, np.float32)
+_ZERO = np.float32(0)
 
 
 class KeyAtlas:
@@ -323,3 +324,88 @@ def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
     X += x0[:, None]
     return _sample_blend(atlas, src, Y, X, rows0, wm[modes])
 
+
+
+def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
+    """(2C, P) matrix M with ``[planes, floor(planes / 2)] @ M`` = the YCoCg-R inverse of
+    :func:`formats.pixels.inverse_int` (R, G, B; alpha and grey planes pass through): its
+    ``>> 1`` steps are the floor halves, the rest is sums and differences, exact on integers in
+    the float type. C: the atlas's channels (a fourth, unused one for three planes)."""
+    M = np.zeros((2 * C, P), ftype)
+    if P < 3:
+        M[np.arange(P), np.arange(P)] = 1
+        return M
+    y, co, cg, co_h, cg_h = 0, 1, 2, C + 1, C + 2
+    M[[y, co, co_h, cg_h], 0] = [1, 1, -1, -1]            # r = b + co
+    M[[y, cg, cg_h], 1] = [1, 1, -1]                      # g = cg + t, t = y - (cg >> 1)
+    M[[y, co_h, cg_h], 2] = [1, -1, -1]                   # b = t - (co >> 1)
+    if P == 4:
+        M[3, 3] = 1
+    return M
+
+
+def block_pixel_refs(atlas: KeyAtlas, refs, tb_y: np.ndarray, tb_x: np.ndarray) -> tuple:
+    """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple and
+    the (nt,) pixel origins of a block's 8×8 blocks within it: per (8×8 block, reference) pair
+    (``nt·R`` rows, block-major) the offsets per unit of disparity, the window's pixel grid
+    (8×8 positions, flat) and the reference's first row in the atlas."""
+    src, rows0, dpy, dpx, wm = refs
+    R, nt = dpy.size, tb_y.size
+    e = np.arange(TB * TB, dtype=np.float32)
+    gy = np.repeat(tb_y.astype(np.float32), R)[:, None] + (e // TB)[None, :]      # (nt·R, 64)
+    gx = np.repeat(tb_x.astype(np.float32), R)[:, None] + (e % TB)[None, :]
+    return (src, np.tile(rows0.reshape(R), nt)[:, None], np.tile(dpy, nt), np.tile(dpx, nt), gy, gx,
+            np.repeat(np.arange(nt), R), wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype))
+
+
+def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype) -> np.ndarray:
+    """The pixels of one random-access block whose 8×8 blocks carry no residual: the same
+    values as :func:`predict_block` followed by :func:`formats.pixels.from_planes`, in fewer
+    numpy calls (a single request costs calls, not pixels).
+
+    The sampling positions are the same exact values as :func:`predict_block`'s, summed in
+    another order (disparity × offset + block origin, + the window's pixel grid; integers and
+    sixteenths, exact in float32 wherever they fall inside the image, and clamped alike where
+    they do not). Columns are not clamped: the remap's replicated border gives the clamped
+    coordinate's sample exactly, as rows clamped to their key view do in the stacked atlas. The
+    blend's weights are divided by 64 (exact: each product and sum has at most 24 significant
+    bits), so ``floor(x + 0.5)`` is its rounded shift; the YCoCg-R inverse is one product with
+    :func:`pixel_matrix` of the planes and their floor halves.
+
+    Args:
+        prefs: :func:`block_pixel_refs` of the view; d: (nt,) float32 disparities of the
+            block's 8×8 blocks (raster order) and ``modes`` (nt,) their modes; by_px, bx_px:
+            the block's pixel origin; tpb: 8×8 blocks per block side; peak (a number of the
+            atlas's float type), dtype: the pixels'.
+
+    Returns:
+        (8·tpb, 8·tpb, P) pixels of ``dtype``.
+    """
+    src, rows0, dpy, dpx, gy, gx, rep, w64, M = prefs
+    C, P = atlas.C, atlas.P
+    nt = d.size
+    dr = d[rep]                                                           # (nt·R,) per pair
+    y = dr * dpy
+    y += by_px
+    mr = y[:, None] + gy                                                  # (nt·R, 64) rows in the key view
+    mr.clip(_ZERO, np.float32(atlas.hp - 1), out=mr)
+    mr += rows0                                                           # … in the atlas
+    x = dr * dpx
+    x += bx_px
+    mc = x[:, None] + gx
+    smp = cv2.remap(src, mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    np.floor(smp, out=smp)                                                # atlas + 0.5: rounded
+    acc = np.matmul(w64[modes], smp.reshape(nt, gy.shape[0] // nt, -1)).reshape(nt * TB * TB, C)
+    acc += 0.5
+    np.floor(acc, out=acc)                                                # (Σ w·p + 32) >> 6
+    if P >= 3:
+        half = acc * 0.5
+        np.floor(half, out=half)                                          # the planes >> 1
+        px = np.dot(acc, M[:C])
+        px += np.dot(half, M[C:])
+    else:
+        px = acc[:, :P]
+    px.clip(0, peak, out=px)
+    out = np.empty((tpb, TB, tpb, TB, P), dtype)
+    np.copyto(out, px.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4), casting="unsafe")
+    return out.reshape(tpb * TB, tpb * TB, P)

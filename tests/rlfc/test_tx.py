@@ -253,6 +253,43 @@ def test_single_blocks_with_key_views_in_several_atlas_groups(monkeypatch):
     assert spans == {True, False}                      # views with references in one group and in several
 
 
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=2), dict(c=4)])
+def test_one_request_pixel_path_equals_planes_then_pixels(kw):
+    """decode_block's lean path (``block_pixels``: the blend rounded and the YCoCg-R inverse
+    done in the remap's floats) gives the pixels of ``block`` + ``from_planes`` for every
+    predicted block, also where disparities reach far outside the key views (rows clamped to
+    their key view, columns replicated at the image's edge), and decode_block takes it."""
+    from formats.pixels import from_planes
+
+    lf = smooth_lf(rows=5, cols=5, **kw)
+    e = tx(lf, step=6.0 * (257 if kw.get("dtype") == np.uint16 else 1))
+    d, _ = open_encoded(lf, e)
+    core, B = d.core, d.block_size
+    disp, _ = core._map_store.all()
+    rng = np.random.default_rng(5)
+    far = rng.random(disp.shape) < 0.3                 # a third of the 8×8 blocks: up to ±190 px, some ±2^16 px
+    disp[far] = rng.integers(-3000, 3001, int(far.sum()))
+    disp[rng.random(disp.shape) < 0.02] = 1 << 20
+    core._map_done[:] = False                          # (the key views' reach follows the new maps)
+    taken = 0
+    for v in np.flatnonzero(~core.is_key):
+        r, c = divmod(int(v), lf.cols)
+        for by in range(d.nby):
+            for bx in range(d.nbx):
+                for level in (0, 1):
+                    lean = core.block_pixels(int(v), by, bx, level)
+                    if lean is None:
+                        continue
+                    taken += 1
+                    ref = from_planes(core.block(int(v), by, bx, level).reshape(B, B, core.P), core.dtype)
+                    assert lean.dtype == ref.dtype and (lean == ref).all()
+    assert taken > 50
+    full = d.decode_all(1)
+    v = int(np.flatnonzero(~core.is_key)[0])
+    r, c = divmod(v, lf.cols)
+    assert (d.decode_block(r, c, 0, 0, 1) == full[r, c, :B, :B]).all()
+
+
 def _wide_lf(h: int, w: int, channels: int = 3):
     """A 2×2 grid of h × w views: a horizontal pattern moving 2 px per view step."""
     from formats.lightfield import LightField, grid_positions
