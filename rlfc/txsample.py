@@ -325,7 +325,6 @@ def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
     return _sample_blend(atlas, src, Y, X, rows0, wm[modes])
 
 
-
 def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
     """(2C, P) matrix M with ``[planes, floor(planes / 2)] @ M`` = the YCoCg-R inverse of
     :func:`formats.pixels.inverse_int` (R, G, B; alpha and grey planes pass through): its
