@@ -143,7 +143,7 @@ class TxDecoder(ProfileDecoder):
         self._tb_x = (self._tbx * TB).astype(np.float32)
         self._blockref_cache: dict = {}
         self._pixref_cache: dict = {}                           # view → block_pixel_refs (block_pixels)
-        self._dispf: dict = {}                                  # map → (disparities as float32, modes)
+        self._cell_maps: dict = {}                              # map → (disparities as float32, modes)
         self._peak = int(np.iinfo(self.dtype).max)
         if c.info("tx.blocks").length != off[-1] + PAD:
             raise FormatError(f"{name}: section 'tx.blocks' has {c.info('tx.blocks').length} bytes, the index "
@@ -632,7 +632,7 @@ class TxDecoder(ProfileDecoder):
     def block_pixels(self, view: int, by: int, bx: int, level: int) -> np.ndarray | None:
         """One request's pixels (B, B, P) when its 8×8 blocks are predicted only (no residual at
         this level) from references in one atlas group: :func:`rlfc.txsample.predict_block_pixels`,
-        the same pixels as :meth:`block` + ``from_planes`` in a third of the numpy calls. None
+        the same pixels as :meth:`block` + ``from_planes`` in about half the numpy calls. None
         otherwise (the caller takes :meth:`block`)."""
         if self.is_key[view] or self.atlas is None or (level == 0 and self.coded[view, by * self.nbx + bx]):
             return None
@@ -643,31 +643,36 @@ class TxDecoder(ProfileDecoder):
                 block_pixel_refs(self.atlas, refs, self._tb_y, self._tb_x)
         if prefs is None:
             return None
-        if not self._keys_all and not self._rows_ok[view, by]:
-            self._have_rows(np.array([view]), np.array([by]))
-        cell = self.lay.cell[view]
-        if not self._map_done[cell]:
-            self._have_maps(np.array([cell]))
-        dm = self._dispf.get(cell)
+        cell = self._one_ready(view, by)
+        dm = self._cell_maps.get(cell)
         if dm is None:
-            dm = self._dispf[cell] = (self._map_store.disp[cell].astype(np.float32), self._map_store.modes[cell])
+            dm = self._cell_maps[cell] = (self._map_store.disp[cell].astype(np.float32), self._map_store.modes[cell])
         B, tpb = self.block_size, self.tpb
         loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off
         return predict_block_pixels(self.atlas, prefs, dm[0][loc8], dm[1][loc8], by * B, bx * B, tpb,
                                     self.atlas.ftype(self._peak), self.dtype)
 
+    def _one_ready(self, view: int, by: int) -> int:
+        """For one request of a view with references: the key-view rows its block row reaches
+        and its map decoded where they are not yet (scalar checks: the one-request paths are
+        lean); returns the view's map."""
+        if not self._keys_all and not self._rows_ok[view, by]:
+            self._have_rows(np.array([view]), np.array([by]))
+        cell = self.lay.cell[view]
+        if not self._map_done[cell]:                    # (not _maps_of: a scalar check)
+            self._have_maps(np.array([cell]))
+        return cell
+
     def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
         """One request, lean: the prediction of the block's nt tbs from every reference at once
         (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
         B, P, tpb = self.block_size, self.P, self.tpb
-        if not self._keys_all and not self._rows_ok[view, by]:       # (a scalar check: this path is lean)
-            self._have_rows(np.array([view]), np.array([by]))
         if self.is_key[view]:
+            if not self._keys_all and not self._rows_ok[view, by]:
+                self._have_rows(np.array([view]), np.array([by]))
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
-        cell = self.lay.cell[view]
-        if not self._map_done[cell]:                    # (as the rows: a scalar check, not _maps_of)
-            self._have_maps(np.array([cell]))
+        cell = self._one_ready(view, by)
         disp, modes = self._map_store.disp, self._map_store.modes
         loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
         refs = self._block_refs(view) if self.atlas is not None else None

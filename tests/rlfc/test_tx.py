@@ -273,7 +273,6 @@ def test_one_request_pixel_path_equals_planes_then_pixels(kw):
     core._map_done[:] = False                          # (the key views' reach follows the new maps)
     taken = 0
     for v in np.flatnonzero(~core.is_key):
-        r, c = divmod(int(v), lf.cols)
         for by in range(d.nby):
             for bx in range(d.nbx):
                 for level in (0, 1):
