@@ -10,8 +10,9 @@
 - Alpha: reported apart, as exact (bool) and its own PSNR.
 - PSNR_YCoCg = (6·PSNR_Y + PSNR_Co + PSNR_Cg) / 8 on the YCoCg-R planes, same peak
   (grey input: PSNR_Y).
-- SSIM = scikit-image structural_similarity per view on the colour channels
-  (channel_axis=-1, data_range=peak), averaged over views.
+- SSIM = scikit-image's structural_similarity per view on the colour channels
+  (channel_axis=-1, data_range=peak: uniform 7×7 window), averaged over views; computed with
+  OpenCV box filters (the same value to ~1e-14, tested against scikit-image).
 """
 from __future__ import annotations
 
@@ -167,17 +168,73 @@ def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
     return (6 * ps[0] + ps[1] + ps[2]) / 8
 
 
-def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
-    """Mean SSIM over views of the colour channels (scikit-image, channel_axis=-1, data_range=peak)."""
-    ref, dec = _pair(ref, dec)
-    from skimage.metrics import structural_similarity
+#: SSIM's window side (scikit-image's default: a uniform 7×7 window)
+SSIM_WIN = 7
 
+
+def _ssim_view(a: np.ndarray, b: np.ndarray, peak: float) -> float:
+    """SSIM of one (H, W, C) pair, both sides at least :data:`SSIM_WIN`: scikit-image's
+    ``structural_similarity(a, b, channel_axis=-1, data_range=peak)`` (uniform 7×7 window,
+    sample covariance, K1 = 0.01, K2 = 0.03, the window's half-width cropped from each border,
+    float64 for integer pixels and float32 for float32 ones), computed with OpenCV's box filter
+    and in-place arithmetic: the same value to ~1e-14 (float32: ~1e-7), 3–4× faster."""
+    import cv2
+
+    ft = np.float32 if a.dtype in (np.float16, np.float32) else np.float64
+    if a.shape[-1] == 1:                                   # (OpenCV drops a single channel's axis)
+        a, b = a[..., 0], b[..., 0]
+    x, y = a.astype(ft), b.astype(ft)
+
+    def box(src, out=None):
+        return cv2.boxFilter(src, -1, (SSIM_WIN, SSIM_WIN), dst=out, normalize=True, borderType=cv2.BORDER_REFLECT)
+
+    ux, uy = box(x), box(y)
+    t = np.multiply(x, x)
+    vx = box(t)
+    vy = box(np.multiply(y, y, out=t))
+    vxy = box(np.multiply(x, y, out=t), out=x)             # (x is not needed again)
+    cov = ft(SSIM_WIN ** 2 / (SSIM_WIN ** 2 - 1))          # sample covariance
+    for v, p, q in ((vx, ux, ux), (vy, uy, uy), (vxy, ux, uy)):
+        v -= np.multiply(p, q, out=t)
+        v *= cov
+    c1, c2 = ft((0.01 * peak) ** 2), ft((0.03 * peak) ** 2)
+    a1 = np.multiply(ux, uy, out=t)                        # 2·ux·uy + C1
+    a1 *= 2
+    a1 += c1
+    b1 = np.multiply(ux, ux, out=ux)                       # ux² + uy² + C1
+    b1 += np.multiply(uy, uy, out=uy)
+    b1 += c1
+    vxy *= 2                                               # 2·vxy + C2
+    vxy += c2
+    vx += vy                                               # vx + vy + C2
+    vx += c2
+    a1 *= vxy
+    b1 *= vx
+    a1 /= b1
+    h = (SSIM_WIN - 1) // 2
+    return float(a1[h:-h, h:-h].mean(dtype=np.float64))
+
+
+def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
+    """Mean SSIM over views of the colour channels (scikit-image's definition, channel_axis=-1,
+    data_range=peak; :func:`_ssim_view`), views on a few threads (OpenCV and numpy release the
+    GIL). A view smaller than the 7×7 window counts 1 where it is exact, else 0."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .parallel import LOCAL_THREADS
+
+    ref, dec = _pair(ref, dec)
     peak = peak or peak_of(ref.dtype)
     cs = colour_channels(ref.shape[-1])
     r = _flat(ref)[..., cs]
     d = _flat(dec).reshape(_flat(ref).shape)[..., cs]
-    vals = [structural_similarity(a, b, channel_axis=-1, data_range=peak) if min(a.shape[:2]) >= 7 else
-            float(np.all(a == b)) for a, b in zip(r, d)]
+
+    def one(i):
+        a, b = r[i], d[i]
+        return _ssim_view(a, b, peak) if min(a.shape[:2]) >= SSIM_WIN else float(np.all(a == b))
+
+    with ThreadPoolExecutor(max(1, min(LOCAL_THREADS, r.shape[0]))) as pool:
+        vals = list(pool.map(one, range(r.shape[0])))
     return float(np.mean(vals))
 
 

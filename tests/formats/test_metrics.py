@@ -44,3 +44,26 @@ def test_metrics_refuse_views_that_do_not_compare():
             f(a, a.astype(np.uint16))
     assert M.psnr_rgb(a, a.reshape(1, 2, 4, 4, 3)) == float("inf")      # a grid against a stack
     assert M.mse(a, a.astype(np.int32)) == 0.0                            # decoded integer planes
+
+
+@pytest.mark.parametrize("channels,dtype,shape", [(3, np.uint8, (40, 33)), (1, np.uint16, (7, 12)), (4, np.uint8, (9, 7)),
+                                                  (2, np.uint16, (16, 16)), (3, np.float32, (21, 18))])
+def test_ssim_is_scikit_images(channels, dtype, shape):
+    """SSIM (OpenCV box filters, in place) equals scikit-image's structural_similarity averaged
+    over views, on the colour channels: 8/16-bit, grey, alpha left out, float, the 7-px minimum;
+    a view under 7 px a side counts 1 when exact, else 0."""
+    from skimage.metrics import structural_similarity
+
+    rng = np.random.default_rng(channels + len(shape) + shape[0])
+    peak = 1.0 if dtype == np.float32 else float(np.iinfo(dtype).max)
+    smooth = np.cumsum(rng.random((3, *shape, channels)), axis=1)      # structure as well as noise
+    ref = (smooth / smooth.max() * peak).astype(dtype)
+    noise = rng.normal(0, 0.03 * peak, ref.shape)
+    dec = np.clip(ref + noise, 0, peak).astype(dtype)
+    cs = slice(0, 3) if channels >= 3 else slice(0, 1)
+    want = np.mean([structural_similarity(ref[i][..., cs], dec[i][..., cs], channel_axis=-1, data_range=peak)
+                    for i in range(3)])
+    assert M.ssim(ref, dec) == pytest.approx(want, abs=1e-6 if dtype == np.float32 else 1e-12)
+    assert M.ssim(ref, ref.copy()) == pytest.approx(1.0, abs=1e-12)
+    tiny = ref[:, :6, :5]
+    assert M.ssim(tiny, tiny.copy()) == 1.0 and M.ssim(tiny, dec[:, :6, :5]) == 0.0
