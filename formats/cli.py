@@ -727,6 +727,9 @@ def _decode_source(a):
 
 
 def _decode(a) -> int:
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .parallel import LOCAL_THREADS
     from .scenes import view_filename, write_layout, write_views
     from .scenes.layout import layout_paths
     from .viewnames import output_path, png_name, unpack_names
@@ -795,29 +798,38 @@ def _decode(a) -> int:
             keep = _kept_outputs(d, outdir, name, [(r, c) for r in range(d.rows) for c in range(d.cols)], level,
                                  layout_paths(outdir, scene), a.overwrite)
             prog = _Progress(a.quiet)
-            # decoded and written one row of views at a time: a large light field is never held whole
-            paths, made = [], []
+            # decoded one row of views at a time, each row's files written on a few threads while
+            # the next row decodes (image encoders release the GIL): at most two rows are held
+            paths, made, writing = [], [], []
+            pool = ThreadPoolExecutor(LOCAL_THREADS)
             try:
                 for r in range(d.rows):
                     cs = [c for c in range(d.cols) if (r, c) not in keep]
                     row = d.decode_views(np.asarray(cs, np.int64) + r * d.cols, level=level)[None] if cs else None
+                    for w in writing:                      # the previous row's files are written
+                        w.result()
+                    writing = []
                     for j, c in enumerate(cs):
                         p = output_path(outdir, name(r, c))
-                        new = not p.exists()
-                        write_views(outdir, row[:, j:j + 1], rows=[r], cols=[c], filename=name)
-                        if new:
+                        if not p.exists():
                             made.append(p)
+                        writing.append(pool.submit(write_views, outdir, row[:, j:j + 1], rows=[r], cols=[c],
+                                                   filename=name))
                     paths += [output_path(outdir, name(r, c)) for c in range(d.cols)]
                     del row
                     prog("decode views", r + 1, d.rows)
+                for w in writing:
+                    w.result()
             except BaseException:
                 # a file that fails part-way (a damaged stream in a later row) leaves none of the
                 # views it made behind: a folder holding only some views would pass for a whole
                 # decode (files that were there before stay)
+                pool.shutdown(wait=True, cancel_futures=True)
                 for p in made:
                     Path(p).unlink(missing_ok=True)
                 raise
             finally:
+                pool.shutdown(wait=True)
                 prog.close()
             # the layout file, so that the folder encodes again as the same scene
             layout = write_layout(outdir, scene, name)

@@ -127,17 +127,22 @@ def view_filename(row: int, col: int, ext: str = ".png") -> str:
 
 def write_views(folder: str | os.PathLike, views: np.ndarray, *, rows: list[int] | None = None,
                 cols: list[int] | None = None, ext: str = ".png", filename=None) -> list[Path]:
-    """Write (R, C, H, W, Ch) views as ``rRR_cCC.png`` (16-bit PNG for uint16), atomically each.
+    """Write (R, C, H, W, Ch) views as ``rRR_cCC.png`` (16-bit PNG for uint16), atomically each,
+    on a few threads; returns their paths in row-major order.
 
     ``rows``/``cols`` give the grid indices of the given views when they are a subset;
     ``filename(row, col)`` names the files instead (relative to ``folder``; subfolders are
     made, and a name that would leave ``folder`` is a FormatError).
     """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from ..parallel import LOCAL_THREADS
+
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     rows = rows if rows is not None else list(range(views.shape[0]))
     cols = cols if cols is not None else list(range(views.shape[1]))
-    out = []
+    jobs = []
     for i, r in enumerate(rows):
         for j, c in enumerate(cols):
             if filename is None:
@@ -147,6 +152,10 @@ def write_views(folder: str | os.PathLike, views: np.ndarray, *, rows: list[int]
 
                 path = output_path(folder, filename(r, c))
                 path.parent.mkdir(parents=True, exist_ok=True)
-            write_image(path, views[i, j])
-            out.append(path)
-    return out
+            jobs.append((path, views[i, j]))
+    if len(jobs) == 1:
+        write_image(*jobs[0])
+    else:                                    # (image encoders release the GIL: files on a few threads)
+        with ThreadPoolExecutor(LOCAL_THREADS) as pool:
+            list(pool.map(lambda job: write_image(*job), jobs))
+    return [path for path, _ in jobs]
