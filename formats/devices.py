@@ -2,7 +2,28 @@
 imports this module, so torch is imported only where a device is asked for)."""
 from __future__ import annotations
 
+import os
+import sys
+
 from .errors import ParameterError
+
+#: device nodes and driver files of which at least one exists where torch can see a GPU on Linux:
+#: NVIDIA's driver, WSL2's GPU paravirtualization, AMD's ROCm (torch.cuda serves it)
+_GPU_TRACES = ("/dev/nvidiactl", "/dev/nvidia0", "/proc/driver/nvidia", "/dev/dxg", "/dev/kfd")
+
+
+def cuda_available() -> bool:
+    """``torch.cuda.is_available()``, without importing torch (about 1.6 s) where no GPU driver
+    can be there: on Linux without any of :data:`_GPU_TRACES`, and on macOS (no CUDA). Where torch
+    is already imported, or elsewhere, torch is asked."""
+    if "torch" not in sys.modules:
+        if sys.platform == "darwin":
+            return False
+        if sys.platform.startswith("linux") and not any(os.path.exists(p) for p in _GPU_TRACES):
+            return False
+    import torch
+
+    return bool(torch.cuda.is_available())
 
 
 def torch_device(device: str | None = None):

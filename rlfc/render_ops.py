@@ -335,9 +335,9 @@ def make_ops(device: str | None):
     one is present, else numpy; "cpu", "cuda", "cuda:1", "mps" … → torch there (ParameterError
     when that device is not usable)."""
     if device == "auto":
-        import torch
+        from formats.devices import cuda_available
 
-        device = "cuda" if torch.cuda.is_available() else None
+        device = "cuda" if cuda_available() else None
     if device is None or device == "numpy":
         return NumpyOps()
     if not isinstance(device, str):
