@@ -122,3 +122,34 @@ def test_path_frames_never_mix_with_an_earlier_sequence(grid, tmp_path, capsys):
     assert main(["render", str(f), str(out), "--path", "sweep:3", "--overwrite", "--quiet"]) == 0
     assert sorted(p.name for p in out.iterdir()) == ["frame_00000.png", "frame_00001.png", "frame_00002.png",
                                                      "notes.txt"]
+
+
+def test_png_frames_written_in_the_background_fail_loudly(tmp_path, monkeypatch):
+    """PNG frames go to a writer thread; every frame lands in order, and a write that fails
+    raises its typed error at the next write or at close, never silently."""
+    import numpy as np
+    import pytest
+
+    import formats.imageio as io
+    from formats.errors import SceneError
+    from formats.video import SequenceWriter, frame_files
+
+    frames = [np.full((8, 10, 3), 20 * i, np.uint8) for i in range(5)]
+    with SequenceWriter(tmp_path / "ok") as w:
+        for f in frames:
+            w.write(f)
+    got = frame_files(tmp_path / "ok")
+    assert [p.name for p in got] == [f"frame_{i:05d}.png" for i in range(5)]
+    assert all((io.read_image(p) == f).all() for p, f in zip(got, frames))
+    real = io.write_image
+
+    def fail_third(path, px):
+        if path.name == "frame_00002.png":
+            raise SceneError(f"{path}: cannot write (test)")
+        real(path, px)
+
+    monkeypatch.setattr(io, "write_image", fail_third)
+    with pytest.raises(SceneError, match="frame_00002"):
+        with SequenceWriter(tmp_path / "bad") as w:
+            for f in frames:
+                w.write(f)
