@@ -215,6 +215,27 @@ def test_decode_that_fails_part_way_leaves_no_views(encoded, tmp_path, monkeypat
     assert not any(out.iterdir())
 
 
+def test_decode_whose_file_write_fails_leaves_no_views(encoded, tmp_path, monkeypatch, capsys):
+    """Files are written on threads while the next row decodes; a write that fails (here the
+    second row's second view) stops the decode with its one-line error, and no views stay."""
+    import formats.scenes as scenes
+    from formats.errors import SceneError
+
+    real = scenes.write_image
+
+    def fail_one(path, px):
+        if path.name == "r01_c01.png":
+            raise SceneError(f"{path}: cannot write (No space left on device)")
+        real(path, px)
+
+    monkeypatch.setattr(scenes, "write_image", fail_one)
+    out = tmp_path / "full"
+    assert main(["decode", str(encoded), str(out), "--quiet"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "No space left" in err[0]
+    assert not out.exists() or not any(out.iterdir())
+
+
 def _run(*args):
     r = subprocess.run([sys.executable, "-m", "formats.cli", *args], capture_output=True, text=True, cwd=ROOT)
     return r.returncode, r.stdout, r.stderr
