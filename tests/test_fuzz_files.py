@@ -30,7 +30,7 @@ def test_structure_aware_fuzz_finds_no_defects():
     assert rep["typed"] > 0 and rep["exact"] > 0      # both outcomes are exercised
     for name, c in rep["per_file"].items():            # accepted files met a reference decoder
         if not name.startswith("rlfc_tx_"):            # (tx version 1 has none: only the paths agree)
-            assert c["referenced"] + c["sampled"] == c["exact"], (name, c)
+            assert c["referenced"] + c["sampled"] + c["illcond"] == c["exact"], (name, c)
     assert rep["referenced"] > 0
 
 
@@ -48,6 +48,27 @@ def test_lfn_mutant_declaring_a_huge_grid_is_checked_on_a_sample(seed, tmp_path)
     assert outcome == "sampled", (outcome, detail, what)
     d = open_decoder(open_lfc(mutant))
     assert d.rows * d.cols * d.height * d.width > LFN_RENDER_PIXELS
+
+
+def test_lfn_reference_tolerance_follows_float32s_own_spread(tmp_path):
+    """tools.fuzz seed 55001339 moves bytes into a hidden layer (a weight of 17 328): float32 then
+    cannot evaluate the network to a grey level (the library's own pixel moves by 3 levels between
+    one ray per batch and all rays together), and the float64 reference differs there by up to 4:
+    counted ``illcond``, not a defect. On a network of trained weights the same check still calls a
+    wrong pixel a mismatch: float32 moves by nothing there."""
+    from tools.fuzz import check_reference, make_mutant, run_one
+
+    blob = (GOLDEN / "lfn_tiny_rgba8.lfc").read_bytes()
+    mutant, what = make_mutant(blob, 55001339)
+    outcome, detail, _ = run_one(mutant, 55001339, str(tmp_path))
+    assert outcome == "illcond" and "1 pixel" in detail, (outcome, detail, what)
+    with open_lfc(blob) as f:
+        got = open_decoder(f).decode_all(0)
+    assert check_reference(blob, {"levels": {0: got}})
+    bad = got.copy()
+    bad[1, 2, 3, 4, 0] = (int(bad[1, 2, 3, 4, 0]) + 3) % 256          # one wrong sample
+    with pytest.raises(AssertionError, match="reference differs"):
+        check_reference(blob, {"levels": {0: bad}})
 
 
 def _rebuild(meta, secs):
