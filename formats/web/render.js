@@ -118,13 +118,7 @@ export class Renderer {
     for (const [r, c] of src) imgs.push(await this.view(r * d.cols + c, level));
     if (robust && maps && src.length > 1) disp = this._consistent(s, t, src, imgs, disp);
     const acc = new Float32Array(H * W * P);
-    const smp = new Float32Array(H * W * P);
-    const all = Int32Array.from({ length: H * W }, (_, i) => i);
-    src.forEach(([r, c, w], j) => {
-      this._sample(imgs[j], all, W, disp, s - r, t - c, P, smp);
-      const wf = Math.fround(w);
-      for (let i = 0; i < acc.length; i++) acc[i] += wf * smp[i];
-    });
+    src.forEach(([r, c, w], j) => this._blendFrame(imgs[j], disp, s - r, t - c, Math.fround(w), acc));
     this._trim(keep);
     const planes = new Int32Array(H * W * P);
     for (let i = 0; i < planes.length; i++) {
@@ -133,6 +127,30 @@ export class Renderer {
     }
     const pixels = fromPlanes(planes, H, W, H, W, d.C, d.peak);
     return { pixels, ms: performance.now() - t0, sources: src.length };
+  }
+
+  /** acc += wf · (every plane of `img` sampled at every pixel of the frame, displaced by
+   *  disp·(ds, dt)): the values of _sample over all pixels (each sample rounded to float32, as
+   *  stored there) blended in the same float order, in one pass without index or sample arrays. */
+  _blendFrame(img, disp, ds, dt, wf, acc) {
+    const d = this.d, P = d.P, Wp = d.Wp, H = d.H, W = d.W, Hp1 = d.Hp - 1, Wp1 = Wp - 1;
+    const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround;
+    for (let y = 0, k = 0; y < H; y++) {
+      for (let x = 0; x < W; x++, k++) {
+        const dd = disp[k];
+        let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
+        Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
+        X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
+        const qy = Math.round(Y * 32), qx = Math.round(X * 32);
+        const y0 = qy >> 5, x0 = qx >> 5, fy = (qy & 31) / 32, fx = (qx & 31) / 32;
+        const y1 = y0 + 1 < Hp1 ? y0 + 1 : Hp1, x1 = x0 + 1 < Wp1 ? x0 + 1 : Wp1;
+        const i00 = (y0 * Wp + x0) * P, i01 = (y0 * Wp + x1) * P, i10 = (y1 * Wp + x0) * P, i11 = (y1 * Wp + x1) * P;
+        const gx = 1 - fx, gy = 1 - fy, o = k * P;
+        for (let p = 0; p < P; p++) {
+          acc[o + p] += wf * f32((img[i00 + p] * gx + img[i01 + p] * fx) * gy + (img[i10 + p] * gx + img[i11 + p] * fx) * fy);
+        }
+      }
+    }
   }
 
   /** Bilinear samples of the first `np` planes of view planes `img` at the pixels `idx` (flat
@@ -202,6 +220,9 @@ export class Renderer {
       }
     };
     const blurred = new Float32Array(G);
+    // the box's reflected rows and columns: rows[i + a] = refl(i + a − 2), a = 0..3 (no calls per tap)
+    const rows = Int32Array.from({ length: gh + 3 }, (_, i) => refl(i - 2, gh));
+    const cols = Int32Array.from({ length: gw + 3 }, (_, j) => refl(j - 2, gw));
     cand.forEach((fn, k) => {
       for (let i = 0; i < gh; i++) for (let j = 0; j < gw; j++) D[i * gw + j] = fn(i * S, j * S);
       src.forEach(([r, c], q) => this._sample(imgs[q], idx, gw, D, s - r, t - c, 1, smp[q], S, gw));
@@ -215,7 +236,10 @@ export class Renderer {
       for (let i = 0; i < gh; i++) {                          // 4×4 box, anchor (2, 2)
         for (let j = 0; j < gw; j++) {
           let sum = 0;
-          for (let a = -2; a <= 1; a++) for (let b = -2; b <= 1; b++) sum += cost[refl(i + a, gh) * gw + refl(j + b, gw)];
+          for (let a = 0; a < 4; a++) {
+            const row = rows[i + a] * gw;
+            for (let b = 0; b < 4; b++) sum += cost[row + cols[j + b]];
+          }
           blurred[i * gw + j] = f32(sum / 16);
         }
       }
@@ -229,8 +253,11 @@ export class Renderer {
       }
     });
     const out = new Float32Array(H * W);
-    for (let y = 0; y < H; y++) {
-      for (let x = 0; x < W; x++) out[y * W + x] = cand[choice[(y >> 2) * gw + (x >> 2)]](y, x);
+    for (let y = 0; y < H; y++) {                              // (the candidates, inlined)
+      for (let x = 0; x < W; x++) {
+        const k = choice[(y >> 2) * gw + (x >> 2)];
+        out[y * W + x] = k === 0 ? median : k === 1 ? med[(y >> 3) * bx + (x >> 3)] : disp[y * W + x];
+      }
     }
     return out;
   }
