@@ -568,32 +568,45 @@ function parseBlock(data, start, end, tables, nt, pcs, kind, key, what) {
   return { modes, levels };
 }
 
-/** Residual of one tb and plane: levels (64, scan order) → out (64, raster), exact integers. */
+const T8F = Float64Array.from(T8.flat());           // T8 row-major: T8F[k·8 + i] = T8[k][i]
+const RES_X = new Float64Array(64), RES_Y = new Float64Array(64), RES_OUT = new Float64Array(64);
+
+/** Residual of one tb and plane: levels (64, scan order) → out (64, raster), exact integers.
+ *  Every product and sum is an integer below 2^53, so the terms of zero rows of X (first pass)
+ *  and zero columns of X, hence of Y (second pass), are skipped without changing a value. */
 function residual(levels, off, step16, bypass, out) {
-  const X = new Float64Array(64);
-  let any = false;
+  const X = RES_X;
+  X.fill(0);
+  let rowsNz = 0, colsNz = 0;
   for (let i = 0; i < 64; i++) {
     const q = levels[off + i];
     if (!q) continue;
-    any = true;
     let v = Math.floor((Math.abs(q) * step16 + 8) / 16);
     if (v > COEF_MAX) v = COEF_MAX;
-    X[bypass ? i : ZIGZAG[i]] = q < 0 ? -v : v;
+    const at = bypass ? i : ZIGZAG[i];
+    X[at] = q < 0 ? -v : v;
+    rowsNz |= 1 << (at >> 3);
+    colsNz |= 1 << (at & 7);
   }
-  if (!any) { out.fill(0); return; }
+  if (!rowsNz) { out.fill(0); return; }
   if (bypass) { out.set(X); return; }
-  const Y = new Float64Array(64);
+  const Y = RES_Y;
   for (let i = 0; i < 8; i++) {                        // Y = (Tᵀ X + 64) >> 7
     for (let j = 0; j < 8; j++) {
       let s = 0;
-      for (let k = 0; k < 8; k++) s += T8[k][i] * X[k * 8 + j];
+      if (colsNz & (1 << j)) {
+        for (let k = 0; k < 8; k++) if (rowsNz & (1 << k)) s += T8F[k * 8 + i] * X[k * 8 + j];
+      }
       Y[i * 8 + j] = Math.floor((s + 64) / 128);
     }
   }
   for (let i = 0; i < 8; i++) {                        // R = (Y T + 128) >> 8
     for (let j = 0; j < 8; j++) {
       let s = 0;
-      for (let k = 0; k < 8; k++) s += Y[i * 8 + k] * T8[k][j];
+      for (let k = 0; k < 8; k++) {
+        const y = Y[i * 8 + k];
+        if (y) s += y * T8F[k * 8 + j];
+      }
       out[i * 8 + j] = Math.floor((s + 128) / 256);
     }
   }
@@ -859,13 +872,19 @@ export class TxDecoder {
     if (this.file.info("tx.blocks").length !== off + 8) throw new FormatError(`tx.blocks has ${this.file.info("tx.blocks").length} bytes, the index says ${off + 8}`);
   }
 
-  /** Prediction of the 8×8 tb at pixel (y0, x0) of view v into out (64·P, raster, planes last). */
-  _predictTb(v, y0, x0, out) {
+  /** Prediction of the 8×8 tb at pixel (y0, x0) of view v, written where it lies in img (Hp·Wp·P).
+   *  Each tap ((a(16−fx) + b·fx)(16−fy) + (c(16−fx) + e·fx)·fy + 128) >> 8 is summed as
+   *  a·w00 + b·w01 + c·w10 + e·w11 + 128 (the same integer); a window inside the key view reads
+   *  its taps without clamping. */
+  _predictTb(v, y0, x0, img) {
     const P = this.P, Hp = this.Hp, Wp = this.Wp;
     const loc8 = (y0 >> 3) * this.nbx8 + (x0 >> 3);
     const cell = this.cell[v];
     const d = this.disp[cell * this.nby8 * this.nbx8 + loc8], mode = this.modes[cell * this.nby8 * this.nbx8 + loc8];
-    const acc = new Int32Array(64 * P);
+    const n = 64 * P;
+    if (!this._acc || this._acc.length !== n) this._acc = new Int32Array(n);
+    const acc = this._acc;
+    acc.fill(0);
     for (let j = 0; j < MAX_REFS; j++) {
       const k = this.refs[4 * v + j];
       if (k < 0) continue;
@@ -875,25 +894,32 @@ export class TxDecoder {
       const Y = 16 * y0 + d * (this.pos[2 * v] - this.pos[2 * k]);
       const X = 16 * x0 + d * (this.pos[2 * v + 1] - this.pos[2 * k + 1]);
       const ry = Y >> 4, rx = X >> 4, fy = Y & 15, fx = X & 15;
+      const w00 = (16 - fx) * (16 - fy), w01 = fx * (16 - fy), w10 = (16 - fx) * fy, w11 = fx * fy;
+      const inside = ry >= 0 && ry + 8 <= Hp - 1 && rx >= 0 && rx + 8 <= Wp - 1;
       for (let y = 0; y < 8; y++) {
-        const ya = Math.min(Math.max(ry + y, 0), Hp - 1) * Wp, yb = Math.min(Math.max(ry + y + 1, 0), Hp - 1) * Wp;
+        const ya = inside ? (ry + y) * Wp : Math.min(Math.max(ry + y, 0), Hp - 1) * Wp;
+        const yb = inside ? ya + Wp : Math.min(Math.max(ry + y + 1, 0), Hp - 1) * Wp;
         for (let x = 0; x < 8; x++) {
-          const xa = Math.min(Math.max(rx + x, 0), Wp - 1), xb = Math.min(Math.max(rx + x + 1, 0), Wp - 1);
+          const xa = inside ? rx + x : Math.min(Math.max(rx + x, 0), Wp - 1);
+          const xb = inside ? xa + 1 : Math.min(Math.max(rx + x + 1, 0), Wp - 1);
+          const i00 = (ya + xa) * P, i01 = (ya + xb) * P, i10 = (yb + xa) * P, i11 = (yb + xb) * P, o = (y * 8 + x) * P;
           for (let p = 0; p < P; p++) {
-            const a = kp[(ya + xa) * P + p], b = kp[(ya + xb) * P + p], c = kp[(yb + xa) * P + p], e = kp[(yb + xb) * P + p];
-            const s = ((a * (16 - fx) + b * fx) * (16 - fy) + (c * (16 - fx) + e * fx) * fy + 128) >> 8;
-            acc[(y * 8 + x) * P + p] += w * s;
+            acc[o + p] += w * ((kp[i00 + p] * w00 + kp[i01 + p] * w01 + kp[i10 + p] * w10 + kp[i11 + p] * w11 + 128) >> 8);
           }
         }
       }
     }
-    for (let i = 0; i < 64 * P; i++) out[i] = (acc[i] + 32) >> 6;
+    for (let y = 0; y < 8; y++) {
+      const o = ((y0 + y) * Wp + x0) * P, a = y * 8 * P;
+      for (let i = 0; i < 8 * P; i++) img[o + i] = (acc[a + i] + 32) >> 6;
+    }
   }
 
   /** Add the parsed residual of tb t (mode) to the prediction at (y0, x0) in img, clipped. */
   _addResidual(img, y0, x0, parsed, t, isKey) {
     const P = this.P, Wp = this.Wp, mode = parsed.modes[t];
-    const r = new Float64Array(64);            // skip tbs: the prediction, clipped
+    const r = RES_OUT;                         // skip tbs: the prediction, clipped
+    r.fill(0);
     for (let p = 0; p < P; p++) {
       if (mode !== MODE_SKIP) residual(parsed.levels, (t * P + p) * 64, this.step16[isKey ? 0 : 1][p], this.bypass[p], r);
       const lo = this.lo[p], hi = this.hi[p], flat = this.flat[p];
@@ -938,13 +964,7 @@ export class TxDecoder {
         }
       }
     } else {
-      const pred = new Int32Array(64 * P);
-      for (let y0 = 0; y0 < Hp; y0 += 8) {
-        for (let x0 = 0; x0 < Wp; x0 += 8) {
-          this._predictTb(k, y0, x0, pred);
-          for (let y = 0; y < 8; y++) img.set(pred.subarray(y * 8 * P, (y + 1) * 8 * P), ((y0 + y) * Wp + x0) * P);
-        }
-      }
+      for (let y0 = 0; y0 < Hp; y0 += 8) for (let x0 = 0; x0 < Wp; x0 += 8) this._predictTb(k, y0, x0, img);
     }
     const rows = this.keyRow.get(k), buf = this.file, ks = this.keySplit, sb = this.nbx / ks;
     for (let by = 0; by < this.nby; by++) {
@@ -969,13 +989,8 @@ export class TxDecoder {
     if (level !== 0 && level !== 1) throw new LfcError(`level ${level} is not 0 or 1 (0 = full quality, 1 = prediction only)`);
     if (this.keySlot[v] >= 0) return this.keyPlanes[this.keySlot[v]];
     const P = this.P, Hp = this.Hp, Wp = this.Wp, B = this.B, tpb = this.tpb, nloc = this.nby * this.nbx;
-    const img = new Int32Array(Hp * Wp * P), pred = new Int32Array(64 * P);
-    for (let y0 = 0; y0 < Hp; y0 += 8) {
-      for (let x0 = 0; x0 < Wp; x0 += 8) {
-        this._predictTb(v, y0, x0, pred);
-        for (let y = 0; y < 8; y++) img.set(pred.subarray(y * 8 * P, (y + 1) * 8 * P), ((y0 + y) * Wp + x0) * P);
-      }
-    }
+    const img = new Int32Array(Hp * Wp * P);
+    for (let y0 = 0; y0 < Hp; y0 += 8) for (let x0 = 0; x0 < Wp; x0 += 8) this._predictTb(v, y0, x0, img);
     if (level === 0) {
       const locs = [];
       for (let l = 0; l < nloc; l++) if (this.coded[v * nloc + l]) locs.push(l);
