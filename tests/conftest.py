@@ -24,3 +24,22 @@ def shared_scene(name: str) -> Path:
 @pytest.fixture
 def rng():
     return np.random.default_rng(1234)
+
+
+@pytest.fixture
+def failing_write(monkeypatch):
+    """``failing_write(module, name, why)``: that module's ``write_image`` raises a SceneError
+    (with ``why``) for files called ``name`` and writes every other file."""
+    from formats.errors import SceneError
+
+    def install(module, name: str, why: str = "test"):
+        real = module.write_image
+
+        def write(path, px):
+            if path.name == name:
+                raise SceneError(f"{path}: cannot write ({why})")
+            real(path, px)
+
+        monkeypatch.setattr(module, "write_image", write)
+
+    return install

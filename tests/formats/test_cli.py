@@ -215,20 +215,12 @@ def test_decode_that_fails_part_way_leaves_no_views(encoded, tmp_path, monkeypat
     assert not any(out.iterdir())
 
 
-def test_decode_whose_file_write_fails_leaves_no_views(encoded, tmp_path, monkeypatch, capsys):
+def test_decode_whose_file_write_fails_leaves_no_views(encoded, tmp_path, failing_write, capsys):
     """Files are written on threads while the next row decodes; a write that fails (here the
     second row's second view) stops the decode with its one-line error, and no views stay."""
     import formats.scenes as scenes
-    from formats.errors import SceneError
 
-    real = scenes.write_image
-
-    def fail_one(path, px):
-        if path.name == "r01_c01.png":
-            raise SceneError(f"{path}: cannot write (No space left on device)")
-        real(path, px)
-
-    monkeypatch.setattr(scenes, "write_image", fail_one)
+    failing_write(scenes, "r01_c01.png", "No space left on device")
     out = tmp_path / "full"
     assert main(["decode", str(encoded), str(out), "--quiet"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

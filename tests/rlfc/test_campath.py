@@ -124,7 +124,7 @@ def test_path_frames_never_mix_with_an_earlier_sequence(grid, tmp_path, capsys):
                                                      "notes.txt"]
 
 
-def test_png_frames_written_in_the_background_fail_loudly(tmp_path, monkeypatch):
+def test_png_frames_written_in_the_background_fail_loudly(tmp_path, failing_write):
     """PNG frames go to a writer thread; every frame lands in order, and a write that fails
     raises its typed error at the next write or at close, never silently."""
     import numpy as np
@@ -141,14 +141,7 @@ def test_png_frames_written_in_the_background_fail_loudly(tmp_path, monkeypatch)
     got = frame_files(tmp_path / "ok")
     assert [p.name for p in got] == [f"frame_{i:05d}.png" for i in range(5)]
     assert all((io.read_image(p) == f).all() for p, f in zip(got, frames))
-    real = io.write_image
-
-    def fail_third(path, px):
-        if path.name == "frame_00002.png":
-            raise SceneError(f"{path}: cannot write (test)")
-        real(path, px)
-
-    monkeypatch.setattr(io, "write_image", fail_third)
+    failing_write(io, "frame_00002.png")
     with pytest.raises(SceneError, match="frame_00002"):
         with SequenceWriter(tmp_path / "bad") as w:
             for f in frames:
