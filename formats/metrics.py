@@ -22,7 +22,7 @@ import numpy as np
 
 from .pixels import peak_of, to_planes
 
-__all__ = ["peak_of", "mse", "psnr_rgb", "psnr_views", "psnr_visible", "psnr_alpha", "psnr_ycocg", "ssim", "bpp",
+__all__ = ["peak_of", "mse", "psnr_rgb", "psnr_views", "psnr_visible", "psnr_alpha", "psnr_ycocg", "ssim", "ssim_image", "bpp",
            "colour_channels", "quality_report", "finite", "colour_sq_error", "psnr_from_sq_error"]
 
 
@@ -172,15 +172,16 @@ def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
 SSIM_WIN = 7
 
 
-def _ssim_view(a: np.ndarray, b: np.ndarray, peak: float) -> float:
-    """SSIM of one (H, W, C) pair, both sides at least :data:`SSIM_WIN`: scikit-image's
+def ssim_image(a: np.ndarray, b: np.ndarray, peak: float) -> float:
+    """SSIM of one (H, W, C) pair of images, both sides at least :data:`SSIM_WIN`: scikit-image's
     ``structural_similarity(a, b, channel_axis=-1, data_range=peak)`` (uniform 7×7 window,
     sample covariance, K1 = 0.01, K2 = 0.03, the window's half-width cropped from each border,
-    float64 for integer pixels and float32 for float32 ones), computed with OpenCV's box filter
-    and in-place arithmetic: the same value to ~1e-14 (float32: ~1e-7), 3–4× faster."""
+    in float32 where both images are float16/32, else float64), computed with OpenCV's box
+    filter and in-place arithmetic: the same value to ~1e-14 (float32: ~1e-7), 3–4× faster."""
     import cv2
 
-    ft = np.float32 if a.dtype in (np.float16, np.float32) else np.float64
+    small = (np.float16, np.float32)
+    ft = np.float32 if a.dtype in small and b.dtype in small else np.float64
     if a.shape[-1] == 1:                                   # (OpenCV drops a single channel's axis)
         a, b = a[..., 0], b[..., 0]
     x, y = a.astype(ft), b.astype(ft)
@@ -217,7 +218,7 @@ def _ssim_view(a: np.ndarray, b: np.ndarray, peak: float) -> float:
 
 def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
     """Mean SSIM over views of the colour channels (scikit-image's definition, channel_axis=-1,
-    data_range=peak; :func:`_ssim_view`), views on a few threads (OpenCV and numpy release the
+    data_range=peak; :func:`ssim_image`), views on a few threads (OpenCV and numpy release the
     GIL). A view smaller than the 7×7 window counts 1 where it is exact, else 0."""
     from concurrent.futures import ThreadPoolExecutor
 
@@ -231,7 +232,7 @@ def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
 
     def one(i):
         a, b = r[i], d[i]
-        return _ssim_view(a, b, peak) if min(a.shape[:2]) >= SSIM_WIN else float(np.all(a == b))
+        return ssim_image(a, b, peak) if min(a.shape[:2]) >= SSIM_WIN else float(np.all(a == b))
 
     with ThreadPoolExecutor(max(1, min(LOCAL_THREADS, r.shape[0]))) as pool:
         vals = list(pool.map(one, range(r.shape[0])))

@@ -24,13 +24,14 @@ from .training import targets_of
 
 
 def _ssim(a: np.ndarray, b: np.ndarray) -> float:
-    """SSIM of two (h, w, c) images in [0, 1]; NaN where the image is smaller than SSIM's 7-px
-    window (tiny low levels), which the caller reports as None."""
-    from skimage.metrics import structural_similarity
+    """SSIM of two (h, w, c) images in [0, 1] (:func:`formats.metrics.ssim_image`, scikit-image's
+    definition); NaN where the image is smaller than SSIM's 7-px window (tiny low levels), which
+    the caller reports as None."""
+    from formats.metrics import SSIM_WIN, ssim_image
 
-    if min(a.shape[:2]) < 7:
+    if min(a.shape[:2]) < SSIM_WIN:
         return float("nan")
-    return float(structural_similarity(a, b, channel_axis=-1, data_range=1.0))
+    return ssim_image(a, b, 1.0)
 
 
 def first_renderable_end(c) -> int:

@@ -67,3 +67,7 @@ def test_ssim_is_scikit_images(channels, dtype, shape):
     assert M.ssim(ref, ref.copy()) == pytest.approx(1.0, abs=1e-12)
     tiny = ref[:, :6, :5]
     assert M.ssim(tiny, tiny.copy()) == 1.0 and M.ssim(tiny, dec[:, :6, :5]) == 0.0
+    if dtype == np.float32:                  # a float32 image against a float64 one: float64, as scikit-image
+        d64 = dec[0].astype(np.float64)
+        want64 = structural_similarity(ref[0][..., cs], d64[..., cs], channel_axis=-1, data_range=peak)
+        assert M.ssim_image(ref[0][..., cs], d64[..., cs], peak) == pytest.approx(want64, abs=1e-12)
