@@ -90,6 +90,8 @@ class RlfcDecoder(Decoder):
         return views, by, bx
 
     def check_level(self, level) -> int:
+        if type(level) is int and 0 <= level <= self.levels:     # (the common case, without the checks' calls)
+            return level
         if isinstance(level, bool) or not isinstance(level, (int, np.integer, float, np.floating)) \
                 or not np.isfinite(level) or level != int(level) or not 0 <= int(level) <= self.levels:
             raise ParameterError(f"level must be an integer within 0..{self.levels} (0 = full quality, "
@@ -97,7 +99,8 @@ class RlfcDecoder(Decoder):
         return int(level)
 
     def view_index(self, row: int, col: int) -> int:
-        check_integers(row=row, col=col)
+        if type(row) is not int or type(col) is not int:        # (plain ints: no call)
+            check_integers(row=row, col=col)
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         return row * self.cols + col
@@ -158,7 +161,8 @@ class RlfcDecoder(Decoder):
         Block (by, bx) covers pixels [by·B, (by+1)·B) × [bx·B, (bx+1)·B).
         """
         v = self.view_index(row, col)
-        check_integers(by=by, bx=bx)
+        if type(by) is not int or type(bx) is not int:
+            check_integers(by=by, bx=bx)
         if not (0 <= by < self.nby and 0 <= bx < self.nbx):
             raise ParameterError(f"block ({by},{bx}) is outside the {self.nby}x{self.nbx} block grid "
                                  f"({self.height}x{self.width} px, B={self.block_size})")
