@@ -652,12 +652,16 @@ class TxDecoder(ProfileDecoder):
         return predict_block_pixels(self.atlas, prefs, dm[0][loc8], dm[1][loc8], by * B, bx * B, tpb,
                                     self.atlas.ftype(self._peak), self.dtype)
 
-    def _one_ready(self, view: int, by: int) -> int:
-        """For one request of a view with references: the key-view rows its block row reaches
-        and its map decoded where they are not yet (scalar checks: the one-request paths are
-        lean); returns the view's map."""
+    def _one_rows(self, view: int, by: int) -> None:
+        """For one request: the key-view rows its block row reaches, decoded where they are not
+        yet (a scalar check: the one-request paths are lean)."""
         if not self._keys_all and not self._rows_ok[view, by]:
             self._have_rows(np.array([view]), np.array([by]))
+
+    def _one_ready(self, view: int, by: int) -> int:
+        """For one request of a view with references: :meth:`_one_rows`, and the view's map
+        decoded where it is not yet (a scalar check, not :meth:`_maps_of`); returns the map."""
+        self._one_rows(view, by)
         cell = self.lay.cell[view]
         if not self._map_done[cell]:                    # (not _maps_of: a scalar check)
             self._have_maps(np.array([cell]))
@@ -668,8 +672,7 @@ class TxDecoder(ProfileDecoder):
         (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
         B, P, tpb = self.block_size, self.P, self.tpb
         if self.is_key[view]:
-            if not self._keys_all and not self._rows_ok[view, by]:
-                self._have_rows(np.array([view]), np.array([by]))
+            self._one_rows(view, by)
             s = self.key_slot[view]
             return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
         cell = self._one_ready(view, by)
