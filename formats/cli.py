@@ -414,8 +414,9 @@ def _render_lfn_still(a, d, out: Path) -> int:
         img = _lfn_frame(a, d, _lfn_camera(a, d))
     write_image(out, img)
     if not a.quiet:
-        print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
-              f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes), "
+        size = (f"foveated around {a.gaze}: the network of {d.neurons:g} neurons per layer at the gaze" if a.gaze
+                else f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes)")
+        print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, {size}, "
               f"{d.rays_evaluated} rays evaluated")
     return 0
 
@@ -426,6 +427,8 @@ def _render_kind(a, codec: str) -> bool:
     from .campath import turn_frames
 
     lfn = codec == "lfn"
+    if a.fovea is not None and a.gaze is None:
+        raise ParameterError("--fovea sets the radii of --gaze's foveation: give --gaze X,Y too")
     if lfn:
         used = [o for o, v in (("--focus", a.focus is not None), ("--aperture", a.aperture != 0), ("--fast", a.fast))
                 if v]
@@ -434,7 +437,7 @@ def _render_kind(a, codec: str) -> bool:
                                  f"field network renders pinhole cameras (--at, --pose, --turn, --stereo)")
     else:
         used = [o for o, v in (("--pose", a.pose), ("--turn", a.turn), ("--stereo", a.stereo), ("--level", a.level),
-                               ("--scale", a.scale)) if v is not None]
+                               ("--scale", a.scale), ("--gaze", a.gaze)) if v is not None]
         if used:
             raise ParameterError(f"{a.input}: {', '.join(used)} {'is an option' if len(used) == 1 else 'are options'} "
                                  f"for light field network files (this is {codec}); an RLFC grid renders positions "
@@ -511,13 +514,32 @@ def _lfn_frame(a, d, pose: np.ndarray) -> np.ndarray:
     scale = 1.0 if a.scale is None else a.scale
     if not (math.isfinite(scale) and 0 < scale <= 4):
         raise ParameterError(f"--scale must be within (0, 4], got {scale}")
-    neurons = _lfn_neurons(a, d)
+    if a.gaze is not None:
+        render = _lfn_foveated(a, d, scale)
+    else:
+        neurons = _lfn_neurons(a, d)
+        render = lambda p: d.render_pose(p, neurons, scale)      # noqa: E731
     if a.stereo is None:
-        return d.to_pixels(d.render_pose(pose, neurons, scale))
+        return d.to_pixels(render(pose))
     if not (math.isfinite(a.stereo) and 0 <= a.stereo <= 1e6):
         raise ParameterError(f"--stereo is a finite eye distance >= 0 in scene units, got {a.stereo}")
-    return np.concatenate([d.to_pixels(d.render_pose(p, neurons, scale)) for p in d.stereo_poses(pose, a.stereo)],
-                          axis=1)
+    return np.concatenate([d.to_pixels(render(p)) for p in d.stereo_poses(pose, a.stereo)], axis=1)
+
+
+def _lfn_foveated(a, d, scale: float):
+    """``pose → RGBA`` rendering --gaze's foveation map (the largest held network inside
+    --fovea's inner radius, the base network at its outer one) with fewer samples where the
+    network is coarser (LfnRenderer.render_pose_lod_mip)."""
+    if not hasattr(d, "render_pose_lod_mip"):
+        raise ParameterError(f"{a.input}: --gaze renders one network's sizes; a tile set blends several networks "
+                             f"(render it without --gaze)")
+    if a.level is not None:
+        raise ParameterError("--gaze renders the largest network at the gaze and smaller ones around it: give "
+                             "--gaze or --level")
+    gaze = _floats(a.gaze, 2, "--gaze")
+    inner, outer = _floats(a.fovea or "0.1,0.5", 2, "--fovea")
+    fmap = d.foveation_map(tuple(gaze), inner, outer, dither=False, scale=scale)
+    return lambda p: d.render_pose_lod_mip(p, fmap)
 
 
 def _render_path(a, out: Path) -> int:
@@ -990,6 +1012,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "display ladder within its bytes (sizes the encoder measured to beat every smaller one)")
     r.add_argument("--scale", type=float, default=None,
                    help="light field networks: output size relative to the captured views, (0, 4] (default 1)")
+    r.add_argument("--gaze", metavar="X,Y", default=None,
+                   help="light field networks: foveated rendering around this point (pixels of the output frame): "
+                        "the largest network near it, smaller networks drawn with fewer samples farther out "
+                        "(about half a full render's time)")
+    r.add_argument("--fovea", metavar="INNER,OUTER", default=None,
+                   help="with --gaze: the full network within INNER x the frame's diagonal of the gaze, the base "
+                        "network from OUTER x the diagonal on (default 0.1,0.5)")
     r.add_argument("--partial", action="store_true",
                    help="accept a byte prefix of a file (a progressive download): use what its bytes hold (a light field "
                         "network's prefix is a smaller network; its captured cameras are at the end, so give --pose)")

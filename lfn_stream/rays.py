@@ -23,8 +23,10 @@ def normalization(lf: LightField, views: np.ndarray | None = None) -> tuple[list
 
 
 def view_rays(lf: LightField, view: int, scale: float = 1.0, centre=(0, 0, 0), radius: float = 1.0,
-              size: tuple[int, int] | None = None) -> np.ndarray:
-    """Plücker rays through the pixel centres of one view rendered at ``scale``.
+              size: tuple[int, int] | None = None, spacing: tuple[float, float] | None = None,
+              at: np.ndarray | None = None) -> np.ndarray:
+    """Plücker rays through the pixel centres of one view rendered at ``scale`` (``size``,
+    ``spacing`` and ``at``: as :func:`camera_rays`).
 
     Returns:
         (h, w, 6) float32 with h, w = round(H·scale), round(W·scale) (or ``size``).
@@ -35,22 +37,31 @@ def view_rays(lf: LightField, view: int, scale: float = 1.0, centre=(0, 0, 0), r
     else:
         c2w = np.eye(4)
         c2w[:3, 3] = lf.positions[r, c]
-    return camera_rays(c2w, lf.focal, lf.principal, lf.height, lf.width, scale, centre, radius, size)
+    return camera_rays(c2w, lf.focal, lf.principal, lf.height, lf.width, scale, centre, radius, size, spacing, at)
 
 
 def camera_rays(c2w: np.ndarray, focal, principal, H: int, W: int, scale: float = 1.0, centre=(0, 0, 0),
-                radius: float = 1.0, size: tuple[int, int] | None = None) -> np.ndarray:
+                radius: float = 1.0, size: tuple[int, int] | None = None,
+                spacing: tuple[float, float] | None = None, at: np.ndarray | None = None) -> np.ndarray:
     """Plücker rays through the pixel centres of a camera with pose ``c2w`` (4×4, OpenGL axes),
     focal lengths and principal point in pixels of an H×W view, rendered at ``scale``.
+    ``spacing`` (sy, sx): output pixels per view pixel along y and x, where they are not
+    ``size`` / (H, W) (a lattice every k pixels of a render that a size does not divide).
+    ``at``: only the rays of these flat (row-major) pixel indices.
 
     Returns:
-        (h, w, 6) float32 with h, w = round(H·scale), round(W·scale) (or ``size``).
+        (h, w, 6) float32 with h, w = round(H·scale), round(W·scale) (or ``size``); with ``at``,
+        (len(at), 6).
     """
     h, w = size or (max(1, round(H * scale)), max(1, round(W * scale)))
-    sy, sx = h / H, w / W
+    sy, sx = spacing or (h / H, w / W)
     fx, fy = focal[0] * sx, focal[1] * sy
     cx, cy = principal[0] * sx, principal[1] * sy
-    ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    if at is None:
+        ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+    else:
+        ys, xs = np.divmod(np.asarray(at, np.int64), w)
+        ys, xs = ys + 0.5, xs + 0.5
     with np.errstate(all="ignore"):          # checked below: a ray that is not finite is an error
         d = np.stack([(xs - cx) / fx, -(ys - cy) / fy, -np.ones_like(xs)], -1) @ c2w[:3, :3].T
         d /= np.linalg.norm(d, axis=-1, keepdims=True)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numpy as np
 import torch
 
@@ -26,6 +27,13 @@ ALPHA_MIN = 2.0 ** -20   # below it a pixel's colour is 0 (invisible at 16 bits;
 
 OCC_BATCH = 16384   # rays per occupancy-net call: ~2 MiB of activations (one 65536-ray call ran ~4x slower)
 MAX_SIZE_PASSES = 16  # an all-integer size map with at most this many sizes runs one fused pass per size
+MIP_LEVELS = 3        # render_lod_mip's coarsest lattice: every 2^3 pixels (the base network's 1/8 scale)
+#: render_lod_mip: level j's lattice (every 2^j pixels) runs the size made for 2^-(j − this) of the
+#: full scale, a finer network than the stride strictly allows: the nested networks are smoother
+#: than their nominal scale (sampled at the lattice and upsampled they are 42-65 dB from the same
+#: network at every pixel), and the finer size is closer to the captured views (BENCHMARKS.md)
+MIP_SHARPEN = 0.75
+MIP_BLEND = 0.25      # render_lod_mip: the part of each interval between two levels that blends them
 
 
 def dither_threshold(height: int, width: int, frame: int = 0) -> np.ndarray:
@@ -511,13 +519,9 @@ class LfnRenderer(Decoder):
                 out[part] = self.model.forward_lod(x[torch.from_numpy(part).to(self.device)], t).float().cpu().numpy()
         return out
 
-    def render_lod_map(self, row: int, col: int, lod: np.ndarray, quantum: float | None = None,
-                       passes: int | None = None) -> np.ndarray:
-        """A view where pixel (y, x) is rendered with ``lod[y, x]`` (fractional) neurons, in at
-        most ``passes`` network passes (:meth:`render_rays_lod`; None: its default); ``quantum``
-        rounds the sizes first (None: exact). The view is rendered at the size of ``lod``: the
-        views' (H, W), or any other (h, w) of the same aspect, e.g. a display's (the scale is
-        h / H). Returns (h, w, 4) float32 RGBA (premultiplied)."""
+    def _lod_map(self, lod) -> tuple[np.ndarray, float]:
+        """(lod as float64 (h, w), its scale h / H), or a ParameterError: a 2-D map of the views'
+        aspect within ``Limits.max_view_pixels``."""
         lod = np.asarray(lod, np.float64)
         if lod.ndim != 2 or min(lod.shape) < 1:
             raise ParameterError(f"lod must be an (h, w) map of sizes, got shape {lod.shape}")
@@ -527,11 +531,161 @@ class LfnRenderer(Decoder):
         scale = h / self.height
         if (round(self.height * scale), round(self.width * scale)) != (h, w):
             raise ParameterError(f"a {h}x{w} lod map is not the {self.height}x{self.width} views at one scale")
+        if not np.isfinite(lod).all():
+            raise ParameterError("lod must hold finite sizes")
+        return lod, scale
+
+    def render_lod_map(self, row: int, col: int, lod: np.ndarray, quantum: float | None = None,
+                       passes: int | None = None) -> np.ndarray:
+        """A view where pixel (y, x) is rendered with ``lod[y, x]`` (fractional) neurons, in at
+        most ``passes`` network passes (:meth:`render_rays_lod`; None: its default); ``quantum``
+        rounds the sizes first (None: exact). The view is rendered at the size of ``lod``: the
+        views' (H, W), or any other (h, w) of the same aspect, e.g. a display's (the scale is
+        h / H). Returns (h, w, 4) float32 RGBA (premultiplied)."""
+        lod, scale = self._lod_map(lod)
+        h, w = lod.shape
         rays = self.view_rays(row, col, scale).reshape(-1, 6)
         lod = lod.reshape(-1)
         if quantum:
             lod = np.round(lod / quantum) * quantum
         return self.render_rays_lod(rays, lod, passes).reshape(h, w, 4)
+
+    def mip_levels(self, lod: np.ndarray, max_level: int = MIP_LEVELS) -> np.ndarray:
+        """Per-pixel mip level of a size map (float64, same shape): log2 of how much coarser the
+        image scale a size stands for (:meth:`LfnConfig.scale_of`) is than the largest held
+        size's, within [0, ``max_level``] and the base network's level. 0 = every pixel drawn."""
+        lo, hi = self.neuron_range
+        c = self.cfg
+        span = c.max_neurons - c.min_neurons
+        per = math.log2(1.0 / c.min_scale) / span if span else 0.0     # levels per neuron (scale_of is log-linear)
+        return np.clip((hi - np.clip(lod, lo, hi)) * per, 0.0, min(float(max_level), (hi - lo) * per))
+
+    def mip_neurons(self, level: int) -> float:
+        """The integer size a mip level's lattice is rendered with: the size made for the image
+        scale 2^-(level − :data:`MIP_SHARPEN`) of the largest held size's (rounded up; the
+        largest held size at level 0), within the held range."""
+        lo, hi = self.neuron_range
+        c = self.cfg
+        span = c.max_neurons - c.min_neurons
+        if not span or level <= 0:
+            return float(hi)
+        per = math.log2(1.0 / c.min_scale) / span
+        return float(min(hi, max(lo, math.ceil(hi - max(level - MIP_SHARPEN, 0.0) / per - 1e-9))))
+
+    def render_lod_mip(self, row: int, col: int, lod: np.ndarray, max_level: int = MIP_LEVELS,
+                       blend: float = MIP_BLEND, bias: float = 0.0) -> np.ndarray:
+        """A view drawn from a size map with the sample density each size stands for, as
+        mipmapping draws a texture: sizes are anti-aliased networks (size n is trained on the
+        views box-filtered to :meth:`LfnConfig.scale_of` (n)), so a pixel whose size stands for
+        1/2^m of the largest size's scale needs a sample only every 2^m pixels. Level j is a
+        lattice every 2^j pixels rendered with the one integer size :meth:`mip_neurons` (j) (one
+        fused pass per level, at most ``max_level`` + 1), only at the lattice points some pixel
+        reads; each pixel takes the level below and above its :meth:`mip_levels` value ``m``,
+        each upsampled bilinearly, and blends them linearly over the middle ``blend`` of the
+        interval between them (1 = trilinear filtering; the default 0.25 blends over a quarter
+        and takes one level elsewhere, which halves the rays of the full-density level, still
+        without steps or dither noise). ``bias`` is added to ``m`` (> 0: coarser and faster, as
+        a texture's LOD bias). Where the map is the full network the pixels are exactly
+        :meth:`render`'s. ``lod`` as in :meth:`render_lod_map`, e.g. ``foveation_map(gaze,
+        dither=False)`` (0.46-0.53x a full render's time on the 360-degree capture on one CPU
+        thread, closer to the full network in the periphery than the dithered map: BENCHMARKS.md).
+
+        Returns:
+            (h, w, 4) float32 RGBA (premultiplied), (h, w) = ``lod``'s shape.
+        """
+        check_integers(row=row, col=col)
+        if not (0 <= row < self.rows and 0 <= col < self.cols):
+            raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+        lod, scale = self._lod_map(lod)
+
+        def rays_at(size, spacing, at):
+            try:
+                return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"],
+                                 size, spacing, at)
+            except ParameterError as e:              # the file's own camera and intrinsics
+                raise FormatError(f"{self.file.container.name}: view ({row},{col}): {e}") from None
+        return self._render_mip(lod, scale, rays_at, max_level, blend, bias)
+
+    def render_pose_lod_mip(self, c2w, lod: np.ndarray, max_level: int = MIP_LEVELS, blend: float = MIP_BLEND,
+                            bias: float = 0.0) -> np.ndarray:
+        """:meth:`render_lod_mip` from any camera pose (as :meth:`render_pose`): a foveated frame
+        for a headset's eye, e.g. ``render_pose_lod_mip(eye, foveation_map(gaze, dither=False,
+        scale=S))``."""
+        c2w = self._check_pose(c2w, self.norm)
+        lod, scale = self._lod_map(lod)
+        g = self._intr
+        return self._render_mip(lod, scale, lambda size, spacing, at: camera_rays(
+            c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"], size,
+            spacing, at), max_level, blend, bias)
+
+    @torch.no_grad()
+    def _render_mip(self, lod: np.ndarray, scale: float, rays_at, max_level, blend, bias) -> np.ndarray:
+        """The mip render of :meth:`render_lod_mip`; ``rays_at(size, spacing, at)`` gives the (M, 6)
+        rays of a lattice's points ``at`` (:func:`camera_rays`' arguments)."""
+        if isinstance(max_level, bool) or not isinstance(max_level, (int, np.integer)) or not 0 <= max_level <= 8:
+            raise ParameterError(f"max_level must be an integer in 0..8, got {max_level!r}")
+        check_numbers(blend=blend, bias=bias)
+        if not (0 <= blend <= 1 and -8 <= bias <= 8):
+            raise ParameterError(f"blend must be within [0, 1] and bias within [-8, 8], got {blend!r}, {bias!r}")
+        h, w = lod.shape
+        m = np.clip(self.mip_levels(lod, int(max_level)) + bias, 0.0, float(max_level))
+        lower = np.floor(m)
+        f = m - lower
+        # the upper level's share: linear over the middle `blend` of each interval (1: trilinear)
+        up = np.clip((f - 0.5) / blend + 0.5, 0.0, 1.0) if blend > 0 else (f >= 0.5).astype(np.float64)
+        lower = lower.astype(np.int64)
+        out = np.zeros((h, w, 4), np.float32)
+
+        def at_pixels(idx):                 # the rays of these pixels
+            return rays_at((h, w), (h / self.height, w / self.width), idx)
+
+        dt = torch.float16 if self.half else torch.float32
+        for j in range(int(lower.max()) + 2):
+            wt = (np.where(lower == j, 1.0 - up, 0.0) + np.where(lower == j - 1, up, 0.0)).astype(np.float32)
+            used = wt > 0
+            if not used.any():
+                continue
+            if j == 0:
+                at = np.flatnonzero(used)
+                img = np.zeros((h * w, 4), np.float32)
+                img[at] = self.render_rays(at_pixels(at), self.mip_neurons(0))
+                out += wt[..., None] * img.reshape(h, w, 4)
+                continue
+            k = 1 << j
+            hj, wj = -(-h // k), -(-w // k)
+            # the lattice points a used pixel's bilinear taps read: its 2^j block's and the
+            # neighbours' (a pixel's sample position lies within half a lattice step of its block)
+            need = np.zeros((hj * k, wj * k), bool)
+            need[:h, :w] = used
+            need = need.reshape(hj, k, wj, k).any(axis=(1, 3))
+            need = cv2.dilate(need.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+            cand = np.flatnonzero(need)
+            rays = rays_at((hj, wj), (h / (self.height * k), w / (self.width * k)), cand)
+            inside = None
+            if self.occ is not None:
+                # the occupancy net's cut is sharp, and upsampled from a lattice it would be drawn
+                # as stairs: the network runs at the lattice points next to an occupied one too
+                # (colour to upsample up to the silhouette), and the silhouette is cut per pixel
+                # below, asking the occupancy net only where the lattice's answer is mixed
+                inside = np.zeros(hj * wj, np.uint8)
+                inside[cand[self._occupied(torch.from_numpy(rays).to(self.device, dt)).cpu().numpy()]] = 1
+                inside = inside.reshape(hj, wj)
+                sel = cv2.dilate(inside, np.ones((3, 3), np.uint8)).view(bool).reshape(-1)[cand]
+                cand, rays = cand[sel], np.ascontiguousarray(rays[sel])
+            img = np.zeros((hj * wj, 4), np.float32)
+            img[cand] = self.render_rays(rays, self.mip_neurons(j), use_occupancy=False)
+            # OpenCV's pixel-centre convention: pixel y samples the lattice at (y + 0.5)/k − 0.5
+            img = cv2.resize(img.reshape(hj, wj, 4), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
+            if inside is not None:
+                frac = cv2.resize(inside.astype(np.float32), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
+                keep = frac > 1 - 1e-4                                  # every tap occupied
+                mixed = np.flatnonzero(used & ~keep & (frac > 1e-4))
+                if mixed.size:
+                    x = torch.from_numpy(at_pixels(mixed)).to(self.device, dt)
+                    keep.reshape(-1)[mixed[self._occupied(x).cpu().numpy()]] = True
+                img *= keep[..., None]
+            out += wt[..., None] * img
+        return out
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
                       dither: bool = True, sizes: int = 8, frame: int = 0, scale: float = 1.0) -> np.ndarray:
@@ -546,9 +700,12 @@ class LfnRenderer(Decoder):
           (:func:`dither_threshold`, shifted by ``frame``: advance it per frame and the noise
           averages out). :meth:`render_lod_map` runs one fused pass per size: the fast form
           (0.54-0.73x a full render on one CPU thread, BENCHMARKS.md), and the one without arcs.
-        - ``dither=False``: fractional sizes, rendered exactly: no pixel noise, but the nested
-          networks' differences from one size to the next show as faint arcs around the gaze,
-          and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.
+        - ``dither=False``: fractional sizes. :meth:`render_lod_mip` (or :meth:`render_pose_lod_mip`)
+          draws them with fewer samples where the network is coarser: the fastest form (0.46-0.53x
+          a full render on the 360-degree capture), continuous, without pixel noise.
+          :meth:`render_lod_map` renders every pixel at its exact size: no pixel noise, but the
+          nested networks' differences from one size to the next show as faint arcs around the
+          gaze, and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.
         """
         h, w = self._scaled(scale)
         if not (np.isfinite(gaze).all() and np.size(gaze) == 2):

@@ -6,7 +6,11 @@ For an LFN file and a few captured views, renders each view (at the scene's reso
   (:meth:`lfn_stream.LfnRenderer.render_rays_lod`), no dithering: the reference transition;
 - ``dither K``: each pixel at one of K integer sizes, interleaved-gradient-noise dither between
   neighbouring sizes (``foveation_map(dither=True, sizes=K)``), one fused pass per size;
-- ``snap K``: the same K sizes, each pixel rounded to the nearest (no dither): level steps.
+- ``snap K``: the same K sizes, each pixel rounded to the nearest (no dither): level steps;
+- ``mip L``: the exact map drawn as mipmapping draws a texture
+  (:meth:`lfn_stream.LfnRenderer.render_lod_mip`): lattices every 2^j pixels, j ≤ L, each at the
+  size made for its scale, blended trilinearly; ``rays`` = network evaluations against the full
+  render's.
 
 Reports ms per view and the ratio to the full-width render (issue 17: ≤ 0.6×), and, against
 the full render over the band between the inner and outer radius (grey levels of 255): PSNR
@@ -14,10 +18,13 @@ of one frame, of one frame seen through a 1-pixel Gaussian blur (what a display 
 integrates), and of the mean of 4 frames with the dither advancing (temporal dither); the
 *ring error* (:func:`ring_error`: arcs and level steps around the gaze, the smooth loss of
 detail with distance taken out); the transition roughness (mean |Laplacian| of (render −
-full): pixel-scale noise); and the fovea's PSNR (the full network up to rounding).
+full): pixel-scale noise); the fovea's PSNR (the full network up to rounding); and with
+``--scene``, ``gt_psnr``: the band's PSNR against the captured view (colour premultiplied by
+alpha where the views have one), the measure of what foveation loses that a viewer could see.
 
 Usage:
-    python -m tools.bench_foveation FILE.lfc [--views 0 7 33] [--rounds 3] [--sizes 4 8 16] [--out JSON]
+    python -m tools.bench_foveation FILE.lfc [--views 0 7 33] [--rounds 3] [--sizes 4 8 16] [--mip 2 3]
+        [--blend 1 0.25] [--bias 0] [--scene DIR] [--out JSON]
 """
 from __future__ import annotations
 
@@ -30,7 +37,7 @@ import torch
 
 from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
-from lfn_stream.render import size_levels
+from lfn_stream.render import MIP_BLEND, size_levels
 from tools.common import log, machine
 
 
@@ -100,14 +107,25 @@ def main(argv=None) -> int:
     ap.add_argument("--inner", type=float, default=0.1)
     ap.add_argument("--outer", type=float, default=0.5)
     ap.add_argument("--sizes", type=int, nargs="+", default=[4, 8, 16])
+    ap.add_argument("--mip", type=int, nargs="*", default=[3], help="render_lod_mip's max_level values to time")
+    ap.add_argument("--blend", type=float, nargs="*", default=[MIP_BLEND], help="render_lod_mip's blend values")
+    ap.add_argument("--bias", type=float, nargs="*", default=[0.0], help="render_lod_mip's bias values")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--device", default="cpu", help="torch device the networks run on (cpu, cuda)")
     ap.add_argument("--scale", type=float, default=1.0,
                     help="render at this multiple of the views' size (a display's resolution)")
+    ap.add_argument("--scene", default=None, help="the captured scene (scale 1 only): PSNR against its views")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
     torch.set_num_threads(a.threads)
     r = LfnRenderer(open_lfc(a.file), device=a.device)
+    lf = None
+    if a.scene:
+        from formats import read_scene
+
+        lf = read_scene(a.scene)
+        if a.scale != 1 or (lf.rows, lf.cols, lf.height, lf.width) != (r.rows, r.cols, r.height, r.width):
+            raise SystemExit(f"{a.scene}: not the views of {a.file} at --scale 1")
     rows = []
     for v in a.views:
         row, col = divmod(v, r.cols)
@@ -117,20 +135,31 @@ def main(argv=None) -> int:
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / float(np.hypot(H, W))
         fovea, band = e < a.inner, (e >= a.inner) & (e <= a.outer)
         radius, angle = np.hypot(xs - gaze[0], ys - gaze[1]), np.arctan2(ys - gaze[1], xs - gaze[0])
+        n0 = r.rays_evaluated
         t_full, full = timed(lambda: r.render(row, col, r.neurons, a.scale), a.rounds)
+        rays_full = (r.rays_evaluated - n0) / a.rounds
         exact_map = r.foveation_map(gaze, a.inner, a.outer, dither=False, scale=a.scale)
         t_ex, exact = timed(lambda: r.render_lod_map(row, col, exact_map), a.rounds)
+
+        gt = None
+        if lf is not None:
+            gt = lf.views[row, col].astype(np.float64) / np.iinfo(lf.views.dtype).max
+            if gt.shape[-1] == 4:
+                gt = np.concatenate([gt[..., :3] * gt[..., 3:], gt[..., 3:]], -1)
 
         def measures(img, ms, frames=None):
             m = {"ms": round(ms, 1), "ratio": round(ms / t_full, 3),
                  "psnr": round(psnr_in(img, full, band), 2), "blur1_psnr": round(psnr_in(blur(img), blur(full), band), 2),
                  "ring_error": round(ring_error(img, full, radius, angle, band), 3),
                  "roughness": round(roughness(img, full, band), 3), "fovea_psnr": psnr_in(img, full, fovea)}
+            if gt is not None:
+                m["gt_psnr"] = round(psnr_in(np.clip(img, 0, 1), gt, band), 2)
             if frames is not None:
                 m["frames4_psnr"] = round(psnr_in(np.mean(frames, 0), full, band), 2)
             return m
 
         res = {"view": v, "pixels": H * W, "full_ms": round(t_full, 1),
+               **({"full_gt_psnr": round(psnr_in(np.clip(full, 0, 1), gt, band), 2)} if gt is not None else {}),
                "mean_neurons": round(float(exact_map.mean()), 2), "exact": measures(exact, t_ex)}
         lo, hi = r.neuron_range
         for k in a.sizes:
@@ -144,6 +173,11 @@ def main(argv=None) -> int:
             smap = levels[np.abs(exact_map[..., None] - levels).argmin(-1)]
             t_s, img = timed(lambda: r.render_lod_map(row, col, smap), a.rounds)
             res[f"snap_{k}"] = measures(img, t_s)
+        for L, bl, bi in [(L, bl, bi) for L in a.mip for bl in a.blend for bi in a.bias]:
+            n0 = r.rays_evaluated
+            t_m, img = timed(lambda: r.render_lod_mip(row, col, exact_map, max_level=L, blend=bl, bias=bi), a.rounds)
+            res[f"mip_{L}_{bl:g}_{bi:g}"] = {**measures(img, t_m), "rays": round((r.rays_evaluated - n0) / a.rounds / rays_full, 3),
+                               "psnr_vs_exact": round(psnr_in(img, exact, band), 2)}
         log(json.dumps(res))
         rows.append(res)
     out = {"file": a.file, "machine": machine(), "device": a.device, "scale": a.scale, "threads": a.threads, "inner": a.inner, "outer": a.outer,

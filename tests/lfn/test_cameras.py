@@ -95,6 +95,14 @@ def test_cli_renders_lfn_cameras(tmp_path):
     pair = _render_cli(tmp_path, "--stereo", "0.25")
     assert pair.shape == (29, 74, 4) and np.array_equal(pair, np.concatenate([px(left), px(right)], 1))
     assert not np.array_equal(pair[:, :37], pair[:, 37:])
+    # --gaze: the foveation map drawn by render_pose_lod_mip (--fovea sets its radii), per eye
+    fov = r3.foveation_map((9.0, 7.0), 0.05, 0.4, dither=False, scale=2.0)
+    want = r3.to_pixels(r3.render_pose_lod_mip(r3.pose(2, 2), fov))
+    assert np.array_equal(_render_cli(tmp_path, "--gaze", "9,7", "--fovea", "0.05,0.4", "--scale", "2"), want)
+    assert not np.array_equal(want, px(r3.pose(2, 2), scale=2.0))
+    fov = r3.foveation_map((20.0, 14.0), dither=False)
+    eyes = [r3.to_pixels(r3.render_pose_lod_mip(p, fov)) for p in (left, right)]
+    assert np.array_equal(_render_cli(tmp_path, "--gaze", "20,14", "--stereo", "0.25"), np.concatenate(eyes, 1))
 
 
 def test_cli_lfn_quilt_path_and_partial_prefix(tmp_path):
@@ -140,6 +148,11 @@ def test_cli_lfn_quilt_path_and_partial_prefix(tmp_path):
     (["--device", "nonsense"], "not a device"),
     (["--pose", "BAD"], "16 finite numbers"),
     (["--at", "9,9"], "outside"),
+    (["--gaze", "1"], "--gaze must be 2"),
+    (["--gaze", "1,nan"], "--gaze must be 2"),
+    (["--gaze", "1,1", "--level", "1"], "give --gaze or --level"),
+    (["--fovea", "0.1,0.3"], "give --gaze"),
+    (["--gaze", "1,1", "--fovea", "0.5,0.1"], "inner and outer"),
 ])
 def test_cli_lfn_render_errors_are_one_line(tmp_path, capsys, args, needle):
     from formats.cli import main
@@ -157,7 +170,7 @@ def test_cli_lfn_options_on_rlfc_files_and_prefix_without_partial(tmp_path, caps
 
     rl = ROOT / "tests" / "data" / "golden" / "rlfc_dcp_lossy_rgb8.lfc"
     for args, needle in ((["--level", "1"], "light field network files"), (["--stereo", "0.1"], "network files"),
-                         (["--path", "turn:3"], "--path turn")):
+                         (["--gaze", "4,4"], "network files"), (["--path", "turn:3"], "--path turn")):
         out = tmp_path / ("seq" if "--path" in args else "o.png")
         assert main(["render", str(rl), str(out), *args]) == 2
         err = capsys.readouterr().err

@@ -12,8 +12,10 @@ from formats.lfcfile import lfc_bytes, open_lfc
 from formats.lightfield import LightField
 from lfn_stream import (CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, TrainOptions,
                         to_sections, train)
+from lfn_stream import render as render_module
 from lfn_stream.evaluate import prefix_bytes
 from lfn_stream.pack import pack_network, step_bytes, step_name, step_offsets, unpack_network
+from lfn_stream.rays import view_rays
 from lfn_stream.sampling import RaySampler, TorchRaySampler
 from lfn_stream.sat import box_mean, box_mean_frac, box_mean_frac_torch, box_mean_torch, summed_area_table
 from tests.conftest import ROOT
@@ -286,11 +288,10 @@ def test_sampler_foreground_split_and_saliency():
     assert s2.sample(100, rng)[0].shape == (100,)
 
 
-def test_occupancy_really_skips_rays_and_lod_maps():
-    lf = smooth_lf(rows=1, cols=2, h=16, w=16, c=4)
-    m = _model()
+def _halfspace_occ() -> OccupancyNet:
+    """An occupancy net that accepts the rays with a positive first direction component."""
     occ = OccupancyNet(8)
-    with torch.no_grad():   # an occupancy net that accepts rays with positive first direction component
+    with torch.no_grad():
         for p in occ.parameters():
             p.zero_()
         occ.net[0].weight[0, 0] = 100.0
@@ -298,7 +299,13 @@ def test_occupancy_really_skips_rays_and_lod_maps():
         occ.net[2].weight[0, 0] = 1.0
         occ.net[4].weight[0, 0] = 1.0
         occ.net[4].bias[0] = -5.0
-    r = LfnRenderer(open_lfc(_lfc_bytes(m, occ, lf)), device="cpu")
+    return occ
+
+
+def test_occupancy_really_skips_rays_and_lod_maps():
+    lf = smooth_lf(rows=1, cols=2, h=16, w=16, c=4)
+    m = _model()
+    r = LfnRenderer(open_lfc(_lfc_bytes(m, _halfspace_occ(), lf)), device="cpu")
     rays = r.view_rays(0, 0).reshape(-1, 6)
     out = r.render_rays(rays, 12.0)
     keep = rays[:, 0] > 0.1
@@ -354,6 +361,95 @@ def test_occupancy_really_skips_rays_and_lod_maps():
         small.render_lod_map(0, 0, np.full((48, 48), 8.0))
     with pytest.raises(ParameterError):
         r.render_rays_lod(rays, np.full(rays.shape[0] - 1, 8.0))
+
+
+def _bilinear_up(img: np.ndarray, k: int, h: int, w: int) -> np.ndarray:
+    """A lattice every k pixels (its point i at pixel centre (i + 0.5)·k) sampled bilinearly at
+    each of h × w pixel centres, edges clamped: the reference for render_lod_mip's upsampling."""
+    def axis(n, size):
+        u = np.clip((np.arange(n) + 0.5) / k - 0.5, 0, size - 1)
+        i0 = np.floor(u).astype(int)
+        i1 = np.minimum(i0 + 1, size - 1)
+        return i0, i1, (u - i0)[:, None]
+    y0, y1, fy = axis(h, img.shape[0])
+    x0, x1, fx = axis(w, img.shape[1])
+    rows = img[y0] * (1 - fy[..., None]) + img[y1] * fy[..., None]
+    return rows[:, x0] * (1 - fx[None]) + rows[:, x1] * fx[None]
+
+
+def test_render_lod_mip_draws_each_size_at_its_own_density():
+    """render_lod_mip: the full network where the map says so (exactly render()'s pixels); a
+    map at one mip level is that level's lattice rendered at its size and upsampled bilinearly
+    (on and off the lattice's divisors, from a grid view and from a pose); between levels the
+    two blend linearly; a foveated map evaluates fewer rays than the full view; bad arguments
+    are ParameterErrors."""
+    lf = smooth_lf(rows=1, cols=2, h=16, w=16, c=4)
+    r = LfnRenderer(open_lfc(_lfc_bytes(_model(), None, lf)), device="cpu")
+    lo, hi = r.neuron_range
+    per = np.log2(1 / r.cfg.min_scale) / (r.cfg.max_neurons - r.cfg.min_neurons)
+    sharpen = render_module.MIP_SHARPEN              # level j runs the size made for level j − sharpen
+    assert r.mip_neurons(0) == hi and r.mip_neurons(1) == np.ceil(hi - (1 - sharpen) / per)
+    assert r.mip_neurons(3) == np.ceil(hi - (3 - sharpen) / per) and r.mip_neurons(8) == lo
+    full = r.render(0, 0, hi, scale=1.0)
+    assert np.array_equal(r.render_lod_mip(0, 0, np.full((16, 16), hi)), full)
+    assert np.allclose(r.mip_levels(np.array([hi, hi - 1 / per, lo, lo - 5])), [0, 1, 3, 3])
+    assert r.mip_levels(np.array([lo]), max_level=2)[0] == 2
+    for scale, (h, w) in ((1.0, (16, 16)), (1.25, (20, 20)), (0.6875, (11, 11))):   # 11 and 20: not multiples of 4
+        for j in (1, 2):
+            lod = np.full((h, w), hi - j / per)
+            k = 1 << j
+            hj, wj = -(-h // k), -(-w // k)
+            rays = view_rays(r.geom, 0, scale, r.norm["centre"], r.norm["radius"], (hj, wj), (h / (16 * k), w / (16 * k)))
+            lattice = r.render_rays(rays.reshape(-1, 6), r.mip_neurons(j)).reshape(hj, wj, 4)
+            want = _bilinear_up(lattice, k, h, w)
+            got = r.render_lod_mip(0, 0, lod)
+            assert got.shape == (h, w, 4) and np.allclose(got, want, atol=1e-5), (scale, j)
+            assert np.allclose(r.render_pose_lod_mip(r.pose(0, 0), lod), got, atol=1e-5)
+        if scale == 1.0:                  # the lattice every 2 pixels is the view rendered at scale 1/2
+            half = r.render(0, 0, r.mip_neurons(1), scale=0.5)
+            assert np.allclose(r.render_lod_mip(0, 0, np.full((16, 16), hi - 1 / per)), _bilinear_up(half, 2, 16, 16),
+                               atol=1e-5)
+    # between two levels: linear over the middle `blend` of the interval, one level elsewhere
+    lv1 = r.render_lod_mip(0, 0, np.full((16, 16), hi - 1 / per))
+    at = lambda m, **kw: r.render_lod_mip(0, 0, np.full((16, 16), hi - m / per), **kw)    # noqa: E731
+    assert np.allclose(at(0.25, blend=1.0), 0.75 * full + 0.25 * lv1, atol=1e-5)       # trilinear
+    assert np.array_equal(at(0.3), full)                                               # default blend 0.25
+    assert np.allclose(at(0.55), 0.3 * full + 0.7 * lv1, atol=1e-5)
+    assert np.allclose(at(0.8), lv1, atol=1e-5)
+    assert np.allclose(at(0.55, blend=0.0), lv1, atol=1e-5) and np.allclose(at(0.45, blend=0.0), full, atol=1e-5)
+    assert np.allclose(r.render_lod_mip(0, 0, np.full((16, 16), hi), bias=1.0), lv1, atol=1e-5)     # LOD bias
+    fov = r.foveation_map((8, 8), inner=0.05, outer=0.6, dither=False)
+    n0 = r.rays_evaluated
+    img = r.render_lod_mip(0, 0, fov)
+    assert 0 < r.rays_evaluated - n0 < 16 * 16 and img.shape == (16, 16, 4)
+    # with an occupancy net, the silhouette is cut per pixel at every level (no lattice stairs):
+    # for a convex occupied region, empty pixels are exactly 0 and occupied ones are the
+    # upsampled lattice as without the net (their taps were all evaluated)
+    ro = LfnRenderer(open_lfc(_lfc_bytes(_model(), _halfspace_occ(), lf)), device="cpu")
+    pix = torch.from_numpy(ro.view_rays(0, 0).reshape(-1, 6))
+    inside = np.zeros(256, bool)
+    inside[ro._occupied(pix).numpy()] = True
+    assert 0 < inside.sum() < 256
+    for j in (1, 2, 3):
+        lod = np.full((16, 16), hi - j / per)
+        got = ro.render_lod_mip(0, 0, lod).reshape(-1, 4)
+        want = r.render_lod_mip(0, 0, lod).reshape(-1, 4)
+        assert (got[~inside] == 0).all() and np.allclose(got[inside], want[inside], atol=1e-6), j
+    centre = r.mip_levels(fov) == 0
+    assert centre[8, 8]
+    for bad in (-1, 9, True, 1.5):
+        with pytest.raises(ParameterError):
+            r.render_lod_mip(0, 0, fov, max_level=bad)
+    for kw in ({"blend": -0.1}, {"blend": 1.5}, {"blend": float("nan")}, {"bias": 9.0}, {"bias": "1"}):
+        with pytest.raises(ParameterError):
+            r.render_lod_mip(0, 0, fov, **kw)
+    for bad in (np.full((16, 15), 8.0), np.full((16, 16), np.nan)):
+        with pytest.raises(ParameterError):
+            r.render_lod_mip(0, 0, bad)
+    with pytest.raises(ParameterError):
+        r.render_lod_mip(0, 2, fov)
+    with pytest.raises(ParameterError):
+        r.render_pose_lod_mip(np.eye(3), fov)
 
 
 def test_dither_sizes_mix_neighbouring_sizes_in_proportion():
@@ -521,8 +617,6 @@ def test_stratified_levels_see_foreground_and_background_at_every_size():
     lf = _half_transparent_lf()
     cfg = LfnConfig(depth=2, min_neurons=4, max_neurons=12, occupancy_neurons=0)
     m, _, info = train(lf, cfg, TrainOptions(steps=150, batch=1024, holdout=0, lod_levels=4))
-    from lfn_stream.rays import view_rays
-
     rays = torch.from_numpy(view_rays(lf, 0, 1.0, info["norm"]["centre"], info["norm"]["radius"]).reshape(-1, 6))
     m.eval()
     with torch.no_grad():
