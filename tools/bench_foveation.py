@@ -12,7 +12,8 @@ For an LFN file and a few captured views, renders each view (at the scene's reso
   size made for its scale, blended trilinearly; ``rays`` = network evaluations against the full
   render's.
 
-Reports ms per view and the ratio to the full-width render (issue 17: ≤ 0.6×), and, against
+Reports ms per view (medians; the modes are called in turn, round after round) and the ratio to
+the full-width render (issue 17: ≤ 0.6×), and, against
 the full render over the band between the inner and outer radius (grey levels of 255): PSNR
 of one frame, of one frame seen through a 1-pixel Gaussian blur (what a display or an eye
 integrates), and of the mean of 4 frames with the dither advancing (temporal dither); the
@@ -90,13 +91,19 @@ def ring_error(img: np.ndarray, ref: np.ndarray, radius: np.ndarray, angle: np.n
     return float(np.sqrt(np.mean(np.concatenate(res) ** 2)))
 
 
-def timed(fn, rounds: int):
-    ts, out = [], None
+def timed_modes(r, modes: dict, rounds: int) -> tuple[dict, dict, dict]:
+    """Each mode's median ms, last image and network evaluations per call, the modes called in
+    turn round after round (so that a noisy box's slow spells fall on every mode alike)."""
+    ts = {k: [] for k in modes}
+    imgs, rays = {}, {}
     for _ in range(rounds):
-        t = time.perf_counter()
-        out = fn()
-        ts.append(time.perf_counter() - t)
-    return float(np.median(ts)) * 1e3, out
+        for k, fn in modes.items():
+            n0 = r.rays_evaluated
+            t = time.perf_counter()
+            imgs[k] = fn()
+            ts[k].append(time.perf_counter() - t)
+            rays[k] = r.rays_evaluated - n0
+    return {k: float(np.median(v)) * 1e3 for k, v in ts.items()}, imgs, rays
 
 
 def main(argv=None) -> int:
@@ -135,11 +142,21 @@ def main(argv=None) -> int:
         e = np.hypot(xs - gaze[0], ys - gaze[1]) / float(np.hypot(H, W))
         fovea, band = e < a.inner, (e >= a.inner) & (e <= a.outer)
         radius, angle = np.hypot(xs - gaze[0], ys - gaze[1]), np.arctan2(ys - gaze[1], xs - gaze[0])
-        n0 = r.rays_evaluated
-        t_full, full = timed(lambda: r.render(row, col, r.neurons, a.scale), a.rounds)
-        rays_full = (r.rays_evaluated - n0) / a.rounds
         exact_map = r.foveation_map(gaze, a.inner, a.outer, dither=False, scale=a.scale)
-        t_ex, exact = timed(lambda: r.render_lod_map(row, col, exact_map), a.rounds)
+        lo, hi = r.neuron_range
+        modes = {"full": lambda: r.render(row, col, r.neurons, a.scale),
+                 "exact": lambda: r.render_lod_map(row, col, exact_map)}
+        for k in a.sizes:
+            dmap = r.foveation_map(gaze, a.inner, a.outer, dither=True, sizes=k, scale=a.scale)
+            levels = size_levels(lo, hi, k)
+            smap = levels[np.abs(exact_map[..., None] - levels).argmin(-1)]
+            modes[f"dither_{k}"] = lambda m=dmap: r.render_lod_map(row, col, m)
+            modes[f"snap_{k}"] = lambda m=smap: r.render_lod_map(row, col, m)
+        for L, bl, bi in [(L, bl, bi) for L in a.mip for bl in a.blend for bi in a.bias]:
+            modes[f"mip_{L}_{bl:g}_{bi:g}"] = lambda L=L, bl=bl, bi=bi: r.render_lod_mip(row, col, exact_map, max_level=L,
+                                                                                       blend=bl, bias=bi)
+        times, imgs, rays = timed_modes(r, modes, a.rounds)
+        t_full, full, exact = times["full"], imgs["full"], imgs["exact"]
 
         gt = None
         if lf is not None:
@@ -160,24 +177,18 @@ def main(argv=None) -> int:
 
         res = {"view": v, "pixels": H * W, "full_ms": round(t_full, 1),
                **({"full_gt_psnr": round(psnr_in(np.clip(full, 0, 1), gt, band), 2)} if gt is not None else {}),
-               "mean_neurons": round(float(exact_map.mean()), 2), "exact": measures(exact, t_ex)}
-        lo, hi = r.neuron_range
-        for k in a.sizes:
-            dmap = r.foveation_map(gaze, a.inner, a.outer, dither=True, sizes=k, scale=a.scale)
-            t_d, img = timed(lambda: r.render_lod_map(row, col, dmap), a.rounds)
-            frames = [img] + [r.render_lod_map(row, col, r.foveation_map(gaze, a.inner, a.outer, dither=True,
-                                                                         sizes=k, frame=f, scale=a.scale))
-                      for f in (1, 2, 3)]
-            res[f"dither_{k}"] = measures(img, t_d, frames)
-            levels = size_levels(lo, hi, k)
-            smap = levels[np.abs(exact_map[..., None] - levels).argmin(-1)]
-            t_s, img = timed(lambda: r.render_lod_map(row, col, smap), a.rounds)
-            res[f"snap_{k}"] = measures(img, t_s)
-        for L, bl, bi in [(L, bl, bi) for L in a.mip for bl in a.blend for bi in a.bias]:
-            n0 = r.rays_evaluated
-            t_m, img = timed(lambda: r.render_lod_mip(row, col, exact_map, max_level=L, blend=bl, bias=bi), a.rounds)
-            res[f"mip_{L}_{bl:g}_{bi:g}"] = {**measures(img, t_m), "rays": round((r.rays_evaluated - n0) / a.rounds / rays_full, 3),
-                               "psnr_vs_exact": round(psnr_in(img, exact, band), 2)}
+               "mean_neurons": round(float(exact_map.mean()), 2), "exact": measures(exact, times["exact"])}
+        for name in modes:
+            if name.startswith("dither_"):
+                k = int(name.split("_")[1])
+                frames = [imgs[name]] + [r.render_lod_map(row, col, r.foveation_map(
+                    gaze, a.inner, a.outer, dither=True, sizes=k, frame=f, scale=a.scale)) for f in (1, 2, 3)]
+                res[name] = measures(imgs[name], times[name], frames)
+            elif name.startswith("snap_"):
+                res[name] = measures(imgs[name], times[name])
+            elif name.startswith("mip_"):
+                res[name] = {**measures(imgs[name], times[name]), "rays": round(rays[name] / rays["full"], 3),
+                             "psnr_vs_exact": round(psnr_in(imgs[name], exact, band), 2)}
         log(json.dumps(res))
         rows.append(res)
     out = {"file": a.file, "machine": machine(), "device": a.device, "scale": a.scale, "threads": a.threads, "inner": a.inner, "outer": a.outer,
