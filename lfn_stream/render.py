@@ -28,11 +28,15 @@ ALPHA_MIN = 2.0 ** -20   # below it a pixel's colour is 0 (invisible at 16 bits;
 OCC_BATCH = 16384   # rays per occupancy-net call: ~2 MiB of activations (one 65536-ray call ran ~4x slower)
 MAX_SIZE_PASSES = 16  # an all-integer size map with at most this many sizes runs one fused pass per size
 MIP_LEVELS = 3        # render_lod_mip's coarsest lattice: every 2^3 pixels (the base network's 1/8 scale)
-#: render_lod_mip: level j's lattice (every 2^j pixels) runs the size made for 2^-(j − this) of the
-#: full scale, a finer network than the stride strictly allows: the nested networks are smoother
-#: than their nominal scale (sampled at the lattice and upsampled they are 42-65 dB from the same
-#: network at every pixel), and the finer size is closer to the captured views (BENCHMARKS.md)
-MIP_SHARPEN = 0.75
+#: render_lod_mip's calibration (measured on three networks, BENCHMARKS.md): level j's lattice
+#: (every 2^j pixels) runs the size made for 2^-(j − MIP_SHARPEN) of the full scale, and a pixel
+#: at level m reads the lattices around m + MIP_OFFSET. The nested networks are smoother than
+#: their nominal scale (a size sampled on such a lattice and upsampled is 33-53 dB from the same
+#: size at every pixel, against 19-22 dB from the captured views), so a finer size on a sparser
+#: lattice is as close to the captured views and faster; the offset is small enough that the
+#: fovea (m = 0) stays on the full-density lattice alone
+MIP_SHARPEN = 1.0
+MIP_OFFSET = 0.25
 MIP_BLEND = 0.25      # render_lod_mip: the part of each interval between two levels that blends them
 
 
@@ -580,15 +584,17 @@ class LfnRenderer(Decoder):
         1/2^m of the largest size's scale needs a sample only every 2^m pixels. Level j is a
         lattice every 2^j pixels rendered with the one integer size :meth:`mip_neurons` (j) (one
         fused pass per level, at most ``max_level`` + 1), only at the lattice points some pixel
-        reads; each pixel takes the level below and above its :meth:`mip_levels` value ``m``,
-        each upsampled bilinearly, and blends them linearly over the middle ``blend`` of the
-        interval between them (1 = trilinear filtering; the default 0.25 blends over a quarter
-        and takes one level elsewhere, which halves the rays of the full-density level, still
-        without steps or dither noise). ``bias`` is added to ``m`` (> 0: coarser and faster, as
-        a texture's LOD bias). Where the map is the full network the pixels are exactly
-        :meth:`render`'s. ``lod`` as in :meth:`render_lod_map`, e.g. ``foveation_map(gaze,
-        dither=False)`` (0.46-0.53x a full render's time on the 360-degree capture on one CPU
-        thread, closer to the full network in the periphery than the dithered map: BENCHMARKS.md).
+        reads; each pixel takes the level below and above its :meth:`mip_levels` value ``m``
+        (plus :data:`MIP_OFFSET`), each upsampled bilinearly, and blends them linearly over the
+        middle ``blend`` of the interval between them (1 = trilinear filtering; the default 0.25
+        blends over a quarter and takes one level elsewhere, which halves the rays of the
+        full-density level, still without steps or dither noise). Level j runs a size one
+        octave finer than its stride (:data:`MIP_SHARPEN`, :meth:`mip_neurons`). ``bias`` is
+        added to ``m`` (> 0: coarser and faster, as a texture's LOD bias). Where the map is the
+        full network the pixels are exactly :meth:`render`'s. ``lod`` as in
+        :meth:`render_lod_map`, e.g. ``foveation_map(gaze, dither=False)``: on one CPU thread
+        about 0.3-0.65x a full render's time, closer to the captured views than the dithered
+        map's render and without its pixel noise (BENCHMARKS.md).
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied), (h, w) = ``lod``'s shape.
@@ -628,7 +634,7 @@ class LfnRenderer(Decoder):
         if not (0 <= blend <= 1 and -8 <= bias <= 8):
             raise ParameterError(f"blend must be within [0, 1] and bias within [-8, 8], got {blend!r}, {bias!r}")
         h, w = lod.shape
-        m = np.clip(self.mip_levels(lod, int(max_level)) + bias, 0.0, float(max_level))
+        m = np.clip(self.mip_levels(lod, int(max_level)) + (MIP_OFFSET + bias), 0.0, float(max_level))
         lower = np.floor(m)
         f = m - lower
         # the upper level's share: linear over the middle `blend` of each interval (1: trilinear)
@@ -701,8 +707,8 @@ class LfnRenderer(Decoder):
           averages out). :meth:`render_lod_map` runs one fused pass per size: the fast form
           (0.54-0.73x a full render on one CPU thread, BENCHMARKS.md), and the one without arcs.
         - ``dither=False``: fractional sizes. :meth:`render_lod_mip` (or :meth:`render_pose_lod_mip`)
-          draws them with fewer samples where the network is coarser: the fastest form (0.46-0.53x
-          a full render on the 360-degree capture), continuous, without pixel noise.
+          draws them with fewer samples where the network is coarser: the fastest form (0.28-0.69x
+          a full render on one CPU thread), continuous, without pixel noise.
           :meth:`render_lod_map` renders every pixel at its exact size: no pixel noise, but the
           nested networks' differences from one size to the next show as faint arcs around the
           gaze, and the weighted LayerNorm of fractional sizes costs on a CPU about what it saves.

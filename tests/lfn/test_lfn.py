@@ -411,7 +411,9 @@ def test_render_lod_mip_draws_each_size_at_its_own_density():
                                atol=1e-5)
     # between two levels: linear over the middle `blend` of the interval, one level elsewhere
     lv1 = r.render_lod_mip(0, 0, np.full((16, 16), hi - 1 / per))
-    at = lambda m, **kw: r.render_lod_mip(0, 0, np.full((16, 16), hi - m / per), **kw)    # noqa: E731
+    off = render_module.MIP_OFFSET               # a pixel at level m reads the lattices around m + off
+    at = lambda m, **kw: r.render_lod_mip(0, 0, np.full((16, 16), hi - (m - off) / per), **kw)    # noqa: E731
+    assert off <= 0.375 and np.array_equal(at(off), full)      # the fovea: the full-density lattice alone
     assert np.allclose(at(0.25, blend=1.0), 0.75 * full + 0.25 * lv1, atol=1e-5)       # trilinear
     assert np.array_equal(at(0.3), full)                                               # default blend 0.25
     assert np.allclose(at(0.55), 0.3 * full + 0.7 * lv1, atol=1e-5)
