@@ -31,8 +31,8 @@ MIP_LEVELS = 3        # render_lod_mip's coarsest lattice: every 2^3 pixels (the
 #: render_lod_mip's calibration (measured on three networks, BENCHMARKS.md): level j's lattice
 #: (every 2^j pixels) runs the size made for 2^-(j − MIP_SHARPEN) of the full scale, and a pixel
 #: at level m reads the lattices around m + MIP_OFFSET. The nested networks are smoother than
-#: their nominal scale (a size sampled on such a lattice and upsampled is 33-53 dB from the same
-#: size at every pixel, against 19-22 dB from the captured views), so a finer size on a sparser
+#: their nominal scale (a size sampled on such a lattice and upsampled is 33-65 dB from the same
+#: size at every pixel, against 17-26 dB from the captured views), so a finer size on a sparser
 #: lattice is as close to the captured views and faster; the offset is small enough that the
 #: fovea (m = 0) stays on the full-density lattice alone
 MIP_SHARPEN = 1.0
@@ -704,8 +704,8 @@ class LfnRenderer(Decoder):
           spaced from the base to the full network): between two of them, the upper where the
           pixel's position between them exceeds an interleaved-gradient-noise threshold
           (:func:`dither_threshold`, shifted by ``frame``: advance it per frame and the noise
-          averages out). :meth:`render_lod_map` runs one fused pass per size: the fast form
-          (0.54-0.73x a full render on one CPU thread, BENCHMARKS.md), and the one without arcs.
+          averages out). :meth:`render_lod_map` runs one fused pass per size (0.54-0.81x a full
+          render on one CPU thread, BENCHMARKS.md), without arcs but with pixel-scale noise.
         - ``dither=False``: fractional sizes. :meth:`render_lod_mip` (or :meth:`render_pose_lod_mip`)
           draws them with fewer samples where the network is coarser: the fastest form (0.28-0.69x
           a full render on one CPU thread), continuous, without pixel noise.
