@@ -559,21 +559,24 @@ class LfnRenderer(Decoder):
         image scale a size stands for (:meth:`LfnConfig.scale_of`) is than the largest held
         size's, within [0, ``max_level``] and the base network's level. 0 = every pixel drawn."""
         lo, hi = self.neuron_range
+        per = self._levels_per_neuron()
+        return np.clip((hi - np.clip(lod, lo, hi)) * per, 0.0, min(float(max_level), (hi - lo) * per))
+
+    def _levels_per_neuron(self) -> float:
+        """Mip levels (octaves of image scale) per neuron: :meth:`LfnConfig.scale_of` is
+        log-linear from ``min_scale`` at the base network to 1 at the full one (0 if one size)."""
         c = self.cfg
         span = c.max_neurons - c.min_neurons
-        per = math.log2(1.0 / c.min_scale) / span if span else 0.0     # levels per neuron (scale_of is log-linear)
-        return np.clip((hi - np.clip(lod, lo, hi)) * per, 0.0, min(float(max_level), (hi - lo) * per))
+        return math.log2(1.0 / c.min_scale) / span if span else 0.0
 
     def mip_neurons(self, level: int) -> float:
         """The integer size a mip level's lattice is rendered with: the size made for the image
         scale 2^-(level − :data:`MIP_SHARPEN`) of the largest held size's (rounded up; the
         largest held size at level 0), within the held range."""
         lo, hi = self.neuron_range
-        c = self.cfg
-        span = c.max_neurons - c.min_neurons
-        if not span or level <= 0:
+        per = self._levels_per_neuron()
+        if not per or level <= 0:
             return float(hi)
-        per = math.log2(1.0 / c.min_scale) / span
         return float(min(hi, max(lo, math.ceil(hi - max(level - MIP_SHARPEN, 0.0) / per - 1e-9))))
 
     def render_lod_mip(self, row: int, col: int, lod: np.ndarray, max_level: int = MIP_LEVELS,
