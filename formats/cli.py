@@ -414,10 +414,8 @@ def _render_lfn_still(a, d, out: Path) -> int:
         img = _lfn_frame(a, d, _lfn_camera(a, d))
     write_image(out, img)
     if not a.quiet:
-        size = (f"foveated around {a.gaze}: the network of {d.neurons:g} neurons per layer at the gaze" if a.gaze
-                else f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes)")
-        print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, {size}, "
-              f"{d.rays_evaluated} rays evaluated")
+        print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
+              f"{_lfn_size_text(a, d)}, {d.rays_evaluated} rays evaluated")
     return 0
 
 
@@ -484,6 +482,13 @@ def _lfn_neurons(a, d) -> float:
     if not math.isfinite(level):
         raise ParameterError(f"--level must be a finite number, got {level}")
     return d.neurons_at(level)
+
+
+def _lfn_size_text(a, d) -> str:
+    """The network a render used, for its report line."""
+    if a.gaze:
+        return f"foveated around {a.gaze}: the network of {d.neurons:g} neurons per layer at the gaze"
+    return f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes)"
 
 
 def _lfn_camera(a, d) -> np.ndarray:
@@ -608,7 +613,7 @@ def _render_lfn_path(a, d, out: Path) -> int:
     if not a.quiet:
         print(f"\rwrote {out}: {len(times)} frames of {img.shape[0]}x{img.shape[1]}; render "
               f"{1e3 * times[0]:.0f} ms first frame, {1e3 * float(np.median(times[1:] or times)):.0f} ms median, "
-              f"network of {_lfn_neurons(a, d):g} neurons per layer")
+              f"{_lfn_size_text(a, d)}")
     return 0
 
 
