@@ -642,7 +642,8 @@ class LfnRenderer(Decoder):
         f = m - lower
         # the upper level's share: linear over the middle `blend` of each interval (1: trilinear)
         up = np.clip((f - 0.5) / blend + 0.5, 0.0, 1.0) if blend > 0 else (f >= 0.5).astype(np.float64)
-        lower = lower.astype(np.int64)
+        lower = lower.astype(np.int8)
+        w_lo, w_up = (1.0 - up).astype(np.float32), up.astype(np.float32)   # (a pixel's two levels' shares)
         out = np.zeros((h, w, 4), np.float32)
 
         def at_pixels(idx):                 # the rays of these pixels
@@ -650,15 +651,19 @@ class LfnRenderer(Decoder):
 
         dt = torch.float16 if self.half else torch.float32
         for j in range(int(lower.max()) + 2):
-            wt = (np.where(lower == j, 1.0 - up, 0.0) + np.where(lower == j - 1, up, 0.0)).astype(np.float32)
+            wt = np.where(lower == j, w_lo, np.where(lower == j - 1, w_up, np.float32(0)))
             used = wt > 0
-            if not used.any():
+            rows, cols = np.flatnonzero(used.any(1)), np.flatnonzero(used.any(0))
+            if rows.size == 0:
                 continue
+            box = np.s_[rows[0]:rows[-1] + 1, cols[0]:cols[-1] + 1]      # where this level has weight
             if j == 0:
-                at = np.flatnonzero(used)
-                img = np.zeros((h * w, 4), np.float32)
-                img[at] = self.render_rays(at_pixels(at), self.mip_neurons(0))
-                out += wt[..., None] * img.reshape(h, w, 4)
+                y, x = np.nonzero(used[box])
+                at = (y + rows[0]) * w + (x + cols[0])
+                img = np.zeros(used[box].shape + (4,), np.float32)
+                img[y, x] = self.render_rays(at_pixels(at), self.mip_neurons(0))
+                img *= wt[box][..., None]
+                out[box] += img
                 continue
             k = 1 << j
             hj, wj = -(-h // k), -(-w // k)
@@ -693,7 +698,9 @@ class LfnRenderer(Decoder):
                     x = torch.from_numpy(at_pixels(mixed)).to(self.device, dt)
                     keep.reshape(-1)[mixed[self._occupied(x).cpu().numpy()]] = True
                 img *= keep[..., None]
-            out += wt[..., None] * img
+            img = img[box]
+            img *= wt[box][..., None]
+            out[box] += img
         return out
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
