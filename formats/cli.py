@@ -428,8 +428,7 @@ def _render_kind(a, codec: str) -> bool:
     if a.fovea is not None and a.gaze is None:
         raise ParameterError("--fovea sets the radii of --gaze's foveation: give --gaze X,Y too")
     if lfn:
-        used = [o for o, v in (("--focus", a.focus is not None), ("--aperture", a.aperture != 0), ("--fast", a.fast))
-                if v]
+        used = [o for o, v in (("--focus", a.focus is not None), ("--aperture", a.aperture != 0)) if v]
         if used:
             raise ParameterError(f"{a.input}: {', '.join(used)} refocus an RLFC grid from its disparity maps; a light "
                                  f"field network renders pinhole cameras (--at, --pose, --turn, --stereo)")
@@ -488,7 +487,10 @@ def _lfn_size_text(a, d) -> str:
     """The network a render used, for its report line."""
     if a.gaze:
         return f"foveated around {a.gaze}: the network of {d.neurons:g} neurons per layer at the gaze"
-    return f"network of {_lfn_neurons(a, d):g} neurons per layer ({d.neurons:g} in the file's bytes)"
+    n = _lfn_neurons(a, d)
+    k = d.native_stride(n, 1.0 if a.scale is None else a.scale) if a.fast else 1
+    return f"network of {n:g} neurons per layer ({d.neurons:g} in the file's bytes)" + (
+        f", run every {k} pixels (its own resolution) and upsampled" if k > 1 else "")
 
 
 def _lfn_camera(a, d) -> np.ndarray:
@@ -523,7 +525,11 @@ def _lfn_frame(a, d, pose: np.ndarray) -> np.ndarray:
         render = _lfn_foveated(a, d, scale)
     else:
         neurons = _lfn_neurons(a, d)
-        render = lambda p: d.render_pose(p, neurons, scale)      # noqa: E731
+        if a.fast and not hasattr(d, "native_scale"):
+            raise ParameterError(f"{a.input}: --fast runs one network on its own pixel grid; a tile set blends "
+                                 f"several (render it without --fast)")
+        kw = {"native": True} if a.fast else {}
+        render = lambda p: d.render_pose(p, neurons, scale, **kw)      # noqa: E731
     if a.stereo is None:
         return d.to_pixels(render(pose))
     if not (math.isfinite(a.stereo) and 0 <= a.stereo <= 1e6):
@@ -541,6 +547,8 @@ def _lfn_foveated(a, d, scale: float):
     if a.level is not None:
         raise ParameterError("--gaze renders the largest network at the gaze and smaller ones around it: give "
                              "--gaze or --level")
+    if a.fast:
+        raise ParameterError("--gaze already samples the smaller networks sparsely: give --gaze or --fast")
     gaze = _floats(a.gaze, 2, "--gaze")
     inner, outer = _floats(a.fovea or "0.1,0.5", 2, "--fovea")
     fmap = d.foveation_map(tuple(gaze), inner, outer, dither=False, scale=scale)
@@ -998,8 +1006,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="--path into a folder that holds frames already: replace them (and remove the earlier "
                         "sequence's frames past the new one's end); refused without it")
     r.add_argument("--fast", action="store_true",
-                   help="use the file's disparity maps as they are (about 3x faster; the default also tries "
-                        "smoother disparities where the maps make the views disagree, e.g. on noisy captures)")
+                   help="RLFC grids: use the file's disparity maps as they are (about 3x faster; the default also "
+                        "tries smoother disparities where the maps make the views disagree, e.g. on noisy "
+                        "captures). Light field networks: where the frame is finer than the network was trained "
+                        "at, run it on its own pixel grid and upsample (3-5x faster, within 0.05 dB)")
     r.add_argument("--device", default="auto",
                    help="where the pixels are computed: auto (a CUDA GPU through torch when present, else numpy; "
                         "default), numpy, or a torch device (cuda, cuda:1, cpu); the frames agree within rounding")

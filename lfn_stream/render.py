@@ -410,18 +410,49 @@ class LfnRenderer(Decoder):
         except ParameterError as e:                  # the file's own camera and intrinsics
             raise FormatError(f"{self.file.container.name}: view ({row},{col}): {e}") from None
 
-    def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
+    def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None,
+               native: bool = False) -> np.ndarray:
         """One view with a (fractional) network size (default: :meth:`display_neurons_at` the
         scale asked for, else :attr:`display_neurons`); scale defaults to the size's own (1/8 … 1).
+        ``native=True``: where the render is finer than the network holds (a network trained at
+        reduced resolution, :attr:`native_scale`), the network runs on a lattice every
+        :meth:`native_stride` pixels, upsampled bilinearly with the silhouette cut per pixel:
+        0.05-0.3x the time, within 0.1 dB of the dense render against the captured views
+        (BENCHMARKS.md).
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
         neurons = self.display_neurons_at(scale) if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
+        if native and self.native_stride(neurons, scale) > 1:
+            check_integers(row=row, col=col)
+            if not (0 <= row < self.rows and 0 <= col < self.cols):
+                raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+            return self._render_native(neurons, scale, self._view_rays_at(row, col, scale))
         rays = self.view_rays(row, col, scale)
         h, w = rays.shape[:2]
         return self.render_rays(rays.reshape(-1, 6), neurons).reshape(h, w, 4)
+
+    @property
+    def native_scale(self) -> float:
+        """The scale of the views the full network was trained at, as the file's display ladders
+        state it (the encoder measures them at the training views' scale and at its 1/2, 1/4 and
+        1/8: the largest is that scale); 1 for a file without them."""
+        return min(1.0, self.display_scales[-1][0]) if self.display_scales else 1.0
+
+    def native_stride(self, neurons: float, scale: float) -> int:
+        """Pixels between network samples for ``native=True`` renders of ``neurons`` at ``scale``:
+        the largest power of two up to 8 within how much finer the render is than the network's
+        own scale (:attr:`native_scale` × :meth:`LfnConfig.scale_of`)."""
+        check_numbers(neurons=neurons, scale=scale)
+        over = float(scale) / (self.native_scale * self.cfg.scale_of(float(neurons)))
+        return int(2 ** min(3, max(0, math.floor(math.log2(over) + 1e-9)))) if over > 0 else 1
+
+    def _render_native(self, neurons: float, scale: float, rays_at) -> np.ndarray:
+        h, w = self._scaled(scale)
+        dt = torch.float16 if self.half else torch.float32
+        return self._lattice(self.native_stride(neurons, scale), np.ones((h, w), bool), neurons, rays_at, dt)
 
     # -- free cameras (lfn_stream.cameras; the browser viewer uses the same formulas) ---------
     def pose(self, row: int, col: int) -> np.ndarray:
@@ -467,9 +498,10 @@ class LfnRenderer(Decoder):
             raise ParameterError("a camera lies more than 2^20 scene radii from the scene's centre")
         return a
 
-    def render_pose(self, c2w, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
+    def render_pose(self, c2w, neurons: float | None = None, scale: float | None = None,
+                    native: bool = False) -> np.ndarray:
         """A view from any camera pose (4×4 camera-to-world, OpenGL axes, scene units) with the
-        captured views' intrinsics; neurons and scale as in :meth:`render`.
+        captured views' intrinsics; neurons, scale and native as in :meth:`render`.
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
@@ -478,6 +510,8 @@ class LfnRenderer(Decoder):
         neurons = self.display_neurons_at(scale) if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         self._scaled(scale)
+        if native and self.native_stride(neurons, scale) > 1:
+            return self._render_native(neurons, scale, self._pose_rays_at(c2w, scale))
         g = self._intr
         rays = camera_rays(c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"])
         h, w = rays.shape[:2]
@@ -606,14 +640,24 @@ class LfnRenderer(Decoder):
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
         lod, scale = self._lod_map(lod)
+        return self._render_mip(lod, scale, self._view_rays_at(row, col, scale), max_level, blend, bias)
 
+    def _view_rays_at(self, row: int, col: int, scale: float):
+        """``rays_at(size, spacing, at)`` of captured view (row, col) rendered at ``scale``
+        (:func:`camera_rays`' arguments; a bad camera in the file is a FormatError)."""
         def rays_at(size, spacing, at):
             try:
                 return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"],
                                  size, spacing, at)
             except ParameterError as e:              # the file's own camera and intrinsics
                 raise FormatError(f"{self.file.container.name}: view ({row},{col}): {e}") from None
-        return self._render_mip(lod, scale, rays_at, max_level, blend, bias)
+        return rays_at
+
+    def _pose_rays_at(self, c2w: np.ndarray, scale: float):
+        """``rays_at(size, spacing, at)`` of a checked camera pose rendered at ``scale``."""
+        g = self._intr
+        return lambda size, spacing, at: camera_rays(c2w, g.focal, g.principal, g.height, g.width, scale,
+                                                     self.norm["centre"], self.norm["radius"], size, spacing, at)
 
     def render_pose_lod_mip(self, c2w, lod: np.ndarray, max_level: int = MIP_LEVELS, blend: float = MIP_BLEND,
                             bias: float = 0.0) -> np.ndarray:
@@ -622,10 +666,7 @@ class LfnRenderer(Decoder):
         scale=S))``."""
         c2w = self._check_pose(c2w, self.norm)
         lod, scale = self._lod_map(lod)
-        g = self._intr
-        return self._render_mip(lod, scale, lambda size, spacing, at: camera_rays(
-            c2w, g.focal, g.principal, g.height, g.width, scale, self.norm["centre"], self.norm["radius"], size,
-            spacing, at), max_level, blend, bias)
+        return self._render_mip(lod, scale, self._pose_rays_at(c2w, scale), max_level, blend, bias)
 
     @torch.no_grad()
     def _render_mip(self, lod: np.ndarray, scale: float, rays_at, max_level, blend, bias) -> np.ndarray:
@@ -665,43 +706,51 @@ class LfnRenderer(Decoder):
                 img *= wt[box][..., None]
                 out[box] += img
                 continue
-            k = 1 << j
-            hj, wj = -(-h // k), -(-w // k)
-            # the lattice points a used pixel's bilinear taps read: its 2^j block's and the
-            # neighbours' (a pixel's sample position lies within half a lattice step of its block)
-            need = np.zeros((hj * k, wj * k), bool)
-            need[:h, :w] = used
-            need = need.reshape(hj, k, wj, k).any(axis=(1, 3))
-            need = cv2.dilate(need.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
-            cand = np.flatnonzero(need)
-            rays = rays_at((hj, wj), (h / (self.height * k), w / (self.width * k)), cand)
-            inside = None
-            if self.occ is not None:
-                # the occupancy net's cut is sharp, and upsampled from a lattice it would be drawn
-                # as stairs: the network runs at the lattice points next to an occupied one too
-                # (colour to upsample up to the silhouette), and the silhouette is cut per pixel
-                # below, asking the occupancy net only where the lattice's answer is mixed
-                inside = np.zeros(hj * wj, np.uint8)
-                inside[cand[self._occupied(torch.from_numpy(rays).to(self.device, dt)).cpu().numpy()]] = 1
-                inside = inside.reshape(hj, wj)
-                sel = cv2.dilate(inside, np.ones((3, 3), np.uint8)).view(bool).reshape(-1)[cand]
-                cand, rays = cand[sel], np.ascontiguousarray(rays[sel])
-            img = np.zeros((hj * wj, 4), np.float32)
-            img[cand] = self.render_rays(rays, self.mip_neurons(j), use_occupancy=False)
-            # OpenCV's pixel-centre convention: pixel y samples the lattice at (y + 0.5)/k − 0.5
-            img = cv2.resize(img.reshape(hj, wj, 4), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
-            if inside is not None:
-                frac = cv2.resize(inside.astype(np.float32), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
-                keep = frac > 1 - 1e-4                                  # every tap occupied
-                mixed = np.flatnonzero(used & ~keep & (frac > 1e-4))
-                if mixed.size:
-                    x = torch.from_numpy(at_pixels(mixed)).to(self.device, dt)
-                    keep.reshape(-1)[mixed[self._occupied(x).cpu().numpy()]] = True
-                img *= keep[..., None]
+            img = self._lattice(1 << j, used, self.mip_neurons(j), rays_at, dt)
             img = img[box]
             img *= wt[box][..., None]
             out[box] += img
         return out
+
+    @torch.no_grad()
+    def _lattice(self, k: int, used: np.ndarray, neurons: float, rays_at, dt) -> np.ndarray:
+        """(h, w, 4) pixels read bilinearly from a lattice every ``k`` pixels (k > 1) rendered at
+        ``neurons``, valid where ``used`` (h, w) is set: the network runs only at the lattice
+        points those pixels' taps read. ``rays_at(size, spacing, at)`` as in :meth:`_render_mip`."""
+        h, w = used.shape
+        hj, wj = -(-h // k), -(-w // k)
+        # the lattice points a used pixel's bilinear taps read: its k×k block's and the
+        # neighbours' (a pixel's sample position lies within half a lattice step of its block)
+        need = np.zeros((hj * k, wj * k), bool)
+        need[:h, :w] = used
+        need = need.reshape(hj, k, wj, k).any(axis=(1, 3))
+        need = cv2.dilate(need.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        cand = np.flatnonzero(need)
+        rays = rays_at((hj, wj), (h / (self.height * k), w / (self.width * k)), cand)
+        inside = None
+        if self.occ is not None:
+            # the occupancy net's cut is sharp, and upsampled from a lattice it would be drawn as
+            # stairs: the network runs at the lattice points next to an occupied one too (colour
+            # to upsample up to the silhouette), and the silhouette is cut per pixel below, asking
+            # the occupancy net only where the lattice's answer is mixed
+            inside = np.zeros(hj * wj, np.uint8)
+            inside[cand[self._occupied(torch.from_numpy(rays).to(self.device, dt)).cpu().numpy()]] = 1
+            inside = inside.reshape(hj, wj)
+            sel = cv2.dilate(inside, np.ones((3, 3), np.uint8)).view(bool).reshape(-1)[cand]
+            cand, rays = cand[sel], np.ascontiguousarray(rays[sel])
+        img = np.zeros((hj * wj, 4), np.float32)
+        img[cand] = self.render_rays(rays, neurons, use_occupancy=False)
+        # OpenCV's pixel-centre convention: pixel y samples the lattice at (y + 0.5)/k − 0.5
+        img = cv2.resize(img.reshape(hj, wj, 4), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
+        if inside is not None:
+            frac = cv2.resize(inside.astype(np.float32), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
+            keep = frac > 1 - 1e-4                                  # every tap occupied
+            mixed = np.flatnonzero(used & ~keep & (frac > 1e-4))
+            if mixed.size:
+                x = torch.from_numpy(rays_at((h, w), (h / self.height, w / self.width), mixed)).to(self.device, dt)
+                keep.reshape(-1)[mixed[self._occupied(x).cpu().numpy()]] = True
+            img *= keep[..., None]
+        return img
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
                       dither: bool = True, sizes: int = 8, frame: int = 0, scale: float = 1.0) -> np.ndarray:

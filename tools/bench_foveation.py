@@ -7,6 +7,8 @@ For an LFN file and a few captured views, renders each view (at the scene's reso
 - ``dither K``: each pixel at one of K integer sizes, interleaved-gradient-noise dither between
   neighbouring sizes (``foveation_map(dither=True, sizes=K)``), one fused pass per size;
 - ``snap K``: the same K sizes, each pixel rounded to the nearest (no dither): level steps;
+- ``native``: the full network rendered with ``native=True`` (on its own pixel grid where the
+  frame is finer than the network was trained at, upsampled: no foveation);
 - ``mip L``: the exact map drawn as mipmapping draws a texture
   (:meth:`lfn_stream.LfnRenderer.render_lod_mip`): lattices every 2^j pixels, j ≤ L, each at the
   size made for its scale, blended trilinearly; ``rays`` = network evaluations against the full
@@ -145,6 +147,7 @@ def main(argv=None) -> int:
         exact_map = r.foveation_map(gaze, a.inner, a.outer, dither=False, scale=a.scale)
         lo, hi = r.neuron_range
         modes = {"full": lambda: r.render(row, col, r.neurons, a.scale),
+                 "native": lambda: r.render(row, col, r.neurons, a.scale, native=True),
                  "exact": lambda: r.render_lod_map(row, col, exact_map)}
         for k in a.sizes:
             dmap = r.foveation_map(gaze, a.inner, a.outer, dither=True, sizes=k, scale=a.scale)
@@ -186,6 +189,8 @@ def main(argv=None) -> int:
                 res[name] = measures(imgs[name], times[name], frames)
             elif name.startswith("snap_"):
                 res[name] = measures(imgs[name], times[name])
+            elif name == "native":
+                res[name] = {**measures(imgs[name], times[name]), "stride": r.native_stride(r.neurons, a.scale)}
             elif name.startswith("mip_"):
                 res[name] = {**measures(imgs[name], times[name]), "rays": round(rays[name] / rays["full"], 3),
                              "psnr_vs_exact": round(psnr_in(imgs[name], exact, band), 2)}

@@ -21,6 +21,7 @@ from lfn_stream.sat import box_mean, box_mean_frac, box_mean_frac_torch, box_mea
 from tests.conftest import ROOT
 from tests.rlfc.helpers import smooth_lf
 
+GOLDEN3 = ROOT / "tests" / "data" / "golden" / "lfn3_tiny_rgba8.lfc"
 CFG = LfnConfig(depth=3, min_neurons=4, max_neurons=12, occupancy_neurons=8)
 
 
@@ -452,6 +453,55 @@ def test_render_lod_mip_draws_each_size_at_its_own_density():
         r.render_lod_mip(0, 2, fov)
     with pytest.raises(ParameterError):
         r.render_pose_lod_mip(np.eye(3), fov)
+
+
+def _native_half_lfc(occ=None) -> bytes:
+    """A 16×16 RGBA file whose display ladders say the network was trained at half its views'
+    scale (the encoder measures them at the training scale and its 1/2, 1/4, 1/8)."""
+    lf = smooth_lf(rows=1, cols=2, h=16, w=16, c=4)
+    lad = list(range(CFG.min_neurons, CFG.max_neurons + 1))
+    config, sections = to_sections(_model(), occ, {"norm": {"centre": [0, 0, 0], "radius": 1.0}, "train_views": [0],
+                                                   "test_views": [], "display_scales": [[s / 2, lad] for s in
+                                                                                        (0.125, 0.25, 0.5, 1.0)]})
+    return lfc_bytes("lfn", CODEC_VERSION, config, lf.geometry(), sections, more=MOVED_KEYS)
+
+
+def test_native_render_samples_the_network_at_its_own_scale(tmp_path):
+    """render(native=True): a network trained at half its views' scale runs on a lattice every 2
+    pixels (the view at scale 1/2), upsampled bilinearly; coarser sizes on sparser lattices (at
+    most every 8); from poses too; silhouettes cut per pixel; a file without display ladders (and
+    a render no finer than the network) renders every pixel as before; ``lfcodec render --fast``."""
+    r = LfnRenderer(open_lfc(_native_half_lfc()), device="cpu")
+    lo, hi = r.neuron_range
+    assert r.native_scale == 0.5
+    assert r.native_stride(hi, 1.0) == 2 and r.native_stride(hi, 0.5) == 1 and r.native_stride(hi, 4.0) == 8
+    assert r.native_stride(lo, 1.0) == 8                           # 1/8 of 1/2: capped at 8
+    dense = r.render(0, 1, hi, 1.0)
+    half = r.render(0, 1, hi, 0.5)
+    got = r.render(0, 1, hi, 1.0, native=True)
+    assert np.allclose(got, _bilinear_up(half, 2, 16, 16), atol=1e-6) and not np.array_equal(got, dense)
+    assert np.allclose(r.render_pose(r.pose(0, 1), hi, 1.0, native=True), got, atol=1e-5)
+    assert np.array_equal(r.render(0, 1, hi, 0.5, native=True), half)
+    mid = r.render(0, 1, 8.0, 2.0, native=True)                     # 8 neurons: 0.35 of the network's scale
+    assert mid.shape == (32, 32, 4) and r.native_stride(8.0, 2.0) == 8
+    # with an occupancy net: empty pixels 0, occupied ones the lattice's colour (convex region)
+    ro = LfnRenderer(open_lfc(_native_half_lfc(_halfspace_occ())), device="cpu")
+    inside = np.zeros(256, bool)
+    inside[ro._occupied(torch.from_numpy(ro.view_rays(0, 1).reshape(-1, 6))).numpy()] = True
+    g = ro.render(0, 1, hi, 1.0, native=True).reshape(-1, 4)
+    assert 0 < inside.sum() < 256 and (g[~inside] == 0).all()
+    assert np.allclose(g[inside], got.reshape(-1, 4)[inside], atol=1e-6)
+    # lfcodec render --fast: the same pixels, from the default camera
+    from formats.imageio import read_image
+
+    src, out = tmp_path / "half.lfc", tmp_path / "o.png"
+    src.write_bytes(_native_half_lfc())
+    assert main(["render", str(src), str(out), "--fast", "--quiet", "--device", "cpu"]) == 0
+    want = r.render_pose(r.pose(0, 1), r.display_neurons_at(1.0), 1.0, native=True)
+    assert np.array_equal(read_image(out), r.to_pixels(want))
+    plain = LfnRenderer(open_lfc(GOLDEN3), device="cpu")                # no display ladders: scale 1
+    assert plain.native_scale == 1.0
+    assert np.array_equal(plain.render(1, 1, native=True), plain.render(1, 1))
 
 
 def test_dither_sizes_mix_neighbouring_sizes_in_proportion():

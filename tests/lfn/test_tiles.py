@@ -154,6 +154,8 @@ def test_cli_trains_and_renders_a_tile_set(tmp_path, capsys):
     capsys.readouterr()
     assert main(["render", str(out), str(tmp_path / "g.png"), "--gaze", "4,4", "--quiet"]) == 2
     assert "tile set blends several networks" in capsys.readouterr().err and not (tmp_path / "g.png").exists()
+    assert main(["render", str(out), str(tmp_path / "g.png"), "--fast", "--quiet"]) == 2
+    assert "a tile set blends several" in capsys.readouterr().err and not (tmp_path / "g.png").exists()
     assert main(["info", str(out), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["tiles"] == 2
     # a single file is not written under a manifest's name; --tile-band needs --tiles

@@ -39,6 +39,7 @@ def test_bench_foveation_measures_every_mode(tmp_path, capsys):
         m = view[mode]
         assert m["ms"] > 0 and m["ring_error"] >= 0 and m["fovea_psnr"] > 100, mode
     assert view["dither_4"]["roughness"] > view["exact"]["roughness"]   # dither noise is measured
+    assert view["native"]["stride"] == 1 and view["native"]["fovea_psnr"] == float("inf")   # (trained at scale 1)
     mip = view["mip_3_0.25_0"]                                           # render_lod_mip, its defaults
     assert mip["ms"] > 0 and mip["fovea_psnr"] > 100 and 0 < mip["rays"] <= 1
     assert mip["roughness"] < view["dither_4"]["roughness"]
