@@ -400,11 +400,15 @@ class LfnRenderer(Decoder):
                 out[a:a + batch] = self.model(x, neurons).float().cpu().numpy()
         return out
 
-    def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
+    def _check_view(self, row: int, col: int) -> None:
+        """A ParameterError unless (row, col) are integers naming a captured view."""
         check_integers(row=row, col=col)
-        self._scaled(scale)
         if not (0 <= row < self.rows and 0 <= col < self.cols):
             raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+
+    def view_rays(self, row: int, col: int, scale: float = 1.0) -> np.ndarray:
+        self._check_view(row, col)
+        self._scaled(scale)
         try:
             return view_rays(self.geom, row * self.cols + col, scale, self.norm["centre"], self.norm["radius"])
         except ParameterError as e:                  # the file's own camera and intrinsics
@@ -416,9 +420,9 @@ class LfnRenderer(Decoder):
         scale asked for, else :attr:`display_neurons`); scale defaults to the size's own (1/8 … 1).
         ``native=True``: where the render is finer than the network holds (a network trained at
         reduced resolution, :attr:`native_scale`), the network runs on a lattice every
-        :meth:`native_stride` pixels, upsampled bilinearly with the silhouette cut per pixel:
-        0.05-0.3x the time, within 0.1 dB of the dense render against the captured views
-        (BENCHMARKS.md).
+        :meth:`native_stride` pixels, upsampled bilinearly with the silhouette cut per pixel
+        (at stride 2: 0.2-0.3x the time, within 0.05 dB of the dense render against the
+        captured views, BENCHMARKS.md).
 
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
@@ -426,9 +430,7 @@ class LfnRenderer(Decoder):
         neurons = self.display_neurons_at(scale) if neurons is None else self._check(neurons)
         scale = self.cfg.scale_of(neurons) if scale is None else scale
         if native and self.native_stride(neurons, scale) > 1:
-            check_integers(row=row, col=col)
-            if not (0 <= row < self.rows and 0 <= col < self.cols):
-                raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+            self._check_view(row, col)
             return self._render_native(neurons, scale, self._view_rays_at(row, col, scale))
         rays = self.view_rays(row, col, scale)
         h, w = rays.shape[:2]
@@ -450,6 +452,7 @@ class LfnRenderer(Decoder):
         return int(2 ** min(3, max(0, math.floor(math.log2(over) + 1e-9)))) if over > 0 else 1
 
     def _render_native(self, neurons: float, scale: float, rays_at) -> np.ndarray:
+        """The ``native=True`` render: every pixel from the lattice of :meth:`native_stride`."""
         h, w = self._scaled(scale)
         dt = torch.float16 if self.half else torch.float32
         return self._lattice(self.native_stride(neurons, scale), np.ones((h, w), bool), neurons, rays_at, dt)
@@ -457,9 +460,7 @@ class LfnRenderer(Decoder):
     # -- free cameras (lfn_stream.cameras; the browser viewer uses the same formulas) ---------
     def pose(self, row: int, col: int) -> np.ndarray:
         """4×4 camera-to-world matrix of a captured view (OpenGL axes, scene units)."""
-        check_integers(row=row, col=col)
-        if not (0 <= row < self.rows and 0 <= col < self.cols):
-            raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+        self._check_view(row, col)
         return self.poses[row, col].copy()
 
     def grid_pose(self, s: float, t: float) -> np.ndarray:
@@ -636,9 +637,7 @@ class LfnRenderer(Decoder):
         Returns:
             (h, w, 4) float32 RGBA (premultiplied), (h, w) = ``lod``'s shape.
         """
-        check_integers(row=row, col=col)
-        if not (0 <= row < self.rows and 0 <= col < self.cols):
-            raise ParameterError(f"view ({row},{col}) is outside the {self.rows}x{self.cols} grid")
+        self._check_view(row, col)
         lod, scale = self._lod_map(lod)
         return self._render_mip(lod, scale, self._view_rays_at(row, col, scale), max_level, blend, bias)
 
