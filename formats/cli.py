@@ -485,10 +485,11 @@ def _lfn_neurons(a, d) -> float:
 
 def _lfn_size_text(a, d) -> str:
     """The network a render used, for its report line."""
-    if a.gaze:
-        return f"foveated around {a.gaze}: the network of {d.neurons:g} neurons per layer at the gaze"
-    n = _lfn_neurons(a, d)
+    n = d.neurons if a.gaze else _lfn_neurons(a, d)
     k = d.native_stride(n, 1.0 if a.scale is None else a.scale) if a.fast else 1
+    if a.gaze:
+        return f"foveated around {a.gaze}: the network of {n:g} neurons per layer at the gaze" + (
+            f", run every {k} pixels there (its own resolution)" if k > 1 else "")
     return f"network of {n:g} neurons per layer ({d.neurons:g} in the file's bytes)" + (
         f", run every {k} pixels (its own resolution) and upsampled" if k > 1 else "")
 
@@ -547,12 +548,10 @@ def _lfn_foveated(a, d, scale: float):
     if a.level is not None:
         raise ParameterError("--gaze renders the largest network at the gaze and smaller ones around it: give "
                              "--gaze or --level")
-    if a.fast:
-        raise ParameterError("--gaze already samples the smaller networks sparsely: give --gaze or --fast")
     gaze = _floats(a.gaze, 2, "--gaze")
     inner, outer = _floats(a.fovea or "0.1,0.5", 2, "--fovea")
     fmap = d.foveation_map(tuple(gaze), inner, outer, dither=False, scale=scale)
-    return lambda p: d.render_pose_lod_mip(p, fmap)
+    return lambda p: d.render_pose_lod_mip(p, fmap, native=bool(a.fast))
 
 
 def _render_path(a, out: Path) -> int:

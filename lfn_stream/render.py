@@ -615,7 +615,7 @@ class LfnRenderer(Decoder):
         return float(min(hi, max(lo, math.ceil(hi - max(level - MIP_SHARPEN, 0.0) / per - 1e-9))))
 
     def render_lod_mip(self, row: int, col: int, lod: np.ndarray, max_level: int = MIP_LEVELS,
-                       blend: float = MIP_BLEND, bias: float = 0.0) -> np.ndarray:
+                       blend: float = MIP_BLEND, bias: float = 0.0, native: bool = False) -> np.ndarray:
         """A view drawn from a size map with the sample density each size stands for, as
         mipmapping draws a texture: sizes are anti-aliased networks (size n is trained on the
         views box-filtered to :meth:`LfnConfig.scale_of` (n)), so a pixel whose size stands for
@@ -629,7 +629,9 @@ class LfnRenderer(Decoder):
         full-density level, still without steps or dither noise). Level j runs a size one
         octave finer than its stride (:data:`MIP_SHARPEN`, :meth:`mip_neurons`). ``bias`` is
         added to ``m`` (> 0: coarser and faster, as a texture's LOD bias). Where the map is the
-        full network the pixels are exactly :meth:`render`'s. ``lod`` as in
+        full network the pixels are exactly :meth:`render`'s (``native=True``: every lattice
+        :meth:`native_stride` times sparser, each pixel at the same size, and the fovea exactly
+        ``render(native=True)``'s). ``lod`` as in
         :meth:`render_lod_map`, e.g. ``foveation_map(gaze, dither=False)``: on one CPU thread
         about 0.3-0.65x a full render's time, closer to the captured views than the dithered
         map's render and without its pixel noise (BENCHMARKS.md).
@@ -639,7 +641,7 @@ class LfnRenderer(Decoder):
         """
         self._check_view(row, col)
         lod, scale = self._lod_map(lod)
-        return self._render_mip(lod, scale, self._view_rays_at(row, col, scale), max_level, blend, bias)
+        return self._render_mip(lod, scale, self._view_rays_at(row, col, scale), max_level, blend, bias, native)
 
     def _view_rays_at(self, row: int, col: int, scale: float):
         """``rays_at(size, spacing, at)`` of captured view (row, col) rendered at ``scale``
@@ -659,16 +661,16 @@ class LfnRenderer(Decoder):
                                                      self.norm["centre"], self.norm["radius"], size, spacing, at)
 
     def render_pose_lod_mip(self, c2w, lod: np.ndarray, max_level: int = MIP_LEVELS, blend: float = MIP_BLEND,
-                            bias: float = 0.0) -> np.ndarray:
+                            bias: float = 0.0, native: bool = False) -> np.ndarray:
         """:meth:`render_lod_mip` from any camera pose (as :meth:`render_pose`): a foveated frame
         for a headset's eye, e.g. ``render_pose_lod_mip(eye, foveation_map(gaze, dither=False,
         scale=S))``."""
         c2w = self._check_pose(c2w, self.norm)
         lod, scale = self._lod_map(lod)
-        return self._render_mip(lod, scale, self._pose_rays_at(c2w, scale), max_level, blend, bias)
+        return self._render_mip(lod, scale, self._pose_rays_at(c2w, scale), max_level, blend, bias, native)
 
     @torch.no_grad()
-    def _render_mip(self, lod: np.ndarray, scale: float, rays_at, max_level, blend, bias) -> np.ndarray:
+    def _render_mip(self, lod: np.ndarray, scale: float, rays_at, max_level, blend, bias, native) -> np.ndarray:
         """The mip render of :meth:`render_lod_mip`; ``rays_at(size, spacing, at)`` gives the (M, 6)
         rays of a lattice's points ``at`` (:func:`camera_rays`' arguments)."""
         if isinstance(max_level, bool) or not isinstance(max_level, (int, np.integer)) or not 0 <= max_level <= 8:
@@ -677,7 +679,10 @@ class LfnRenderer(Decoder):
         if not (0 <= blend <= 1 and -8 <= bias <= 8):
             raise ParameterError(f"blend must be within [0, 1] and bias within [-8, 8], got {blend!r}, {bias!r}")
         h, w = lod.shape
-        m = np.clip(self.mip_levels(lod, int(max_level)) + (MIP_OFFSET + bias), 0.0, float(max_level))
+        # native: every lattice as many octaves sparser as the frame is finer than the network
+        # (render(native=True)'s stride); each pixel keeps its network size
+        shift = int(self.native_stride(self.neuron_range[1], scale)).bit_length() - 1 if native else 0
+        m = np.clip(self.mip_levels(lod, int(max_level)) + (MIP_OFFSET + bias), 0.0, float(max_level)) + shift
         lower = np.floor(m)
         f = m - lower
         # the upper level's share: linear over the middle `blend` of each interval (1: trilinear)
@@ -705,7 +710,7 @@ class LfnRenderer(Decoder):
                 img *= wt[box][..., None]
                 out[box] += img
                 continue
-            img = self._lattice(1 << j, used, self.mip_neurons(j), rays_at, dt)
+            img = self._lattice(1 << j, used, self.mip_neurons(j - shift), rays_at, dt)
             img = img[box]
             img *= wt[box][..., None]
             out[box] += img

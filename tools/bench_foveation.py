@@ -12,7 +12,7 @@ For an LFN file and a few captured views, renders each view (at the scene's reso
 - ``mip L``: the exact map drawn as mipmapping draws a texture
   (:meth:`lfn_stream.LfnRenderer.render_lod_mip`): lattices every 2^j pixels, j ≤ L, each at the
   size made for its scale, blended trilinearly; ``rays`` = network evaluations against the full
-  render's.
+  render's (``--native``: each also with ``native=True``, on the network's own pixel grid).
 
 Reports ms per view (medians; the modes are called in turn, round after round) and the ratio to
 the full-width render (issue 17: ≤ 0.6×), and, against
@@ -123,6 +123,7 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default="cpu", help="torch device the networks run on (cpu, cuda)")
     ap.add_argument("--scale", type=float, default=1.0,
                     help="render at this multiple of the views' size (a display's resolution)")
+    ap.add_argument("--native", action="store_true", help="also each mip mode with native=True")
     ap.add_argument("--scene", default=None, help="the captured scene (scale 1 only): PSNR against its views")
     ap.add_argument("--out", default=None)
     a = ap.parse_args(argv)
@@ -158,6 +159,9 @@ def main(argv=None) -> int:
         for L, bl, bi in [(L, bl, bi) for L in a.mip for bl in a.blend for bi in a.bias]:
             modes[f"mip_{L}_{bl:g}_{bi:g}"] = lambda L=L, bl=bl, bi=bi: r.render_lod_mip(row, col, exact_map, max_level=L,
                                                                                        blend=bl, bias=bi)
+            if a.native:
+                modes[f"mip_{L}_{bl:g}_{bi:g}_native"] = lambda L=L, bl=bl, bi=bi: r.render_lod_mip(
+                    row, col, exact_map, max_level=L, blend=bl, bias=bi, native=True)
         times, imgs, rays = timed_modes(r, modes, a.rounds)
         t_full, full, exact = times["full"], imgs["full"], imgs["exact"]
 

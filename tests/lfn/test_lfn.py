@@ -491,6 +491,16 @@ def test_native_render_samples_the_network_at_its_own_scale(tmp_path):
     g = ro.render(0, 1, hi, 1.0, native=True).reshape(-1, 4)
     assert 0 < inside.sum() < 256 and (g[~inside] == 0).all()
     assert np.allclose(g[inside], got.reshape(-1, 4)[inside], atol=1e-6)
+    # foveation on the network's own grid: every lattice one octave sparser, each pixel at its
+    # size; the fovea is render(native=True)'s pixels
+    full_map = np.full((16, 16), hi)
+    assert np.array_equal(r.render_lod_mip(0, 1, full_map, native=True), got)
+    per = np.log2(1 / r.cfg.min_scale) / (r.cfg.max_neurons - r.cfg.min_neurons)
+    rays4 = view_rays(r.geom, 1, 1.0, r.norm["centre"], r.norm["radius"], (4, 4), (1 / 4, 1 / 4))
+    lattice = r.render_rays(rays4.reshape(-1, 6), r.mip_neurons(1)).reshape(4, 4, 4)
+    assert np.allclose(r.render_lod_mip(0, 1, np.full((16, 16), hi - 1 / per), native=True),
+                       _bilinear_up(lattice, 4, 16, 16), atol=1e-6)
+    assert np.allclose(r.render_pose_lod_mip(r.pose(0, 1), full_map, native=True), got, atol=1e-5)
     # lfcodec render --fast: the same pixels, from the default camera
     from formats.imageio import read_image
 
@@ -499,9 +509,14 @@ def test_native_render_samples_the_network_at_its_own_scale(tmp_path):
     assert main(["render", str(src), str(out), "--fast", "--quiet", "--device", "cpu"]) == 0
     want = r.render_pose(r.pose(0, 1), r.display_neurons_at(1.0), 1.0, native=True)
     assert np.array_equal(read_image(out), r.to_pixels(want))
+    assert main(["render", str(src), str(out), "--fast", "--gaze", "8,8", "--quiet"]) == 0
+    want = r.render_pose_lod_mip(r.pose(0, 1), r.foveation_map((8.0, 8.0), dither=False), native=True)
+    assert np.array_equal(read_image(out), r.to_pixels(want))
     plain = LfnRenderer(open_lfc(GOLDEN3), device="cpu")                # no display ladders: scale 1
     assert plain.native_scale == 1.0
     assert np.array_equal(plain.render(1, 1, native=True), plain.render(1, 1))
+    fov = plain.foveation_map((10, 10), dither=False)
+    assert np.array_equal(plain.render_lod_mip(1, 1, fov, native=True), plain.render_lod_mip(1, 1, fov))
 
 
 def test_dither_sizes_mix_neighbouring_sizes_in_proportion():
