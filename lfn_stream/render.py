@@ -454,8 +454,7 @@ class LfnRenderer(Decoder):
     def _render_native(self, neurons: float, scale: float, rays_at) -> np.ndarray:
         """The ``native=True`` render: every pixel from the lattice of :meth:`native_stride`."""
         h, w = self._scaled(scale)
-        dt = torch.float16 if self.half else torch.float32
-        return self._lattice(self.native_stride(neurons, scale), np.ones((h, w), bool), neurons, rays_at, dt)
+        return self._lattice(self.native_stride(neurons, scale), np.ones((h, w), bool), neurons, rays_at)
 
     # -- free cameras (lfn_stream.cameras; the browser viewer uses the same formulas) ---------
     def pose(self, row: int, col: int) -> np.ndarray:
@@ -690,11 +689,6 @@ class LfnRenderer(Decoder):
         lower = lower.astype(np.int8)
         w_lo, w_up = (1.0 - up).astype(np.float32), up.astype(np.float32)   # (a pixel's two levels' shares)
         out = np.zeros((h, w, 4), np.float32)
-
-        def at_pixels(idx):                 # the rays of these pixels
-            return rays_at((h, w), (h / self.height, w / self.width), idx)
-
-        dt = torch.float16 if self.half else torch.float32
         for j in range(int(lower.max()) + 2):
             wt = np.where(lower == j, w_lo, np.where(lower == j - 1, w_up, np.float32(0)))
             used = wt > 0
@@ -706,23 +700,25 @@ class LfnRenderer(Decoder):
                 y, x = np.nonzero(used[box])
                 at = (y + rows[0]) * w + (x + cols[0])
                 img = np.zeros(used[box].shape + (4,), np.float32)
-                img[y, x] = self.render_rays(at_pixels(at), self.mip_neurons(0))
+                pixels = rays_at((h, w), (h / self.height, w / self.width), at)
+                img[y, x] = self.render_rays(pixels, self.mip_neurons(0))
                 img *= wt[box][..., None]
                 out[box] += img
                 continue
-            img = self._lattice(1 << j, used, self.mip_neurons(j - shift), rays_at, dt)
+            img = self._lattice(1 << j, used, self.mip_neurons(j - shift), rays_at)
             img = img[box]
             img *= wt[box][..., None]
             out[box] += img
         return out
 
     @torch.no_grad()
-    def _lattice(self, k: int, used: np.ndarray, neurons: float, rays_at, dt) -> np.ndarray:
+    def _lattice(self, k: int, used: np.ndarray, neurons: float, rays_at) -> np.ndarray:
         """(h, w, 4) pixels read bilinearly from a lattice every ``k`` pixels (k > 1) rendered at
         ``neurons``, valid where ``used`` (h, w) is set: the network runs only at the lattice
         points those pixels' taps read. ``rays_at(size, spacing, at)`` as in :meth:`_render_mip`."""
         h, w = used.shape
         hj, wj = -(-h // k), -(-w // k)
+        dt = torch.float16 if self.half else torch.float32
         # the lattice points a used pixel's bilinear taps read: its k×k block's and the
         # neighbours' (a pixel's sample position lies within half a lattice step of its block)
         need = np.zeros((hj * k, wj * k), bool)
