@@ -22,12 +22,13 @@ integrates), and of the mean of 4 frames with the dither advancing (temporal dit
 *ring error* (:func:`ring_error`: arcs and level steps around the gaze, the smooth loss of
 detail with distance taken out); the transition roughness (mean |Laplacian| of (render −
 full): pixel-scale noise); the fovea's PSNR (the full network up to rounding); and with
-``--scene``, ``gt_psnr``: the band's PSNR against the captured view (colour premultiplied by
-alpha where the views have one), the measure of what foveation loses that a viewer could see.
+``--scene``, ``gt_psnr``: the band's PSNR against the captured view as the networks are trained
+on it (:func:`lfn_stream.training.targets_of`: colour premultiplied by alpha), the measure of
+what foveation loses that a viewer could see.
 
 Usage:
     python -m tools.bench_foveation FILE.lfc [--views 0 7 33] [--rounds 3] [--sizes 4 8 16] [--mip 2 3]
-        [--blend 1 0.25] [--bias 0] [--scene DIR] [--out JSON]
+        [--blend 1 0.25] [--bias 0] [--native] [--scene DIR] [--out JSON]
 """
 from __future__ import annotations
 
@@ -41,6 +42,7 @@ import torch
 from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
 from lfn_stream.render import MIP_BLEND, size_levels
+from lfn_stream.training import targets_of
 from tools.common import log, machine
 
 
@@ -166,10 +168,8 @@ def main(argv=None) -> int:
         t_full, full, exact = times["full"], imgs["full"], imgs["exact"]
 
         gt = None
-        if lf is not None:
-            gt = lf.views[row, col].astype(np.float64) / np.iinfo(lf.views.dtype).max
-            if gt.shape[-1] == 4:
-                gt = np.concatenate([gt[..., :3] * gt[..., 3:], gt[..., 3:]], -1)
+        if lf is not None:          # the networks' own targets: RGB premultiplied by alpha (grey as RGB)
+            gt = targets_of(lf.views[row, col][None], lf.has_alpha)[0] / float(np.iinfo(lf.views.dtype).max)
 
         def measures(img, ms, frames=None):
             m = {"ms": round(ms, 1), "ratio": round(ms / t_full, 3),
