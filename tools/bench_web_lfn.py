@@ -1,7 +1,8 @@
 """The browser viewer's LFN renderer (formats/web/lfn.js under Node) against the Python
 renderer (``LfnRenderer`` on the CPU, torch with one thread) on the same file: time per frame
 of captured view 0 at several network sizes (each at its own scale, and the full network at
-full scale), weight bytes the viewer had fetched for that size, and pixel agreement.
+full scale, densely and on the network's own pixel grid: ``native``), weight bytes the viewer
+had fetched for that size, and pixel agreement.
 
     python -m tools.bench_web_lfn FILE.lfc [--rounds 3]
 
@@ -40,27 +41,27 @@ def main(argv=None) -> int:
     r = LfnRenderer(open_lfc(a.file), device="cpu")
     lo, hi = r.cfg.min_neurons, r.cfg.max_neurons
     sizes = sorted({lo, round(lo + (hi - lo) / 4), round(lo + (hi - lo) / 2), hi})
-    settings = [(n, "auto") for n in sizes] + [(hi, "1")]
+    settings = [(n, "auto", False) for n in sizes] + [(hi, "1", False), (hi, "1", True)]
     with tempfile.TemporaryDirectory() as tmp:
         got = subprocess.run([node, str(ROOT / "tools" / "web_lfn_bench.mjs"), a.file, tmp, str(a.rounds),
-                              *[f"{n},{s}" for n, s in settings]], capture_output=True, text=True, check=True)
+                              *[f"{n},{s}" + (",native" if nat else "") for n, s, nat in settings]], capture_output=True, text=True, check=True)
         js = json.loads(got.stdout.strip().splitlines()[-1])
         print(f"{Path(a.file).name}: depth {r.cfg.depth}, {lo}..{hi} neurons, views {r.width}x{r.height}, "
               f"{'occupancy net' if r.occ is not None else 'no occupancy net'}\n")
-        print("| neurons | scale | frame | weights fetched | JS ms | Python ms | JS/Python | max diff | pixels differing |")
-        print("|---|---|---|---|---|---|---|---|---|")
-        for i, ((n, s), j) in enumerate(zip(settings, js)):
+        print("| neurons | scale | sampled | frame | weights fetched | JS ms | Python ms | JS/Python | max diff | pixels differing |")
+        print("|---|---|---|---|---|---|---|---|---|---|")
+        for i, ((n, s, nat), j) in enumerate(zip(settings, js)):
             times = []
             for _ in range(a.rounds):
                 t = time.perf_counter()
-                out = r.render_pose(r.pose(0, 0), float(n), None if s == "auto" else float(s))
+                out = r.render_pose(r.pose(0, 0), float(n), None if s == "auto" else float(s), native=nat)
                 times.append(1e3 * (time.perf_counter() - t))
             want = r.to_pixels(out)
             px = np.fromfile(Path(tmp) / f"px_{i}.bin", want.dtype).reshape(want.shape)
             d = np.abs(px.astype(np.int64) - want)
             py = float(np.median(times))
             print(f"| {n} | {'own' if s == 'auto' else s} ({r.cfg.scale_of(n) if s == 'auto' else 1:.3f}) | "
-                  f"{j['w']}x{j['h']} | {j['bytes'] / 1024:.1f} KiB | {j['ms']:.0f} | {py:.0f} | {j['ms'] / py:.1f}x | "
+                  f"{'every ' + str(j['stride']) + ' px' if j['stride'] > 1 else 'every pixel'} | {j['w']}x{j['h']} | {j['bytes'] / 1024:.1f} KiB | {j['ms']:.0f} | {py:.0f} | {j['ms'] / py:.1f}x | "
                   f"{int(d.max())} | {(d > 0).mean() * 100:.4f}% |")
     return 0
 

@@ -383,21 +383,76 @@ export class LfnDecoder {
     return [R[0][0], R[0][1], R[0][2], o[0], R[1][0], R[1][1], R[1][2], o[1], R[2][0], R[2][1], R[2][2], o[2], 0, 0, 0, 1];
   }
 
+  /** The scale of the views the full network was trained at, as the display ladders state it
+   *  (the largest display scale, at most 1); 1 without them. As LfnRenderer.native_scale. */
+  get nativeScale() {
+    return this.displayScales ? Math.min(1, this.displayScales[this.displayScales.length - 1][0]) : 1;
+  }
+
+  /** Pixels between network samples of a native render of `neurons` at `scale`: the largest power
+   *  of two up to 8 within how much finer the frame is than the network's own scale. As
+   *  LfnRenderer.native_stride. */
+  nativeStride(neurons, scale) {
+    const over = scale / (this.nativeScale * this.scaleOf(neurons));
+    return over > 0 ? 2 ** Math.min(3, Math.max(0, Math.floor(Math.log2(over) + 1e-9))) : 1;
+  }
+
   /** Render a camera pose at (fractional) `neurons` and image `scale` (default: the size's own).
-   *  Returns {rgba: Float64Array h·w·4 premultiplied in [0, 1], h, w, evaluated: rays run}. */
-  render(pose, neurons = this.neurons, scale = null) {
+   *  `native`: a network trained at reduced resolution runs on a lattice every nativeStride()
+   *  pixels, upsampled bilinearly, the silhouette cut per pixel (LfnRenderer.render_pose(...,
+   *  native=True); a quarter of the network passes at stride 2).
+   *  Returns {rgba: Float64Array h·w·4 premultiplied in [0, 1], h, w, evaluated: rays run, stride}. */
+  render(pose, neurons = this.neurons, scale = null, { native = false } = {}) {
     if (!(neurons >= this.minN && neurons <= this.neurons)) {
       throw new LfcError(`${neurons} neurons outside the available range [${this.minN}, ${this.neurons}]`);
     }
     if (scale === null) scale = this.scaleOf(neurons);
     const H = this.H, W = this.W;
     const h = Math.max(1, Math.round(H * scale)), w = Math.max(1, Math.round(W * scale));
-    const sx = w / W, sy = h / H, fx = this.focal[0] * sx, fy = this.focal[1] * sy;
-    const cx = this.principal[0] * sx, cy = this.principal[1] * sy;
+    const k = native ? this.nativeStride(neurons, scale) : 1;
+    if (k > 1) return this._renderLattice(pose, neurons, h, w, k);
+    const rays = this._rays(pose, h, w, h / H, w / W);
+    const rgba = new Float64Array(h * w * 4);
+    const ws = this._workspace(neurons);
+    const run = this.occ ? this._occupiedAll(rays, h * w, ws) : null;
+    const evaluated = this._forwardRays(ws, rays, h * w, run, rgba);
+    return { rgba, h, w, evaluated, stride: 1 };
+  }
+
+  /** Plücker rays (float32 values, as the Python renderer's) through the pixel centres of an h×w
+   *  grid at `sy`, `sx` grid pixels per view pixel: Float64Array n·6 (ray i at 6i). */
+  _rays(pose, h, w, sy, sx) {
+    const ray = this._rayMaker(pose, sy, sx), out = new Float64Array(h * w * 6);
+    for (let yy = 0, i = 0; yy < h; yy++) for (let xx = 0; xx < w; xx++, i += 6) ray(yy, xx, out, i);
+    return out;
+  }
+
+  /** (y, x, out, i) → the ray of grid pixel (y, x) written to out[i..i+5] (lfn_stream.rays.camera_rays). */
+  _rayMaker(pose, sy, sx) {
+    const fx = this.focal[0] * sx, fy = this.focal[1] * sy, cx = this.principal[0] * sx, cy = this.principal[1] * sy;
     const o = [0, 1, 2].map((i) => (pose[4 * i + 3] - this.centre[i]) / this.radius);
-    const rgba = new Float64Array(h * w * 4), x = new Float64Array(6);
     const f32 = Math.fround;
-    const ws = this._workspace(neurons), RB = ws.RB, X = ws.X;
+    return (yy, xx, out, i) => {
+      const u = (xx + 0.5 - cx) / fx, v = -(yy + 0.5 - cy) / fy;
+      let d0 = u * pose[0] + v * pose[1] - pose[2], d1 = u * pose[4] + v * pose[5] - pose[6], d2 = u * pose[8] + v * pose[9] - pose[10];
+      const l = Math.sqrt(d0 * d0 + d1 * d1 + d2 * d2);
+      d0 /= l; d1 /= l; d2 /= l;
+      out[i] = f32(d0); out[i + 1] = f32(d1); out[i + 2] = f32(d2);
+      out[i + 3] = f32(o[1] * d2 - o[2] * d1); out[i + 4] = f32(o[2] * d0 - o[0] * d2); out[i + 5] = f32(o[0] * d1 - o[1] * d0);
+    };
+  }
+
+  /** Uint8Array n: 1 where the occupancy net lets ray i through. */
+  _occupiedAll(rays, n, ws) {
+    const inside = new Uint8Array(n);
+    for (let i = 0; i < n; i++) inside[i] = this._occupied(rays.subarray(6 * i, 6 * i + 6), ws) ? 1 : 0;
+    return inside;
+  }
+
+  /** Rays i < n with run[i] set (all when run is null) through the network into rgba (4i..4i+3);
+   *  returns how many ran. */
+  _forwardRays(ws, rays, n, run, rgba) {
+    const RB = ws.RB, X = ws.X;
     let evaluated = 0, cnt = 0;
     const flush = () => {
       this._forwardBatch(ws, cnt);
@@ -408,22 +463,75 @@ export class LfnDecoder {
       evaluated += cnt;
       cnt = 0;
     };
-    for (let yy = 0; yy < h; yy++) {
-      for (let xx = 0; xx < w; xx++) {
-        const u = (xx + 0.5 - cx) / fx, v = -(yy + 0.5 - cy) / fy;
-        let d0 = u * pose[0] + v * pose[1] - pose[2], d1 = u * pose[4] + v * pose[5] - pose[6], d2 = u * pose[8] + v * pose[9] - pose[10];
-        const l = Math.sqrt(d0 * d0 + d1 * d1 + d2 * d2);
-        d0 /= l; d1 /= l; d2 /= l;
-        x[0] = f32(d0); x[1] = f32(d1); x[2] = f32(d2);        // the Python renderer's rays are float32
-        x[3] = f32(o[1] * d2 - o[2] * d1); x[4] = f32(o[2] * d0 - o[0] * d2); x[5] = f32(o[0] * d1 - o[1] * d0);
-        if (this.occ && !this._occupied(x, ws)) continue;
-        for (let q = 0; q < 6; q++) X[q * RB + cnt] = x[q];
-        ws.pix[cnt++] = yy * w + xx;
-        if (cnt === RB) flush();
-      }
+    for (let i = 0; i < n; i++) {
+      if (run && !run[i]) continue;
+      for (let q = 0; q < 6; q++) X[q * RB + cnt] = rays[6 * i + q];
+      ws.pix[cnt++] = i;
+      if (cnt === RB) flush();
     }
     if (cnt) flush();
-    return { rgba, h, w, evaluated };
+    return evaluated;
+  }
+
+  /** The native render of an h×w frame from a lattice every k pixels (LfnRenderer._lattice with
+   *  every pixel used): the occupancy net at every lattice point, the network at the lattice
+   *  points within one of an occupied one, OpenCV's bilinear resize (pixel y reads the lattice at
+   *  (y + 0.5)/k − 0.5, clamped), then each pixel kept where all its taps are occupied, cut where
+   *  none is, and asked of the occupancy net at its own ray where they are mixed. */
+  _renderLattice(pose, neurons, h, w, k) {
+    const hj = Math.ceil(h / k), wj = Math.ceil(w / k), n = hj * wj;
+    const rays = this._rays(pose, hj, wj, h / (this.H * k), w / (this.W * k));
+    const ws = this._workspace(neurons);
+    let inside = null, run = null;
+    if (this.occ) {
+      inside = this._occupiedAll(rays, n, ws);
+      run = new Uint8Array(n);                     // 3×3 dilation of inside
+      for (let y = 0; y < hj; y++) {
+        for (let x = 0; x < wj; x++) {
+          if (!inside[y * wj + x]) continue;
+          for (let yy = Math.max(0, y - 1); yy <= Math.min(hj - 1, y + 1); yy++) {
+            for (let xx = Math.max(0, x - 1); xx <= Math.min(wj - 1, x + 1); xx++) run[yy * wj + xx] = 1;
+          }
+        }
+      }
+    }
+    const lat = new Float64Array(n * 4);
+    const evaluated = this._forwardRays(ws, rays, n, run, lat);
+    const taps = (m, size) => {                    // per output coordinate: lower tap and weight
+      const i0 = new Int32Array(m), wt = new Float64Array(m);
+      for (let y = 0; y < m; y++) {
+        const f = (y + 0.5) / k - 0.5;
+        let s = Math.floor(f), a = f - s;
+        if (s < 0) { s = 0; a = 0; }
+        if (s >= size - 1) { s = size - 1; a = 0; }
+        i0[y] = s; wt[y] = a;
+      }
+      return [i0, wt];
+    };
+    const [ty, ay] = taps(h, hj), [tx, ax] = taps(w, wj);
+    const rgba = new Float64Array(h * w * 4), x6 = new Float64Array(6);
+    const pixelRay = this.occ ? this._rayMaker(pose, h / this.H, w / this.W) : null;
+    let asked = 0;
+    for (let y = 0; y < h; y++) {
+      const r0 = ty[y] * wj, r1 = Math.min(ty[y] + 1, hj - 1) * wj, b = ay[y];
+      for (let x = 0; x < w; x++) {
+        const c0 = tx[x], c1 = Math.min(tx[x] + 1, wj - 1), a = ax[x];
+        const w00 = (1 - b) * (1 - a), w01 = (1 - b) * a, w10 = b * (1 - a), w11 = b * a;
+        if (inside) {
+          const frac = w00 * inside[r0 + c0] + w01 * inside[r0 + c1] + w10 * inside[r1 + c0] + w11 * inside[r1 + c1];
+          if (!(frac > 1 - 1e-4)) {
+            if (!(frac > 1e-4)) continue;          // no tap occupied: empty
+            // mixed: the occupancy net at this pixel's own ray (the dense render's rays)
+            pixelRay(y, x, x6, 0);
+            asked++;
+            if (!this._occupied(x6, ws)) continue;
+          }
+        }
+        const p = 4 * (y * w + x), q00 = 4 * (r0 + c0), q01 = 4 * (r0 + c1), q10 = 4 * (r1 + c0), q11 = 4 * (r1 + c1);
+        for (let c = 0; c < 4; c++) rgba[p + c] = w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c];
+      }
+    }
+    return { rgba, h, w, evaluated, stride: k, asked };
   }
 
   _workspace(neurons) {

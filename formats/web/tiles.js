@@ -131,20 +131,21 @@ export class TiledLfn {
   orbitPose(v, yaw, pitch = 0) { return this.tiles.get(0).orbitPose(v, yaw, pitch); }
 
   /** Render a camera as the blend of its tiles (each opened and grown by grow(n, pose) first),
-   *  every tile at `neurons` and `scale`: {rgba (premultiplied), h, w, evaluated, tiles}. */
-  render(pose, neurons, scale = null) {
-    let out = null, evaluated = 0, h = 0, w = 0;
+   *  every tile at `neurons` and `scale` (and `native`, as LfnDecoder.render):
+   *  {rgba (premultiplied), h, w, evaluated, stride, tiles}. */
+  render(pose, neurons, scale = null, opts = {}) {
+    let out = null, evaluated = 0, h = 0, w = 0, stride = 1;
     const used = [];
     for (const [j, wj] of this.weights(pose)) {
       const d = this.tiles.get(j);
       if (!d) throw new LfcError(`tile ${j} is not open: call grow(neurons, pose) before render`);
-      const r = d.render(pose, neurons, scale);
-      if (out === null) { out = new Float64Array(r.rgba.length); h = r.h; w = r.w; }
+      const r = d.render(pose, neurons, scale, opts);
+      if (out === null) { out = new Float64Array(r.rgba.length); h = r.h; w = r.w; stride = r.stride; }
       for (let i = 0; i < out.length; i++) out[i] += wj * r.rgba[i];
       evaluated += r.evaluated;
       used.push(j);
     }
-    return { rgba: out, h, w, evaluated, tiles: used };
+    return { rgba: out, h, w, evaluated, stride, tiles: used };
   }
 
   toPixels(rgba, h, w) { return this.tiles.get(0).toPixels(rgba, h, w); }

@@ -142,7 +142,7 @@ async function mainLfn(dec, source, t0) {
   const openMs = performance.now() - t0;
   const posed = dec.layout === "posed";
   Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
-    neurons: dec.maxN, scale: "auto" });
+    neurons: dec.maxN, scale: "auto", native: true });
   const want = Number(params.get("neurons"));
   if (want >= dec.minN && want <= dec.maxN) state.neurons = want;
   $("rlfc-controls").hidden = true;
@@ -164,7 +164,7 @@ async function mainLfn(dec, source, t0) {
       `network        ${dec.neurons} of ${dec.maxN} neurons fetched (${(held / 1024).toFixed(1)} KiB of weights)`,
       ...(tiled ? [`tiles          ${f ? f.tiles.join(", ") : "-"} blended; ${dec.tiles.size} of ${dec.files.length} opened`] : []),
       `open           ${openMs.toFixed(0)} ms`,
-      `frame          ${f ? f.ms.toFixed(1) : "-"} ms, ${f ? `${f.w}×${f.h}` : "-"} at ${f ? f.neurons.toFixed(2) : "-"} neurons`,
+      `frame          ${f ? f.ms.toFixed(1) : "-"} ms, ${f ? `${f.w}×${f.h}` : "-"} at ${f ? f.neurons.toFixed(2) : "-"} neurons${f && f.stride > 1 ? `, the network every ${f.stride} pixels` : ""}`,
       `rays evaluated ${f ? f.evaluated.toLocaleString() : "-"}${dec.occ ? " (the occupancy net skips the others)" : ""}`,
     ].join("\n");
     $("st").textContent = posed ? `view ${state.view}, yaw ${state.yaw.toFixed(1)}°, pitch ${state.pitch.toFixed(1)}°`
@@ -180,13 +180,13 @@ async function mainLfn(dec, source, t0) {
     const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(state.scale === "auto" ? null : Number(state.scale));
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
-    const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc);      // a quarter-scale preview while dragging
+    const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc, { native: state.native });   // a quarter-scale preview while dragging
     const px = dec.toPixels(r.rgba, r.h, r.w);
     const ms = performance.now() - t;
     canvas.width = r.w;
     canvas.height = r.h;
     ctx.putImageData(new ImageData(toRGBA(px, r.h, r.w, dec.C, dec.peak), r.w, r.h), 0, 0);
-    state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated, tiles: r.tiles || [0] };
+    state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated, stride: r.stride, tiles: r.tiles || [0] };
     stats();
     return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons };
   };
@@ -215,6 +215,7 @@ async function mainLfn(dec, source, t0) {
   });
   $("neurons").addEventListener("input", (e) => { state.neurons = Number(e.target.value); request(); });
   $("scale").addEventListener("change", (e) => { state.scale = e.target.value; request(); });
+  $("native").addEventListener("change", (e) => { state.native = e.target.checked; request(); });
 
   await draw(dec.minN);                        // the base network at its own scale: the first useful bytes
   await request();                             // then the chosen level, its steps streamed in
@@ -223,7 +224,8 @@ async function mainLfn(dec, source, t0) {
   return {
     decoder: dec, source,
     /** Render a camera ({s, t} on a grid, or {view, yaw, pitch}) with opts {neurons, scale
-     *  ("auto" or a number)}; resolves with frame info. */
+     *  ("auto" or a number), native (the network on its own pixel grid; default true)};
+     *  resolves with frame info. */
     async show(cam, opts = {}) {
       if (state.busy) await state.busy;
       if (cam.view !== undefined) {
@@ -234,6 +236,8 @@ async function mainLfn(dec, source, t0) {
       state.yaw = cam.yaw || 0; state.pitch = cam.pitch || 0;
       if (opts.neurons !== undefined) state.neurons = opts.neurons;
       if (opts.scale !== undefined) state.scale = String(opts.scale);
+      if (opts.native !== undefined) state.native = Boolean(opts.native);
+      $("native").checked = state.native;
       $("neurons").value = String(state.neurons); $("scale").value = state.scale === "auto" ? "auto" : "1";
       return draw();
     },

@@ -54,6 +54,7 @@ def site(tmp_path_factory):
 
     lfn_file(d, 3, posed=True, occ=False).rename(d / "net_posed.lfc")
     lfn_file(d, 3, posed=False, occ=False, seed=1).rename(d / "net_grid.lfc")
+    lfn_file(d, 4, posed=True, seed=2, display_scales=[[0.25, [6, 9, 14, 20]]]).rename(d / "net_native.lfc")
     tile_set(d)
     with FileServer(d, viewer=True) as srv:
         yield srv, f
@@ -191,6 +192,31 @@ def test_light_field_networks_render_in_the_page(site, page):
         got = canvas_rgba(page)[..., :3]
         assert got.shape == want.shape
         assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.02
+
+
+def test_networks_trained_below_the_views_size_render_on_their_own_grid(site, page):
+    """A network whose display ladders say it was trained at 1/4 of the views' size: the page
+    renders it on a lattice every 4 pixels by default (LfnRenderer.render_pose(..., native=True)'s
+    pixels, and the stats say so), and densely with the box unticked."""
+    from lfn_stream import LfnRenderer
+
+    srv, f = site
+    net = f.parent / "net_native.lfc"
+    assert open_viewer(page, srv, net.name) == "ready", page.inner_text("#error")
+    r = LfnRenderer(open_lfc(net), device="cpu")
+    pose = r.orbit_pose(0, 3, 20, -5)
+    for native, opt in ((True, ""), (False, ", native: false")):        # the default, then unticked
+        info = page.evaluate(f"lfcViewer.show({{view: 3, yaw: 20, pitch: -5}}, {{neurons: 20, scale: 1{opt}}})")
+        assert info["stride"] == (4 if native else 1)
+        assert ("every 4 pixels" in page.inner_text("#stats")) == native
+        assert page.evaluate("document.getElementById('native').checked") == native
+        want = r.to_pixels(r.render_pose(pose, 20.0, 1.0, native=native))
+        got = canvas_rgba(page)
+        assert got.shape == want.shape
+        assert np.abs(got[..., 3].astype(int) - want[..., 3]).max() <= 1        # alpha (the canvas premultiplies colour)
+        assert (got[..., 3] != want[..., 3]).mean() < 0.02
+        pre = lambda x: x[..., :3].astype(float) * x[..., 3:] / 255      # noqa: E731 (premultiplied colour)
+        assert np.abs(pre(got) - pre(want)).max() <= 1.5
 
 
 def test_network_weights_stream_as_the_level_rises(site, page):

@@ -89,10 +89,10 @@ def compare(path: Path, out: Path, cams, py_poses, first=None):
     info = run_js(path, out, [c[0] for c in cams], first)
     assert info["ok"], info
     r = LfnRenderer(open_lfc(path), device="cpu")
-    for i, ((_, neurons, scale), pose) in enumerate(zip(cams, py_poses)):
+    for i, ((spec, neurons, scale), pose) in enumerate(zip(cams, py_poses)):
         got = info["renders"][i]
         np.testing.assert_allclose(np.array(got["pose"]).reshape(4, 4), pose, atol=1e-12)
-        want = r.to_pixels(r.render_pose(pose, neurons, scale))
+        want = r.to_pixels(r.render_pose(pose, neurons, scale, native=spec.endswith(",native")))
         js = np.fromfile(out / f"render_{i}.bin", want.dtype).reshape(want.shape)
         diff = np.abs(js.astype(np.int64) - want)
         peak = np.iinfo(want.dtype).max
@@ -166,6 +166,28 @@ def test_display_ladders_per_scale_show_the_same_size_as_python(tmp_path):
         info, _ = compare(path, tmp_path / str(first), cams, [r.grid_pose(1, 2)] * 4, first=first)
         assert [x["shown"] for x in info["renders"]] == [c[1] for c in cams]
     assert [c[1] for c in cams] == [9, 9, 18, 20]
+
+
+@pytest.mark.parametrize("channels,occ", [(4, True), (3, False), (2, True)])
+def test_native_renders_match_python(tmp_path, channels, occ):
+    """render(..., {native: true}): a network whose display ladders say it was trained at 1/4 of
+    the views' size runs on a lattice every 4 pixels at full size (2 at half size, fractional
+    sizes too), upsampled with OpenCV's pixel-centre convention and the silhouette cut per
+    pixel: the pixels of LfnRenderer.render_pose(..., native=True), with a sixteenth of the
+    network passes; at the network's own scale the render is the dense one."""
+    scales = [[0.125, [6, 9]], [0.25, [6, 9, 14, 20]]]
+    path = lfn_file(tmp_path, channels, occ=occ, display_scales=scales)
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    assert r.native_stride(20, 1.0) == 4 and r.native_stride(20, 0.5) == 2 and r.native_stride(20, 0.25) == 1
+    cams = [("view,2,max,1,native", 20.0, 1.0), ("orbit,4,25,-10,13.5,0.5,native", 13.5, 0.5),
+            ("orbit,1,-140,30,9.25,1,native", 9.25, 1.0), ("view,3,max,0.25,native", 20.0, 0.25)]
+    poses = [r.pose(0, 2), r.orbit_pose(0, 4, 25, -10), r.orbit_pose(0, 1, -140, 30), r.pose(0, 3)]
+    info, _ = compare(path, tmp_path, cams, poses)
+    assert [x["stride"] for x in info["renders"]] == [r.native_stride(n, s) for _, n, s in cams]
+    assert info["renders"][2]["stride"] == 8 and info["renders"][3]["stride"] == 1
+    assert info["renders"][0]["evaluated"] <= 6 * 8          # the 6×8 lattice of a 24×30 view
+    dense = run_js(path, tmp_path / "dense", ["view,3,max,0.25"])
+    assert (tmp_path / "render_3.bin").read_bytes() == (tmp_path / "dense" / "render_0.bin").read_bytes()
 
 
 def r_cfg(f):

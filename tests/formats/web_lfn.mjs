@@ -1,7 +1,8 @@
 // Test helper: render views of an LFN .lfc file with the browser viewer's JavaScript renderer
 // (formats/web/lfn.js) under Node.
 // node web_lfn.mjs FILE OUTDIR CAM...   CAM = view,V,N,S | grid,S,T,N,S | orbit,V,YAW,PITCH,N,S
-// (N neurons, "max" = all, "display" = the display ladder's size for what is held; S image scale, "auto" = the size's own). Writes OUTDIR/render_I.bin
+// (N neurons, "max" = all, "display" = the display ladder's size for what is held; S image scale, "auto" = the size's own;
+// a trailing ",native" renders on the network's own pixel grid). Writes OUTDIR/render_I.bin
 // (pixels of the file's dtype, h·w·C) per camera and prints one JSON line: {ok: true, renders:
 // [{h, w, pose, evaluated}], neurons, bytesRead} or {ok: false, name, message}.
 import fs from "fs";
@@ -23,6 +24,8 @@ try {
   const renders = [];
   for (let i = 0; i < cams.length; i++) {
     const a = cams[i].split(",");
+    const native = a[a.length - 1] === "native";
+    if (native) a.pop();
     let pose, rest;
     if (a[0] === "view") { pose = dec.pose(Number(a[1])); rest = a.slice(2); }
     else if (a[0] === "grid") { pose = dec.gridPose(Number(a[1]), Number(a[2])); rest = a.slice(3); }
@@ -30,10 +33,10 @@ try {
     const n = rest[0] === "max" || rest[0] === "display" ? Infinity : Number(rest[0]);
     if (rest[0] !== "display") await dec.grow(n);            // display: what the opened steps show
     const use = rest[0] === "display" ? dec.displayNeurons(rest[1] === "auto" ? null : Number(rest[1])) : Math.min(n, dec.neurons);
-    const r = dec.render(pose, use, rest[1] === "auto" ? null : Number(rest[1]));
+    const r = dec.render(pose, use, rest[1] === "auto" ? null : Number(rest[1]), { native });
     const px = dec.toPixels(r.rgba, r.h, r.w);
     fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
-    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, neurons: dec.neurons, shown: use });
+    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, stride: r.stride, neurons: dec.neurons, shown: use });
   }
   console.log(JSON.stringify({ ok: true, renders, opened, pivot: dec.pivot, up: dec.up }));
 } catch (e) {
