@@ -186,7 +186,7 @@ def test_native_renders_match_python(tmp_path, channels, occ):
     assert [x["stride"] for x in info["renders"]] == [r.native_stride(n, s) for _, n, s in cams]
     assert info["renders"][2]["stride"] == 8 and info["renders"][3]["stride"] == 1
     assert info["renders"][0]["evaluated"] <= 6 * 8          # the 6×8 lattice of a 24×30 view
-    dense = run_js(path, tmp_path / "dense", ["view,3,max,0.25"])
+    assert run_js(path, tmp_path / "dense", ["view,3,max,0.25"])["ok"]
     assert (tmp_path / "render_3.bin").read_bytes() == (tmp_path / "dense" / "render_0.bin").read_bytes()
 
 
