@@ -6,7 +6,13 @@ had fetched for that size, and pixel agreement.
 
     python -m tools.bench_web_lfn FILE.lfc [--rounds 3]
 
-Prints a Markdown table (ratios JS / Python; this box is noisy, read the ratios)."""
+Prints a Markdown table (ratios JS / Python; this box is noisy, read the ratios).
+
+``--page``: instead, the viewer page itself in headless Chromium (``LFC_CHROMIUM`` or Debian's
+``chromium``, driven by Playwright) over ``lfcodec serve``'s server: the full network's frame of
+captured view 0 at full scale, densely and on the network's own pixel grid, with its passes on
+the page's thread (``&workers=0``) and on Web Workers (the page's default: as many as the cores
+Chromium reports, at most 8), settings interleaved round by round; medians."""
 from __future__ import annotations
 
 import argparse
@@ -27,7 +33,10 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("file")
     ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--page", action="store_true", help="time the viewer page in headless Chromium instead")
     a = ap.parse_args(argv)
+    if a.page:
+        return page_bench(Path(a.file).resolve(), a.rounds)
     node = shutil.which("node")
     if node is None:
         print("Node.js is not installed", file=sys.stderr)
@@ -63,6 +72,48 @@ def main(argv=None) -> int:
             print(f"| {n} | {'own' if s == 'auto' else s} ({r.cfg.scale_of(n) if s == 'auto' else 1:.3f}) | "
                   f"{'every ' + str(j['stride']) + ' px' if j['stride'] > 1 else 'every pixel'} | {j['w']}x{j['h']} | {j['bytes'] / 1024:.1f} KiB | {j['ms']:.0f} | {py:.0f} | {j['ms'] / py:.1f}x | "
                   f"{int(d.max())} | {(d > 0).mean() * 100:.4f}% |")
+    return 0
+
+
+def page_bench(path: Path, rounds: int) -> int:
+    """``--page``: frame times of the viewer page (see the module docstring)."""
+    import os
+
+    from playwright.sync_api import sync_playwright
+
+    from formats.serve import FileServer
+
+    chromium = os.environ.get("LFC_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
+    if chromium is None:
+        print("Chromium is not installed", file=sys.stderr)
+        return 2
+    flags = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
+    settings = [(q, nat) for q in ("&workers=0", "") for nat in (False, True)]
+    times: dict = {k: [] for k in settings}
+    info: dict = {}
+    with FileServer(path.parent, viewer=True) as srv, sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=chromium, headless=True, args=flags)
+        page = browser.new_page()
+        for _ in range(rounds):
+            for q, nat in settings:
+                page.goto(srv.viewer_url(path.name) + q)
+                page.wait_for_function("document.body.dataset.state !== 'loading'", timeout=600_000)
+                cam = f"lfcViewer.show({{view: 0}}, {{scale: 1, native: {str(nat).lower()}}})"
+                page.evaluate(cam)                                   # (the first frame: the pool's start-up)
+                got = page.evaluate(cam)
+                times[q, nat].append(got["ms"])
+                info[q, nat] = got
+        cores = page.evaluate("navigator.hardwareConcurrency")
+        browser.close()
+    print(f"{path.name}: the viewer page in headless Chromium ({cores} cores reported), view 0, full network, "
+          f"medians of {rounds}\n")
+    print("| network passes on | sampled | frame | rays run | frame ms |")
+    print("|---|---|---|---|---|")
+    for q, nat in settings:
+        g = info[q, nat]
+        where = "the page's thread" if q else f"{g['workers']} workers"
+        print(f"| {where} | {'every ' + str(g['stride']) + ' px' if g['stride'] > 1 else 'every pixel'} | "
+              f"{g['w']}x{g['h']} | {g['evaluated']} | {float(np.median(times[q, nat])):.0f} |")
     return 0
 
 

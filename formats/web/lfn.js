@@ -403,6 +403,27 @@ export class LfnDecoder {
    *  native=True); a quarter of the network passes at stride 2).
    *  Returns {rgba: Float64Array h·w·4 premultiplied in [0, 1], h, w, evaluated: rays run, stride}. */
   render(pose, neurons = this.neurons, scale = null, { native = false } = {}) {
+    const job = this._job(pose, neurons, scale, native);
+    const inside = this.occ ? this._occupiedAll(job.rays, job.n, job.ws) : null;
+    const out = new Float64Array(job.n * 4);
+    return job.finish(out, this._forwardRays(job.ws, job.rays, job.n, job.run(inside), out), inside);
+  }
+
+  /** render() with the network passes (and the occupancy net's) shared among a ForwardPool's
+   *  workers (lfn_pool.js; the same pixels: each ray's arithmetic does not depend on the rays
+   *  beside it); without a pool, render(). */
+  async renderAsync(pose, neurons = this.neurons, scale = null, { native = false, pool = null } = {}) {
+    if (!pool) return this.render(pose, neurons, scale, { native });
+    const job = this._job(pose, neurons, scale, native);
+    const inside = this.occ ? await pool.occupancy(this, job.rays, job.n) : null;
+    const { out, evaluated } = await pool.forward(this, neurons, job.rays, job.n, job.run(inside));
+    return job.finish(out, evaluated, inside);
+  }
+
+  /** What a frame asks of the networks: {ws, rays (n·6), n, run(inside) → the rays the network
+   *  runs given the occupancy net's answers (null: all), finish(out, evaluated, inside) → the
+   *  frame}, the network's outputs for ray i at out[4i..4i+3]. */
+  _job(pose, neurons, scale, native) {
     if (!(neurons >= this.minN && neurons <= this.neurons)) {
       throw new LfcError(`${neurons} neurons outside the available range [${this.minN}, ${this.neurons}]`);
     }
@@ -410,13 +431,10 @@ export class LfnDecoder {
     const H = this.H, W = this.W;
     const h = Math.max(1, Math.round(H * scale)), w = Math.max(1, Math.round(W * scale));
     const k = native ? this.nativeStride(neurons, scale) : 1;
-    if (k > 1) return this._renderLattice(pose, neurons, h, w, k);
-    const rays = this._rays(pose, h, w, h / H, w / W);
-    const rgba = new Float64Array(h * w * 4);
     const ws = this._workspace(neurons);
-    const run = this.occ ? this._occupiedAll(rays, h * w, ws) : null;
-    const evaluated = this._forwardRays(ws, rays, h * w, run, rgba);
-    return { rgba, h, w, evaluated, stride: 1 };
+    if (k > 1) return this._latticeJob(pose, ws, h, w, k);
+    return { ws, rays: this._rays(pose, h, w, h / H, w / W), n: h * w, run: (inside) => inside,
+      finish: (rgba, evaluated) => ({ rgba, h, w, evaluated, stride: 1 }) };
   }
 
   /** Plücker rays (float32 values, as the Python renderer's) through the pixel centres of an h×w
@@ -474,29 +492,32 @@ export class LfnDecoder {
   }
 
   /** The native render of an h×w frame from a lattice every k pixels (LfnRenderer._lattice with
-   *  every pixel used): the occupancy net at every lattice point, the network at the lattice
-   *  points within one of an occupied one, OpenCV's bilinear resize (pixel y reads the lattice at
-   *  (y + 0.5)/k − 0.5, clamped), then each pixel kept where all its taps are occupied, cut where
-   *  none is, and asked of the occupancy net at its own ray where they are mixed. */
-  _renderLattice(pose, neurons, h, w, k) {
-    const hj = Math.ceil(h / k), wj = Math.ceil(w / k), n = hj * wj;
-    const rays = this._rays(pose, hj, wj, h / (this.H * k), w / (this.W * k));
-    const ws = this._workspace(neurons);
-    let inside = null, run = null;
-    if (this.occ) {
-      inside = this._occupiedAll(rays, n, ws);
-      run = new Uint8Array(n);                     // 3×3 dilation of inside
+   *  every pixel used), as a _job: the occupancy net at every lattice point, the network at the
+   *  lattice points within one of an occupied one; finish() resizes as OpenCV does (pixel y reads
+   *  the lattice at (y + 0.5)/k − 0.5, clamped), then keeps each pixel where all its taps are
+   *  occupied, cuts it where none is, and asks the occupancy net at its own ray where they are
+   *  mixed. */
+  _latticeJob(pose, ws, h, w, k) {
+    const hj = Math.ceil(h / k), wj = Math.ceil(w / k);
+    const run = (inside) => {
+      if (!inside) return null;
+      const out = new Uint8Array(hj * wj);        // 3×3 dilation of inside
       for (let y = 0; y < hj; y++) {
         for (let x = 0; x < wj; x++) {
           if (!inside[y * wj + x]) continue;
           for (let yy = Math.max(0, y - 1); yy <= Math.min(hj - 1, y + 1); yy++) {
-            for (let xx = Math.max(0, x - 1); xx <= Math.min(wj - 1, x + 1); xx++) run[yy * wj + xx] = 1;
+            for (let xx = Math.max(0, x - 1); xx <= Math.min(wj - 1, x + 1); xx++) out[yy * wj + xx] = 1;
           }
         }
       }
-    }
-    const lat = new Float64Array(n * 4);
-    const evaluated = this._forwardRays(ws, rays, n, run, lat);
+      return out;
+    };
+    return { ws, rays: this._rays(pose, hj, wj, h / (this.H * k), w / (this.W * k)), n: hj * wj, run,
+      finish: (lat, evaluated, inside) => this._upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated) };
+  }
+
+  /** The h×w frame from the hj×wj lattice's outputs `lat` (and occupancy `inside`, or null). */
+  _upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated) {
     const taps = (m, size) => {                    // per output coordinate: lower tap and weight
       const i0 = new Int32Array(m), wt = new Float64Array(m);
       for (let y = 0; y < m; y++) {

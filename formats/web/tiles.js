@@ -134,18 +134,31 @@ export class TiledLfn {
    *  every tile at `neurons` and `scale` (and `native`, as LfnDecoder.render):
    *  {rgba (premultiplied), h, w, evaluated, stride, tiles}. */
   render(pose, neurons, scale = null, opts = {}) {
+    return this._blend([...this.weights(pose)].map(([j, wj]) => [j, wj, this._opened(j).render(pose, neurons, scale, opts)]));
+  }
+
+  /** render() with each tile's network passes on `opts.pool`'s workers (LfnDecoder.renderAsync). */
+  async renderAsync(pose, neurons, scale = null, opts = {}) {
+    const parts = [];
+    for (const [j, wj] of this.weights(pose)) parts.push([j, wj, await this._opened(j).renderAsync(pose, neurons, scale, opts)]);
+    return this._blend(parts);
+  }
+
+  _opened(j) {
+    const d = this.tiles.get(j);
+    if (!d) throw new LfcError(`tile ${j} is not open: call grow(neurons, pose) before render`);
+    return d;
+  }
+
+  /** The weighted sum of the tiles' renders [[tile, weight, render]]. */
+  _blend(parts) {
     let out = null, evaluated = 0, h = 0, w = 0, stride = 1;
-    const used = [];
-    for (const [j, wj] of this.weights(pose)) {
-      const d = this.tiles.get(j);
-      if (!d) throw new LfcError(`tile ${j} is not open: call grow(neurons, pose) before render`);
-      const r = d.render(pose, neurons, scale, opts);
+    for (const [, wj, r] of parts) {
       if (out === null) { out = new Float64Array(r.rgba.length); h = r.h; w = r.w; stride = r.stride; }
       for (let i = 0; i < out.length; i++) out[i] += wj * r.rgba[i];
       evaluated += r.evaluated;
-      used.push(j);
     }
-    return { rgba: out, h, w, evaluated, stride, tiles: used };
+    return { rgba: out, h, w, evaluated, stride, tiles: parts.map(([j]) => j) };
   }
 
   toPixels(rgba, h, w) { return this.tiles.get(0).toPixels(rgba, h, w); }

@@ -8,13 +8,15 @@
 // drag moves along the grid, or orbits a posed capture's cameras about their common target.
 // A tile set's manifest (?file=NAME.json, tiles.js) opens the same way: each tile's file is
 // opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
+// The networks' passes run on Web Workers (lfn_pool.js; &workers=N, 0 = on the page's thread).
 //
 // For tests and scripts: window.lfcViewer = {ready (a promise), show(...) → frame info, state};
 // RLFC files: show(s, t, {focus, aperture, level, robust}); LFN files: show({s, t} | {view, yaw,
-// pitch}, {neurons, scale}). document.body.dataset.state is "loading", "ready" or "error" (the
+// pitch}, {neurons, scale, native}). document.body.dataset.state is "loading", "ready" or "error" (the
 // message in #error); state.mode is "rlfc" or "lfn".
 import { LfcFile, RangeSource, TxDecoder } from "./lfc.js";
 import { LfnDecoder } from "./lfn.js";
+import { ForwardPool, defaultWorkers } from "./lfn_pool.js";
 import { makeKeyImage } from "./openjpeg.js";
 import { Renderer, toRGBA } from "./render.js";
 import { TiledLfn } from "./tiles.js";
@@ -24,6 +26,7 @@ const params = new URLSearchParams(location.search);
 const fileUrl = params.get("file");
 const cacheMiB = Number(params.get("cache_mib") || 256);     // decoded views
 const chunkMiB = Number(params.get("chunk_mib") || 64);      // verified file chunks
+const workers = params.has("workers") ? Math.max(0, Math.min(64, Math.floor(Number(params.get("workers")) || 0))) : defaultWorkers();
 
 function fail(e) {
   document.body.dataset.state = "error";
@@ -139,6 +142,7 @@ async function main() {
 
 async function mainLfn(dec, source, t0) {
   const tiled = dec instanceof TiledLfn;
+  const pool = workers > 0 && typeof Worker !== "undefined" ? new ForwardPool(workers) : null;   // the networks' passes
   const openMs = performance.now() - t0;
   const posed = dec.layout === "posed";
   Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
@@ -165,7 +169,8 @@ async function mainLfn(dec, source, t0) {
       ...(tiled ? [`tiles          ${f ? f.tiles.join(", ") : "-"} blended; ${dec.tiles.size} of ${dec.files.length} opened`] : []),
       `open           ${openMs.toFixed(0)} ms`,
       `frame          ${f ? f.ms.toFixed(1) : "-"} ms, ${f ? `${f.w}×${f.h}` : "-"} at ${f ? f.neurons.toFixed(2) : "-"} neurons${f && f.stride > 1 ? `, the network every ${f.stride} pixels` : ""}`,
-      `rays evaluated ${f ? f.evaluated.toLocaleString() : "-"}${dec.occ ? " (the occupancy net skips the others)" : ""}`,
+      `rays evaluated ${f ? f.evaluated.toLocaleString() : "-"}${dec.occ ? " (the occupancy net skips the others)" : ""}`
+        + (pool ? ` on ${pool.size} worker${pool.size > 1 ? "s" : ""}` : " on the page's thread"),
     ].join("\n");
     $("st").textContent = posed ? `view ${state.view}, yaw ${state.yaw.toFixed(1)}°, pitch ${state.pitch.toFixed(1)}°`
       : `${state.s.toFixed(2)}, ${state.t.toFixed(2)}`;
@@ -180,7 +185,7 @@ async function mainLfn(dec, source, t0) {
     const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(state.scale === "auto" ? null : Number(state.scale));
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
-    const r = dec.render(p, n, drag ? Math.min(sc, 0.25) : sc, { native: state.native });   // a quarter-scale preview while dragging
+    const r = await dec.renderAsync(p, n, drag ? Math.min(sc, 0.25) : sc, { native: state.native, pool });   // a quarter-scale preview while dragging
     const px = dec.toPixels(r.rgba, r.h, r.w);
     const ms = performance.now() - t;
     canvas.width = r.w;
@@ -188,7 +193,8 @@ async function mainLfn(dec, source, t0) {
     ctx.putImageData(new ImageData(toRGBA(px, r.h, r.w, dec.C, dec.peak), r.w, r.h), 0, 0);
     state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated, stride: r.stride, tiles: r.tiles || [0] };
     stats();
-    return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons };
+    return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons,
+      workers: pool ? pool.size : 0 };
   };
   const request = scheduler(() => draw());
 
