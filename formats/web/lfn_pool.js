@@ -20,13 +20,18 @@ export class ForwardPool {
     this.sent = null;                 // the weights the workers hold (LfnDecoder.Wt identity: rebuilt on grow)
     this.next = 0;
     this.waiting = new Map();
+    this.failed = null;
     for (const w of this.workers) {
       w.onmessage = (e) => {
         const { id, out, error } = e.data, p = this.waiting.get(id);
         this.waiting.delete(id);
         if (p) (error ? p.reject(new Error(error)) : p.resolve(out));
       };
-      w.onerror = (e) => { for (const p of this.waiting.values()) p.reject(new Error(e.message || "worker failed")); this.waiting.clear(); };
+      w.onerror = (e) => {             // (a worker that cannot start or throws: every call fails from now on)
+        this.failed = e.message || "a worker failed";
+        for (const p of this.waiting.values()) p.reject(new Error(this.failed));
+        this.waiting.clear();
+      };
     }
   }
 
@@ -60,6 +65,7 @@ export class ForwardPool {
   /** Rays idx[0..m) (rays 0..m when idx is null) cut into one contiguous run per worker, each
    *  answered by op ("occ" or "net"); resolves to [[a, b, answer of rays a..b)]]. */
   async _map(dec, op, neurons, rays, m, idx) {
+    if (this.failed) throw new Error(this.failed);
     if (this.sent !== dec.Wt) {      // the network grew (or another one): send its weights first
       const net = { depth: dec.depth, w: dec.w, Wt: dec.Wt, b: dec.b, g: dec.g, be: dec.be, ow: dec.ow, ob: dec.ob,
         occ: dec.occ, occN: dec.occN };

@@ -14,7 +14,7 @@
 // RLFC files: show(s, t, {focus, aperture, level, robust}); LFN files: show({s, t} | {view, yaw,
 // pitch}, {neurons, scale, native}). document.body.dataset.state is "loading", "ready" or "error" (the
 // message in #error); state.mode is "rlfc" or "lfn".
-import { LfcFile, RangeSource, TxDecoder } from "./lfc.js";
+import { LfcError, LfcFile, RangeSource, TxDecoder } from "./lfc.js";
 import { LfnDecoder } from "./lfn.js";
 import { ForwardPool, defaultWorkers } from "./lfn_pool.js";
 import { makeKeyImage } from "./openjpeg.js";
@@ -142,7 +142,7 @@ async function main() {
 
 async function mainLfn(dec, source, t0) {
   const tiled = dec instanceof TiledLfn;
-  const pool = workers > 0 && typeof Worker !== "undefined" ? new ForwardPool(workers) : null;   // the networks' passes
+  let pool = workers > 0 && typeof Worker !== "undefined" ? new ForwardPool(workers) : null;   // the networks' passes
   const openMs = performance.now() - t0;
   const posed = dec.layout === "posed";
   Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
@@ -185,7 +185,17 @@ async function mainLfn(dec, source, t0) {
     const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(state.scale === "auto" ? null : Number(state.scale));
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
-    const r = await dec.renderAsync(p, n, drag ? Math.min(sc, 0.25) : sc, { native: state.native, pool });   // a quarter-scale preview while dragging
+    const frame = (pl) => dec.renderAsync(p, n, drag ? Math.min(sc, 0.25) : sc, { native: state.native, pool: pl });   // a quarter-scale preview while dragging
+    let r;
+    try {
+      r = await frame(pool);
+    } catch (e) {
+      if (!pool || e instanceof LfcError) throw e;
+      console.warn(`network workers failed (${e.message}); rendering on the page's thread`);
+      pool.terminate();
+      pool = null;
+      r = await frame(null);
+    }
     const px = dec.toPixels(r.rgba, r.h, r.w);
     const ms = performance.now() - t;
     canvas.width = r.w;

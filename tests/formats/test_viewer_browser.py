@@ -239,6 +239,24 @@ def test_network_passes_on_workers_give_the_page_threads_pixels(site, page, nati
         assert np.array_equal(got["", i][0], got["&workers=0", i][0]) and got["", i][2] == got["&workers=0", i][2]
 
 
+def test_workers_that_cannot_start_leave_the_frame_to_the_page(site, page):
+    """A page whose worker script cannot load (blocked here) draws on its own thread: the same
+    canvas as &workers=0, and the frame says no workers ran it."""
+    srv, f = site
+    cam = "lfcViewer.show({view: 3, yaw: 20, pitch: -5}, {neurons: 20, scale: 1})"
+    assert open_viewer(page, srv, "net_native.lfc", "&workers=0") == "ready", page.inner_text("#error")
+    page.evaluate(cam)
+    want = canvas_rgba(page)
+    page.route("**/lfn_worker.js", lambda route: route.abort())
+    try:
+        assert open_viewer(page, srv, "net_native.lfc") == "ready", page.inner_text("#error")
+        info = page.evaluate(cam)
+        assert info["workers"] == 0 and np.array_equal(canvas_rgba(page), want)
+        assert "page's thread" in page.inner_text("#stats")
+    finally:
+        page.unroute("**/lfn_worker.js")
+
+
 def test_network_weights_stream_as_the_level_rises(site, page):
     srv, f = site
     net = f.parent / "net_grid.lfc"
