@@ -6,7 +6,9 @@ had fetched for that size, and pixel agreement.
 
     python -m tools.bench_web_lfn FILE.lfc [--rounds 3]
 
-Prints a Markdown table (ratios JS / Python; this box is noisy, read the ratios).
+Prints a Markdown table (ratios JS / Python; this box is noisy, read the ratios): the JS times
+with lfn.js's own loops and with its WebAssembly layers (the pixels compared are the latter's;
+the two are byte-identical, tests/formats/test_web_lfn.py).
 
 ``--page``: instead, the viewer page itself in headless Chromium (``LFC_CHROMIUM`` or Debian's
 ``chromium``, driven by Playwright) over ``lfcodec serve``'s server: the full network's frame of
@@ -52,14 +54,22 @@ def main(argv=None) -> int:
     sizes = sorted({lo, round(lo + (hi - lo) / 4), round(lo + (hi - lo) / 2), hi})
     settings = [(n, "auto", False) for n in sizes] + [(hi, "1", False), (hi, "1", True)]
     with tempfile.TemporaryDirectory() as tmp:
-        got = subprocess.run([node, str(ROOT / "tools" / "web_lfn_bench.mjs"), a.file, tmp, str(a.rounds),
-                              *[f"{n},{s}" + (",native" if nat else "") for n, s, nat in settings]], capture_output=True, text=True, check=True)
-        js = json.loads(got.stdout.strip().splitlines()[-1])
+        import os
+
+        def node_run(wasm: bool) -> list:
+            env = dict(os.environ, **({} if wasm else {"LFN_NO_WASM": "1"}))
+            got = subprocess.run([node, str(ROOT / "tools" / "web_lfn_bench.mjs"), a.file, tmp, str(a.rounds),
+                                  *[f"{n},{s}" + (",native" if nat else "") for n, s, nat in settings]],
+                                 capture_output=True, text=True, check=True, env=env)
+            return json.loads(got.stdout.strip().splitlines()[-1])
+
+        loops = node_run(False)              # lfn.js's own loops, then the WebAssembly layers (whose pixels stay)
+        js = node_run(True)
         print(f"{Path(a.file).name}: depth {r.cfg.depth}, {lo}..{hi} neurons, views {r.width}x{r.height}, "
               f"{'occupancy net' if r.occ is not None else 'no occupancy net'}\n")
-        print("| neurons | scale | sampled | frame | weights fetched | JS ms | Python ms | JS/Python | max diff | pixels differing |")
-        print("|---|---|---|---|---|---|---|---|---|---|")
-        for i, ((n, s, nat), j) in enumerate(zip(settings, js)):
+        print("| neurons | scale | sampled | frame | weights fetched | JS loops ms | JS + wasm ms | Python ms | JS+wasm/Python | max diff | pixels differing |")
+        print("|---|---|---|---|---|---|---|---|---|---|---|")
+        for i, ((n, s, nat), j, lo) in enumerate(zip(settings, js, loops)):
             times = []
             for _ in range(a.rounds):
                 t = time.perf_counter()
@@ -70,7 +80,7 @@ def main(argv=None) -> int:
             d = np.abs(px.astype(np.int64) - want)
             py = float(np.median(times))
             print(f"| {n} | {'own' if s == 'auto' else s} ({r.cfg.scale_of(n) if s == 'auto' else 1:.3f}) | "
-                  f"{'every ' + str(j['stride']) + ' px' if j['stride'] > 1 else 'every pixel'} | {j['w']}x{j['h']} | {j['bytes'] / 1024:.1f} KiB | {j['ms']:.0f} | {py:.0f} | {j['ms'] / py:.1f}x | "
+                  f"{'every ' + str(j['stride']) + ' px' if j['stride'] > 1 else 'every pixel'} | {j['w']}x{j['h']} | {j['bytes'] / 1024:.1f} KiB | {lo['ms']:.0f} | {j['ms']:.0f} | {py:.0f} | {j['ms'] / py:.1f}x | "
                   f"{int(d.max())} | {(d > 0).mean() * 100:.4f}% |")
     return 0
 

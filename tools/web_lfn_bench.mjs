@@ -10,6 +10,7 @@ import { fileURLToPath } from "url";
 const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
 const { LfcFile, BufferSource } = await import(path.join(web, "lfc.js"));
 const { LfnDecoder } = await import(path.join(web, "lfn.js"));
+if (process.env.LFN_NO_WASM) LfnDecoder.useWasm = false;               // lfn.js's own loops
 
 const [file, out, rounds, ...settings] = process.argv.slice(2);
 const src = new BufferSource(fs.readFileSync(file));

@@ -7,6 +7,7 @@
 // Cameras follow lfn_stream/cameras.py: gridPose(s, t) (continuous grid position), orbitPose(v,
 // yaw, pitch) (a captured view turned about the scene's pivot), with the captured intrinsics.
 import { FormatError, LfcError, UnsupportedError } from "./lfc.js";
+import { kernelModule } from "./lfn_kernel.js";
 
 /** Values of all networks the viewer builds together (weights as doubles): 2^25 = 256 MiB. */
 export const MAX_NETWORK_VALUES = 2 ** 25;
@@ -63,6 +64,37 @@ function nested(v, shape, where) {
 
 const stepName = (j) => `lfn.step.${String(j).padStart(4, "0")}`;
 
+const RB = 64;                               // rays per network batch (a multiple of 4)
+
+/** The network's dense layers on WebAssembly SIMD (lfn_kernel.wat): its weights and one batch's
+ *  activations in the module's memory; the same doubles as LfnDecoder._forwardBatch's loops
+ *  (each sum in the same order, one rounding per product and per addition; tested). */
+class DenseKernel {
+  constructor(mod, Wt, b, w) {
+    const inst = new WebAssembly.Instance(mod, {});
+    const mem = inst.exports.memory, big = Math.max(w, 6) * RB;
+    const sizes = [...Wt.map((x) => x.length), ...b.map((x) => x.length), 6 * RB, w * RB, big, big];
+    const bytes = sizes.reduce((a, n) => a + 8 * n, 0);
+    if (bytes > mem.buffer.byteLength) mem.grow(Math.ceil((bytes - mem.buffer.byteLength) / 65536));
+    let off = 0;
+    const take = (n, from = null) => {
+      const v = new Float64Array(mem.buffer, off, n);
+      if (from) v.set(from);
+      off += 8 * n;
+      return v;
+    };
+    this.W = Wt.map((x) => take(x.length, x));
+    this.b = b.map((x) => take(x.length, x));
+    Object.assign(this, { X: take(6 * RB), z: take(w * RB), h: take(big), h2: take(big), w, dense: inst.exports.dense });
+  }
+
+  /** z[j·RB + r] = b_i[j] + Σ_q W_i[j·stride + q]·hin[q·RB + r] for j < n, r < R4 (hin and z this
+   *  kernel's arrays). */
+  layer(i, hin, z, k, n, R4) {
+    this.dense(this.W[i].byteOffset, i === 0 ? 6 : this.w, hin.byteOffset, z.byteOffset, this.b[i].byteOffset, k, n, R4, RB);
+  }
+}
+
 // -- small 3-vector / 4×4 helpers (row-major 4×4 in a 16-array) -------------------------------------
 const col = (M, j) => [M[j], M[4 + j], M[8 + j]];
 const norm3 = (v) => Math.hypot(v[0], v[1], v[2]);
@@ -105,6 +137,10 @@ function symEigMinMax(A) {                    // smallest and largest eigenvalue
 }
 
 export class LfnDecoder {
+  /** The dense layers on WebAssembly SIMD where the environment has it (false: lfn.js's own loops;
+   *  the same pixels either way). */
+  static useWasm = true;
+
   /** Open the LFN in an LfcFile (lfc.js): config and geometry checked, the base network and
    *  the steps up to `maxNeurons` neurons read (fetched) and verified. */
   static async open(file, { maxNeurons = Infinity } = {}) {
@@ -561,10 +597,21 @@ export class LfnDecoder {
     if (a > 1e-6) m[n - 1] = a;
     let msum = 0;
     for (let i = 0; i < n; i++) msum += m[i];
-    const RB = 64, big = Math.max(n, 6) * RB;       // rays per batch (a multiple of 4)
-    return { n, m, msum, RB, X: new Float64Array(6 * RB), z: new Float64Array(n * RB), h: new Float64Array(big),
-      h2: new Float64Array(big), out: new Float64Array(4 * RB), pix: new Int32Array(RB),
-      o1: new Float64Array(this.occN), o2: new Float64Array(this.occN) };
+    const kern = this._kernel(), big = Math.max(n, 6) * RB;
+    return { n, m, msum, RB, kern, X: kern ? kern.X : new Float64Array(6 * RB), z: kern ? kern.z : new Float64Array(n * RB),
+      h: kern ? kern.h : new Float64Array(big), h2: kern ? kern.h2 : new Float64Array(big),
+      out: new Float64Array(4 * RB), pix: new Int32Array(RB), o1: new Float64Array(this.occN), o2: new Float64Array(this.occN) };
+  }
+
+  /** The DenseKernel of the weights held (rebuilt when the network grows); null without
+   *  WebAssembly SIMD or with LfnDecoder.useWasm false. */
+  _kernel() {
+    if (!LfnDecoder.useWasm || !this.Wt) return null;
+    if (!this._kern || this._kern.Wt !== this.Wt) {
+      const mod = kernelModule();
+      this._kern = { Wt: this.Wt, k: mod ? new DenseKernel(mod, this.Wt, this.b, this.w) : null };
+    }
+    return this._kern.k;
   }
 
   /** The occupancy net: sigmoid(logit) > 0.1 (Linear 6→k, ReLU, k→k, ReLU, k→1). */
@@ -587,15 +634,17 @@ export class LfnDecoder {
   }
 
   /** `cnt` rays (ws.X, feature q of ray r at q·RB + r) through the nested network at the
-   *  workspace's (fractional) size → ws.out (channel c of ray r at c·RB + r). Matrix products
-   *  in 2-neuron × 4-ray register blocks (about 3× a ray-at-a-time loop in V8). */
+   *  workspace's (fractional) size → ws.out (channel c of ray r at c·RB + r). Matrix products on
+   *  the WebAssembly kernel (ws.kern), else in 2-neuron × 4-ray register blocks (about 3× a
+   *  ray-at-a-time loop in V8; the kernel is ~4.5× these loops, the same doubles). */
   _forwardBatch(ws, cnt) {
-    const { n, m, msum, RB, z } = ws, w = this.w, R4 = (cnt + 3) & ~3;
+    const { n, m, msum, z, kern } = ws, w = this.w, R4 = (cnt + 3) & ~3;
     let hin = ws.X, hout = ws.h, k = 6;
     for (let r = cnt; r < R4; r++) for (let q = 0; q < 6; q++) hin[q * RB + r] = 0;     // padding rays
     for (let i = 0; i < this.depth; i++) {
       const Wi = this.Wt[i], stride = i === 0 ? 6 : w, bi = this.b[i], gi = this.g[i], bei = this.be[i];
-      for (let r = 0; r < R4; r += 4) {
+      if (kern) kern.layer(i, hin, z, k, n, R4);
+      else for (let r = 0; r < R4; r += 4) {
         let j = 0;
         for (; j + 1 < n; j += 2) {
           const ra = j * stride, rb = ra + stride;

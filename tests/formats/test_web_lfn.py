@@ -27,10 +27,14 @@ NODE = shutil.which("node")
 pytestmark = pytest.mark.skipif(NODE is None, reason="Node.js is not installed (apt-get install nodejs)")
 
 
-def run_js(path: Path, out: Path, cams, first=None) -> dict:
+def run_js(path: Path, out: Path, cams, first=None, wasm: bool = True) -> dict:
     import os
 
-    env = dict(os.environ, LFN_FIRST_NEURONS=str(first)) if first is not None else None
+    env = dict(os.environ)
+    if first is not None:
+        env["LFN_FIRST_NEURONS"] = str(first)
+    if not wasm:
+        env["LFN_NO_WASM"] = "1"
     got = subprocess.run([NODE, str(HERE / "web_lfn.mjs"), str(path), str(out), *cams], capture_output=True,
                          text=True, timeout=600, env=env)
     assert got.returncode == 0, got.stderr[-3000:]
@@ -190,6 +194,26 @@ def test_native_renders_match_python(tmp_path, channels, occ):
     assert (tmp_path / "render_3.bin").read_bytes() == (tmp_path / "dense" / "render_0.bin").read_bytes()
 
 
+@pytest.mark.parametrize("channels,dtype,weights,occ", [(4, np.uint8, "fp16", True), (3, np.uint8, "fp32", False),
+                                                         (1, np.uint16, "fp16", True)])
+def test_webassembly_layers_give_the_same_pixels_as_the_js_loops(tmp_path, channels, dtype, weights, occ):
+    """The dense layers on WebAssembly SIMD (lfn_kernel.wat) sum in the JS loops' order with the
+    same roundings: byte-identical renders at full, fractional (widths not a multiple of 4) and
+    base sizes, grown networks included."""
+    path = lfn_file(tmp_path, channels, dtype, weights, occ=occ, display_scales=[[0.25, [6, 9, 14, 20]]])
+    cams = ["view,2,max,1", "orbit,4,25,-10,13.5,1", "orbit,1,-140,30,9.25,auto", "view,0,6,1", "view,5,17,1,native"]
+    fast = run_js(path, tmp_path / "wasm", cams, first=7)
+    slow = run_js(path, tmp_path / "js", cams, first=7, wasm=False)
+    assert fast["ok"] and slow["ok"] and fast["wasm"] and not slow["wasm"]
+    seen = set()
+    for i in range(len(cams)):
+        a = (tmp_path / "wasm" / f"render_{i}.bin").read_bytes()
+        assert a == (tmp_path / "js" / f"render_{i}.bin").read_bytes(), cams[i]
+        assert len(set(a)) >= 3, cams[i]                          # not a constant
+        seen |= set(a)
+    assert len(seen) >= 20
+
+
 def r_cfg(f):
     return LfnConfig.from_dict(f.meta["config"]["network"], f.meta["codec_version"])
 
@@ -273,3 +297,12 @@ console.log(JSON.stringify(out));
         want = np.stack([blend_weights(m["centres"], np.asarray(p), m["band"]) for p in cams])
         np.testing.assert_allclose(np.asarray(r["w"]), want, rtol=0, atol=1e-12)
         assert ((np.asarray(r["w"]) > 0) == (want > 0)).all()
+
+
+@pytest.mark.skipif(not (HERE.parents[1] / "formats/web/node_modules/wabt").is_dir(),
+                    reason="wabt is not installed (tools/build_web.sh installs it with npm ci)")
+def test_the_kernel_module_is_built_from_its_text():
+    """formats/web/lfn_kernel.js holds what tools/build_lfn_kernel.mjs makes of lfn_kernel.wat."""
+    got = subprocess.run([NODE, str(HERE.parents[1] / "tools/build_lfn_kernel.mjs"), "--check"], capture_output=True,
+                         text=True, timeout=120)
+    assert got.returncode == 0, got.stdout + got.stderr

@@ -2,7 +2,8 @@
 // (formats/web/lfn.js) under Node.
 // node web_lfn.mjs FILE OUTDIR CAM...   CAM = view,V,N,S | grid,S,T,N,S | orbit,V,YAW,PITCH,N,S
 // (N neurons, "max" = all, "display" = the display ladder's size for what is held; S image scale, "auto" = the size's own;
-// a trailing ",native" renders on the network's own pixel grid). Writes OUTDIR/render_I.bin
+// a trailing ",native" renders on the network's own pixel grid; LFN_NO_WASM=1: without the WebAssembly kernel).
+// Writes OUTDIR/render_I.bin
 // (pixels of the file's dtype, h·w·C) per camera and prints one JSON line: {ok: true, renders:
 // [{h, w, pose, evaluated}], neurons, bytesRead} or {ok: false, name, message}.
 import fs from "fs";
@@ -12,6 +13,7 @@ import { fileURLToPath } from "url";
 const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../../formats/web");
 const { LfcFile, BufferSource, LfcError } = await import(path.join(web, "lfc.js"));
 const { LfnDecoder } = await import(path.join(web, "lfn.js"));
+if (process.env.LFN_NO_WASM) LfnDecoder.useWasm = false;                 // lfn.js's own loops
 
 const [file, out, ...cams] = process.argv.slice(2);
 try {
@@ -38,7 +40,7 @@ try {
     fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
     renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, stride: r.stride, neurons: dec.neurons, shown: use });
   }
-  console.log(JSON.stringify({ ok: true, renders, opened, pivot: dec.pivot, up: dec.up }));
+  console.log(JSON.stringify({ ok: true, renders, opened, pivot: dec.pivot, up: dec.up, wasm: Boolean(dec._kernel()) }));
 } catch (e) {
   if (!(e instanceof LfcError)) throw e;
   process.stdout.write(JSON.stringify({ ok: false, name: e.name, message: e.message }) + "\n");
