@@ -14,7 +14,8 @@ the two are byte-identical, tests/formats/test_web_lfn.py).
 ``chromium``, driven by Playwright) over ``lfcodec serve``'s server: the full network's frame of
 captured view 0 at full scale, densely and on the network's own pixel grid, with its passes on
 the page's thread (``&workers=0``) and on Web Workers (the page's default: as many as the cores
-Chromium reports, at most 8), settings interleaved round by round; medians."""
+Chromium reports, at most 8), in lfn.js's own loops (``&wasm=0``) and on its WebAssembly layers,
+settings interleaved round by round; medians."""
 from __future__ import annotations
 
 import argparse
@@ -98,7 +99,7 @@ def page_bench(path: Path, rounds: int) -> int:
         print("Chromium is not installed", file=sys.stderr)
         return 2
     flags = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
-    settings = [(q, nat) for q in ("&workers=0", "") for nat in (False, True)]
+    settings = [(w + q, nat) for w in ("&wasm=0", "") for q in ("&workers=0", "") for nat in (False, True)]
     times: dict = {k: [] for k in settings}
     info: dict = {}
     with FileServer(path.parent, viewer=True) as srv, sync_playwright() as p:
@@ -117,12 +118,13 @@ def page_bench(path: Path, rounds: int) -> int:
         browser.close()
     print(f"{path.name}: the viewer page in headless Chromium ({cores} cores reported), view 0, full network, "
           f"medians of {rounds}\n")
-    print("| network passes on | sampled | frame | rays run | frame ms |")
-    print("|---|---|---|---|---|")
+    print("| network | passes on | sampled | frame | rays run | frame ms |")
+    print("|---|---|---|---|---|---|")
     for q, nat in settings:
         g = info[q, nat]
-        where = "the page's thread" if q else f"{g['workers']} workers"
-        print(f"| {where} | {'every ' + str(g['stride']) + ' px' if g['stride'] > 1 else 'every pixel'} | "
+        where = "the page's thread" if "workers=0" in q else f"{g['workers']} workers"
+        print(f"| {'JS loops' if 'wasm=0' in q else 'WebAssembly'} | {where} | "
+              f"{'every ' + str(g['stride']) + ' px' if g['stride'] > 1 else 'every pixel'} | "
               f"{g['w']}x{g['h']} | {g['evaluated']} | {float(np.median(times[q, nat])):.0f} |")
     return 0
 

@@ -66,14 +66,15 @@ const stepName = (j) => `lfn.step.${String(j).padStart(4, "0")}`;
 
 const RB = 64;                               // rays per network batch (a multiple of 4)
 
-/** The network's dense layers on WebAssembly SIMD (lfn_kernel.wat): its weights and one batch's
- *  activations in the module's memory; the same doubles as LfnDecoder._forwardBatch's loops
- *  (each sum in the same order, one rounding per product and per addition; tested). */
+/** The network's dense layers and LayerNorms on WebAssembly SIMD (lfn_kernel.wat): its weights
+ *  and one batch's activations in the module's memory; the same doubles as
+ *  LfnDecoder._forwardBatch's loops (every operation in the same order, each rounded once; tested). */
 class DenseKernel {
-  constructor(mod, Wt, b, w) {
+  constructor(mod, Wt, b, g, be, w, occ, occN) {
     const inst = new WebAssembly.Instance(mod, {});
     const mem = inst.exports.memory, big = Math.max(w, 6) * RB;
-    const sizes = [...Wt.map((x) => x.length), ...b.map((x) => x.length), 6 * RB, w * RB, big, big];
+    const sizes = [...Wt.map((x) => x.length), ...[b, g, be].flat().map((x) => x.length), 6 * RB, w * RB, big, big, w,
+      occ ? occ.length + 2 * occN * RB + RB : 0];
     const bytes = sizes.reduce((a, n) => a + 8 * n, 0);
     if (bytes > mem.buffer.byteLength) mem.grow(Math.ceil((bytes - mem.buffer.byteLength) / 65536));
     let off = 0;
@@ -85,14 +86,39 @@ class DenseKernel {
     };
     this.W = Wt.map((x) => take(x.length, x));
     this.b = b.map((x) => take(x.length, x));
-    Object.assign(this, { X: take(6 * RB), z: take(w * RB), h: take(big), h2: take(big), w, dense: inst.exports.dense });
+    this.g = g.map((x) => take(x.length, x));
+    this.be = be.map((x) => take(x.length, x));
+    Object.assign(this, { X: take(6 * RB), z: take(w * RB), h: take(big), h2: take(big), m: take(w), w,
+      dense: inst.exports.dense, norm: inst.exports.norm, relu: inst.exports.relu });
+    if (occ) Object.assign(this, { occN, occP: take(occ.length, occ), o1: take(occN * RB), o2: take(occN * RB), o3: take(RB) });
   }
 
-  /** z[j·RB + r] = b_i[j] + Σ_q W_i[j·stride + q]·hin[q·RB + r] for j < n, r < R4 (hin and z this
+  /** z[j·RB + r] = Σ_q W_i[j·stride + q]·hin[q·RB + r] + b_i[j] for j < n, r < R4 (hin and z this
    *  kernel's arrays). */
   layer(i, hin, z, k, n, R4) {
-    this.dense(this.W[i].byteOffset, i === 0 ? 6 : this.w, hin.byteOffset, z.byteOffset, this.b[i].byteOffset, k, n, R4, RB);
+    this.dense(this.W[i].byteOffset, i === 0 ? 6 : this.w, hin.byteOffset, z.byteOffset, this.b[i].byteOffset, k, n, R4, RB, 0);
   }
+
+  /** The occupancy net's logits of the rays in X (r < R4): Linear 6→k, ReLU, k→k, ReLU, k→1, each
+   *  sum started from its bias (LfnDecoder._occupied's order). */
+  occupancy(R4) {
+    const k = this.occN, W1 = this.occP.byteOffset, b1 = W1 + 8 * 6 * k, W2 = b1 + 8 * k, b2 = W2 + 8 * k * k;
+    const W3 = b2 + 8 * k, b3 = W3 + 8 * k, o1 = this.o1.byteOffset, o2 = this.o2.byteOffset;
+    this.dense(W1, 6, this.X.byteOffset, o1, b1, 6, k, R4, RB, 1);
+    this.relu(o1, o1, k * RB);
+    this.dense(W2, k, o1, o2, b2, k, k, R4, RB, 1);
+    this.relu(o2, o2, k * RB);
+    this.dense(W3, k, o2, this.o3.byteOffset, b3, k, 1, R4, RB, 1);
+    return this.o3;
+  }
+
+  /** Layer i's LayerNorm with the neuron weights m (n values, summing to msum), ReLU and mask:
+   *  hout[j·RB + r] from z, for j < n, r < R4 (this kernel's arrays). */
+  layerNorm(i, z, hout, m, n, R4, msum) {
+    this.m.set(m);
+    this.norm(z.byteOffset, hout.byteOffset, this.g[i].byteOffset, this.be[i].byteOffset, this.m.byteOffset, n, R4, RB, msum);
+  }
+
 }
 
 // -- small 3-vector / 4×4 helpers (row-major 4×4 in a 16-array) -------------------------------------
@@ -496,10 +522,21 @@ export class LfnDecoder {
     };
   }
 
-  /** Uint8Array n: 1 where the occupancy net lets ray i through. */
+  /** Uint8Array n: 1 where the occupancy net lets ray i through (on the WebAssembly kernel in
+   *  batches where there is one: the same doubles as _occupied). */
   _occupiedAll(rays, n, ws) {
-    const inside = new Uint8Array(n);
-    for (let i = 0; i < n; i++) inside[i] = this._occupied(rays.subarray(6 * i, 6 * i + 6), ws) ? 1 : 0;
+    const inside = new Uint8Array(n), kern = ws.kern;
+    if (!kern || !kern.occP) {
+      for (let i = 0; i < n; i++) inside[i] = this._occupied(rays.subarray(6 * i, 6 * i + 6), ws) ? 1 : 0;
+      return inside;
+    }
+    const X = kern.X;
+    for (let a = 0; a < n; a += RB) {
+      const cnt = Math.min(RB, n - a), R4 = (cnt + 3) & ~3;
+      for (let r = 0; r < R4; r++) for (let q = 0; q < 6; q++) X[q * RB + r] = r < cnt ? rays[6 * (a + r) + q] : 0;
+      const s = kern.occupancy(R4);
+      for (let r = 0; r < cnt; r++) inside[a + r] = 1 / (1 + Math.exp(-s[r])) > 0.1 ? 1 : 0;
+    }
     return inside;
   }
 
@@ -609,13 +646,16 @@ export class LfnDecoder {
     if (!LfnDecoder.useWasm || !this.Wt) return null;
     if (!this._kern || this._kern.Wt !== this.Wt) {
       const mod = kernelModule();
-      this._kern = { Wt: this.Wt, k: mod ? new DenseKernel(mod, this.Wt, this.b, this.w) : null };
+      this._kern = { Wt: this.Wt, k: mod ? new DenseKernel(mod, this.Wt, this.b, this.g, this.be, this.w, this.occ, this.occN) : null };
     }
     return this._kern.k;
   }
 
-  /** The occupancy net: sigmoid(logit) > 0.1 (Linear 6→k, ReLU, k→k, ReLU, k→1). */
-  _occupied(x, ws) {
+  /** The occupancy net lets ray x through: sigmoid(logit) > 0.1. */
+  _occupied(x, ws) { return 1 / (1 + Math.exp(-this._occupancyLogit(x, ws))) > 0.1; }
+
+  /** The occupancy net's logit of ray x (Linear 6→k, ReLU, k→k, ReLU, k→1; each sum from its bias). */
+  _occupancyLogit(x, ws) {
     const k = this.occN, P = this.occ, h1 = ws.o1, h2 = ws.o2;
     const b1 = 6 * k, W2 = b1 + k, b2 = W2 + k * k, W3 = b2 + k, b3 = W3 + k;
     for (let j = 0; j < k; j++) {
@@ -630,7 +670,7 @@ export class LfnDecoder {
     }
     let s = P[b3];
     for (let q = 0; q < k; q++) s += P[W3 + q] * h2[q];
-    return 1 / (1 + Math.exp(-s)) > 0.1;
+    return s;
   }
 
   /** `cnt` rays (ws.X, feature q of ray r at q·RB + r) through the nested network at the
@@ -670,7 +710,8 @@ export class LfnDecoder {
           z[za] = a0 + ba; z[za + 1] = a1 + ba; z[za + 2] = a2 + ba; z[za + 3] = a3 + ba;
         }
       }
-      for (let r = 0; r < R4; r++) {            // LayerNorm with the neuron weights, ReLU, mask
+      if (kern) kern.layerNorm(i, z, hout, m, n, R4, msum);
+      else for (let r = 0; r < R4; r++) {       // LayerNorm with the neuron weights, ReLU, mask
         let mean = 0;
         for (let j = 0; j < n; j++) mean += z[j * RB + r] * m[j];
         mean /= msum;

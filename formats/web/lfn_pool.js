@@ -68,7 +68,7 @@ export class ForwardPool {
     if (this.failed) throw new Error(this.failed);
     if (this.sent !== dec.Wt) {      // the network grew (or another one): send its weights first
       const net = { depth: dec.depth, w: dec.w, Wt: dec.Wt, b: dec.b, g: dec.g, be: dec.be, ow: dec.ow, ob: dec.ob,
-        occ: dec.occ, occN: dec.occN };
+        occ: dec.occ, occN: dec.occN, useWasm: dec.constructor.useWasm };
       for (const w of this.workers) w.postMessage({ net });
       this.sent = dec.Wt;
     }

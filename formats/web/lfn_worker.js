@@ -8,7 +8,9 @@ let net = null;
 self.onmessage = (e) => {
   const m = e.data;
   if (m.net) {
-    net = Object.assign(Object.create(LfnDecoder.prototype), m.net);
+    const { useWasm, ...fields } = m.net;
+    LfnDecoder.useWasm = useWasm;            // as the page's thread
+    net = Object.assign(Object.create(LfnDecoder.prototype), fields);
     return;
   }
   try {

@@ -8,7 +8,8 @@
 // drag moves along the grid, or orbits a posed capture's cameras about their common target.
 // A tile set's manifest (?file=NAME.json, tiles.js) opens the same way: each tile's file is
 // opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
-// The networks' passes run on Web Workers (lfn_pool.js; &workers=N, 0 = on the page's thread).
+// The networks' passes run on Web Workers (lfn_pool.js; &workers=N, 0 = on the page's thread),
+// their dense layers on WebAssembly SIMD where the browser has it (&wasm=0: lfn.js's own loops).
 //
 // For tests and scripts: window.lfcViewer = {ready (a promise), show(...) → frame info, state};
 // RLFC files: show(s, t, {focus, aperture, level, robust}); LFN files: show({s, t} | {view, yaw,
@@ -27,6 +28,7 @@ const fileUrl = params.get("file");
 const cacheMiB = Number(params.get("cache_mib") || 256);     // decoded views
 const chunkMiB = Number(params.get("chunk_mib") || 64);      // verified file chunks
 const workers = params.has("workers") ? Math.max(0, Math.min(64, Math.floor(Number(params.get("workers")) || 0))) : defaultWorkers();
+if (params.get("wasm") === "0") LfnDecoder.useWasm = false;   // the networks in lfn.js's own loops (the same pixels)
 
 function fail(e) {
   document.body.dataset.state = "error";

@@ -220,13 +220,14 @@ def test_networks_trained_below_the_views_size_render_on_their_own_grid(site, pa
 
 @pytest.mark.parametrize("native", [True, False])
 def test_network_passes_on_workers_give_the_page_threads_pixels(site, page, native):
-    """The page runs the networks' passes on Web Workers (two here: the cores Chromium reports);
-    the canvas is the same, byte for byte, as with &workers=0 (every pass on the page's thread),
+    """The page runs the networks' passes on Web Workers (two here: the cores Chromium reports)
+    and their layers on WebAssembly: the canvas is the same, byte for byte, as with &workers=0
+    (every pass on the page's thread) and with &wasm=0 (lfn.js's own loops, in the workers too),
     with and without the native lattice and while the network grows."""
     srv, f = site
     cams = ["{view: 3, yaw: 20, pitch: -5}, {neurons: 20, scale: 1", "{view: 1}, {neurons: 9.25, scale: 'auto'"]
     got = {}
-    for query in ("", "&workers=0"):
+    for query in ("", "&workers=0", "&wasm=0"):
         assert open_viewer(page, srv, "net_native.lfc", query + "&neurons=8") == "ready", page.inner_text("#error")
         for i, cam in enumerate(cams):
             info = page.evaluate(f"lfcViewer.show({cam}, native: {str(native).lower()}}})")
@@ -234,9 +235,10 @@ def test_network_passes_on_workers_give_the_page_threads_pixels(site, page, nati
         if not query:
             assert "worker" in page.inner_text("#stats")
     for i in range(len(cams)):
-        assert got["", i][1] >= 1 and got["&workers=0", i][1] == 0
+        assert got["", i][1] >= 1 and got["&workers=0", i][1] == 0 and got["&wasm=0", i][1] >= 1
         assert got["", i][0][..., :3].std() > 10                # a picture, not a blank canvas
-        assert np.array_equal(got["", i][0], got["&workers=0", i][0]) and got["", i][2] == got["&workers=0", i][2]
+        for q in ("&workers=0", "&wasm=0"):
+            assert np.array_equal(got["", i][0], got[q, i][0]) and got["", i][2] == got[q, i][2], q
 
 
 def test_workers_that_cannot_start_leave_the_frame_to_the_page(site, page):

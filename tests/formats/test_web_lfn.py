@@ -299,6 +299,36 @@ console.log(JSON.stringify(out));
         assert ((np.asarray(r["w"]) > 0) == (want > 0)).all()
 
 
+def test_webassembly_occupancy_logits_equal_the_js_ones(tmp_path):
+    """The occupancy net on the kernel (batches of rays, sums started from their biases) gives
+    _occupancyLogit's doubles exactly, for 1000 random rays (ones near the threshold included)."""
+    path = lfn_file(tmp_path, 4)
+    script = tmp_path / "occ.mjs"
+    web = HERE.parents[1] / "formats/web"
+    script.write_text(f"""
+import fs from "fs";
+const {{ LfcFile, BufferSource }} = await import({json.dumps(str(web / "lfc.js"))});
+const {{ LfnDecoder }} = await import({json.dumps(str(web / "lfn.js"))});
+const dec = await LfnDecoder.open(await LfcFile.open(new BufferSource(fs.readFileSync({json.dumps(str(path))})), "n"));
+let seed = 1; const rnd = () => ((seed = (seed * 16807) % 2147483647) / 2147483647) * 2 - 1;
+const n = 1000, rays = new Float64Array(6 * n).map(() => rnd());
+const ws = dec._workspace(dec.neurons), got = [], want = [];
+for (let a = 0; a < n; a += 64) {{
+  const cnt = Math.min(64, n - a), R4 = (cnt + 3) & ~3;
+  for (let r = 0; r < R4; r++) for (let q = 0; q < 6; q++) ws.kern.X[q * 64 + r] = r < cnt ? rays[6 * (a + r) + q] : 0;
+  const s = ws.kern.occupancy(R4);
+  for (let r = 0; r < cnt; r++) {{ got.push(s[r]); want.push(dec._occupancyLogit(rays.subarray(6 * (a + r), 6 * (a + r) + 6), ws)); }}
+}}
+const inside = dec._occupiedAll(rays, n, ws);
+console.log(JSON.stringify({{ same: got.every((x, i) => Object.is(x, want[i])), spread: [Math.min(...want), Math.max(...want)],
+  inside: inside.reduce((a, b) => a + b, 0) }}));
+""")
+    out = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    res = json.loads(out.stdout)
+    assert res["same"] and res["spread"][0] < -2.2 < res["spread"][1] and 0 < res["inside"] < 1000, res
+
+
 @pytest.mark.skipif(not (HERE.parents[1] / "formats/web/node_modules/wabt").is_dir(),
                     reason="wabt is not installed (tools/build_web.sh installs it with npm ci)")
 def test_the_kernel_module_is_built_from_its_text():
