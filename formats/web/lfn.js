@@ -744,13 +744,14 @@ export class LfnDecoder {
       const x = Math.min(Math.max(v, 0), 1) * peak, f = Math.floor(x), r = x - f;
       return r > 0.5 ? f + 1 : r < 0.5 ? f : (f % 2 === 0 ? f : f + 1);       // rint: half to even
     };
+    const c01 = (v) => Math.min(Math.max(v, 0), 1);
     for (let i = 0; i < h * w; i++) {
-      const a = rgba.subarray(4 * i, 4 * i + 4).map((v) => Math.min(Math.max(v, 0), 1));
-      const al = a[3], un = (v) => (al >= 2 ** -20 ? v / al : 0);      // FORMAT.md: colour 0 below α = 2^-20
-      if (C === 4) { out[4 * i] = q(un(a[0])); out[4 * i + 1] = q(un(a[1])); out[4 * i + 2] = q(un(a[2])); out[4 * i + 3] = q(al); }
-      else if (C === 2) { out[2 * i] = q(un(a[0])); out[2 * i + 1] = q(al); }
-      else if (C === 1) out[i] = q(a[0]);
-      else { out[3 * i] = q(a[0]); out[3 * i + 1] = q(a[1]); out[3 * i + 2] = q(a[2]); }
+      const p = 4 * i, a0 = c01(rgba[p]), a1 = c01(rgba[p + 1]), a2 = c01(rgba[p + 2]), al = c01(rgba[p + 3]);
+      const un = (v) => (al >= 2 ** -20 ? v / al : 0);                // FORMAT.md: colour 0 below α = 2^-20
+      if (C === 4) { out[4 * i] = q(un(a0)); out[4 * i + 1] = q(un(a1)); out[4 * i + 2] = q(un(a2)); out[4 * i + 3] = q(al); }
+      else if (C === 2) { out[2 * i] = q(un(a0)); out[2 * i + 1] = q(al); }
+      else if (C === 1) out[i] = q(a0);
+      else { out[3 * i] = q(a0); out[3 * i + 1] = q(a1); out[3 * i + 2] = q(a2); }
     }
     return out;
   }
