@@ -499,10 +499,10 @@ export class LfnDecoder {
       finish: (rgba, evaluated) => ({ rgba, h, w, evaluated, stride: 1 }) };
   }
 
-  /** Plücker rays (float32 values, as the Python renderer's) through the pixel centres of an h×w
-   *  grid at `sy`, `sx` grid pixels per view pixel: Float64Array n·6 (ray i at 6i). */
+  /** Plücker rays (float32, as the Python renderer's) through the pixel centres of an h×w grid at
+   *  `sy`, `sx` grid pixels per view pixel: Float32Array n·6 (ray i at 6i). */
   _rays(pose, h, w, sy, sx) {
-    const ray = this._rayMaker(pose, sy, sx), out = new Float64Array(h * w * 6);
+    const ray = this._rayMaker(pose, sy, sx), out = new Float32Array(h * w * 6);
     for (let yy = 0, i = 0; yy < h; yy++) for (let xx = 0; xx < w; xx++, i += 6) ray(yy, xx, out, i);
     return out;
   }

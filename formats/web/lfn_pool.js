@@ -76,7 +76,7 @@ export class ForwardPool {
     const jobs = [];
     for (let p = 0; p < parts; p++) {
       const a = Math.floor((m * p) / parts), b = Math.floor((m * (p + 1)) / parts);
-      const chunk = new Float64Array((b - a) * 6);
+      const chunk = new Float32Array((b - a) * 6);
       if (idx) for (let j = a; j < b; j++) chunk.set(rays.subarray(6 * idx[j], 6 * idx[j] + 6), 6 * (j - a));
       else chunk.set(rays.subarray(6 * a, 6 * b));
       const id = this.next++;
