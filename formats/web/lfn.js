@@ -635,9 +635,11 @@ export class LfnDecoder {
     let msum = 0;
     for (let i = 0; i < n; i++) msum += m[i];
     const kern = this._kernel(), big = Math.max(n, 6) * RB;
-    return { n, m, msum, RB, kern, X: kern ? kern.X : new Float64Array(6 * RB), z: kern ? kern.z : new Float64Array(n * RB),
-      h: kern ? kern.h : new Float64Array(big), h2: kern ? kern.h2 : new Float64Array(big),
-      out: new Float64Array(4 * RB), pix: new Int32Array(RB), o1: new Float64Array(this.occN), o2: new Float64Array(this.occN) };
+    // the activations: in the kernel's memory where there is one
+    const { X, z, h, h2 } = kern || { X: new Float64Array(6 * RB), z: new Float64Array(n * RB), h: new Float64Array(big),
+      h2: new Float64Array(big) };
+    return { n, m, msum, RB, kern, X, z, h, h2, out: new Float64Array(4 * RB), pix: new Int32Array(RB),
+      o1: new Float64Array(this.occN), o2: new Float64Array(this.occN) };
   }
 
   /** The DenseKernel of the weights held (rebuilt when the network grows); null without
