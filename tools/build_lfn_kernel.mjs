@@ -12,6 +12,10 @@ const wat = fs.readFileSync(path.join(web, "lfn_kernel.wat"), "utf8");
 const mod = wabt.parseWat("lfn_kernel.wat", wat, { simd: true });
 mod.validate();
 const { buffer } = mod.toBinary({});
+if (buffer.length > 4096) {       // browsers refuse to compile larger modules synchronously on a page's thread
+  console.error(`lfn_kernel.wat builds to ${buffer.length} bytes: over 4 KB, lfn_kernel.js would need an asynchronous compile`);
+  process.exit(1);
+}
 const b64 = Buffer.from(buffer).toString("base64");
 const js = `// lfn_kernel.js — generated from lfn_kernel.wat by tools/build_lfn_kernel.mjs (wabt); do not edit.
 // The WebAssembly module of the network renderer's dense layers (${buffer.length} bytes), compiled once

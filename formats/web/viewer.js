@@ -206,7 +206,7 @@ async function mainLfn(dec, source, t0) {
     state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated, stride: r.stride, tiles: r.tiles || [0] };
     stats();
     return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons,
-      workers: pool ? pool.size : 0 };
+      workers: pool ? pool.size : 0, wasm: Boolean(dec._kernel && dec._kernel()) };
   };
   const request = scheduler(() => draw());
 

@@ -232,6 +232,7 @@ def test_network_passes_on_workers_give_the_page_threads_pixels(site, page, nati
         for i, cam in enumerate(cams):
             info = page.evaluate(f"lfcViewer.show({cam}, native: {str(native).lower()}}})")
             got[query, i] = (canvas_rgba(page), info["workers"], info["evaluated"])
+            assert info["wasm"] == (query != "&wasm=0")          # the kernel compiled in the page (< 4 KB)
         if not query:
             assert "worker" in page.inner_text("#stats")
     for i in range(len(cams)):
