@@ -101,7 +101,7 @@ def _dump(obj) -> str:
 # -- info ------------------------------------------------------------------------------------
 def cmd_info(a) -> int:
     from .lfcfile import open_lfc
-    from .registry import open_decoder, open_set
+    from .registry import describe, open_set
 
     if _is_set(a.file):             # a set of files (an LFN tile set's manifest): what its codec says
         if a.verify:
@@ -128,7 +128,7 @@ def cmd_info(a) -> int:
         if all(isinstance(scene.get(k), int) and scene[k] > 0 for k in ("rows", "cols", "height", "width")):
             out["bpp"] = 8.0 * c.size / (scene["rows"] * scene["cols"] * scene["height"] * scene["width"])
         try:
-            out["decoder"] = open_decoder(f).info()
+            out["decoder"] = describe(f)
         except TruncatedError as e:
             if not a.partial:
                 raise

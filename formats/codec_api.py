@@ -203,6 +203,11 @@ class Codec(abc.ABC):
     def open(self, f, **kw) -> Decoder:
         """A decoder over an opened :class:`~formats.lfcfile.LfcFile` of this codec."""
 
+    def describe(self, f) -> dict:
+        """What ``lfcodec info`` says of an opened file (:meth:`Decoder.info` of :meth:`open`'s
+        decoder, unless the codec can check and describe the file without building a decoder)."""
+        return self.open(f).info()
+
     #: file-name suffix (lower case) of a set of files this codec writes and opens as one (a
     #: manifest naming the others, e.g. ".json"), or None for codecs that write one .lfc only
     set_suffix: str | None = None

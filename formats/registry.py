@@ -55,6 +55,12 @@ def open_decoder(f, **kw):
     return get_codec(f.codec).open(f, **kw)
 
 
+def describe(f) -> dict:
+    """What ``lfcodec info`` says of an opened :class:`~formats.lfcfile.LfcFile`: its codec's
+    :meth:`~formats.codec_api.Codec.describe`."""
+    return get_codec(f.codec).describe(f)
+
+
 def set_codec(source) -> Codec | None:
     """The codec whose sets of files (:attr:`Codec.set_suffix`) ``source`` (a path or URL) names,
     or None: such a source is opened with :func:`open_set`, not as an .lfc file."""

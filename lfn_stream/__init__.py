@@ -7,6 +7,7 @@ Public API:
     first_prefix_bytes, auto_occupancy — the first renderable prefix a network shape makes, and
         the occupancy net size that keeps it within 8 KB
     LfnRenderer — render from a file or any prefix of it (fractional / per-pixel sizes)
+    LfnStream — the same file read and checked without torch (what ``lfcodec info`` says)
     encode_tiles, open_tiles, TiledLfnRenderer — tile sets: one network per region of camera space
 
 Names load on first use (PEP 562), so that ``import lfn_stream`` and the codec plug-in cost no
@@ -22,9 +23,9 @@ _WHERE = {"LfnConfig": "config", "CODEC_ID": "config", "CODEC_VERSION": "config"
           "NestedLFN": "model", "OccupancyNet": "model", "TrainOptions": "training", "train": "training",
           "to_sections": "codec", "LfnCodec": "codec", "first_prefix_bytes": "codec",
           "auto_occupancy": "codec", "encode_tiles": "codec", "LfnRenderer": "render",
-          "TiledLfnRenderer": "tiles", "open_tiles": "tiles"}
+          "LfnStream": "stream", "TiledLfnRenderer": "tiles", "open_tiles": "tiles"}
 
-__all__ = ["LfnConfig", "NestedLFN", "OccupancyNet", "TrainOptions", "train", "to_sections", "LfnRenderer",
+__all__ = ["LfnConfig", "NestedLFN", "OccupancyNet", "TrainOptions", "train", "to_sections", "LfnRenderer", "LfnStream",
            "encode_tiles", "open_tiles", "TiledLfnRenderer", "LfnCodec", "first_prefix_bytes", "auto_occupancy",
            "CODEC_ID", "CODEC_VERSION", "MOVED_KEYS"]
 

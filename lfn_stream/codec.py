@@ -261,6 +261,13 @@ class LfnCodec(Codec):
 
         return LfnRenderer(f, **kw)
 
+    def describe(self, f) -> dict:
+        """The file read and checked as a renderer would (weights included), without torch:
+        :class:`~lfn_stream.stream.LfnStream`."""
+        from .stream import LfnStream
+
+        return LfnStream(f).info()
+
     set_suffix = ".json"      # a tile set's manifest (lfn_stream.tiles)
 
     def writes_set(self, options: EncodeOptions) -> bool:

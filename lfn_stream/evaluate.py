@@ -16,9 +16,9 @@ import numpy as np
 from formats.lightfield import LightField
 
 from .config import LfnConfig
-from .pack import step_name, step_offsets
 from .rays import view_rays
 from .render import LfnRenderer
+from .stream import first_renderable_end, prefix_bytes  # noqa: F401 (imported from here by tools and tests)
 from .sat import area_downsample
 from .training import targets_of
 
@@ -32,33 +32,6 @@ def _ssim(a: np.ndarray, b: np.ndarray) -> float:
     if min(a.shape[:2]) < SSIM_WIN:
         return float("nan")
     return ssim_image(a, b, 1.0)
-
-
-def first_renderable_end(c) -> int:
-    """Byte where the first renderable prefix of an LFN file's container ``c`` ends: its header,
-    meta, base network and occupancy net (where it has one)."""
-    names = ["lfn.base"] + (["lfn.occ"] if c.has("lfn.occ") else [])
-    return max(c.info(nm).offset + c.info(nm).length for nm in names)
-
-
-def prefix_bytes(r: LfnRenderer, level: float) -> int:
-    """Bytes of the file prefix holding the network a level needs (header, meta, base,
-    occupancy, steps; version 3: up to the end of the checksum chunk holding the last step); of
-    a tile set (:class:`lfn_stream.tiles.TiledLfnRenderer`), its own sum over the tiles."""
-    from .tiles import TiledLfnRenderer
-
-    if isinstance(r, TiledLfnRenderer):
-        return r.prefix_bytes(level)
-    c = r.file.container
-    n = int(math.ceil(level - 1e-9)) - r.cfg.min_neurons
-    end = first_renderable_end(c)
-    if n <= 0:
-        return end
-    if c.has("lfn.steps"):
-        s = c.info("lfn.steps")
-        stop = int(step_offsets(r.cfg, r.dtype_w)[n])
-        return s.offset + min(-(-stop // s.chunk_size) * s.chunk_size, s.length)
-    return max(end, *(c.info(step_name(j)).offset + c.info(step_name(j)).length for j in range(n)))
 
 
 def evaluate(r: LfnRenderer, lf: LightField, test_views, train_views, levels, baselines: bool = True) -> list[dict]:

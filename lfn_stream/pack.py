@@ -16,13 +16,16 @@ chunk is a complete network. Version 2 stored each step as its own section:
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-import torch
 
 from formats.errors import FormatError
 
 from .config import LfnConfig
-from .model import NestedLFN, OccupancyNet
+
+if TYPE_CHECKING:        # (torch loads where a network is built: reading a file's shape needs none)
+    from .model import NestedLFN, OccupancyNet
 
 DTYPES = {"fp16": "<f2", "fp32": "<f4"}
 #: checksum granularity of ``lfn.steps`` (bytes): a prefix is usable up to its last whole chunk
@@ -114,10 +117,42 @@ def occ_values(cfg: LfnConfig) -> int:
 def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes | None = None,
                    dtype: str = "fp16") -> tuple[NestedLFN, OccupancyNet | None]:
     """Rebuild the network of width min_neurons + len(steps) (a smaller cfg) from sections."""
+    import torch
+
+    from .model import NestedLFN, OccupancyNet
+
+    (W, b, g, be, ow, ob), occ_vals = unpack_arrays(cfg, base, steps, occ, dtype)
+    model = NestedLFN(LfnConfig(**{**cfg.to_dict(), "max_neurons": cfg.min_neurons + len(steps)}))
+    with torch.no_grad():
+        for i in range(cfg.depth):
+            model.weights[i].copy_(torch.from_numpy(W[i]).float())
+            model.biases[i].copy_(torch.from_numpy(b[i]).float())
+            model.gammas[i].copy_(torch.from_numpy(g[i]).float())
+            model.betas[i].copy_(torch.from_numpy(be[i]).float())
+        model.out_w.copy_(torch.from_numpy(ow).float())
+        model.out_b.copy_(torch.from_numpy(ob).float())
+    occ_net = None
+    if occ_vals is not None:
+        occ_net = OccupancyNet(cfg.occupancy_neurons, cfg.in_features)
+        pos = 0
+        with torch.no_grad():
+            for p in occ_net.parameters():
+                p.copy_(torch.from_numpy(occ_vals[pos:pos + p.numel()].reshape(p.shape)).float())
+                pos += p.numel()
+    return model, occ_net
+
+
+def unpack_arrays(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes | None = None, dtype: str = "fp16"):
+    """The weights of the network of width min_neurons + len(steps), read from its sections and
+    checked (numpy only): ((W_i (depth, each (width, k_i)), b, γ, β (depth, width), W_out, b_out),
+    the occupancy net's values in its parameters' order or None).
+
+    Raises:
+        FormatError: a section of the wrong length, or weights that are NaN, infinite or beyond
+            ±MAX_WEIGHT.
+    """
     dt = DTYPES[dtype]
     width = cfg.min_neurons + len(steps)
-    sub = LfnConfig(**{**cfg.to_dict(), "max_neurons": width})
-    model = NestedLFN(sub)
     m = cfg.min_neurons
     vals = np.frombuffer(base, dtype=dt).astype(np.float64)
     pos = 0
@@ -155,22 +190,10 @@ def unpack_network(cfg: LfnConfig, base: bytes, steps: list[bytes], occ: bytes |
             raise FormatError(f"{step_name(s)} has {vals.size} values, expected {pos}")
     if not all((np.abs(a) <= MAX_WEIGHT).all() for a in (*W, b, g, be, ow, ob)):     # NaN fails too
         raise FormatError(f"lfn network weights hold NaN, infinite or values beyond ±{MAX_WEIGHT:g}")
-    with torch.no_grad():
-        for i in range(cfg.depth):
-            model.weights[i].copy_(torch.from_numpy(W[i]).float())
-            model.biases[i].copy_(torch.from_numpy(b[i]).float())
-            model.gammas[i].copy_(torch.from_numpy(g[i]).float())
-            model.betas[i].copy_(torch.from_numpy(be[i]).float())
-        model.out_w.copy_(torch.from_numpy(ow).float())
-        model.out_b.copy_(torch.from_numpy(ob).float())
-    occ_net = None
+    occ_vals = None
     if occ is not None and cfg.occupancy_neurons:
-        occ_net = OccupancyNet(cfg.occupancy_neurons, cfg.in_features)
-        vals = np.frombuffer(occ, dtype=dt).astype(np.float64)
-        pos = 0
-        with torch.no_grad():
-            for p in occ_net.parameters():
-                p.copy_(torch.from_numpy(take(p.numel()).reshape(p.shape)).float())
+        vals, pos = np.frombuffer(occ, dtype=dt).astype(np.float64), 0
+        occ_vals = take(occ_values(cfg))
         if pos != vals.size or not (np.abs(vals) <= MAX_WEIGHT).all():
             raise FormatError(f"lfn.occ has trailing data or NaN, infinite or values beyond ±{MAX_WEIGHT:g}")
-    return model, occ_net
+    return (W, b, g, be, ow, ob), occ_vals
