@@ -144,8 +144,6 @@ class LfnRenderer(LfnStream, Decoder):
 
     def _build(self) -> None:
         self.model, self.occ = unpack_network(self.cfg, self._base, self._steps, self._occ_bytes, self.dtype_w)
-        self.neurons = self.model.cfg.max_neurons
-        self.levels = float(self.neurons - self.cfg.min_neurons)
         self.model.to(self.device).eval()
         if self.occ is not None:
             self.occ.to(self.device).eval()

@@ -118,11 +118,18 @@ class LfnStream:
             self.geom                  # noqa: B018 -- a local file's cameras are checked when it opens
 
     def _check_weights(self) -> None:
-        """The held network's weights read and checked (numpy: :func:`unpack_arrays`); the size
-        they make (``neurons``, ``levels``)."""
+        """The held network's weights read and checked (numpy: :func:`unpack_arrays`)."""
         unpack_arrays(self.cfg, self._base, self._steps, self._occ_bytes, self.dtype_w)
-        self.neurons = self.cfg.min_neurons + len(self._steps)
-        self.levels = float(self.neurons - self.cfg.min_neurons)
+
+    @property
+    def neurons(self) -> int:
+        """Neurons per layer of the largest network the steps held make."""
+        return self.cfg.min_neurons + len(self._steps)
+
+    @property
+    def levels(self) -> float:
+        """The coarsest level: neurons − min_neurons."""
+        return float(len(self._steps))
 
     def _read_display(self, val) -> list[int] | None:
         """``config.display`` (FORMAT.md): strictly increasing integer sizes from min_neurons to
