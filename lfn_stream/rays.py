@@ -58,16 +58,30 @@ def camera_rays(c2w: np.ndarray, focal, principal, H: int, W: int, scale: float 
     fx, fy = focal[0] * sx, focal[1] * sy
     cx, cy = principal[0] * sx, principal[1] * sy
     if at is None:
-        ys, xs = np.meshgrid(np.arange(h) + 0.5, np.arange(w) + 0.5, indexing="ij")
+        ys, xs = (np.arange(h) + 0.5)[:, None], (np.arange(w) + 0.5)[None, :]     # broadcast to (h, w)
     else:
         ys, xs = np.divmod(np.asarray(at, np.int64), w)
         ys, xs = ys + 0.5, xs + 0.5
+    R = np.asarray(c2w, np.float64)[:3, :3]
+    o = (np.asarray(c2w, np.float64)[:3, 3] - np.asarray(centre, np.float64)) / radius
+    rays = np.empty(np.broadcast_shapes(np.shape(ys), np.shape(xs)) + (6,), np.float32)
     with np.errstate(all="ignore"):          # checked below: a ray that is not finite is an error
-        d = np.stack([(xs - cx) / fx, -(ys - cy) / fy, -np.ones_like(xs)], -1) @ c2w[:3, :3].T
-        d /= np.linalg.norm(d, axis=-1, keepdims=True)
-        o = (c2w[:3, 3] - np.asarray(centre)) / radius
-        m = np.cross(np.broadcast_to(o, d.shape), d)
-        rays = np.concatenate([d, m], -1).astype(np.float32)
+        # d = R (u, v, −1) / |·|, then o × d: each component written out (no BLAS product, no
+        # temporaries of stacked vectors; the browser decoder's lfn.js runs the same operations)
+        u, v = (xs - cx) / fx, -(ys - cy) / fy
+        d = [np.add(u * R[i, 0], v * R[i, 1]) for i in range(3)]
+        n = np.zeros_like(d[0])
+        for i in range(3):
+            d[i] -= R[i, 2]
+            n += d[i] * d[i]
+        np.sqrt(n, out=n)
+        for i in range(3):
+            d[i] /= n
+            rays[..., i] = d[i]
+        for i, (a, b) in enumerate(((1, 2), (2, 0), (0, 1))):
+            x = o[a] * d[b]
+            x -= o[b] * d[a]
+            rays[..., 3 + i] = x
     if not np.isfinite(rays).all():
         raise ParameterError("the camera's rays are not finite in float32 (focal length, pose or scene scale "
                              "out of range)")

@@ -276,7 +276,10 @@ class LfnRenderer(LfnStream, Decoder):
     def _render_native(self, neurons: float, scale: float, rays_at) -> np.ndarray:
         """The ``native=True`` render: every pixel from the lattice of :meth:`native_stride`."""
         h, w = self._scaled(scale)
-        return self._lattice(self.native_stride(neurons, scale), np.ones((h, w), bool), neurons, rays_at)
+        img, keep = self._lattice(self.native_stride(neurons, scale), np.ones((h, w), bool), neurons, rays_at)
+        if keep is not None:
+            img *= keep[..., None]
+        return img
 
     # -- free cameras (lfn_stream.cameras; the browser viewer uses the same formulas) ---------
     def pose(self, row: int, col: int) -> np.ndarray:
@@ -512,26 +515,32 @@ class LfnRenderer(LfnStream, Decoder):
                 img *= wt[box][..., None]
                 out[box] += img
                 continue
-            img = self._lattice(1 << j, used, self.mip_neurons(j - shift), rays_at)
+            img, keep = self._lattice(1 << j, used, self.mip_neurons(j - shift), rays_at)
+            wb = wt[box] if keep is None else wt[box] * keep[box]     # the silhouette's cut folded in
             img = img[box]
-            img *= wt[box][..., None]
+            img *= wb[..., None]
             out[box] += img
         return out
 
     @torch.no_grad()
-    def _lattice(self, k: int, used: np.ndarray, neurons: float, rays_at) -> np.ndarray:
-        """(h, w, 4) pixels read bilinearly from a lattice every ``k`` pixels (k > 1) rendered at
-        ``neurons``, valid where ``used`` (h, w) is set: the network runs only at the lattice
-        points those pixels' taps read. ``rays_at(size, spacing, at)`` as in :meth:`_render_mip`."""
+    def _lattice(self, k: int, used: np.ndarray, neurons: float, rays_at) -> tuple[np.ndarray, np.ndarray | None]:
+        """Pixels read bilinearly from a lattice every ``k`` pixels (k > 1) rendered at ``neurons``,
+        valid where ``used`` (h, w) is set: the network runs only at the lattice points those
+        pixels' taps read. ``rays_at(size, spacing, at)`` as in :meth:`_render_mip`.
+
+        Returns:
+            ((h, w, 4) float32 RGBA, the upsampled lattice; (h, w) bool, the pixels inside the
+            silhouette (cut per pixel: multiply the image by it), or None without an occupancy
+            net)."""
         h, w = used.shape
         hj, wj = -(-h // k), -(-w // k)
         dt = torch.float16 if self.half else torch.float32
         # the lattice points a used pixel's bilinear taps read: its k×k block's and the
         # neighbours' (a pixel's sample position lies within half a lattice step of its block)
-        need = np.zeros((hj * k, wj * k), bool)
+        need = np.zeros((hj * k, wj * k), np.uint8)
         need[:h, :w] = used
-        need = need.reshape(hj, k, wj, k).any(axis=(1, 3))
-        need = cv2.dilate(need.view(np.uint8), np.ones((3, 3), np.uint8)).view(bool)
+        need = need.reshape(hj, k, wj * k).max(1).reshape(hj, wj, k).max(2)
+        need = cv2.dilate(need, np.ones((3, 3), np.uint8)).view(bool)
         cand = np.flatnonzero(need)
         rays = rays_at((hj, wj), (h / (self.height * k), w / (self.width * k)), cand)
         inside = None
@@ -549,15 +558,15 @@ class LfnRenderer(LfnStream, Decoder):
         img[cand] = self.render_rays(rays, neurons, use_occupancy=False)
         # OpenCV's pixel-centre convention: pixel y samples the lattice at (y + 0.5)/k − 0.5
         img = cv2.resize(img.reshape(hj, wj, 4), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
-        if inside is not None:
-            frac = cv2.resize(inside.astype(np.float32), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
-            keep = frac > 1 - 1e-4                                  # every tap occupied
-            mixed = np.flatnonzero(used & ~keep & (frac > 1e-4))
-            if mixed.size:
-                x = torch.from_numpy(rays_at((h, w), (h / self.height, w / self.width), mixed)).to(self.device, dt)
-                keep.reshape(-1)[mixed[self._occupied(x).cpu().numpy()]] = True
-            img *= keep[..., None]
-        return img
+        if inside is None:
+            return img, None
+        frac = cv2.resize(inside.astype(np.float32), (wj * k, hj * k), interpolation=cv2.INTER_LINEAR)[:h, :w]
+        keep = frac > 1 - 1e-4                                  # every tap occupied
+        mixed = np.flatnonzero(used & ~keep & (frac > 1e-4))
+        if mixed.size:
+            x = torch.from_numpy(rays_at((h, w), (h / self.height, w / self.width), mixed)).to(self.device, dt)
+            keep.reshape(-1)[mixed[self._occupied(x).cpu().numpy()]] = True
+        return img, keep
 
     def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5,
                       dither: bool = True, sizes: int = 8, frame: int = 0, scale: float = 1.0) -> np.ndarray:
