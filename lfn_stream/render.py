@@ -539,7 +539,7 @@ class LfnRenderer(LfnStream, Decoder):
         # neighbours' (a pixel's sample position lies within half a lattice step of its block)
         need = np.zeros((hj * k, wj * k), np.uint8)
         need[:h, :w] = used
-        need = need.reshape(hj, k, wj * k).max(1).reshape(hj, wj, k).max(2)
+        need = cv2.dilate(need, np.ones((k, k), np.uint8), anchor=(0, 0))[::k, ::k]   # any of each k×k block
         need = cv2.dilate(need, np.ones((3, 3), np.uint8)).view(bool)
         cand = np.flatnonzero(need)
         rays = rays_at((hj, wj), (h / (self.height * k), w / (self.width * k)), cand)
