@@ -23,7 +23,7 @@ from .rays import camera_rays, view_rays
 
 ALPHA_MIN = 2.0 ** -20   # below it a pixel's colour is 0 (invisible at 16 bits; exact in float32 and float64)
 
-OCC_BATCH = 16384   # rays per occupancy-net call: ~2 MiB of activations (one 65536-ray call ran ~4x slower)
+OCC_BATCH = 4096    # rays per occupancy-net call on a CPU: 512 KiB of activations (16384: 2x slower, 65536: ~8x)
 MAX_SIZE_PASSES = 16  # an all-integer size map with at most this many sizes runs one fused pass per size
 MIP_LEVELS = 3        # render_lod_mip's coarsest lattice: every 2^3 pixels (the base network's 1/8 scale)
 #: render_lod_mip's calibration (measured on three networks, BENCHMARKS.md): level j's lattice
@@ -138,9 +138,10 @@ class LfnRenderer(LfnStream, Decoder):
 
     def _occupied(self, x: torch.Tensor) -> torch.Tensor:
         """Indices (M,) of the rays x (N, 6) that the occupancy net lets through (sigmoid > 0.1),
-        in calls of OCC_BATCH rays."""
-        return torch.cat([torch.nonzero(torch.sigmoid(self.occ(x[a:a + OCC_BATCH]).float()) > 0.1)[:, 0] + a
-                          for a in range(0, x.shape[0], OCC_BATCH)] or [torch.zeros(0, dtype=torch.long, device=x.device)])
+        in calls of OCC_BATCH rays (65536 on a GPU)."""
+        step = 65536 if self.device.type == "cuda" else OCC_BATCH
+        return torch.cat([torch.nonzero(torch.sigmoid(self.occ(x[a:a + step]).float()) > 0.1)[:, 0] + a
+                          for a in range(0, x.shape[0], step)] or [torch.zeros(0, dtype=torch.long, device=x.device)])
 
     def _build(self) -> None:
         self.model, self.occ = unpack_network(self.cfg, self._base, self._steps, self._occ_bytes, self.dtype_w)
@@ -204,22 +205,27 @@ class LfnRenderer(LfnStream, Decoder):
     def render_rays(self, rays: np.ndarray, neurons: float, batch: int | None = None,
                     use_occupancy: bool = True) -> np.ndarray:
         """(N, 6) Plücker rays → (N, 4) RGBA in [0, 1] (premultiplied), skipping empty rays
-        (those the occupancy net rejects, when the stream has one and ``use_occupancy``), in
-        batches of ``batch`` rays (default :attr:`batch`)."""
+        (those the occupancy net rejects, when the stream has one and ``use_occupancy``): the
+        occupancy net runs first over all the rays, then the network over the rays it let
+        through, in calls of ``batch`` rays (default :meth:`_batch`: full calls whatever the
+        share of empty rays)."""
         neurons = self._check(neurons)
+        if batch is not None:
+            check_integers(batch=batch)
+            if batch < 1:
+                raise ParameterError(f"batch must be a positive number of rays, got {batch!r}")
         batch = batch or self._batch(neurons)
         out = np.zeros((rays.shape[0], 4), np.float32)
         dt = torch.float16 if self.half else torch.float32
-        for a in range(0, rays.shape[0], batch):
-            x = torch.from_numpy(rays[a:a + batch]).to(self.device, dt)
-            if self.occ is not None and use_occupancy:
-                idx = self._occupied(x)               # the occupancy net really skips rays
-                self.rays_evaluated += int(idx.numel())
-                if idx.numel():
-                    out[a + idx.cpu().numpy()] = self.model(x[idx], neurons).float().cpu().numpy()
-            else:
-                self.rays_evaluated += x.shape[0]
-                out[a:a + batch] = self.model(x, neurons).float().cpu().numpy()
+        x = torch.from_numpy(rays).to(self.device, dt)
+        idx = None
+        if self.occ is not None and use_occupancy:
+            idx = self._occupied(x)                   # the occupancy net really skips rays
+            x = x[idx]
+        self.rays_evaluated += int(x.shape[0])
+        if x.shape[0]:
+            rgba = torch.cat([self.model(x[a:a + batch], neurons) for a in range(0, x.shape[0], batch)])
+            out[slice(None) if idx is None else idx.cpu().numpy()] = rgba.float().cpu().numpy()
         return out
 
     def _check_view(self, row: int, col: int) -> None:
