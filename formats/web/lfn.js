@@ -62,9 +62,28 @@ function nested(v, shape, where) {
   return out;
 }
 
+/** The 3×3 dilation of a 0/1 grid (Uint8Array h·w, as cv2.dilate with a 3×3 kernel). */
+function dilate3(src, h, w) {
+  const out = new Uint8Array(h * w);
+  for (let y = 0; y < h; y++) {
+    for (let x = 0; x < w; x++) {
+      if (!src[y * w + x]) continue;
+      for (let yy = Math.max(0, y - 1); yy <= Math.min(h - 1, y + 1); yy++) {
+        for (let xx = Math.max(0, x - 1); xx <= Math.min(w - 1, x + 1); xx++) out[yy * w + xx] = 1;
+      }
+    }
+  }
+  return out;
+}
+
 const stepName = (j) => `lfn.step.${String(j).padStart(4, "0")}`;
 
 const RB = 64;                               // rays per network batch (a multiple of 4)
+
+// LfnRenderer.render_lod_mip's constants (lfn_stream/render.py): the coarsest lattice (every 2^3
+// pixels), the size each level runs (the one made for the level below), the offset of a pixel's
+// level and the part of each interval between two levels that blends them
+export const MIP_LEVELS = 3, MIP_SHARPEN = 1, MIP_OFFSET = 0.25, MIP_BLEND = 0.25;
 
 /** The network's dense layers and LayerNorms on WebAssembly SIMD (lfn_kernel.wat): its weights
  *  and one batch's activations in the module's memory; the same doubles as
@@ -459,6 +478,125 @@ export class LfnDecoder {
     return over > 0 ? 2 ** Math.min(3, Math.max(0, Math.floor(Math.log2(over) + 1e-9))) : 1;
   }
 
+  /** Per-pixel network sizes of an h×w frame around a gaze (x, y in pixels of the frame): the
+   *  full held network within inner·diagonal, falling linearly to the base network at
+   *  outer·diagonal (LfnRenderer.foveation_map(gaze, dither=False)). Float64Array h·w. */
+  foveationMap(gaze, h, w, inner = 0.1, outer = 0.5) {
+    if (!(gaze && gaze.length === 2 && Number.isFinite(gaze[0]) && Number.isFinite(gaze[1]))) {
+      throw new LfcError(`gaze must be a finite (x, y) in pixels, got ${JSON.stringify(gaze)}`);
+    }
+    if (!(Number.isFinite(inner) && Number.isFinite(outer) && inner >= 0 && inner <= outer)) {
+      throw new LfcError(`inner and outer must be finite with 0 <= inner <= outer, got ${inner}, ${outer}`);
+    }
+    const lo = this.minN, hi = this.neurons, diag = Math.hypot(h, w), span = Math.max(outer - inner, 1e-9);
+    const lod = new Float64Array(h * w);
+    for (let y = 0, i = 0; y < h; y++) {
+      for (let x = 0; x < w; x++, i++) {
+        const e = Math.hypot(x + 0.5 - gaze[0], y + 0.5 - gaze[1]) / diag;
+        const t = Math.min(Math.max((e - inner) / span, 0), 1);
+        lod[i] = Math.min(Math.max(hi - t * (hi - lo), lo), hi);
+      }
+    }
+    return lod;
+  }
+
+  /** Mip levels (octaves of image scale) per neuron: scaleOf is log-linear from minScale at the
+   *  base network to 1 at the full one (0 if one size). As LfnRenderer._levels_per_neuron. */
+  _levelsPerNeuron() {
+    const span = this.maxN - this.minN;
+    return span ? Math.log2(1 / this.minScale) / span : 0;
+  }
+
+  /** The integer size a mip level's lattice runs (LfnRenderer.mip_neurons). */
+  mipNeurons(level) {
+    const lo = this.minN, hi = this.neurons, per = this._levelsPerNeuron();
+    if (!per || level <= 0) return hi;
+    return Math.min(hi, Math.max(lo, Math.ceil(hi - Math.max(level - MIP_SHARPEN, 0) / per - 1e-9)));
+  }
+
+  /** A foveated frame: pixel i at the (fractional) size lod[i] (Float64Array h·w, e.g.
+   *  foveationMap), drawn as a texture's mip chain is drawn (LfnRenderer.render_pose_lod_mip):
+   *  level j is a lattice every 2^j pixels run at mipNeurons(j) only where some pixel reads it,
+   *  each pixel blends the two levels around its own over the middle `blend` of the interval;
+   *  the fovea is exactly render()'s pixels. `native`: every lattice as many octaves sparser as
+   *  the frame is finer than the network (the fovea render(..., {native: true})'s pixels).
+   *  Returns {rgba, h, w, evaluated, levels}. */
+  renderMip(pose, lod, scale = 1, opts = {}) {
+    const steps = this._mip(pose, lod, scale, opts);
+    for (let r = steps.next(); ; ) {
+      if (r.done) return r.value;
+      const job = r.value, inside = this.occ ? this._occupiedAll(job.rays, job.n, job.ws) : null;
+      const out = new Float64Array(job.n * 4);
+      r = steps.next({ out, evaluated: this._forwardRays(job.ws, job.rays, job.n, job.run(inside), out), inside });
+    }
+  }
+
+  /** renderMip() with the network passes shared among a ForwardPool's workers (the same pixels). */
+  async renderMipAsync(pose, lod, scale = 1, { pool = null, ...opts } = {}) {
+    if (!pool) return this.renderMip(pose, lod, scale, opts);
+    const steps = this._mip(pose, lod, scale, opts);
+    for (let r = steps.next(); ; ) {
+      if (r.done) return r.value;
+      const job = r.value, inside = this.occ ? await pool.occupancy(this, job.rays, job.n) : null;
+      const { out, evaluated } = await pool.forward(this, job.neurons, job.rays, job.n, job.run(inside));
+      r = steps.next({ out, evaluated, inside });
+    }
+  }
+
+  /** The mip render as a generator: yields each level's _job (with its `neurons`), is sent
+   *  {out, evaluated, inside} for it, and returns the frame. */
+  *_mip(pose, lod, scale, { maxLevel = MIP_LEVELS, blend = MIP_BLEND, bias = 0, native = false } = {}) {
+    if (!Number.isInteger(maxLevel) || maxLevel < 0 || maxLevel > 8) throw new LfcError(`maxLevel must be an integer in 0..8, got ${maxLevel}`);
+    if (!(blend >= 0 && blend <= 1 && bias >= -8 && bias <= 8)) throw new LfcError(`blend must be within [0, 1] and bias within [-8, 8], got ${blend}, ${bias}`);
+    if (!(scale > 0 && scale <= 64)) throw new LfcError(`scale must be within (0, 64], got ${scale}`);
+    const H = this.H, W = this.W, h = Math.max(1, Math.round(H * scale)), w = Math.max(1, Math.round(W * scale)), n = h * w;
+    if (!lod || lod.length !== n || !lod.every(Number.isFinite)) throw new LfcError(`lod must hold ${n} finite sizes (a ${h}x${w} frame)`);
+    const lo = this.minN, hi = this.neurons, per = this._levelsPerNeuron(), cap = Math.min(maxLevel, (hi - lo) * per);
+    const shift = native ? Math.round(Math.log2(this.nativeStride(hi, scale))) : 0;
+    const lower = new Int8Array(n), wlo = new Float32Array(n), wup = new Float32Array(n);
+    let top = 0;
+    for (let i = 0; i < n; i++) {                  // as mip_levels, then the pixel's two levels' shares
+      const m0 = Math.min(Math.max((hi - Math.min(Math.max(lod[i], lo), hi)) * per, 0), cap);
+      const m = Math.min(Math.max(m0 + (MIP_OFFSET + bias), 0), maxLevel) + shift;
+      const l = Math.floor(m), f = m - l;
+      const up = blend > 0 ? Math.min(Math.max((f - 0.5) / blend + 0.5, 0), 1) : (f >= 0.5 ? 1 : 0);
+      lower[i] = l; wlo[i] = 1 - up; wup[i] = up;
+      if (l > top) top = l;
+    }
+    const rgba = new Float64Array(n * 4), wt = new Float32Array(n), used = new Uint8Array(n);
+    let evaluated = 0, levels = 0;
+    for (let j = 0; j <= top + 1; j++) {
+      let any = 0;
+      for (let i = 0; i < n; i++) {
+        wt[i] = lower[i] === j ? wlo[i] : lower[i] === j - 1 ? wup[i] : 0;
+        any |= used[i] = wt[i] > 0 ? 1 : 0;
+      }
+      if (!any) continue;
+      levels++;
+      let img;
+      if (j === 0) {                               // every used pixel, with the occupancy net: render()'s pixels
+        const neurons = this.mipNeurons(0);
+        let m = 0;
+        for (let i = 0; i < n; i++) m += used[i];
+        const at = new Int32Array(m);
+        for (let i = 0, q = 0; i < n; i++) if (used[i]) at[q++] = i;
+        const got = yield { ws: this._workspace(neurons), neurons, rays: this._raysAt(pose, w, h / H, w / W, at), n: m,
+          run: (inside) => inside };
+        evaluated += got.evaluated;
+        for (let q = 0; q < m; q++) for (let c = 0; c < 4; c++) rgba[4 * at[q] + c] += wt[at[q]] * got.out[4 * q + c];
+        continue;
+      }
+      const neurons = this.mipNeurons(j - shift);
+      const job = this._latticeJob(pose, this._workspace(neurons), h, w, 1 << j, used);
+      job.neurons = neurons;
+      const got = yield job;
+      evaluated += got.evaluated;
+      img = job.finish(got.out, got.evaluated, got.inside).rgba;
+      for (let i = 0; i < n; i++) if (used[i]) for (let c = 0; c < 4; c++) rgba[4 * i + c] += wt[i] * img[4 * i + c];
+    }
+    return { rgba, h, w, evaluated, levels, stride: 1 << shift };
+  }
+
   /** Render a camera pose at (fractional) `neurons` and image `scale` (default: the size's own).
    *  `native`: a network trained at reduced resolution runs on a lattice every nativeStride()
    *  pixels, upsampled bilinearly, the silhouette cut per pixel (LfnRenderer.render_pose(...,
@@ -504,6 +642,13 @@ export class LfnDecoder {
   _rays(pose, h, w, sy, sx) {
     const ray = this._rayMaker(pose, sy, sx), out = new Float32Array(h * w * 6);
     for (let yy = 0, i = 0; yy < h; yy++) for (let xx = 0; xx < w; xx++, i += 6) ray(yy, xx, out, i);
+    return out;
+  }
+
+  /** The rays of grid pixels `at` (flat indices into a grid `w` wide): Float32Array at.length·6. */
+  _raysAt(pose, w, sy, sx, at) {
+    const ray = this._rayMaker(pose, sy, sx), out = new Float32Array(at.length * 6);
+    for (let q = 0; q < at.length; q++) ray(Math.floor(at[q] / w), at[q] % w, out, 6 * q);
     return out;
   }
 
@@ -565,32 +710,48 @@ export class LfnDecoder {
   }
 
   /** The native render of an h×w frame from a lattice every k pixels (LfnRenderer._lattice with
-   *  every pixel used), as a _job: the occupancy net at every lattice point, the network at the
-   *  lattice points within one of an occupied one; finish() resizes as OpenCV does (pixel y reads
-   *  the lattice at (y + 0.5)/k − 0.5, clamped), then keeps each pixel where all its taps are
-   *  occupied, cuts it where none is, and asks the occupancy net at its own ray where they are
-   *  mixed. */
-  _latticeJob(pose, ws, h, w, k) {
+   *  every pixel used, or only where `used` (Uint8Array h·w) is set: then only the lattice points
+   *  those pixels' bilinear taps read), as a _job: the occupancy net at those lattice points, the
+   *  network at the ones within one of an occupied one; finish() resizes as OpenCV does (pixel y
+   *  reads the lattice at (y + 0.5)/k − 0.5, clamped), then keeps each pixel where all its taps
+   *  are occupied, cuts it where none is, and asks the occupancy net at its own ray where they
+   *  are mixed. */
+  _latticeJob(pose, ws, h, w, k, used = null) {
     const hj = Math.ceil(h / k), wj = Math.ceil(w / k);
+    let cand = null;                               // the lattice points run (null: all)
+    if (used) {
+      const block = new Uint8Array(hj * wj);
+      for (let y = 0; y < h; y++) for (let x = 0; x < w; x++) if (used[y * w + x]) block[((y / k) | 0) * wj + ((x / k) | 0)] = 1;
+      const need = dilate3(block, hj, wj);
+      let m = 0;
+      for (let i = 0; i < need.length; i++) m += need[i];
+      cand = new Int32Array(m);
+      for (let i = 0, j = 0; i < need.length; i++) if (need[i]) cand[j++] = i;
+    }
+    const grid = (vals, per) => {                  // per-candidate values → the whole lattice (0 elsewhere)
+      if (!cand) return vals;
+      const g = new (vals.constructor)(hj * wj * per);
+      for (let q = 0; q < cand.length; q++) for (let c = 0; c < per; c++) g[per * cand[q] + c] = vals[per * q + c];
+      return g;
+    };
     const run = (inside) => {
       if (!inside) return null;
-      const out = new Uint8Array(hj * wj);        // 3×3 dilation of inside
-      for (let y = 0; y < hj; y++) {
-        for (let x = 0; x < wj; x++) {
-          if (!inside[y * wj + x]) continue;
-          for (let yy = Math.max(0, y - 1); yy <= Math.min(hj - 1, y + 1); yy++) {
-            for (let xx = Math.max(0, x - 1); xx <= Math.min(wj - 1, x + 1); xx++) out[yy * wj + xx] = 1;
-          }
-        }
-      }
+      const near = dilate3(grid(inside, 1), hj, wj);
+      if (!cand) return near;
+      const out = new Uint8Array(cand.length);
+      for (let q = 0; q < cand.length; q++) out[q] = near[cand[q]];
       return out;
     };
-    return { ws, rays: this._rays(pose, hj, wj, h / (this.H * k), w / (this.W * k)), n: hj * wj, run,
-      finish: (lat, evaluated, inside) => this._upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated) };
+    const sy = h / (this.H * k), sx = w / (this.W * k);
+    return { ws, rays: cand ? this._raysAt(pose, wj, sy, sx, cand) : this._rays(pose, hj, wj, sy, sx),
+      n: cand ? cand.length : hj * wj, run,
+      finish: (lat, evaluated, inside) => this._upsample(pose, ws, grid(lat, 4), inside && grid(inside, 1), hj, wj, h, w, k,
+        evaluated, used) };
   }
 
-  /** The h×w frame from the hj×wj lattice's outputs `lat` (and occupancy `inside`, or null). */
-  _upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated) {
+  /** The h×w frame from the hj×wj lattice's outputs `lat` (and occupancy `inside`, or null), at
+   *  the pixels `used` marks (null: all; the others 0). */
+  _upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated, used = null) {
     const taps = (m, size) => {                    // per output coordinate: lower tap and weight
       const i0 = new Int32Array(m), wt = new Float64Array(m);
       for (let y = 0; y < m; y++) {
@@ -609,6 +770,7 @@ export class LfnDecoder {
     for (let y = 0; y < h; y++) {
       const r0 = ty[y] * wj, r1 = Math.min(ty[y] + 1, hj - 1) * wj, b = ay[y];
       for (let x = 0; x < w; x++) {
+        if (used && !used[y * w + x]) continue;
         const c0 = tx[x], c1 = Math.min(tx[x] + 1, wj - 1), a = ax[x];
         const w00 = (1 - b) * (1 - a), w01 = (1 - b) * a, w10 = b * (1 - a), w11 = b * a;
         if (inside) {

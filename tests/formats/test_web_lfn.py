@@ -194,6 +194,41 @@ def test_native_renders_match_python(tmp_path, channels, occ):
     assert (tmp_path / "render_3.bin").read_bytes() == (tmp_path / "dense" / "render_0.bin").read_bytes()
 
 
+@pytest.mark.parametrize("channels,occ", [(4, True), (3, False)])
+def test_foveated_renders_match_python(tmp_path, channels, occ):
+    """renderMip(pose, foveationMap(gaze)): the mip render of LfnRenderer.render_pose_lod_mip
+    (pose, foveation_map(gaze, dither=False, scale=S)) within one grey level: lattices every 2,
+    4 and 8 pixels at the sizes mip_neurons gives, blended, silhouettes cut per pixel; on the
+    network's own grid too (native); the fovea exactly the JS dense render's pixels; fewer
+    network passes than the dense render."""
+    path = lfn_file(tmp_path, channels, occ=occ, display_scales=[[0.25, [6, 9, 14, 20]]])
+    r = LfnRenderer(open_lfc(path), device="cpu")
+    cams = [("view,2,max,2,fovea:30:24", r.pose(0, 2), (30, 24), 2.0, False),
+            ("orbit,4,25,-10,max,3,fovea:20:60", r.orbit_pose(0, 4, 25, -10), (20, 60), 3.0, False),
+            ("orbit,1,-140,30,max,2,native,fovea:45:10", r.orbit_pose(0, 1, -140, 30), (45, 10), 2.0, True),
+            ("view,3,max,1,fovea:-4:30", r.pose(0, 3), (-4, 30), 1.0, False)]
+    info = run_js(path, tmp_path, [c[0] for c in cams])
+    assert info["ok"], info
+    dense = run_js(path, tmp_path / "dense", [c[0].rsplit(",", 1)[0] for c in cams])
+    fovea = 0
+    for i, (spec, pose, gaze, scale, native) in enumerate(cams):
+        lod = r.foveation_map(gaze, dither=False, scale=scale)
+        want = r.to_pixels(r.render_pose_lod_mip(pose, lod, native=native))
+        js = np.fromfile(tmp_path / f"render_{i}.bin", want.dtype).reshape(want.shape)
+        diff = np.abs(js.astype(np.int64) - want)
+        assert diff.max() <= 1 and (diff > 0).mean() < 0.02, (spec, diff.max(), (diff > 0).mean())
+        got = info["renders"][i]
+        assert got["levels"] >= 3 and got["evaluated"] < dense["renders"][i]["evaluated"], (spec, got)
+        if not native:                     # pixels on the full-density level alone: render()'s
+            m = np.clip(r.mip_levels(lod, 3) + 0.25, 0, 3)
+            pure = (np.floor(m) == 0) & (np.clip((m - np.floor(m) - 0.5) / 0.25 + 0.5, 0, 1) == 0)
+            full = np.fromfile(tmp_path / "dense" / f"render_{i}.bin", want.dtype).reshape(want.shape)
+            assert np.array_equal(js[pure], full[pure]), spec
+            fovea += int(pure.sum())
+    assert fovea >= 100                    # (the last gaze lies outside its frame: no fovea)
+    assert len(set((tmp_path / "render_0.bin").read_bytes())) >= 10          # not a constant
+
+
 @pytest.mark.parametrize("channels,dtype,weights,occ", [(4, np.uint8, "fp16", True), (3, np.uint8, "fp32", False),
                                                          (1, np.uint16, "fp16", True)])
 def test_webassembly_layers_give_the_same_pixels_as_the_js_loops(tmp_path, channels, dtype, weights, occ):

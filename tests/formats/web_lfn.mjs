@@ -2,7 +2,8 @@
 // (formats/web/lfn.js) under Node.
 // node web_lfn.mjs FILE OUTDIR CAM...   CAM = view,V,N,S | grid,S,T,N,S | orbit,V,YAW,PITCH,N,S
 // (N neurons, "max" = all, "display" = the display ladder's size for what is held; S image scale, "auto" = the size's own;
-// a trailing ",native" renders on the network's own pixel grid; LFN_NO_WASM=1: without the WebAssembly kernel).
+// a trailing ",native" renders on the network's own pixel grid, ",fovea:X:Y" foveated around the gaze (X, Y)
+// in pixels of the frame (renderMip of foveationMap); LFN_NO_WASM=1: without the WebAssembly kernel).
 // Writes OUTDIR/render_I.bin
 // (pixels of the file's dtype, h·w·C) per camera and prints one JSON line: {ok: true, renders:
 // [{h, w, pose, evaluated}], neurons, bytesRead} or {ok: false, name, message}.
@@ -26,6 +27,7 @@ try {
   const renders = [];
   for (let i = 0; i < cams.length; i++) {
     const a = cams[i].split(",");
+    const fovea = a[a.length - 1].startsWith("fovea:") ? a.pop().split(":").slice(1).map(Number) : null;
     const native = a[a.length - 1] === "native";
     if (native) a.pop();
     let pose, rest;
@@ -35,10 +37,16 @@ try {
     const n = rest[0] === "max" || rest[0] === "display" ? Infinity : Number(rest[0]);
     if (rest[0] !== "display") await dec.grow(n);            // display: what the opened steps show
     const use = rest[0] === "display" ? dec.displayNeurons(rest[1] === "auto" ? null : Number(rest[1])) : Math.min(n, dec.neurons);
-    const r = dec.render(pose, use, rest[1] === "auto" ? null : Number(rest[1]), { native });
+    const scale = rest[1] === "auto" ? null : Number(rest[1]);
+    let r;
+    if (fovea) {
+      const h = Math.max(1, Math.round(dec.H * scale)), w = Math.max(1, Math.round(dec.W * scale));
+      r = dec.renderMip(pose, dec.foveationMap(fovea, h, w), scale, { native });
+    } else r = dec.render(pose, use, scale, { native });
     const px = dec.toPixels(r.rgba, r.h, r.w);
     fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(px.buffer, px.byteOffset, px.byteLength));
-    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, stride: r.stride, neurons: dec.neurons, shown: use });
+    renders.push({ h: r.h, w: r.w, pose, evaluated: r.evaluated, stride: r.stride, levels: r.levels, neurons: dec.neurons,
+      shown: use });
   }
   console.log(JSON.stringify({ ok: true, renders, opened, pivot: dec.pivot, up: dec.up, wasm: Boolean(dec._kernel()) }));
 } catch (e) {
