@@ -10,10 +10,12 @@
 // opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
 // The networks' passes run on Web Workers (lfn_pool.js; &workers=N, 0 = on the page's thread),
 // their dense layers on WebAssembly SIMD where the browser has it (&wasm=0: lfn.js's own loops).
+// "foveate" (&fovea=1) draws the full network where the pointer is and coarser networks on
+// sparser pixels further out (lfn.js renderMip, LfnRenderer.render_pose_lod_mip's frame).
 //
 // For tests and scripts: window.lfcViewer = {ready (a promise), show(...) → frame info, state};
 // RLFC files: show(s, t, {focus, aperture, level, robust}); LFN files: show({s, t} | {view, yaw,
-// pitch}, {neurons, scale, native}). document.body.dataset.state is "loading", "ready" or "error" (the
+// pitch}, {neurons, scale, native, fovea, gaze}). document.body.dataset.state is "loading", "ready" or "error" (the
 // message in #error); state.mode is "rlfc" or "lfn".
 import { LfcError, LfcFile, RangeSource, TxDecoder } from "./lfc.js";
 import { LfnDecoder } from "./lfn.js";
@@ -148,11 +150,13 @@ async function mainLfn(dec, source, t0) {
   const openMs = performance.now() - t0;
   const posed = dec.layout === "posed";
   Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
-    neurons: dec.maxN, scale: "auto", native: true });
+    neurons: dec.maxN, scale: "auto", native: true, fovea: !tiled && params.get("fovea") === "1", gaze: null });
   const want = Number(params.get("neurons"));
   if (want >= dec.minN && want <= dec.maxN) state.neurons = want;
   $("rlfc-controls").hidden = true;
   $("lfn-controls").hidden = false;
+  $("fovea").checked = state.fovea;
+  $("fovea").disabled = tiled;                 // (a tile set blends whole frames of several networks)
   $("viewidx").max = String(dec.rows * dec.cols - 1);
   $("neurons").min = String(dec.minN); $("neurons").max = String(dec.maxN); $("neurons").value = String(state.neurons);
   $("title").textContent = `${fileUrl} — ${tiled ? `tile set of ${dec.files.length} light field networks` : "light field network"}, ${dec.depth} layers of ${dec.minN}..${dec.maxN} neurons; ${dec.rows}×${dec.cols} views of ${dec.W}×${dec.H}`;
@@ -171,6 +175,7 @@ async function mainLfn(dec, source, t0) {
       ...(tiled ? [`tiles          ${f ? f.tiles.join(", ") : "-"} blended; ${dec.tiles.size} of ${dec.files.length} opened`] : []),
       `open           ${openMs.toFixed(0)} ms`,
       `frame          ${f ? f.ms.toFixed(1) : "-"} ms, ${f ? `${f.w}×${f.h}` : "-"} at ${f ? f.neurons.toFixed(2) : "-"} neurons${f && f.stride > 1 ? `, the network every ${f.stride} pixels` : ""}`,
+      ...(f && f.gaze ? [`foveated       around (${f.gaze.map((v) => v.toFixed(0)).join(", ")}): ${f.levels} levels, the full network at the gaze`] : []),
       `rays evaluated ${f ? f.evaluated.toLocaleString() : "-"}${dec.occ ? " (the occupancy net skips the others)" : ""}`
         + (pool ? ` on ${pool.size} worker${pool.size > 1 ? "s" : ""}` : " on the page's thread"),
     ].join("\n");
@@ -187,7 +192,12 @@ async function mainLfn(dec, source, t0) {
     const n = neurons <= dec.neurons ? neurons : dec.displayNeurons(state.scale === "auto" ? null : Number(state.scale));
     const t = performance.now();
     const sc = state.scale === "auto" ? dec.scaleOf(n) : Number(state.scale);
-    const frame = (pl) => dec.renderAsync(p, n, drag ? Math.min(sc, 0.25) : sc, { native: state.native, pool: pl });   // a quarter-scale preview while dragging
+    const s = drag ? Math.min(sc, 0.25) : sc;   // a quarter-scale preview while dragging
+    const h = Math.max(1, Math.round(dec.H * s)), w = Math.max(1, Math.round(dec.W * s));
+    // foveated: sizes falling from the held network at the gaze (default: the centre) to the base one
+    const gaze = state.fovea && !drag ? (state.gaze ? state.gaze.map((v, i) => v * (i ? h : w)) : [w / 2, h / 2]) : null;
+    const frame = (pl) => (gaze ? dec.renderMipAsync(p, dec.foveationMap(gaze, h, w), s, { native: state.native, pool: pl })
+      : dec.renderAsync(p, n, s, { native: state.native, pool: pl }));
     let r;
     try {
       r = await frame(pool);
@@ -203,7 +213,8 @@ async function mainLfn(dec, source, t0) {
     canvas.width = r.w;
     canvas.height = r.h;
     ctx.putImageData(new ImageData(toRGBA(px, r.h, r.w, dec.C, dec.peak), r.w, r.h), 0, 0);
-    state.last = { ms, w: r.w, h: r.h, neurons: n, evaluated: r.evaluated, stride: r.stride, tiles: r.tiles || [0] };
+    state.last = { ms, w: r.w, h: r.h, neurons: gaze ? dec.neurons : n, evaluated: r.evaluated, stride: r.stride,
+      tiles: r.tiles || [0], gaze, levels: r.levels };
     stats();
     return { ...state.last, pose: p, bytesFetched: source.bytesFetched, requests: source.requests, neuronsFetched: dec.neurons,
       workers: pool ? pool.size : 0, wasm: Boolean(dec._kernel && dec._kernel()) };
@@ -213,7 +224,13 @@ async function mainLfn(dec, source, t0) {
   canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, s: state.s, t: state.t, yaw: state.yaw, pitch: state.pitch }; canvas.classList.add("dragging"); canvas.setPointerCapture(e.pointerId); });
   canvas.addEventListener("pointerup", () => { drag = null; canvas.classList.remove("dragging"); request(); });
   canvas.addEventListener("pointermove", (e) => {
-    if (!drag) return;
+    if (!drag) {                               // foveated: the gaze follows the pointer (as a fraction of the frame)
+      if (!state.fovea) return;
+      const b = canvas.getBoundingClientRect();
+      state.gaze = [(e.clientX - b.left) / b.width, (e.clientY - b.top) / b.height];
+      request();
+      return;
+    }
     const dx = e.clientX - drag.x, dy = e.clientY - drag.y;
     if (posed) {                               // half a degree per pixel
       state.yaw = drag.yaw - dx * 0.5;
@@ -234,6 +251,7 @@ async function mainLfn(dec, source, t0) {
   $("neurons").addEventListener("input", (e) => { state.neurons = Number(e.target.value); request(); });
   $("scale").addEventListener("change", (e) => { state.scale = e.target.value; request(); });
   $("native").addEventListener("change", (e) => { state.native = e.target.checked; request(); });
+  $("fovea").addEventListener("change", (e) => { state.fovea = e.target.checked; request(); });
 
   await draw(dec.minN);                        // the base network at its own scale: the first useful bytes
   await request();                             // then the chosen level, its steps streamed in
@@ -242,8 +260,9 @@ async function mainLfn(dec, source, t0) {
   return {
     decoder: dec, source,
     /** Render a camera ({s, t} on a grid, or {view, yaw, pitch}) with opts {neurons, scale
-     *  ("auto" or a number), native (the network on its own pixel grid; default true)};
-     *  resolves with frame info. */
+     *  ("auto" or a number), native (the network on its own pixel grid; default true), fovea
+     *  (foveated around gaze: [x, y] as fractions of the frame, default the centre)}; resolves
+     *  with frame info. */
     async show(cam, opts = {}) {
       if (state.busy) await state.busy;
       if (cam.view !== undefined) {
@@ -255,7 +274,10 @@ async function mainLfn(dec, source, t0) {
       if (opts.neurons !== undefined) state.neurons = opts.neurons;
       if (opts.scale !== undefined) state.scale = String(opts.scale);
       if (opts.native !== undefined) state.native = Boolean(opts.native);
+      if (opts.fovea !== undefined) state.fovea = Boolean(opts.fovea) && !tiled;
+      if (opts.gaze !== undefined) state.gaze = opts.gaze;
       $("native").checked = state.native;
+      $("fovea").checked = state.fovea;
       $("neurons").value = String(state.neurons); $("scale").value = state.scale === "auto" ? "auto" : "1";
       return draw();
     },

@@ -218,6 +218,42 @@ def test_networks_trained_below_the_views_size_render_on_their_own_grid(site, pa
         assert 0.01 < empty < 0.99, empty
 
 
+def test_foveated_frames_follow_the_pointer(site, page):
+    """"foveate" draws LfnRenderer.render_pose_lod_mip's frame (within one grey level; densely and
+    on the network's own grid), the same canvas on workers as on the page's thread, with fewer
+    network passes than the full frame; the gaze follows the pointer over the canvas."""
+    from lfn_stream import LfnRenderer
+
+    srv, f = site
+    net = f.parent / "net_native.lfc"
+    r = LfnRenderer(open_lfc(net), device="cpu")
+    pose = r.orbit_pose(0, 3, 20, -5)
+    cam = "{view: 3, yaw: 20, pitch: -5}"
+    got = {}
+    for query in ("", "&workers=0"):
+        assert open_viewer(page, srv, net.name, query) == "ready", page.inner_text("#error")
+        full = page.evaluate(f"lfcViewer.show({cam}, {{neurons: 20, scale: 2, native: false}})")
+        for native in (False, True):
+            info = page.evaluate(f"lfcViewer.show({cam}, {{scale: 2, native: {str(native).lower()}, fovea: true, "
+                                 "gaze: [0.3, 0.6]})")
+            assert info["levels"] >= 3 and info["evaluated"] < full["evaluated"], info
+            assert info["gaze"] == [0.3 * 60, 0.6 * 48] and "foveated" in page.inner_text("#stats")
+            want = r.to_pixels(r.render_pose_lod_mip(pose, r.foveation_map((18, 28.8), dither=False, scale=2.0),
+                                                     native=native))
+            px = canvas_rgba(page)
+            assert np.abs(px[..., :3].astype(int) - want).max() <= 1 and (px[..., :3] != want).mean() < 0.02
+            got[query, native] = px
+    for native in (False, True):
+        assert np.array_equal(got["", native], got["&workers=0", native])
+    # the pointer: the gaze follows it (a fraction of the frame, shown in frame pixels)
+    page.evaluate(f"lfcViewer.show({cam}, {{scale: 2, native: false, fovea: true, gaze: [0.5, 0.5]}})")
+    assert page.evaluate("document.getElementById('fovea').checked")
+    box = page.locator("#view").bounding_box()
+    page.mouse.move(box["x"] + 0.25 * box["width"], box["y"] + 0.75 * box["height"])
+    page.wait_for_function("lfcViewer.state.last.gaze && Math.abs(lfcViewer.state.last.gaze[0] - 15) < 1.5")
+    assert abs(page.evaluate("lfcViewer.state.last.gaze[1]") - 36) < 1.5
+
+
 @pytest.mark.parametrize("native", [True, False])
 def test_network_passes_on_workers_give_the_page_threads_pixels(site, page, native):
     """The page runs the networks' passes on Web Workers (two here: the cores Chromium reports)
