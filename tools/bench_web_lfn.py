@@ -15,7 +15,8 @@ the two are byte-identical, tests/formats/test_web_lfn.py).
 captured view 0 at full scale, densely and on the network's own pixel grid, with its passes on
 the page's thread (``&workers=0``) and on Web Workers (the page's default: as many as the cores
 Chromium reports, at most 8), in lfn.js's own loops (``&wasm=0``) and on its WebAssembly layers,
-settings interleaved round by round; medians."""
+settings interleaved round by round; medians. ``--page --fovea``: also foveated frames (gaze at
+the centre: the viewer's "foveate" box, ``renderMip``) on the WebAssembly layers."""
 from __future__ import annotations
 
 import argparse
@@ -37,9 +38,10 @@ def main(argv=None) -> int:
     ap.add_argument("file")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--page", action="store_true", help="time the viewer page in headless Chromium instead")
+    ap.add_argument("--fovea", action="store_true", help="--page: foveated frames too")
     a = ap.parse_args(argv)
     if a.page:
-        return page_bench(Path(a.file).resolve(), a.rounds)
+        return page_bench(Path(a.file).resolve(), a.rounds, a.fovea)
     node = shutil.which("node")
     if node is None:
         print("Node.js is not installed", file=sys.stderr)
@@ -86,7 +88,7 @@ def main(argv=None) -> int:
     return 0
 
 
-def page_bench(path: Path, rounds: int) -> int:
+def page_bench(path: Path, rounds: int, fovea: bool = False) -> int:
     """``--page``: frame times of the viewer page (see the module docstring)."""
     import os
 
@@ -99,33 +101,37 @@ def page_bench(path: Path, rounds: int) -> int:
         print("Chromium is not installed", file=sys.stderr)
         return 2
     flags = ["--no-sandbox", "--disable-gpu", "--no-first-run", "--disable-background-networking"]
-    settings = [(w + q, nat) for w in ("&wasm=0", "") for q in ("&workers=0", "") for nat in (False, True)]
+    settings = [(w + q, nat, False) for w in ("&wasm=0", "") for q in ("&workers=0", "") for nat in (False, True)]
+    if fovea:
+        settings += [(q, nat, True) for q in ("&workers=0", "") for nat in (False, True)]
     times: dict = {k: [] for k in settings}
     info: dict = {}
     with FileServer(path.parent, viewer=True) as srv, sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium, headless=True, args=flags)
         page = browser.new_page()
         for _ in range(rounds):
-            for q, nat in settings:
+            for q, nat, fov in settings:
                 page.goto(srv.viewer_url(path.name) + q)
                 page.wait_for_function("document.body.dataset.state !== 'loading'", timeout=600_000)
-                cam = f"lfcViewer.show({{view: 0}}, {{scale: 1, native: {str(nat).lower()}}})"
+                cam = f"lfcViewer.show({{view: 0}}, {{scale: 1, native: {str(nat).lower()}, fovea: {str(fov).lower()}}})"
                 page.evaluate(cam)                                   # (the first frame: the pool's start-up)
                 got = page.evaluate(cam)
-                times[q, nat].append(got["ms"])
-                info[q, nat] = got
+                times[q, nat, fov].append(got["ms"])
+                info[q, nat, fov] = got
         cores = page.evaluate("navigator.hardwareConcurrency")
         browser.close()
     print(f"{path.name}: the viewer page in headless Chromium ({cores} cores reported), view 0, full network, "
           f"medians of {rounds}\n")
-    print("| network | passes on | sampled | frame | rays run | frame ms |")
-    print("|---|---|---|---|---|---|")
-    for q, nat in settings:
-        g = info[q, nat]
+    print("| network | passes on | sampled | foveated | frame | rays run | frame ms |")
+    print("|---|---|---|---|---|---|---|")
+    for key in settings:
+        q, nat, fov = key
+        g = info[key]
         where = "the page's thread" if "workers=0" in q else f"{g['workers']} workers"
         print(f"| {'JS loops' if 'wasm=0' in q else 'WebAssembly'} | {where} | "
-              f"{'every ' + str(g['stride']) + ' px' if g['stride'] > 1 else 'every pixel'} | "
-              f"{g['w']}x{g['h']} | {g['evaluated']} | {float(np.median(times[q, nat])):.0f} |")
+              f"{('own grid, every ' + str(g['stride']) + ' px') if nat and g['stride'] > 1 else 'every pixel'} | "
+              f"{str(g['levels']) + ' levels' if fov else 'no'} | "
+              f"{g['w']}x{g['h']} | {g['evaluated']} | {float(np.median(times[key])):.0f} |")
     return 0
 
 

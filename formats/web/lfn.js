@@ -89,11 +89,11 @@ export const MIP_LEVELS = 3, MIP_SHARPEN = 1, MIP_OFFSET = 0.25, MIP_BLEND = 0.2
  *  and one batch's activations in the module's memory; the same doubles as
  *  LfnDecoder._forwardBatch's loops (every operation in the same order, each rounded once; tested). */
 class DenseKernel {
-  constructor(mod, Wt, b, g, be, w, occ, occN) {
+  constructor(mod, Wt, b, g, be, w, ow, ob, occ, occN) {
     const inst = new WebAssembly.Instance(mod, {});
     const mem = inst.exports.memory, big = Math.max(w, 6) * RB;
     const sizes = [...Wt.map((x) => x.length), ...[b, g, be].flat().map((x) => x.length), 6 * RB, w * RB, big, big, w,
-      occ ? occ.length + 2 * occN * RB + RB : 0];
+      ow.length, ob.length, 4 * RB, occ ? occ.length + 2 * occN * RB + RB : 0];
     const bytes = sizes.reduce((a, n) => a + 8 * n, 0);
     if (bytes > mem.buffer.byteLength) mem.grow(Math.ceil((bytes - mem.buffer.byteLength) / 65536));
     let off = 0;
@@ -108,6 +108,7 @@ class DenseKernel {
     this.g = g.map((x) => take(x.length, x));
     this.be = be.map((x) => take(x.length, x));
     Object.assign(this, { X: take(6 * RB), z: take(w * RB), h: take(big), h2: take(big), m: take(w), w,
+      ow: take(ow.length, ow), ob: take(ob.length, ob), o: take(4 * RB),
       dense: inst.exports.dense, norm: inst.exports.norm, relu: inst.exports.relu });
     if (occ) Object.assign(this, { occN, occP: take(occ.length, occ), o1: take(occN * RB), o2: take(occN * RB), o3: take(RB) });
   }
@@ -116,6 +117,13 @@ class DenseKernel {
    *  kernel's arrays). */
   layer(i, hin, z, k, n, R4) {
     this.dense(this.W[i].byteOffset, i === 0 ? 6 : this.w, hin.byteOffset, z.byteOffset, this.b[i].byteOffset, k, n, R4, RB, 0);
+  }
+
+  /** The output layer's sums of the rays in hin (r < R4) from the first n neurons: o[c·RB + r] =
+   *  ob[c] + Σ_j ow[c·w + j]·hin[j·RB + r], each sum started from its bias (the JS loop's order). */
+  outputs(hin, n, R4) {
+    this.dense(this.ow.byteOffset, this.w, hin.byteOffset, this.o.byteOffset, this.ob.byteOffset, n, 4, R4, RB, 1);
+    return this.o;
   }
 
   /** The occupancy net's logits of the rays in X (r < R4): Linear 6→k, ReLU, k→k, ReLU, k→1, each
@@ -573,7 +581,6 @@ export class LfnDecoder {
       }
       if (!any) continue;
       levels++;
-      let img;
       if (j === 0) {                               // every used pixel, with the occupancy net: render()'s pixels
         const neurons = this.mipNeurons(0);
         let m = 0;
@@ -591,8 +598,7 @@ export class LfnDecoder {
       job.neurons = neurons;
       const got = yield job;
       evaluated += got.evaluated;
-      img = job.finish(got.out, got.evaluated, got.inside).rgba;
-      for (let i = 0; i < n; i++) if (used[i]) for (let c = 0; c < 4; c++) rgba[4 * i + c] += wt[i] * img[4 * i + c];
+      job.finish(got.out, got.evaluated, got.inside, rgba, wt);          // adds wt × the level's pixels
     }
     return { rgba, h, w, evaluated, levels, stride: 1 << shift };
   }
@@ -745,13 +751,14 @@ export class LfnDecoder {
     const sy = h / (this.H * k), sx = w / (this.W * k);
     return { ws, rays: cand ? this._raysAt(pose, wj, sy, sx, cand) : this._rays(pose, hj, wj, sy, sx),
       n: cand ? cand.length : hj * wj, run,
-      finish: (lat, evaluated, inside) => this._upsample(pose, ws, grid(lat, 4), inside && grid(inside, 1), hj, wj, h, w, k,
-        evaluated, used) };
+      finish: (lat, evaluated, inside, into = null, weight = null) => this._upsample(pose, ws, grid(lat, 4),
+        inside && grid(inside, 1), hj, wj, h, w, k, evaluated, used, into, weight) };
   }
 
   /** The h×w frame from the hj×wj lattice's outputs `lat` (and occupancy `inside`, or null), at
-   *  the pixels `used` marks (null: all; the others 0). */
-  _upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated, used = null) {
+   *  the pixels `used` marks (null: all; the others 0); with `into` (Float64Array h·w·4), each
+   *  pixel's value times weight[pixel] is added there instead. */
+  _upsample(pose, ws, lat, inside, hj, wj, h, w, k, evaluated, used = null, into = null, weight = null) {
     const taps = (m, size) => {                    // per output coordinate: lower tap and weight
       const i0 = new Int32Array(m), wt = new Float64Array(m);
       for (let y = 0; y < m; y++) {
@@ -764,7 +771,7 @@ export class LfnDecoder {
       return [i0, wt];
     };
     const [ty, ay] = taps(h, hj), [tx, ax] = taps(w, wj);
-    const rgba = new Float64Array(h * w * 4), x6 = new Float64Array(6);
+    const rgba = into || new Float64Array(h * w * 4), x6 = new Float64Array(6);
     const pixelRay = this.occ ? this._rayMaker(pose, h / this.H, w / this.W) : null;
     let asked = 0;
     for (let y = 0; y < h; y++) {
@@ -784,7 +791,12 @@ export class LfnDecoder {
           }
         }
         const p = 4 * (y * w + x), q00 = 4 * (r0 + c0), q01 = 4 * (r0 + c1), q10 = 4 * (r1 + c0), q11 = 4 * (r1 + c1);
-        for (let c = 0; c < 4; c++) rgba[p + c] = w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c];
+        if (into) {
+          const s = weight[y * w + x];
+          for (let c = 0; c < 4; c++) rgba[p + c] += s * (w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c]);
+        } else {
+          for (let c = 0; c < 4; c++) rgba[p + c] = w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c];
+        }
       }
     }
     return { rgba, h, w, evaluated, stride: k, asked };
@@ -810,7 +822,7 @@ export class LfnDecoder {
     if (!LfnDecoder.useWasm || !this.Wt) return null;
     if (!this._kern || this._kern.Wt !== this.Wt) {
       const mod = kernelModule();
-      this._kern = { Wt: this.Wt, k: mod ? new DenseKernel(mod, this.Wt, this.b, this.g, this.be, this.w, this.occ, this.occN) : null };
+      this._kern = { Wt: this.Wt, k: mod ? new DenseKernel(mod, this.Wt, this.b, this.g, this.be, this.w, this.ow, this.ob, this.occ, this.occN) : null };
     }
     return this._kern.k;
   }
@@ -889,6 +901,11 @@ export class LfnDecoder {
       }
       if (i === 0) { hin = hout; hout = ws.h2; } else { const t = hin; hin = hout; hout = t; }
       k = n;
+    }
+    if (kern) {
+      const o = kern.outputs(hin, n, R4);
+      for (let c = 0; c < 4; c++) for (let r = 0; r < cnt; r++) ws.out[c * RB + r] = 1 / (1 + Math.exp(-o[c * RB + r]));
+      return;
     }
     for (let c = 0; c < 4; c++) {
       const oc = c * w, bc = this.ob[c];
