@@ -364,6 +364,38 @@ console.log(JSON.stringify({{ same: got.every((x, i) => Object.is(x, want[i])), 
     assert res["same"] and res["spread"][0] < -2.2 < res["spread"][1] and 0 < res["inside"] < 1000, res
 
 
+def test_webassembly_network_outputs_equal_the_js_ones(tmp_path):
+    """The whole network on the kernel (layers, LayerNorms and the output layer, its sums started
+    from the bias as the loop's) gives the JS loops' output doubles exactly: 1000 random rays at
+    the full, a fractional and the base size."""
+    path = lfn_file(tmp_path, 4)
+    script = tmp_path / "net.mjs"
+    web = HERE.parents[1] / "formats/web"
+    script.write_text(f"""
+import fs from "fs";
+const {{ LfcFile, BufferSource }} = await import({json.dumps(str(web / "lfc.js"))});
+const {{ LfnDecoder }} = await import({json.dumps(str(web / "lfn.js"))});
+const dec = await LfnDecoder.open(await LfcFile.open(new BufferSource(fs.readFileSync({json.dumps(str(path))})), "n"));
+let seed = 7; const rnd = () => ((seed = (seed * 16807) % 2147483647) / 2147483647) * 2 - 1;
+const n = 1000, rays = new Float32Array(6 * n).map(() => rnd()), res = {{}};
+for (const neurons of [dec.neurons, 13.5, dec.minN]) {{
+  const fast = new Float64Array(4 * n), slow = new Float64Array(4 * n);
+  LfnDecoder.useWasm = true;
+  const ws = dec._workspace(neurons);
+  dec._forwardRays(ws, rays, n, null, fast);
+  LfnDecoder.useWasm = false;
+  dec._forwardRays(dec._workspace(neurons), rays, n, null, slow);
+  res[neurons] = {{ kernel: Boolean(ws.kern), same: fast.every((x, i) => Object.is(x, slow[i])),
+    spread: [Math.min(...fast), Math.max(...fast)] }};
+}}
+console.log(JSON.stringify(res));
+""")
+    out = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    for k, v in json.loads(out.stdout).items():
+        assert v["kernel"] and v["same"] and v["spread"][1] - v["spread"][0] > 0.3, (k, v)
+
+
 @pytest.mark.skipif(not (HERE.parents[1] / "formats/web/node_modules/wabt").is_dir(),
                     reason="wabt is not installed (tools/build_web.sh installs it with npm ci)")
 def test_the_kernel_module_is_built_from_its_text():
