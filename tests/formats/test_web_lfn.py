@@ -59,7 +59,7 @@ def orbit_c2w(n: int, radius: float = 4.0) -> np.ndarray:
 
 
 def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=True, occ=True, seed=0,
-             display=None, display_scales=None) -> Path:
+             display=None, display_scales=None, out_bias=False) -> Path:
     torch.manual_seed(seed)
     cfg = LfnConfig(depth=4, min_neurons=6, max_neurons=20, occupancy_neurons=8 if occ else 0)
     m = NestedLFN(cfg)
@@ -67,6 +67,8 @@ def lfn_file(tmp: Path, channels: int, dtype=np.uint8, weights="fp16", posed=Tru
         for p in list(m.gammas) + list(m.betas) + list(m.biases):
             p.uniform_(-1, 1)
         m.out_w.mul_(8)
+        if out_bias:
+            m.out_b.uniform_(-2, 2)
     o = OccupancyNet(8) if occ else None
     if o is not None:       # about half of the rays rejected (sigmoid ≤ 0.1 ⇔ logit ≤ −2.197)
         with torch.no_grad():
@@ -368,7 +370,7 @@ def test_webassembly_network_outputs_equal_the_js_ones(tmp_path):
     """The whole network on the kernel (layers, LayerNorms and the output layer, its sums started
     from the bias as the loop's) gives the JS loops' output doubles exactly: 1000 random rays at
     the full, a fractional and the base size."""
-    path = lfn_file(tmp_path, 4)
+    path = lfn_file(tmp_path, 4, out_bias=True)
     script = tmp_path / "net.mjs"
     web = HERE.parents[1] / "formats/web"
     script.write_text(f"""
