@@ -771,35 +771,41 @@ export class LfnDecoder {
       return [i0, wt];
     };
     const [ty, ay] = taps(h, hj), [tx, ax] = taps(w, wj);
-    const rgba = into || new Float64Array(h * w * 4), x6 = new Float64Array(6);
-    const pixelRay = this.occ ? this._rayMaker(pose, h / this.H, w / this.W) : null;
-    let asked = 0;
+    const rgba = into || new Float64Array(h * w * 4);
+    const put = (y, x) => {                        // pixel (y, x) from its four taps
+      const r0 = ty[y] * wj, r1 = Math.min(ty[y] + 1, hj - 1) * wj, b = ay[y];
+      const c0 = tx[x], c1 = Math.min(tx[x] + 1, wj - 1), a = ax[x];
+      const w00 = (1 - b) * (1 - a), w01 = (1 - b) * a, w10 = b * (1 - a), w11 = b * a;
+      const p = 4 * (y * w + x), q00 = 4 * (r0 + c0), q01 = 4 * (r0 + c1), q10 = 4 * (r1 + c0), q11 = 4 * (r1 + c1);
+      if (into) {
+        const s = weight[y * w + x];
+        for (let c = 0; c < 4; c++) rgba[p + c] += s * (w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c]);
+      } else {
+        for (let c = 0; c < 4; c++) rgba[p + c] = w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c];
+      }
+    };
+    const mixed = [];                              // pixels whose taps are partly occupied
     for (let y = 0; y < h; y++) {
       const r0 = ty[y] * wj, r1 = Math.min(ty[y] + 1, hj - 1) * wj, b = ay[y];
       for (let x = 0; x < w; x++) {
         if (used && !used[y * w + x]) continue;
-        const c0 = tx[x], c1 = Math.min(tx[x] + 1, wj - 1), a = ax[x];
-        const w00 = (1 - b) * (1 - a), w01 = (1 - b) * a, w10 = b * (1 - a), w11 = b * a;
         if (inside) {
-          const frac = w00 * inside[r0 + c0] + w01 * inside[r0 + c1] + w10 * inside[r1 + c0] + w11 * inside[r1 + c1];
+          const c0 = tx[x], c1 = Math.min(tx[x] + 1, wj - 1), a = ax[x];
+          const frac = (1 - b) * (1 - a) * inside[r0 + c0] + (1 - b) * a * inside[r0 + c1] + b * (1 - a) * inside[r1 + c0]
+            + b * a * inside[r1 + c1];
           if (!(frac > 1 - 1e-4)) {
-            if (!(frac > 1e-4)) continue;          // no tap occupied: empty
-            // mixed: the occupancy net at this pixel's own ray (the dense render's rays)
-            pixelRay(y, x, x6, 0);
-            asked++;
-            if (!this._occupied(x6, ws)) continue;
+            if (frac > 1e-4) mixed.push(y * w + x);   // (none occupied: empty)
+            continue;
           }
         }
-        const p = 4 * (y * w + x), q00 = 4 * (r0 + c0), q01 = 4 * (r0 + c1), q10 = 4 * (r1 + c0), q11 = 4 * (r1 + c1);
-        if (into) {
-          const s = weight[y * w + x];
-          for (let c = 0; c < 4; c++) rgba[p + c] += s * (w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c]);
-        } else {
-          for (let c = 0; c < 4; c++) rgba[p + c] = w00 * lat[q00 + c] + w01 * lat[q01 + c] + w10 * lat[q10 + c] + w11 * lat[q11 + c];
-        }
+        put(y, x);
       }
     }
-    return { rgba, h, w, evaluated, stride: k, asked };
+    if (mixed.length) {                            // the occupancy net at those pixels' own rays (the dense render's), in batches
+      const at = Int32Array.from(mixed), ins = this._occupiedAll(this._raysAt(pose, w, h / this.H, w / this.W, at), at.length, ws);
+      for (let q = 0; q < at.length; q++) if (ins[q]) put(Math.floor(at[q] / w), at[q] % w);
+    }
+    return { rgba, h, w, evaluated, stride: k, asked: mixed.length };
   }
 
   _workspace(neurons) {
