@@ -530,30 +530,26 @@ export class LfnDecoder {
    *  the frame is finer than the network (the fovea render(..., {native: true})'s pixels).
    *  Returns {rgba, h, w, evaluated, levels}. */
   renderMip(pose, lod, scale = 1, opts = {}) {
-    const steps = this._mip(pose, lod, scale, opts);
-    for (let r = steps.next(); ; ) {
-      if (r.done) return r.value;
-      const job = r.value, inside = this.occ ? this._occupiedAll(job.rays, job.n, job.ws) : null;
-      const out = new Float64Array(job.n * 4);
-      r = steps.next({ out, evaluated: this._forwardRays(job.ws, job.rays, job.n, job.run(inside), out), inside });
-    }
+    const plan = this._mipPlan(pose, lod, scale, opts);
+    return plan.finish(plan.jobs.map((job) => {
+      const inside = this.occ ? this._occupiedAll(job.rays, job.n, job.ws) : null, out = new Float64Array(job.n * 4);
+      return { out, evaluated: this._forwardRays(job.ws, job.rays, job.n, job.run(inside), out), inside };
+    }));
   }
 
-  /** renderMip() with the network passes shared among a ForwardPool's workers (the same pixels). */
+  /** renderMip() with the network passes shared among a ForwardPool's workers, every level's at
+   *  once (the same pixels: each level's rays do not depend on another's). */
   async renderMipAsync(pose, lod, scale = 1, { pool = null, ...opts } = {}) {
     if (!pool) return this.renderMip(pose, lod, scale, opts);
-    const steps = this._mip(pose, lod, scale, opts);
-    for (let r = steps.next(); ; ) {
-      if (r.done) return r.value;
-      const job = r.value, inside = this.occ ? await pool.occupancy(this, job.rays, job.n) : null;
-      const { out, evaluated } = await pool.forward(this, job.neurons, job.rays, job.n, job.run(inside));
-      r = steps.next({ out, evaluated, inside });
-    }
+    const { jobs, finish } = this._mipPlan(pose, lod, scale, opts);
+    const insides = await Promise.all(jobs.map((job) => (this.occ ? pool.occupancy(this, job.rays, job.n) : null)));
+    const got = await Promise.all(jobs.map((job, i) => pool.forward(this, job.neurons, job.rays, job.n, job.run(insides[i]))));
+    return finish(got.map((g, i) => ({ ...g, inside: insides[i] })));
   }
 
-  /** The mip render as a generator: yields each level's _job (with its `neurons`), is sent
-   *  {out, evaluated, inside} for it, and returns the frame. */
-  *_mip(pose, lod, scale, { maxLevel = MIP_LEVELS, blend = MIP_BLEND, bias = 0, native = false } = {}) {
+  /** The mip render's levels as _jobs (each with its `neurons`), and finish(results) → the frame
+   *  from each job's {out, evaluated, inside}. */
+  _mipPlan(pose, lod, scale, { maxLevel = MIP_LEVELS, blend = MIP_BLEND, bias = 0, native = false } = {}) {
     if (!Number.isInteger(maxLevel) || maxLevel < 0 || maxLevel > 8) throw new LfcError(`maxLevel must be an integer in 0..8, got ${maxLevel}`);
     if (!(blend >= 0 && blend <= 1 && bias >= -8 && bias <= 8)) throw new LfcError(`blend must be within [0, 1] and bias within [-8, 8], got ${blend}, ${bias}`);
     if (!(scale > 0 && scale <= 64)) throw new LfcError(`scale must be within (0, 64], got ${scale}`);
@@ -571,36 +567,35 @@ export class LfnDecoder {
       lower[i] = l; wlo[i] = 1 - up; wup[i] = up;
       if (l > top) top = l;
     }
-    const rgba = new Float64Array(n * 4), wt = new Float32Array(n), used = new Uint8Array(n);
-    let evaluated = 0, levels = 0;
+    const jobs = [], adds = [];                    // per level: its job, and how its results add into the frame
     for (let j = 0; j <= top + 1; j++) {
-      let any = 0;
+      const wt = new Float32Array(n), used = new Uint8Array(n);
+      let m = 0;
       for (let i = 0; i < n; i++) {
         wt[i] = lower[i] === j ? wlo[i] : lower[i] === j - 1 ? wup[i] : 0;
-        any |= used[i] = wt[i] > 0 ? 1 : 0;
+        m += used[i] = wt[i] > 0 ? 1 : 0;
       }
-      if (!any) continue;
-      levels++;
+      if (!m) continue;
       if (j === 0) {                               // every used pixel, with the occupancy net: render()'s pixels
-        const neurons = this.mipNeurons(0);
-        let m = 0;
-        for (let i = 0; i < n; i++) m += used[i];
-        const at = new Int32Array(m);
+        const neurons = this.mipNeurons(0), at = new Int32Array(m);
         for (let i = 0, q = 0; i < n; i++) if (used[i]) at[q++] = i;
-        const got = yield { ws: this._workspace(neurons), neurons, rays: this._raysAt(pose, w, h / H, w / W, at), n: m,
-          run: (inside) => inside };
-        evaluated += got.evaluated;
-        for (let q = 0; q < m; q++) for (let c = 0; c < 4; c++) rgba[4 * at[q] + c] += wt[at[q]] * got.out[4 * q + c];
+        jobs.push({ ws: this._workspace(neurons), neurons, rays: this._raysAt(pose, w, h / H, w / W, at), n: m,
+          run: (inside) => inside });
+        adds.push((rgba, got) => {
+          for (let q = 0; q < m; q++) for (let c = 0; c < 4; c++) rgba[4 * at[q] + c] += wt[at[q]] * got.out[4 * q + c];
+        });
         continue;
       }
-      const neurons = this.mipNeurons(j - shift);
-      const job = this._latticeJob(pose, this._workspace(neurons), h, w, 1 << j, used);
-      job.neurons = neurons;
-      const got = yield job;
-      evaluated += got.evaluated;
-      job.finish(got.out, got.evaluated, got.inside, rgba, wt);          // adds wt × the level's pixels
+      const neurons = this.mipNeurons(j - shift), job = this._latticeJob(pose, this._workspace(neurons), h, w, 1 << j, used);
+      jobs.push(Object.assign(job, { neurons }));
+      adds.push((rgba, got) => job.finish(got.out, got.evaluated, got.inside, rgba, wt));   // adds wt × the level's pixels
     }
-    return { rgba, h, w, evaluated, levels, stride: 1 << shift };
+    const finish = (results) => {
+      const rgba = new Float64Array(n * 4);
+      results.forEach((got, i) => adds[i](rgba, got));
+      return { rgba, h, w, evaluated: results.reduce((a, g) => a + g.evaluated, 0), levels: jobs.length, stride: 1 << shift };
+    };
+    return { jobs, finish };
   }
 
   /** Render a camera pose at (fractional) `neurons` and image `scale` (default: the size's own).
