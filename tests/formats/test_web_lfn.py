@@ -336,33 +336,39 @@ console.log(JSON.stringify(out));
         assert ((np.asarray(r["w"]) > 0) == (want > 0)).all()
 
 
-def test_webassembly_occupancy_logits_equal_the_js_ones(tmp_path):
-    """The occupancy net on the kernel (batches of rays, sums started from their biases) gives
-    _occupancyLogit's doubles exactly, for 1000 random rays (ones near the threshold included)."""
-    path = lfn_file(tmp_path, 4)
-    script = tmp_path / "occ.mjs"
+def node_with_decoder(tmp: Path, path: Path, body: str) -> dict:
+    """Run ``body`` (JavaScript) under Node with ``dec``, an LfnDecoder of ``path``, and
+    ``LfnDecoder`` in scope; returns the JSON it prints."""
     web = HERE.parents[1] / "formats/web"
+    script = tmp / "script.mjs"
     script.write_text(f"""
 import fs from "fs";
 const {{ LfcFile, BufferSource }} = await import({json.dumps(str(web / "lfc.js"))});
 const {{ LfnDecoder }} = await import({json.dumps(str(web / "lfn.js"))});
 const dec = await LfnDecoder.open(await LfcFile.open(new BufferSource(fs.readFileSync({json.dumps(str(path))})), "n"));
+""" + body)
+    out = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout)
+
+
+def test_webassembly_occupancy_logits_equal_the_js_ones(tmp_path):
+    """The occupancy net on the kernel (batches of rays, sums started from their biases) gives
+    _occupancyLogit's doubles exactly, for 1000 random rays (ones near the threshold included)."""
+    res = node_with_decoder(tmp_path, lfn_file(tmp_path, 4), """
 let seed = 1; const rnd = () => ((seed = (seed * 16807) % 2147483647) / 2147483647) * 2 - 1;
 const n = 1000, rays = new Float64Array(6 * n).map(() => rnd());
 const ws = dec._workspace(dec.neurons), got = [], want = [];
-for (let a = 0; a < n; a += 64) {{
+for (let a = 0; a < n; a += 64) {
   const cnt = Math.min(64, n - a), R4 = (cnt + 3) & ~3;
   for (let r = 0; r < R4; r++) for (let q = 0; q < 6; q++) ws.kern.X[q * 64 + r] = r < cnt ? rays[6 * (a + r) + q] : 0;
   const s = ws.kern.occupancy(R4);
-  for (let r = 0; r < cnt; r++) {{ got.push(s[r]); want.push(dec._occupancyLogit(rays.subarray(6 * (a + r), 6 * (a + r) + 6), ws)); }}
-}}
+  for (let r = 0; r < cnt; r++) { got.push(s[r]); want.push(dec._occupancyLogit(rays.subarray(6 * (a + r), 6 * (a + r) + 6), ws)); }
+}
 const inside = dec._occupiedAll(rays, n, ws);
-console.log(JSON.stringify({{ same: got.every((x, i) => Object.is(x, want[i])), spread: [Math.min(...want), Math.max(...want)],
-  inside: inside.reduce((a, b) => a + b, 0) }}));
+console.log(JSON.stringify({ same: got.every((x, i) => Object.is(x, want[i])), spread: [Math.min(...want), Math.max(...want)],
+  inside: inside.reduce((a, b) => a + b, 0) }));
 """)
-    out = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr[-2000:]
-    res = json.loads(out.stdout)
     assert res["same"] and res["spread"][0] < -2.2 < res["spread"][1] and 0 < res["inside"] < 1000, res
 
 
@@ -370,31 +376,22 @@ def test_webassembly_network_outputs_equal_the_js_ones(tmp_path):
     """The whole network on the kernel (layers, LayerNorms and the output layer, its sums started
     from the bias as the loop's) gives the JS loops' output doubles exactly: 1000 random rays at
     the full, a fractional and the base size."""
-    path = lfn_file(tmp_path, 4, out_bias=True)
-    script = tmp_path / "net.mjs"
-    web = HERE.parents[1] / "formats/web"
-    script.write_text(f"""
-import fs from "fs";
-const {{ LfcFile, BufferSource }} = await import({json.dumps(str(web / "lfc.js"))});
-const {{ LfnDecoder }} = await import({json.dumps(str(web / "lfn.js"))});
-const dec = await LfnDecoder.open(await LfcFile.open(new BufferSource(fs.readFileSync({json.dumps(str(path))})), "n"));
+    res = node_with_decoder(tmp_path, lfn_file(tmp_path, 4, out_bias=True), """
 let seed = 7; const rnd = () => ((seed = (seed * 16807) % 2147483647) / 2147483647) * 2 - 1;
-const n = 1000, rays = new Float32Array(6 * n).map(() => rnd()), res = {{}};
-for (const neurons of [dec.neurons, 13.5, dec.minN]) {{
+const n = 1000, rays = new Float32Array(6 * n).map(() => rnd()), res = {};
+for (const neurons of [dec.neurons, 13.5, dec.minN]) {
   const fast = new Float64Array(4 * n), slow = new Float64Array(4 * n);
   LfnDecoder.useWasm = true;
   const ws = dec._workspace(neurons);
   dec._forwardRays(ws, rays, n, null, fast);
   LfnDecoder.useWasm = false;
   dec._forwardRays(dec._workspace(neurons), rays, n, null, slow);
-  res[neurons] = {{ kernel: Boolean(ws.kern), same: fast.every((x, i) => Object.is(x, slow[i])),
-    spread: [Math.min(...fast), Math.max(...fast)] }};
-}}
+  res[neurons] = { kernel: Boolean(ws.kern), same: fast.every((x, i) => Object.is(x, slow[i])),
+    spread: [Math.min(...fast), Math.max(...fast)] };
+}
 console.log(JSON.stringify(res));
 """)
-    out = subprocess.run([NODE, str(script)], capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr[-2000:]
-    for k, v in json.loads(out.stdout).items():
+    for k, v in res.items():
         assert v["kernel"] and v["same"] and v["spread"][1] - v["spread"][0] > 0.3, (k, v)
 
 
