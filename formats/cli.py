@@ -522,13 +522,13 @@ def _lfn_frame(a, d, pose: np.ndarray) -> np.ndarray:
     scale = 1.0 if a.scale is None else a.scale
     if not (math.isfinite(scale) and 0 < scale <= 4):
         raise ParameterError(f"--scale must be within (0, 4], got {scale}")
+    if a.fast and not hasattr(d, "native_scale"):
+        raise ParameterError(f"{a.input}: --fast runs one network on its own pixel grid; a tile set blends "
+                             f"several (render it without --fast)")
     if a.gaze is not None:
         render = _lfn_foveated(a, d, scale)
     else:
         neurons = _lfn_neurons(a, d)
-        if a.fast and not hasattr(d, "native_scale"):
-            raise ParameterError(f"{a.input}: --fast runs one network on its own pixel grid; a tile set blends "
-                                 f"several (render it without --fast)")
         kw = {"native": True} if a.fast else {}
         render = lambda p: d.render_pose(p, neurons, scale, **kw)      # noqa: E731
     if a.stereo is None:
@@ -541,17 +541,15 @@ def _lfn_frame(a, d, pose: np.ndarray) -> np.ndarray:
 def _lfn_foveated(a, d, scale: float):
     """``pose → RGBA`` rendering --gaze's foveation map (the largest held network inside
     --fovea's inner radius, the base network at its outer one) with fewer samples where the
-    network is coarser (LfnRenderer.render_pose_lod_mip)."""
-    if not hasattr(d, "render_pose_lod_mip"):
-        raise ParameterError(f"{a.input}: --gaze renders one network's sizes; a tile set blends several networks "
-                             f"(render it without --gaze)")
+    network is coarser (LfnRenderer.render_pose_lod_mip; a tile set blends its tiles' frames)."""
     if a.level is not None:
         raise ParameterError("--gaze renders the largest network at the gaze and smaller ones around it: give "
                              "--gaze or --level")
     gaze = _floats(a.gaze, 2, "--gaze")
     inner, outer = _floats(a.fovea or "0.1,0.5", 2, "--fovea")
     fmap = d.foveation_map(tuple(gaze), inner, outer, dither=False, scale=scale)
-    return lambda p: d.render_pose_lod_mip(p, fmap, native=bool(a.fast))
+    kw = {"native": True} if a.fast else {}            # (a tile set refused --fast before this)
+    return lambda p: d.render_pose_lod_mip(p, fmap, **kw)
 
 
 def _render_path(a, out: Path) -> int:

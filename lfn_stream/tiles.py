@@ -322,6 +322,30 @@ class TiledLfnRenderer:
             out = img * np.float32(wj) if out is None else out + img * np.float32(wj)
         return out
 
+    def foveation_map(self, gaze: tuple[float, float], inner: float = 0.1, outer: float = 0.5, dither: bool = True,
+                      sizes: int = 8, frame: int = 0, scale: float = 1.0) -> np.ndarray:
+        """:meth:`LfnRenderer.foveation_map` over the sizes every opened tile holds (the tiles share
+        their configuration; a prefix may hold fewer steps in one tile)."""
+        return min(self._tiles.values(), key=lambda t: t.neurons).foveation_map(gaze, inner, outer, dither, sizes,
+                                                                               frame, scale)
+
+    def render_pose_lod_mip(self, c2w, lod: np.ndarray, max_level: int | None = None, blend: float | None = None,
+                            bias: float = 0.0) -> np.ndarray:
+        """A foveated view from any camera pose: the blend of the submodels' own
+        :meth:`LfnRenderer.render_pose_lod_mip` frames of the size map ``lod`` (each tile's
+        lattices, sizes and silhouettes; the weights of :meth:`render_pose`).
+
+        Returns:
+            (h, w, 4) float32 RGBA (premultiplied), (h, w) = ``lod``'s shape.
+        """
+        kw = {k: v for k, v in (("max_level", max_level), ("blend", blend)) if v is not None}
+        out = None
+        for j, wj in self.weights(c2w).items():
+            img = self.tile(j).render_pose_lod_mip(c2w, lod, bias=bias, **kw)
+            self.tiles_rendered += 1
+            out = img * np.float32(wj) if out is None else out + img * np.float32(wj)
+        return out
+
     def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
         """A captured camera (row, col) rendered by the blend (:meth:`render_pose`)."""
         return self.render_pose(self.pose(row, col), neurons, scale)

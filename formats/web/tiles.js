@@ -144,6 +144,24 @@ export class TiledLfn {
     return this._blend(parts);
   }
 
+  /** Per-pixel sizes around a gaze (LfnDecoder.foveationMap) over the sizes every tile of the
+   *  last camera holds. */
+  foveationMap(gaze, h, w, inner = 0.1, outer = 0.5) {
+    return this._activeTiles().reduce((a, d) => (d.neurons < a.neurons ? d : a)).foveationMap(gaze, h, w, inner, outer);
+  }
+
+  /** A foveated frame: the blend of the tiles' own renderMip frames (TiledLfnRenderer.render_pose_lod_mip). */
+  renderMip(pose, lod, scale = 1, opts = {}) {
+    return this._blend([...this.weights(pose)].map(([j, wj]) => [j, wj, this._opened(j).renderMip(pose, lod, scale, opts)]));
+  }
+
+  /** renderMip() with each tile's passes on `opts.pool`'s workers (LfnDecoder.renderMipAsync). */
+  async renderMipAsync(pose, lod, scale = 1, opts = {}) {
+    const parts = [];
+    for (const [j, wj] of this.weights(pose)) parts.push([j, wj, await this._opened(j).renderMipAsync(pose, lod, scale, opts)]);
+    return this._blend(parts);
+  }
+
   _opened(j) {
     const d = this.tiles.get(j);
     if (!d) throw new LfcError(`tile ${j} is not open: call grow(neurons, pose) before render`);
@@ -152,13 +170,13 @@ export class TiledLfn {
 
   /** The weighted sum of the tiles' renders [[tile, weight, render]]. */
   _blend(parts) {
-    let out = null, evaluated = 0, h = 0, w = 0, stride = 1;
+    let out = null, evaluated = 0, h = 0, w = 0, stride = 1, levels;
     for (const [, wj, r] of parts) {
-      if (out === null) { out = new Float64Array(r.rgba.length); h = r.h; w = r.w; stride = r.stride; }
+      if (out === null) { out = new Float64Array(r.rgba.length); h = r.h; w = r.w; stride = r.stride; levels = r.levels; }
       for (let i = 0; i < out.length; i++) out[i] += wj * r.rgba[i];
       evaluated += r.evaluated;
     }
-    return { rgba: out, h, w, evaluated, stride, tiles: parts.map(([j]) => j) };
+    return { rgba: out, h, w, evaluated, stride, levels, tiles: parts.map(([j]) => j) };
   }
 
   toPixels(rgba, h, w) { return this.tiles.get(0).toPixels(rgba, h, w); }

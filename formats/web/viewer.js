@@ -150,13 +150,12 @@ async function mainLfn(dec, source, t0) {
   const openMs = performance.now() - t0;
   const posed = dec.layout === "posed";
   Object.assign(state, { mode: "lfn", posed, view: 0, yaw: 0, pitch: 0, s: (dec.rows - 1) / 2, t: (dec.cols - 1) / 2,
-    neurons: dec.maxN, scale: "auto", native: true, fovea: !tiled && params.get("fovea") === "1", gaze: null });
+    neurons: dec.maxN, scale: "auto", native: true, fovea: params.get("fovea") === "1", gaze: null });
   const want = Number(params.get("neurons"));
   if (want >= dec.minN && want <= dec.maxN) state.neurons = want;
   $("rlfc-controls").hidden = true;
   $("lfn-controls").hidden = false;
   $("fovea").checked = state.fovea;
-  $("fovea").disabled = tiled;                 // (a tile set blends whole frames of several networks)
   $("viewidx").max = String(dec.rows * dec.cols - 1);
   $("neurons").min = String(dec.minN); $("neurons").max = String(dec.maxN); $("neurons").value = String(state.neurons);
   $("title").textContent = `${fileUrl} — ${tiled ? `tile set of ${dec.files.length} light field networks` : "light field network"}, ${dec.depth} layers of ${dec.minN}..${dec.maxN} neurons; ${dec.rows}×${dec.cols} views of ${dec.W}×${dec.H}`;
@@ -274,7 +273,7 @@ async function mainLfn(dec, source, t0) {
       if (opts.neurons !== undefined) state.neurons = opts.neurons;
       if (opts.scale !== undefined) state.scale = String(opts.scale);
       if (opts.native !== undefined) state.native = Boolean(opts.native);
-      if (opts.fovea !== undefined) state.fovea = Boolean(opts.fovea) && !tiled;
+      if (opts.fovea !== undefined) state.fovea = Boolean(opts.fovea);
       if (opts.gaze !== undefined) state.gaze = opts.gaze;
       $("native").checked = state.native;
       $("fovea").checked = state.fovea;

@@ -332,6 +332,12 @@ def test_tile_sets_render_in_the_page(site, page):
         assert got.shape == want.shape
         assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.02
     assert page.evaluate("lfcViewer.decoder.tiles.size") == 2
+    # foveated: the blend of the tiles' foveated frames (TiledLfnRenderer.render_pose_lod_mip)
+    info = page.evaluate("lfcViewer.show({view: 1}, {neurons: 20, scale: 1, fovea: true, gaze: [0.4, 0.5]})")
+    assert sorted(info["tiles"]) == [0, 1] and info["levels"] >= 2
+    want = t.to_pixels(t.render_pose_lod_mip(t.pose(0, 1), t.foveation_map(tuple(info["gaze"]), dither=False)))
+    got = canvas_rgba(page)[..., :3]
+    assert np.abs(got.astype(int) - want).max() <= 1 and (got != want).mean() < 0.02
     sizes = sum((f.parent / n).stat().st_size for n in ("set.json", "set.tile00.lfc", "set.tile01.lfc"))
     assert 2 < info["requests"] and info["bytesFetched"] <= sizes
     t.close()

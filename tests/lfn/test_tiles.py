@@ -104,6 +104,26 @@ def test_tile_set_files_are_ordinary_lfn_streams_and_render_as_a_blend(tileset):
             assert f.meta["config"]["tile"]["count"] == 3 and t.cfg.max_neurons == 8
 
 
+def test_tile_sets_render_foveated_frames_as_a_blend(tileset):
+    """render_pose_lod_mip on a tile set: the blend (render_pose's weights) of each tile's own
+    foveated frame; where the map is the full network, the blend of the tiles' full renders."""
+    d, lf, _ = tileset
+    with open_tiles(d / "s.json", device="cpu") as r:
+        pose = next(p for p in (r.grid_pose(a, b) for a in np.linspace(0, 2, 9) for b in np.linspace(0, 3, 13))
+                    if len(r.weights(p)) >= 2)               # a camera between tiles
+        w = r.weights(pose)
+        lod = r.foveation_map((3.0, 8.0), dither=False, scale=2.0)
+        got = r.render_pose_lod_mip(pose, lod)
+        want = sum(np.float32(wj) * r.tile(j).render_pose_lod_mip(pose, lod) for j, wj in w.items())
+        assert got.shape == (24, 24, 4) and np.allclose(got, want, atol=1e-6)
+        full = r.render_pose(pose, float(r.neurons), 2.0)
+        fovea = lod == r.neurons
+        assert fovea.sum() >= 4 and np.allclose(got[fovea], full[fovea], atol=1e-6)
+        assert not np.allclose(got, full, atol=1e-3)          # coarser networks away from the gaze
+        assert np.allclose(r.render_pose_lod_mip(pose, np.full((12, 12), 8.0)), r.render_pose(pose, 8.0, 1.0),
+                           atol=1e-6)
+
+
 def test_tile_set_streams_over_http(tileset):
     from formats.serve import FileServer
 
@@ -152,10 +172,15 @@ def test_cli_trains_and_renders_a_tile_set(tmp_path, capsys):
     assert "manifest named *.json" in capsys.readouterr().err
     assert main(["render", str(out), str(tmp_path / "f.png"), "--focus", "1", "--quiet"]) == 2
     capsys.readouterr()
-    assert main(["render", str(out), str(tmp_path / "g.png"), "--gaze", "4,4", "--quiet"]) == 2
-    assert "tile set blends several networks" in capsys.readouterr().err and not (tmp_path / "g.png").exists()
-    assert main(["render", str(out), str(tmp_path / "g.png"), "--fast", "--quiet"]) == 2
-    assert "a tile set blends several" in capsys.readouterr().err and not (tmp_path / "g.png").exists()
+    # foveated: the blend of the tiles' foveated frames, as the library gives it
+    assert main(["render", str(out), str(tmp_path / "g.png"), "--at", "4,3.5", "--gaze", "40,60", "--quiet"]) == 0
+    with open_tiles(out, device="cpu") as r:
+        pose = r.grid_pose(4, 3.5)
+        want = r.to_pixels(r.render_pose_lod_mip(pose, r.foveation_map((40, 60), dither=False)))
+    assert (read_image(tmp_path / "g.png") == want).all()
+    for extra in (["--gaze", "4,4", "--fast"], ["--fast"]):
+        assert main(["render", str(out), str(tmp_path / "f.png"), *extra, "--quiet"]) == 2
+        assert "a tile set blends several" in capsys.readouterr().err and not (tmp_path / "f.png").exists()
     assert main(["info", str(out), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["tiles"] == 2
     # a single file is not written under a manifest's name; --tile-band needs --tiles
