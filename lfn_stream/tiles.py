@@ -315,9 +315,13 @@ class TiledLfnRenderer:
         Returns:
             (h, w, 4) float32 RGBA (premultiplied) in [0, 1].
         """
+        return self._blend(c2w, lambda t: t.render_pose(c2w, neurons, scale))
+
+    def _blend(self, c2w, render) -> np.ndarray:
+        """Σ weight · ``render(tile)`` (float32) over the submodels the camera blends (:meth:`weights`)."""
         out = None
         for j, wj in self.weights(c2w).items():
-            img = self.tile(j).render_pose(c2w, neurons, scale)
+            img = render(self.tile(j))
             self.tiles_rendered += 1
             out = img * np.float32(wj) if out is None else out + img * np.float32(wj)
         return out
@@ -339,12 +343,7 @@ class TiledLfnRenderer:
             (h, w, 4) float32 RGBA (premultiplied), (h, w) = ``lod``'s shape.
         """
         kw = {k: v for k, v in (("max_level", max_level), ("blend", blend)) if v is not None}
-        out = None
-        for j, wj in self.weights(c2w).items():
-            img = self.tile(j).render_pose_lod_mip(c2w, lod, bias=bias, **kw)
-            self.tiles_rendered += 1
-            out = img * np.float32(wj) if out is None else out + img * np.float32(wj)
-        return out
+        return self._blend(c2w, lambda t: t.render_pose_lod_mip(c2w, lod, bias=bias, **kw))
 
     def render(self, row: int, col: int, neurons: float | None = None, scale: float | None = None) -> np.ndarray:
         """A captured camera (row, col) rendered by the blend (:meth:`render_pose`)."""

@@ -134,14 +134,12 @@ export class TiledLfn {
    *  every tile at `neurons` and `scale` (and `native`, as LfnDecoder.render):
    *  {rgba (premultiplied), h, w, evaluated, stride, tiles}. */
   render(pose, neurons, scale = null, opts = {}) {
-    return this._blend([...this.weights(pose)].map(([j, wj]) => [j, wj, this._opened(j).render(pose, neurons, scale, opts)]));
+    return this._blendEach(pose, (d) => d.render(pose, neurons, scale, opts));
   }
 
   /** render() with each tile's network passes on `opts.pool`'s workers (LfnDecoder.renderAsync). */
-  async renderAsync(pose, neurons, scale = null, opts = {}) {
-    const parts = [];
-    for (const [j, wj] of this.weights(pose)) parts.push([j, wj, await this._opened(j).renderAsync(pose, neurons, scale, opts)]);
-    return this._blend(parts);
+  renderAsync(pose, neurons, scale = null, opts = {}) {
+    return this._blendEachAsync(pose, (d) => d.renderAsync(pose, neurons, scale, opts));
   }
 
   /** Per-pixel sizes around a gaze (LfnDecoder.foveationMap) over the sizes every tile of the
@@ -152,13 +150,23 @@ export class TiledLfn {
 
   /** A foveated frame: the blend of the tiles' own renderMip frames (TiledLfnRenderer.render_pose_lod_mip). */
   renderMip(pose, lod, scale = 1, opts = {}) {
-    return this._blend([...this.weights(pose)].map(([j, wj]) => [j, wj, this._opened(j).renderMip(pose, lod, scale, opts)]));
+    return this._blendEach(pose, (d) => d.renderMip(pose, lod, scale, opts));
   }
 
   /** renderMip() with each tile's passes on `opts.pool`'s workers (LfnDecoder.renderMipAsync). */
-  async renderMipAsync(pose, lod, scale = 1, opts = {}) {
+  renderMipAsync(pose, lod, scale = 1, opts = {}) {
+    return this._blendEachAsync(pose, (d) => d.renderMipAsync(pose, lod, scale, opts));
+  }
+
+  /** The blend of render(tile decoder) over the tiles `pose` blends. */
+  _blendEach(pose, render) {
+    return this._blend([...this.weights(pose)].map(([j, wj]) => [j, wj, render(this._opened(j))]));
+  }
+
+  /** _blendEach with an async render, the tiles one after another (each shares the workers). */
+  async _blendEachAsync(pose, render) {
     const parts = [];
-    for (const [j, wj] of this.weights(pose)) parts.push([j, wj, await this._opened(j).renderMipAsync(pose, lod, scale, opts)]);
+    for (const [j, wj] of this.weights(pose)) parts.push([j, wj, await render(this._opened(j))]);
     return this._blend(parts);
   }
 
