@@ -93,6 +93,13 @@ def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarr
     """Prediction of M 8×8 blocks from up to R references each (see
     :func:`rlfc.txpredict.predict_tbs`, whose integers this returns).
 
+    The blocks are grouped by their weights (a view's blend, or one of its single-reference
+    modes; the order of the requests is kept within a group). Each reference of a group is
+    sampled by one remap of the group's blocks (one per atlas image it reaches) and added with
+    its weight as one scalar. The windows one remap reads lie in one key view, in the requests'
+    order, so the caches hold them; one remap over every (block, reference) pair, blended with
+    per-pair weights, took 1.3-1.6x the time on random-access calls (BENCHMARKS.md).
+
     Args:
         slots: (M, R) key slot of each reference; weights: (M, R) ints summing to 64 per block
             (references of weight 0 are not sampled); disp_y, disp_x: (M, R) displacements in
@@ -107,54 +114,57 @@ def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarr
         return np.zeros((0, TB, TB, P), np.int32)
     if M * R <= SMALL and len(atlas.groups) == 1:
         return _predict_dense(atlas, slots, weights, disp_y, disp_x, y0, x0)
-    nz = weights > 0
-    cnt = nz.sum(1)
-    # entries (block, reference) grouped by the block's reference count, so that each group's
-    # blend is a reshape and a sum
-    order = np.argsort(cnt, kind="stable")
-    counts = np.unique(cnt).tolist()
-    groups = [(c, order[cnt[order] == c]) for c in counts]
-    m = np.concatenate([np.repeat(g, c) for c, g in groups])
-    r = np.concatenate([np.nonzero(nz[g])[1] for c, g in groups])
-    N = m.size
-    scale = 1.0 / (1 << DISP_BITS)
-    Y = ((y0[m] << DISP_BITS) + disp_y[m, r]).astype(np.float32) * np.float32(scale)
-    X = ((x0[m] << DISP_BITS) + disp_x[m, r]).astype(np.float32) * np.float32(scale)
-    s = slots[m, r]
-    g, within = np.divmod(s, atlas.per_group)
-    rows = np.minimum(np.maximum(Y[:, None] + _E, 0), atlas.hp - 1) + (within * atlas.hp).astype(np.float32)[:, None]
-    cols = np.minimum(np.maximum(X[:, None] + _E, 0), atlas.wp - 1)
-    smp = np.empty((N, TB * TB, C), ft)
+    key = weights.astype(np.int64) @ (np.int64(65) ** np.arange(R, dtype=np.int64))   # (weights < 65)
+    order = np.argsort(key, kind="stable")
+    ks = key[order]
+    cut = [0] + (np.flatnonzero(ks[1:] != ks[:-1]) + 1).tolist() + [M]
+    # the (block, reference) pairs, group by group and reference by reference: (g0, g1, r, pair offset)
+    pieces, blk, ref = [], [], []
+    n = 0
+    for g0, g1 in zip(cut[:-1], cut[1:]):
+        for r in np.flatnonzero(weights[order[g0]]).tolist():
+            pieces.append((g0, g1, r, n))
+            blk.append(np.arange(g0, g1))
+            ref.append(np.full(g1 - g0, r))
+            n += g1 - g0
+    blk, ref = np.concatenate(blk), np.concatenate(ref)
+    m = order[blk]                                                   # each pair's block, in the call's order
+    Y = ((y0[m] << DISP_BITS) + disp_y[m, ref]).astype(np.float32) * _F16
+    X = ((x0[m] << DISP_BITS) + disp_x[m, ref]).astype(np.float32) * _F16
+    grp, within = np.divmod(slots[m, ref], atlas.per_group)         # each pair's atlas image, key view's row
+    rows = Y[:, None] + _E
+    np.minimum(np.maximum(rows, 0, out=rows), np.float32(atlas.hp - 1), out=rows)   # clamped to the key view
+    rows += (within * atlas.hp).astype(np.float32)[:, None]
+    cols = X[:, None] + _E
+    np.minimum(np.maximum(cols, 0, out=cols), np.float32(atlas.wp - 1), out=cols)
+    mc, mr = np.tile(cols, (1, TB)), np.repeat(rows, TB, axis=1)    # (n, 64): each pixel's column, row
+    smp = np.empty((n, TB * TB, C), ft)
     ng = len(atlas.groups)
-    sel_all = [np.arange(N)] if ng == 1 else [np.flatnonzero(g == k) for k in range(ng)]
-    for k, sel in enumerate(sel_all):
-        if sel.size == 0:
+    for k, sel in enumerate([None] if ng == 1 else [np.flatnonzero(grp == k) for k in range(ng)]):
+        if sel is not None and sel.size == 0:
             continue
-        src = atlas.groups[k]
-        for a in range(0, sel.size, CV_MAX):
-            part = sel[a:a + CV_MAX]
-            if ng == 1:
-                mr = np.broadcast_to(rows[a:a + CV_MAX, :, None], (part.size, TB, TB)).reshape(part.size, -1)
-                mc = np.broadcast_to(cols[a:a + CV_MAX, None, :], (part.size, TB, TB)).reshape(part.size, -1)
-                dst = smp[a:a + CV_MAX]
-                o = cv2.remap(src, mc, mr, cv2.INTER_LINEAR, dst=dst, borderMode=cv2.BORDER_REPLICATE)
-                if not np.shares_memory(o, dst):                  # OpenCV allocated its own output
-                    dst[...] = o.reshape(dst.shape)
-            else:
-                mr = np.broadcast_to(rows[part][:, :, None], (part.size, TB, TB)).reshape(part.size, -1)
-                mc = np.broadcast_to(cols[part][:, None, :], (part.size, TB, TB)).reshape(part.size, -1)
-                smp[part] = cv2.remap(src, mc, mr, cv2.INTER_LINEAR,
-                                      borderMode=cv2.BORDER_REPLICATE).reshape(part.size, TB * TB, C)
-    np.floor(smp, out=smp)                                     # each reference's sample, rounded (atlas +0.5)
-    smp *= weights[m, r].astype(ft)[:, None, None]
+        for a in range(0, n if sel is None else sel.size, CV_MAX):    # (OpenCV's size limit)
+            part = slice(a, a + CV_MAX) if sel is None else sel[a:a + CV_MAX]
+            dst = smp[part] if sel is None else None                   # (a slice: OpenCV writes there)
+            o = cv2.remap(atlas.groups[k], mc[part], mr[part], cv2.INTER_LINEAR, dst=dst,
+                          borderMode=cv2.BORDER_REPLICATE)
+            if dst is None or not np.shares_memory(o, dst):            # (OpenCV allocated its own output)
+                smp[part] = o.reshape(o.shape[0], TB * TB, C)
+    np.floor(smp, out=smp)                                           # each reference's sample, rounded (atlas +0.5)
     acc = np.empty((M, TB * TB, C), ft)
-    a = 0
-    for c, gi in groups:
-        acc[gi] = smp[a:a + c * gi.size].reshape(gi.size, c, TB * TB, C).sum(1) if c > 1 else smp[a:a + gi.size]
-        a += c * gi.size
-    out = _drop_pad(acc, C, P).astype(np.int32)                # integers below 2^24 (2^53): exact
-    out += 1 << (W_BITS - 1)
-    out >>= W_BITS
+    last = -1
+    for g0, g1, r, a in pieces:                                      # the blend: scalar weights, contiguous slices
+        w, p = weights[order[g0], r], smp[a:a + g1 - g0]
+        if g0 != last:
+            np.multiply(p, ft(w), out=acc[g0:g1])
+            last = g0
+        else:
+            cv2.scaleAdd(p, float(w), acc[g0:g1], dst=acc[g0:g1])    # integers < 2^24 (2^53): exact
+    grouped = _drop_pad(acc, C, P).astype(np.int32)
+    grouped += 1 << (W_BITS - 1)
+    grouped >>= W_BITS
+    out = np.empty((M, TB * TB, P), np.int32)
+    out[order] = grouped
     return out.reshape(M, TB, TB, P)
 
 
@@ -194,8 +204,8 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int) -> n
         X = (xb[None, :] + disp_x[r]).astype(np.float32) * _F16
         rows = np.minimum(np.maximum(Y[:, None, :, None] + _E[:, None, None], 0), atlas.hp - 1) + np.float32(within * atlas.hp)
         cols = np.minimum(np.maximum(X[:, None, :, None] + _E, 0), atlas.wp - 1)
-        mr = np.broadcast_to(rows, (n, TB, n8x, TB)).reshape(n * TB, n8x * TB)
-        mc = np.broadcast_to(cols, (n, TB, n8x, TB)).reshape(n * TB, n8x * TB)
+        mr = np.repeat(rows, TB, axis=3).reshape(n * TB, n8x * TB)      # (np.repeat: 0.5x broadcast_to's copy)
+        mc = np.repeat(cols, TB, axis=1).reshape(n * TB, n8x * TB)
         smp = cv2.remap(atlas.groups[g], mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         np.floor(smp, out=smp)                                                           # atlas + 0.5: rounded
         if acc is None:

@@ -56,6 +56,25 @@ def test_remap_prediction_across_atlas_groups(monkeypatch):
     assert np.array_equal(ts.predict(atlas, slots, w, dy, dx, y0, x0), ref)
 
 
+@pytest.mark.parametrize("P,bits", [(3, 9), (1, 8), (3, 17)])
+def test_remap_prediction_of_blocks_sharing_weights(P, bits, monkeypatch):
+    """Blocks grouped by their weights (as a view's blend and modes give them), each group
+    sampled per reference in pieces of at most CV_MAX blocks: the same integers."""
+    import rlfc.txsample as ts
+
+    monkeypatch.setattr(ts, "CV_MAX", 100)           # 3 keys of 32 rows: one atlas group, pieces of 100 blocks
+    rng = np.random.default_rng(11 + P + bits)
+    lo, hi = (-255, 255) if bits == 9 else (0, 255) if bits == 8 else (-65535, 65535)
+    keys, slots, w, dy, dx, y0, x0 = _case(rng, 3, 32, 40, P, lo, hi, 900, 50)
+    w = w[rng.integers(0, 4, w.shape[0])]            # four weight rows, ~225 blocks each
+    ref = predict_tbs(NUMPY, planar(keys), (32, 40), slots, w, dy, dx, y0, x0)
+    atlas = ts.KeyAtlas(3, 32, 40, P, bits)
+    assert len(atlas.groups) == 1
+    for s in range(3):
+        atlas.set(s, keys[s])
+    assert np.array_equal(ts.predict(atlas, slots, w, dy, dx, y0, x0), ref)
+
+
 @pytest.mark.parametrize("P,lo,hi,bits", [(3, -255, 255, 9), (1, 0, 255, 8), (4, -65535, 65535, 17)])
 def test_remap_prediction_few_blocks(P, lo, hi, bits):
     """One request's tbs (the dense path that samples every reference) give the same integers."""
