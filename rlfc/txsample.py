@@ -94,11 +94,12 @@ def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarr
     :func:`rlfc.txpredict.predict_tbs`, whose integers this returns).
 
     The blocks are grouped by their weights (a view's blend, or one of its single-reference
-    modes; the order of the requests is kept within a group). Each reference of a group is
-    sampled by one remap of the group's blocks (one per atlas image it reaches) and added with
-    its weight as one scalar. The windows one remap reads lie in one key view, in the requests'
-    order, so the caches hold them; one remap over every (block, reference) pair, blended with
-    per-pair weights, took 1.3-1.6x the time on random-access calls (BENCHMARKS.md).
+    modes; the order of the requests is kept within a group), and the (block, reference) pairs
+    laid out group by group and reference by reference, then sampled by one remap (one per atlas
+    image). Consecutive windows then lie in one key view, in the requests' order, so the caches
+    hold them, and each reference of a group is added with its weight as one scalar over a
+    contiguous slice. The pairs in block order, blended with per-pair weights, took 1.04-1.4x
+    the time on random-access calls (BENCHMARKS.md).
 
     Args:
         slots: (M, R) key slot of each reference; weights: (M, R) ints summing to 64 per block
@@ -118,12 +119,13 @@ def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarr
     order = np.argsort(key, kind="stable")
     ks = key[order]
     cut = [0] + (np.flatnonzero(ks[1:] != ks[:-1]) + 1).tolist() + [M]
-    # the (block, reference) pairs, group by group and reference by reference: (g0, g1, r, pair offset)
+    # the (block, reference) pairs, group by group and reference by reference:
+    # pieces (group's blocks g0..g1, reference, first pair, the group's first reference?)
     pieces, blk, ref = [], [], []
     n = 0
     for g0, g1 in zip(cut[:-1], cut[1:]):
-        for r in np.flatnonzero(weights[order[g0]]).tolist():
-            pieces.append((g0, g1, r, n))
+        for i, r in enumerate(np.flatnonzero(weights[order[g0]]).tolist()):
+            pieces.append((g0, g1, r, n, i == 0))
             blk.append(np.arange(g0, g1))
             ref.append(np.full(g1 - g0, r))
             n += g1 - g0
@@ -152,12 +154,10 @@ def predict(atlas: KeyAtlas, slots, weights, disp_y, disp_x, y0, x0) -> np.ndarr
                 smp[part] = o.reshape(o.shape[0], TB * TB, C)
     np.floor(smp, out=smp)                                           # each reference's sample, rounded (atlas +0.5)
     acc = np.empty((M, TB * TB, C), ft)
-    last = -1
-    for g0, g1, r, a in pieces:                                      # the blend: scalar weights, contiguous slices
+    for g0, g1, r, a, first in pieces:                               # the blend: scalar weights, contiguous slices
         w, p = weights[order[g0], r], smp[a:a + g1 - g0]
-        if g0 != last:
+        if first:
             np.multiply(p, ft(w), out=acc[g0:g1])
-            last = g0
         else:
             cv2.scaleAdd(p, float(w), acc[g0:g1], dst=acc[g0:g1])    # integers < 2^24 (2^53): exact
     grouped = _drop_pad(acc, C, P).astype(np.int32)
