@@ -115,6 +115,12 @@ def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
     else:
         img = np.ascontiguousarray(p).reshape(-1, p.shape[-2] if p.ndim >= 3 else 1, C)
     out = np.empty(img.shape, dtype)
+    if np.dtype(dtype) == np.uint8:    # OpenCV's saturating cast to 8 bits after max(0): 0.4x numpy's clip + astype
+        def narrow(q):
+            return cv2.convertScaleAbs(np.maximum(q, 0, out=q))
+    else:
+        def narrow(q):
+            return np.minimum(np.maximum(q, 0, out=q), peak, out=q).astype(dtype)
     step = max(1, SPLIT_CHUNK // (img.shape[1] * C))
     for a in range(0, img.shape[0], step):
         planes = list(cv2.split(img[a:a + step]))
@@ -125,7 +131,7 @@ def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
         np.right_shift(co, 1, out=h)
         np.subtract(y, h, out=y)                     # B = t − (Co >> 1)
         np.add(y, co, out=co)                        # R = B + Co
-        rgb = [np.minimum(np.maximum(q, 0, out=q), peak, out=q).astype(dtype) for q in [co, cg, y] + planes[3:]]
+        rgb = [narrow(q) for q in [co, cg, y] + planes[3:]]
         dst = out[a:a + step]
         got = cv2.merge(rgb, dst=dst)
         if not np.shares_memory(got, dst):           # (OpenCV allocated its own output)
