@@ -58,11 +58,12 @@ def test_remap_prediction_across_atlas_groups(monkeypatch):
 
 @pytest.mark.parametrize("P,bits", [(3, 9), (1, 8), (3, 17)])
 def test_remap_prediction_of_blocks_sharing_weights(P, bits, monkeypatch):
-    """Blocks grouped by their weights (as a view's blend and modes give them), each group
-    sampled per reference in pieces of at most CV_MAX blocks: the same integers."""
+    """Blocks grouped by their weights (as a view's blend and modes give them), their
+    (block, reference) pairs laid out reference by reference and sampled in pieces of at most
+    CV_MAX pairs that cut across groups: the same integers."""
     import rlfc.txsample as ts
 
-    monkeypatch.setattr(ts, "CV_MAX", 100)           # 3 keys of 32 rows: one atlas group, pieces of 100 blocks
+    monkeypatch.setattr(ts, "CV_MAX", 100)           # 3 keys of 32 rows: one atlas group, pieces of 100 pairs
     rng = np.random.default_rng(11 + P + bits)
     lo, hi = (-255, 255) if bits == 9 else (0, 255) if bits == 8 else (-65535, 65535)
     keys, slots, w, dy, dx, y0, x0 = _case(rng, 3, 32, 40, P, lo, hi, 900, 50)
