@@ -38,6 +38,10 @@ class EncodeOptions:
         workers: local worker processes for the codec's independent tasks (1 = this process).
         scheduler: a dask.distributed scheduler address (``tcp://host:8786``) or Client to run
             them on instead (:mod:`formats.parallel`). Neither changes the file written.
+        keep_decoded: return the decoded views with the encode (:attr:`Encoded.decoded`). False
+            lets a codec that would hold them for that (``rlfc`` ``tx``: one copy of the light
+            field) not hold them; ``decoded`` is then None (decode the file to measure it).
+            The file written is the same.
     """
 
     target_psnr: float | None = None
@@ -48,6 +52,7 @@ class EncodeOptions:
     params: dict = field(default_factory=dict)
     workers: int = 1
     scheduler: object = None
+    keep_decoded: bool = True
 
     def __post_init__(self):
         """Types only (a codec checks ranges): a string target compared with numbers deep in an
@@ -56,8 +61,9 @@ class EncodeOptions:
             v = getattr(self, k)
             if v is not None and not is_real(v):
                 raise ParameterError(f"{k} must be a number or None, got {v!r}")
-        if not isinstance(self.lossless, bool):
-            raise ParameterError(f"lossless must be true or false, got {self.lossless!r}")
+        for k in ("lossless", "keep_decoded"):
+            if not isinstance(getattr(self, k), bool):
+                raise ParameterError(f"{k} must be true or false, got {getattr(self, k)!r}")
         if not isinstance(self.profile, str):
             raise ParameterError(f"profile must be a name, got {self.profile!r}")
         if not isinstance(self.params, dict):

@@ -20,10 +20,11 @@ import math
 
 import numpy as np
 
+from .errors import ParameterError
 from .pixels import peak_of, to_planes
 
 __all__ = ["peak_of", "mse", "psnr_rgb", "psnr_views", "psnr_visible", "psnr_alpha", "psnr_ycocg", "ssim", "ssim_image", "bpp",
-           "colour_channels", "quality_report", "finite", "colour_sq_error", "psnr_from_sq_error"]
+           "colour_channels", "quality_report", "QualityAccumulator", "views_per_chunk", "finite", "colour_sq_error", "psnr_from_sq_error"]
 
 
 def colour_channels(c: int) -> slice:
@@ -61,7 +62,8 @@ def _psnr_from_mse(m: float, peak: float) -> float:
 CHUNK_ELEMENTS = 1 << 21
 
 
-def _views_per_chunk(view_elements: int) -> int:
+def views_per_chunk(view_elements: int) -> int:
+    """Views of ``view_elements`` samples each that a metric converts to float64 at once."""
     return max(1, CHUNK_ELEMENTS // max(int(view_elements), 1))
 
 
@@ -70,7 +72,7 @@ def _sq_err_per_view(ref: np.ndarray, dec: np.ndarray, mask: np.ndarray | None =
     r, d = _flat(ref), _flat(dec).reshape(_flat(ref).shape)
     sse = np.zeros(r.shape[0])
     cnt = np.zeros(r.shape[0])
-    k = _views_per_chunk(np.prod(r.shape[1:]))
+    k = views_per_chunk(np.prod(r.shape[1:]))
     for i in range(0, r.shape[0], k):
         e = r[i:i + k].astype(np.float64)
         e -= d[i:i + k]
@@ -154,7 +156,7 @@ def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
     sums = np.zeros(3)
     flat_r = _flat(ref)
     flat_d = _flat(dec).reshape(flat_r.shape)
-    k = _views_per_chunk(np.prod(flat_r.shape[1:3]) * 3)
+    k = views_per_chunk(np.prod(flat_r.shape[1:3]) * 3)
     for i in range(0, flat_r.shape[0], k):
         d = (to_planes(flat_r[i:i + k, ..., :3]) - to_planes(flat_d[i:i + k, ..., :3])).astype(np.float64)
         d *= d
@@ -220,12 +222,16 @@ def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
     """Mean SSIM over views of the colour channels (scikit-image's definition, channel_axis=-1,
     data_range=peak; :func:`ssim_image`), views on a few threads (OpenCV and numpy release the
     GIL). A view smaller than the 7×7 window counts 1 where it is exact, else 0."""
+    ref, dec = _pair(ref, dec)
+    return float(np.mean(_ssim_views(ref, dec, peak or peak_of(ref.dtype))))
+
+
+def _ssim_views(ref: np.ndarray, dec: np.ndarray, peak: float, threads: int | None = None) -> list:
+    """[SSIM of each view] (:func:`ssim`'s terms), views on ``threads`` threads (None: a few)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from .parallel import LOCAL_THREADS
 
-    ref, dec = _pair(ref, dec)
-    peak = peak or peak_of(ref.dtype)
     cs = colour_channels(ref.shape[-1])
     r = _flat(ref)[..., cs]
     d = _flat(dec).reshape(_flat(ref).shape)[..., cs]
@@ -234,9 +240,11 @@ def ssim(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> float:
         a, b = r[i], d[i]
         return ssim_image(a, b, peak) if min(a.shape[:2]) >= SSIM_WIN else float(np.all(a == b))
 
-    with ThreadPoolExecutor(max(1, min(LOCAL_THREADS, r.shape[0]))) as pool:
-        vals = list(pool.map(one, range(r.shape[0])))
-    return float(np.mean(vals))
+    n = max(1, min(LOCAL_THREADS if threads is None else threads, r.shape[0]))
+    if n == 1:
+        return [one(i) for i in range(r.shape[0])]
+    with ThreadPoolExecutor(n) as pool:
+        return list(pool.map(one, range(r.shape[0])))
 
 
 def bpp(nbytes: int, n_views: int, height: int, width: int) -> float:
@@ -256,7 +264,7 @@ def _equal(ref: np.ndarray, dec: np.ndarray) -> bool:
     r, d = _flat(ref), _flat(dec)
     if r.shape != d.shape:
         return False
-    k = _views_per_chunk(np.prod(r.shape[1:]))
+    k = views_per_chunk(np.prod(r.shape[1:]))
     return all(np.array_equal(r[i:i + k], d[i:i + k]) for i in range(0, r.shape[0], k))
 
 
@@ -266,22 +274,93 @@ def quality_report(ref: np.ndarray, dec: np.ndarray, *, with_ssim: bool = True) 
     Args:
         ref, dec: (..., H, W, C) original and decoded views, same dtype.
     """
-    ref, dec = _pair(ref, dec)
-    cs = colour_channels(ref.shape[-1])
-    per_view = psnr_views(ref, dec)
-    out = {
-        "psnr_rgb": finite(psnr_rgb(ref, dec)),
-        "psnr_ycocg": finite(psnr_ycocg(ref, dec)),
-        "psnr_view_min": finite(float(per_view.min())),
-        "psnr_view_mean": finite(float(np.mean(per_view[np.isfinite(per_view)]))) if np.isfinite(per_view).any()
-        else None,
-        "views_exact": int(np.isinf(per_view).sum()),
-        "exact": _equal(ref[..., cs], dec[..., cs]),
-    }
-    if ref.shape[-1] in (2, 4):
-        out["psnr_visible"] = finite(psnr_visible(ref, dec))
-        out["alpha_exact"] = _equal(ref[..., -1:], dec[..., -1:])
-        out["psnr_alpha"] = finite(psnr_alpha(ref, dec))
-    if with_ssim:
-        out["ssim"] = ssim(ref, dec)
-    return out
+    acc = QualityAccumulator(with_ssim=with_ssim)
+    acc.add(ref, dec)
+    return acc.report()
+
+
+class QualityAccumulator:
+    """:func:`quality_report` of a light field given a few views at a time (a decode that is
+    never whole in memory: ``lfcodec encode`` measures the file it wrote one row of views at a
+    time). ``add(ref, dec)`` with (k, H, W, C) or (H, W, C) views of one dtype and size;
+    ``report()`` the figures over every view added (each pooled as the whole-array functions
+    pool it). ``ssim_threads``: views whose SSIM is computed at once (None: a few; each holds
+    about seven float64 copies of a view)."""
+
+    def __init__(self, *, with_ssim: bool = True, ssim_threads: int | None = None):
+        self.with_ssim, self.ssim_threads = with_ssim, ssim_threads
+        self.sse, self.cnt, self.ssim = [], [], []           # per view: colour squared error, count, SSIM
+        self.ycocg, self.n_px = np.zeros(3), 0               # squared errors of the YCoCg-R planes, pixels
+        self.exact, self.alpha_exact = True, True
+        self.vis, self.alpha = [], []                        # (sse, cnt) over visible pixels, of alpha
+        self.any_visible = False
+        self.shape = self.peak = None
+
+    def add(self, ref: np.ndarray, dec: np.ndarray) -> None:
+        ref, dec = _pair(ref, dec)
+        r, d = _flat(ref), _flat(dec).reshape(_flat(ref).shape)
+        if self.shape is None:
+            self.shape, self.peak = (r.shape[1:], r.dtype), peak_of(r.dtype)
+        elif (r.shape[1:], r.dtype) != self.shape:
+            raise ParameterError(f"metrics compare views of one shape and dtype: got {r.shape[1:]} {r.dtype} after "
+                                 f"{self.shape[0]} {self.shape[1]}")
+        k = views_per_chunk(np.prod(r.shape[1:]))
+        for i in range(0, r.shape[0], k):
+            self._add(r[i:i + k], d[i:i + k])
+
+    def _add(self, r: np.ndarray, d: np.ndarray) -> None:
+        c = r.shape[-1]
+        cs = colour_channels(c)
+        sse, cnt = _sq_err_per_view(r[..., cs], d[..., cs])
+        self.sse.append(sse)
+        self.cnt.append(cnt)
+        self.exact = self.exact and _equal(r[..., cs], d[..., cs])
+        if c >= 3:
+            e = (to_planes(r[..., :3]) - to_planes(d[..., :3])).astype(np.float64)
+            e *= e
+            self.ycocg += e.reshape(-1, 3).sum(0)
+            self.n_px += r[..., 0].size
+        if c in (2, 4):
+            mask = r[..., -1] > 0
+            self.any_visible = self.any_visible or bool(mask.any())
+            self.vis.append(_sq_err_per_view(r[..., cs], d[..., cs], mask))
+            self.alpha.append(_sq_err_per_view(r[..., -1:], d[..., -1:]))
+            self.alpha_exact = self.alpha_exact and _equal(r[..., -1:], d[..., -1:])
+        if self.with_ssim:
+            self.ssim += _ssim_views(r, d, self.peak, self.ssim_threads)
+
+    def report(self) -> dict:
+        if self.shape is None:
+            raise ParameterError("no views were measured")
+        peak = self.peak
+        sse, cnt = np.concatenate(self.sse), np.concatenate(self.cnt)
+        per_view = np.array([_psnr_from_mse(a / n, peak) for a, n in zip(sse, cnt)])
+        rgb = _psnr_from_mse(float(sse.sum() / cnt.sum()), peak)
+        if self.shape[0][-1] >= 3:
+            ps = [_psnr_from_mse(x / self.n_px, peak) for x in self.ycocg]
+            if all(math.isinf(p) for p in ps):
+                ycocg = float("inf")
+            elif any(math.isinf(p) for p in ps):
+                ycocg = (6 * min(ps[0], 200) + min(ps[1], 200) + min(ps[2], 200)) / 8
+            else:
+                ycocg = (6 * ps[0] + ps[1] + ps[2]) / 8
+        else:
+            ycocg = rgb                                      # grey: the Y plane is the grey channel
+        out = {
+            "psnr_rgb": finite(rgb),
+            "psnr_ycocg": finite(ycocg),
+            "psnr_view_min": finite(float(per_view.min())),
+            "psnr_view_mean": finite(float(np.mean(per_view[np.isfinite(per_view)]))) if np.isfinite(per_view).any()
+            else None,
+            "views_exact": int(np.isinf(per_view).sum()),
+            "exact": self.exact,
+        }
+        if self.shape[0][-1] in (2, 4):
+            vs, vc = (np.concatenate(x) for x in zip(*self.vis))
+            a_s, a_c = (np.concatenate(x) for x in zip(*self.alpha))
+            out["psnr_visible"] = finite(_psnr_from_mse(float(vs.sum() / vc.sum()), peak)) if self.any_visible else None
+            out["alpha_exact"] = self.alpha_exact
+            out["psnr_alpha"] = finite(_psnr_from_mse(float(a_s.sum() / a_c.sum()), peak))
+        if self.with_ssim:
+            out["ssim"] = float(np.mean(self.ssim))
+        return out

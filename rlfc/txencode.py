@@ -261,6 +261,10 @@ class ViewCode:
 class TxEncoder:
     """Everything independent of the quantizer (planes, structure, maps), and the closed loop."""
 
+    #: hold the final pass's decoded views (:attr:`formats.codec_api.Encoded.decoded`); else its
+    #: passes keep each view's error only (``EncodeOptions.keep_decoded``; the same file)
+    keep_decoded = True
+
     def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0, runner=None):
         """``side_lambda``: luma squared error worth one bit of side information at the quality
         expected (:func:`side_lambda`); ``runner``: where views are coded
@@ -704,7 +708,8 @@ class TxEncoder:
             are views of (one buffer: no per-view copies to gather at the end).
         """
         s16 = self.steps16(step)
-        pix = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype) if keep_pixels else None
+        keep = bool(keep_pixels) and self.keep_decoded      # (the run is "kept" all the same: res["kept"])
+        pix = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype) if keep else None
 
         def px_slot(v):             # where view v's decoded pixels go (in this process)
             return pix[v] if pix is not None else False
@@ -755,7 +760,7 @@ class TxEncoder:
                 for t16 in ([thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})):
                     # (several candidates: each keeps its own pixels, gathered at the end)
                     lv, c = self.code_intra(k, t16, s16[0], lam_k, model,
-                                            px_slot(k) if thumb16 is not None else keep_pixels)
+                                            px_slot(k) if thumb16 is not None else keep)
                     cost = c.sse + lam_rgb * (c.bits + 8 * len(pack_thumbs(lv[None])))
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
@@ -819,12 +824,12 @@ class TxEncoder:
                 return c
 
             out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n,
-                                           keep_pixels) for v in others], tick, take)
+                                           keep) for v in others], tick, take)
         for v, c in zip(others, out):
             codes[v] = c
         res = {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
                "keyimg": keyimg, "model": model, "promoted": promoted, "j2k_ref": j2k_ref,
-               "lam_scale": lam_scale, "j2k_hints": hints, "trial_counts": trial_counts}
+               "lam_scale": lam_scale, "j2k_hints": hints, "trial_counts": trial_counts, "kept": bool(keep_pixels)}
         if pix is not None:
             res["pixels"] = pix
             self._gather_pixels(res)
@@ -945,7 +950,7 @@ class TxEncoder:
         done = []
         for v in range(self.n0):
             c = res["codes"][v]
-            if len(done) >= cap or self.is_key[v] or c is None or c.px is None or not self._j2k_worth_trying(c, ref):
+            if len(done) >= cap or self.is_key[v] or c is None or not self._j2k_worth_trying(c, ref):
                 continue
             img, code, _ = self._j2k_view(v, c, 1.5 * float(c.coded.sum()), 0.0)
             if img is not None:
@@ -955,21 +960,25 @@ class TxEncoder:
         res["promoted"] = res.get("promoted", []) + done
         return done
 
-    def decoded(self, res: dict) -> np.ndarray:
+    def decoded(self, res: dict) -> np.ndarray | None:
         """(R, C, H, W, Ch) pixels of a run (the run again, keeping pixels, where it kept none:
-        the same integers): the run's buffer, with the views coded after it (promoted views)."""
+        the same integers): the run's buffer, with the views coded after it (promoted views);
+        None where the encoder keeps no decoded views (``keep_decoded``)."""
+        if not self.keep_decoded:
+            return None
         res = self.with_pixels(res)
         self._gather_pixels(res)
         return res["pixels"].reshape(self.lf.views.shape)
 
     def with_pixels(self, res: dict) -> dict:
         """``res``, or the same run again keeping the decoded pixels where it kept none (the
-        same integers)."""
-        if any(c.px is None for c in res["codes"]):
+        same integers); without ``keep_decoded``, the same run over every view where it covered
+        a sample only."""
+        if any(c is None for c in res["codes"]) or self.keep_decoded and any(c.px is None for c in res["codes"]):
             # the JPEG 2000 searches start where they started in that pass: the same codestreams
             self._j2k_hints = {k: dict(h) for k, h in res.get("j2k_hints", {}).items()}
             return self.run(res["step"], res["model"], keep_pixels=True, lam_scale=res.get("lam_scale", 1.0))
-        if "pixels" not in res:      # every view's pixels kept in its code (key views: a posed capture)
+        if self.keep_decoded and "pixels" not in res:      # every view's pixels kept in its code (key views: a posed capture)
             res = dict(res, pixels=np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype))
             self._gather_pixels(res)
         return res
@@ -1245,7 +1254,7 @@ def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list
     (more skipped blocks, fewer coefficients) spends the margin: a secant search over log2 of
     λ's multiplier on full passes, keeping the largest multiplier that still meets the target."""
     ps = enc.psnr(res)
-    if ps - target <= TRIM_DB or any(c is None or c.px is None for c in res["codes"]):
+    if ps - target <= TRIM_DB or not res["kept"] or any(c is None for c in res["codes"]):
         return res
     best, lo = res, (0.0, ps)
     miss = None                        # the smallest log2 multiplier that missed the target
@@ -1370,6 +1379,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     from .ratecontrol import depth_scale
 
     enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner)
+    enc.keep_decoded = options.keep_decoded
     scale = depth_scale(lf.views.dtype)
     nv = lf.rows * lf.cols
     model = Model(default_counts())

@@ -2,7 +2,7 @@
 
 Usage:
     python -m tools.bench_scale [--data ../shared/data] [--scene hci_antinous] [--grids 5,9,17] [--workers 1,2]
-                                [--target-psnr 40] [--out docs/bench/scale]
+                                [--decoded dropped,kept] [--target-psnr 40] [--out docs/bench/scale]
 
 Grids of growing size are made from one shared dense grid: its centre 5×5, the grid itself
 (9×9), and a 17×17 grid that mirrors it across its last row and column (rows 0..8, 7..0: a
@@ -12,7 +12,10 @@ views built in memory, never written), sampled every 0.1 s for the resident memo
 process and of its worker processes. Reported: wall and CPU seconds, the peak resident memory
 of the parent and of the largest worker, both also as multiples of the raw input (views × H ×
 W × C bytes), and above the same interpreter's resident memory after importing the codec (the
-floor any run pays), the file's bytes and PSNR. Writes scale.json, scale.md and scale.png.
+floor any run pays), the file's bytes and PSNR. ``--decoded``: ``dropped`` encodes with
+``EncodeOptions(keep_decoded=False)`` (what ``lfcodec encode`` asks of a lossy grid: PSNR from
+the encoder's per-view errors), ``kept`` holds the decoded views as before (PSNR measured on
+them). Writes scale.json, scale.md and scale.png.
 """
 from __future__ import annotations
 
@@ -35,6 +38,7 @@ from rlfc.codec import RlfcCodec
 import psutil
 if __name__ == "__main__":
     scene, n, workers, target = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), float(sys.argv[4])
+    keep = sys.argv[5] == "kept"
     floor = psutil.Process().memory_info().rss
     lf = read_scene(scene)
     r, c = lf.views.shape[:2]
@@ -51,18 +55,19 @@ if __name__ == "__main__":
     raw = views.nbytes
     print(json.dumps({"event": "start", "floor_rss": floor, "raw": raw}), flush=True)
     t = time.perf_counter(); cpu = time.process_time()
-    e = RlfcCodec().encode(lf, EncodeOptions(target_psnr=target, workers=workers))
+    e = RlfcCodec().encode(lf, EncodeOptions(target_psnr=target, workers=workers, keep_decoded=keep))
     out = {"event": "done", "wall_s": time.perf_counter() - t, "parent_cpu_s": time.process_time() - cpu,
-           "bytes": sum(len(x) for _, x in e.sections), "psnr": psnr_rgb(lf.views, e.decoded),
+           "bytes": sum(len(x) for _, x in e.sections),
+           "psnr": psnr_rgb(lf.views, e.decoded) if keep else e.summary["psnr_rgb"],
            "passes": len(e.trace), "step": e.summary["params"]["step"]}
     print(json.dumps(out), flush=True)
 """
 
 
-def run_one(scene: Path, n: int, workers: int, target: float) -> dict:
+def run_one(scene: Path, n: int, workers: int, target: float, decoded: str = "dropped") -> dict:
     import psutil
 
-    p = subprocess.Popen([sys.executable, "-c", CHILD, str(scene), str(n), str(workers), str(target)],
+    p = subprocess.Popen([sys.executable, "-c", CHILD, str(scene), str(n), str(workers), str(target), decoded],
                          stdout=subprocess.PIPE, text=True, env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
     proc = psutil.Process(p.pid)
     peak_parent = peak_worker = peak_total = 0
@@ -95,7 +100,7 @@ def run_one(scene: Path, n: int, workers: int, target: float) -> dict:
     start = next(r for r in recs if r["event"] == "start")
     done = next(r for r in recs if r["event"] == "done")
     raw, floor = start["raw"], start["floor_rss"]
-    return {"grid": f"{n}x{n}", "views": n * n, "workers": workers, "raw_mib": raw / 2 ** 20,
+    return {"grid": f"{n}x{n}", "views": n * n, "workers": workers, "decoded": decoded, "raw_mib": raw / 2 ** 20,
             "mpix": raw / 3 / 1e6, **{k: v for k, v in done.items() if k != "event"},
             "worker_cpu_s": sum(cpu_children.values()),
             "peak_parent_mib": peak_parent / 2 ** 20, "peak_worker_mib": peak_worker / 2 ** 20,
@@ -106,10 +111,10 @@ def run_one(scene: Path, n: int, workers: int, target: float) -> dict:
 
 def write_outputs(rows: list, scene: str, target: float, out: Path) -> None:
     """scale.md and (with matplotlib) scale.png from the runs ``rows``."""
-    md = ["| grid | raw MiB | workers | wall s | CPU s (parent + workers) | peak parent MiB (× raw; above floor × raw) "
-          "| peak worker MiB | bytes | PSNR dB | passes |", "|" + "---|" * 10]
+    md = ["| grid | raw MiB | workers | decoded views | wall s | CPU s (parent + workers) | peak parent MiB (× raw; "
+          "above floor × raw) | peak worker MiB | bytes | PSNR dB | passes |", "|" + "---|" * 11]
     for r in rows:
-        md.append(f"| {r['grid']} | {r['raw_mib']:.0f} | {r['workers']} | {r['wall_s']:.0f} | "
+        md.append(f"| {r['grid']} | {r['raw_mib']:.0f} | {r['workers']} | {r.get('decoded', 'kept')} | {r['wall_s']:.0f} | "
                   f"{r['parent_cpu_s'] + r['worker_cpu_s']:.0f} | {r['peak_parent_mib']:.0f} ({r['parent_x_raw']:.1f}×; "
                   f"{r['parent_above_floor_x_raw']:.1f}×) | {r['peak_worker_mib']:.0f} | {r['bytes']} | "
                   f"{r['psnr']:.2f} | {r['passes']} |")
@@ -120,10 +125,11 @@ def write_outputs(rows: list, scene: str, target: float, out: Path) -> None:
         import matplotlib.pyplot as plt
 
         fig, ax = plt.subplots(1, 2, figsize=(10, 4))
-        for w in sorted({r["workers"] for r in rows}):
-            rs = [r for r in rows if r["workers"] == w]
-            ax[0].plot([r["mpix"] for r in rs], [r["wall_s"] for r in rs], "o-", label=f"{w} worker(s)")
-            ax[1].plot([r["mpix"] for r in rs], [r["peak_parent_mib"] for r in rs], "o-", label=f"parent, {w} worker(s)")
+        for w, dk in sorted({(r["workers"], r.get("decoded", "kept")) for r in rows}):
+            rs = [r for r in rows if r["workers"] == w and r.get("decoded", "kept") == dk]
+            tag = f"{w} worker(s), decoded views {dk}"
+            ax[0].plot([r["mpix"] for r in rs], [r["wall_s"] for r in rs], "o-", label=tag)
+            ax[1].plot([r["mpix"] for r in rs], [r["peak_parent_mib"] for r in rs], "o-", label=f"parent, {tag}")
             if w > 1:
                 ax[1].plot([r["mpix"] for r in rs], [r["peak_worker_mib"] for r in rs], "s--", label=f"largest of {w} workers")
         rs = [r for r in rows if r["workers"] == rows[0]["workers"]]
@@ -145,6 +151,7 @@ def main(argv=None) -> int:
     ap.add_argument("--scene", default="hci_antinous")
     ap.add_argument("--grids", default="5,9,17")
     ap.add_argument("--workers", default="1,2")
+    ap.add_argument("--decoded", default="dropped", help="dropped, kept or both (comma-separated)")
     ap.add_argument("--target-psnr", type=float, default=40.0)
     ap.add_argument("--out", default="docs/bench/scale")
     ap.add_argument("--plot-only", action="store_true", help="remake scale.md and scale.png from OUT/scale.json")
@@ -157,10 +164,13 @@ def main(argv=None) -> int:
         write_outputs(got["runs"], got["scene"], got["target_psnr"], out)
         return 0
     rows = []
+    kinds = [x for x in a.decoded.split(",") if x]
+    if not kinds or set(kinds) - {"dropped", "kept"}:
+        ap.error(f"--decoded takes dropped and/or kept, got {a.decoded!r}")
     for n in [int(x) for x in a.grids.split(",")]:
-        for w in [int(x) for x in a.workers.split(",")]:
-            r = run_one(scene, n, w, a.target_psnr)
-            log(f"{a.scene} {n}x{n} workers {w}: {r['wall_s']:.0f} s, parent {r['peak_parent_mib']:.0f} MiB "
+        for w, dk in [(int(x), k) for x in a.workers.split(",") for k in kinds]:
+            r = run_one(scene, n, w, a.target_psnr, dk)
+            log(f"{a.scene} {n}x{n} workers {w} decoded {dk}: {r['wall_s']:.0f} s, parent {r['peak_parent_mib']:.0f} MiB "
                 f"({r['parent_x_raw']:.1f}x raw), worker {r['peak_worker_mib']:.0f} MiB, {r['bytes']} B, "
                 f"{r['psnr']:.2f} dB")
             rows.append(r)

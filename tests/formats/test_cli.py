@@ -46,6 +46,33 @@ def test_target_psnr(tmp_path, capsys):
     assert psnr_rgb(lf.views.reshape(dec.shape), dec) == pytest.approx(rep["psnr_rgb"], abs=1e-9)
 
 
+def test_a_lossy_grid_report_measures_the_file_written(tmp_path, capsys, monkeypatch):
+    """A lossy grid encode holds no decoded copy (``keep_decoded=False``): the --json report's
+    figures are those of the file decoded a few views at a time (SSIM, YCoCg and per-view PSNR
+    included); a lossless encode keeps the encoder's decoded views (its decoder's parse holds
+    more than they do)."""
+    import formats.cli as cli
+    from formats.lfcfile import open_lfc
+    from formats.metrics import quality_report
+    from formats.registry import open_decoder
+
+    calls = []
+    real = cli._quality_of_file
+    monkeypatch.setattr(cli, "_quality_of_file", lambda *a, **k: calls.append(a[0]) or real(*a, **k))
+    out = tmp_path / "q.lfc"
+    assert main(["encode", str(SAMPLE), str(out), "--target-psnr", "38", "--json", "--quiet"]) == 0
+    rep = json.loads(capsys.readouterr().out)
+    assert calls == [out]
+    lf = read_scene(SAMPLE)
+    with open_lfc(out) as f:
+        dec = open_decoder(f).decode_all()
+    want = quality_report(lf.views, dec.reshape(lf.views.shape))
+    for k, v in want.items():
+        assert rep[k] == (pytest.approx(v, rel=1e-12) if isinstance(v, float) else v), k
+    assert main(["encode", str(SAMPLE), str(tmp_path / "l.lfc"), "--lossless", "--quiet"]) == 0
+    assert calls == [out]
+
+
 def test_target_bpp(tmp_path, capsys):
     out = tmp_path / "b.lfc"
     assert main(["encode", str(SAMPLE), str(out), "--target-bpp", "1.0", "--json", "--quiet"]) == 0

@@ -29,6 +29,38 @@ def test_quality_report_in_chunks_equals_one_chunk(channels, dtype, monkeypatch)
     assert whole["psnr_rgb"] == pytest.approx(M.psnr_from_sq_error(np.array([sse]), np.array([cnt]), peak))
 
 
+@pytest.mark.parametrize("channels,dtype", [(1, np.uint8), (2, np.uint16), (3, np.uint16), (4, np.uint8)])
+def test_quality_of_views_added_one_at_a_time(channels, dtype):
+    """QualityAccumulator (what ``lfcodec encode`` measures the written file with, one row of
+    views at a time) gives every figure of the whole-array functions: pooled, YCoCg, per-view,
+    visible, alpha PSNR, SSIM and exactness; a view of another size is refused."""
+    from formats.errors import ParameterError
+
+    rng = np.random.default_rng(10 + channels)
+    peak = np.iinfo(dtype).max
+    ref = rng.integers(0, peak, (2, 3, 12, 10, channels), endpoint=True).astype(dtype)
+    dec = np.clip(ref.astype(np.int64) + rng.integers(-40, 41, ref.shape), 0, peak).astype(dtype)
+    dec[0, 1] = ref[0, 1]
+    if channels in (2, 4):
+        ref[1, :, :, :, -1] = 0                               # a row of views with nothing visible
+    acc = M.QualityAccumulator()
+    for r in range(2):
+        acc.add(ref[r, 0], dec[r, 0])                        # one view
+        acc.add(ref[r, 1:], dec[r, 1:])                      # two views
+    got = acc.report()
+    want = {"psnr_rgb": M.psnr_rgb(ref, dec), "psnr_ycocg": M.psnr_ycocg(ref, dec),
+            "psnr_view_min": float(M.psnr_views(ref, dec).min()), "ssim": M.ssim(ref, dec)}
+    if channels in (2, 4):
+        want.update(psnr_visible=M.psnr_visible(ref, dec), psnr_alpha=M.psnr_alpha(ref, dec))
+    for k, v in want.items():
+        assert got[k] == pytest.approx(v, rel=1e-12), k
+    assert got["views_exact"] == 1 and got["exact"] is False
+    with pytest.raises(ParameterError, match="one shape"):
+        acc.add(ref[0, 0, :6], dec[0, 0, :6])
+    with pytest.raises(ParameterError, match="no views"):
+        M.QualityAccumulator().report()
+
+
 def test_metrics_refuse_views_that_do_not_compare():
     """Views of another size, no pixels, or another depth: a ParameterError each (before: numpy's
     reshape error, nan with a warning, or a figure on the reference's peak)."""

@@ -469,6 +469,30 @@ def test_jpeg2000_search_learns_where_openjpeg_lands(monkeypatch):
     assert warm < cold
 
 
+@pytest.mark.parametrize("case", ["trim", "promote", "bpp", "lossless", "grey16"])
+def test_an_encode_that_keeps_no_decoded_views_writes_the_same_file(case):
+    """``EncodeOptions(keep_decoded=False)``: the passes keep each view's error, not its pixels
+    (one copy of the light field less at the peak), and ``decoded`` is None; the sections, the
+    rate search's trace and the summary are those of the default encode. The cases take the
+    paths that looked at the kept pixels before: the λ trim (noisy grid at 40 dB), views
+    promoted to JPEG 2000 keys (unrelated views at 48 dB), a bpp target, lossless, 16-bit grey."""
+    lf = {"trim": _noisy_grid, "promote": _unrelated_grid,
+          "grey16": lambda: smooth_lf(rows=3, cols=3, h=24, w=32, c=1, dtype=np.uint16)}.get(
+        case, lambda: smooth_lf(rows=3, cols=3, h=24, w=32))()
+    kw = {"trim": {"target_psnr": 40}, "promote": {"target_psnr": 48}, "bpp": {"target_bpp": 0.8},
+          "lossless": {"lossless": True}, "grey16": {"target_psnr": 50}}[case]
+    a = encode(lf, EncodeOptions(profile="tx", **kw))
+    b = encode(lf, EncodeOptions(profile="tx", keep_decoded=False, **kw))
+    assert a.decoded is not None and b.decoded is None
+    assert a.sections == b.sections and a.trace == b.trace and a.summary == b.summary and a.notes == b.notes
+    if case == "trim":
+        assert any("lam_scale" in t for t in a.trace)
+    if case == "promote":
+        assert a.summary["views_coded_alone"] > 0
+    d, _ = open_encoded(lf, b)
+    assert np.array_equal(d.decode_all(), a.decoded)
+
+
 def test_lambda_trim_spends_a_psnr_margin_between_quantizer_steps():
     """A file above its target by more than TRIM_DB (the integer steps jump past it) has λ raised
     at the same step: still at or above the target, closer to it, fewer bytes; within TRIM_DB
