@@ -28,6 +28,7 @@ from formats.errors import FormatError
 
 from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, ScalarDecoder, Tables, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
+from . import txsyntax
 from .txsyntax import quantize_counts, slot_word_view, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
 VERSION = 3
@@ -96,21 +97,32 @@ def pack_maps(base: np.ndarray, disp: np.ndarray, modes: np.ndarray, shape: tupl
 
 def maps_sizes(base: np.ndarray, variants: list, shape: tuple[int, int]) -> list[int]:
     """``len(pack_maps(base, disp, modes, shape))`` of each (disp, modes) in ``variants``, with
-    every variant's streams rANS-coded in one call (each with its own tables: contexts offset
-    per variant), so the steps over the maps' thousands of symbols are paid once."""
+    the streams of many variants rANS-coded in one call (each with its own tables: contexts
+    offset per variant), so the steps over the maps' thousands of symbols are paid once per
+    group. Groups hold at most :data:`rlfc.txsyntax.PACK_CELLS` lane cells (lanes × longest
+    lane; the sizes do not depend on the grouping): one call for every variant of a 17×17 grid
+    held 1.2 GB of lane matrices."""
+    out: list[int] = []
     if not variants:
-        return []
+        return out
     n_ctx = _n_ctx(VERSION)
-    per = [_map_lanes(base, d, m, shape, VERSION) for d, m in variants]
-    lanes = [(c + i * n_ctx, s) for i, (ls, _) in enumerate(per) for c, s in ls]
-    freq = np.concatenate([tables_from_quantized(q).freq for _, q in per])
-    streams = encode_lanes(*_lane_arrays(lanes), Tables(freq))
-    out, a = [], 0
-    for ls, q in per:
-        lens = [len(x) for x in streams[a:a + len(ls)]]
-        a += len(ls)
-        tb = len(tables_to_bytes(q))
-        out.append(1 + len(varints(np.array([tb] + lens))) + tb + sum(lens))
+    group: list = []
+    cells = 0
+    for i, (d, m) in enumerate(variants):
+        one = _map_lanes(base, d, m, shape, VERSION)
+        group.append(one)
+        cells += len(one[0]) * max(len(c) for c, _ in one[0])
+        if cells >= txsyntax.PACK_CELLS or i == len(variants) - 1:
+            lanes = [(c + j * n_ctx, s) for j, (ls, _) in enumerate(group) for c, s in ls]
+            freq = np.concatenate([tables_from_quantized(q).freq for _, q in group])
+            streams = encode_lanes(*_lane_arrays(lanes), Tables(freq))
+            a = 0
+            for ls, q in group:
+                lens = [len(x) for x in streams[a:a + len(ls)]]
+                a += len(ls)
+                tb = len(tables_to_bytes(q))
+                out.append(1 + len(varints(np.array([tb] + lens))) + tb + sum(lens))
+            group, cells = [], 0
     return out
 
 

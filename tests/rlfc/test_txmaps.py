@@ -88,9 +88,15 @@ def test_every_byte_flip_of_a_maps_section_is_refused_or_in_range():
     assert refused > len(good)                          # most flips are caught
 
 
-def test_sizes_of_many_variants_in_one_pass_equal_each_pack():
+@pytest.mark.parametrize("cells", [None, 1, 700])
+def test_sizes_of_many_variants_in_one_pass_equal_each_pack(cells, monkeypatch):
     """maps_sizes codes several variants' streams in one rANS call (contexts offset per
-    variant): each size is exactly the length of that variant's own section."""
+    variant): each size is exactly the length of that variant's own section, in groups of any
+    size (PACK_CELLS bounds a group's lane matrices: one variant per call, a few, all)."""
+    import rlfc.txsyntax as ts
+
+    if cells is not None:
+        monkeypatch.setattr(ts, "PACK_CELLS", cells)
     rng = np.random.default_rng(7)
     base, disp, modes = _maps(rng, 5, 6, 7, 80, 0.1)
     variants = [(disp, modes)]
