@@ -161,7 +161,12 @@ def psnr_ycocg(ref: np.ndarray, dec: np.ndarray, peak: float | None = None) -> f
         d = (to_planes(flat_r[i:i + k, ..., :3]) - to_planes(flat_d[i:i + k, ..., :3])).astype(np.float64)
         d *= d
         sums += d.reshape(-1, 3).sum(0)
-    n = flat_r[..., 0].size
+    return _ycocg_psnr(sums, flat_r[..., 0].size, peak)
+
+
+def _ycocg_psnr(sums: np.ndarray, n: int, peak: float) -> float:
+    """(6·PSNR_Y + PSNR_Co + PSNR_Cg) / 8 from the planes' summed squared errors over ``n``
+    pixels (an exact plane counts 200 dB beside inexact ones; all exact: inf)."""
     ps = [_psnr_from_mse(s / n, peak) for s in sums]
     if any(math.isinf(p) for p in ps):
         if all(math.isinf(p) for p in ps):
@@ -281,8 +286,7 @@ def quality_report(ref: np.ndarray, dec: np.ndarray, *, with_ssim: bool = True) 
 
 class QualityAccumulator:
     """:func:`quality_report` of a light field given a few views at a time (a decode that is
-    never whole in memory: ``lfcodec encode`` measures the file it wrote one row of views at a
-    time). ``add(ref, dec)`` with (k, H, W, C) or (H, W, C) views of one dtype and size;
+    never whole in memory: ``lfcodec encode`` measures the file it wrote this way). ``add(ref, dec)`` with (k, H, W, C) or (H, W, C) views of one dtype and size;
     ``report()`` the figures over every view added (each pooled as the whole-array functions
     pool it). ``ssim_threads``: views whose SSIM is computed at once (None: a few; each holds
     about seven float64 copies of a view)."""
@@ -336,16 +340,8 @@ class QualityAccumulator:
         sse, cnt = np.concatenate(self.sse), np.concatenate(self.cnt)
         per_view = np.array([_psnr_from_mse(a / n, peak) for a, n in zip(sse, cnt)])
         rgb = _psnr_from_mse(float(sse.sum() / cnt.sum()), peak)
-        if self.shape[0][-1] >= 3:
-            ps = [_psnr_from_mse(x / self.n_px, peak) for x in self.ycocg]
-            if all(math.isinf(p) for p in ps):
-                ycocg = float("inf")
-            elif any(math.isinf(p) for p in ps):
-                ycocg = (6 * min(ps[0], 200) + min(ps[1], 200) + min(ps[2], 200)) / 8
-            else:
-                ycocg = (6 * ps[0] + ps[1] + ps[2]) / 8
-        else:
-            ycocg = rgb                                      # grey: the Y plane is the grey channel
+        # (grey: the Y plane is the grey channel)
+        ycocg = _ycocg_psnr(self.ycocg, self.n_px, peak) if self.shape[0][-1] >= 3 else rgb
         out = {
             "psnr_rgb": finite(rgb),
             "psnr_ycocg": finite(ycocg),

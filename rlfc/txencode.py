@@ -703,9 +703,11 @@ class TxEncoder:
         ``lam_scale`` multiplies λ (rate control's trim between two quantizer steps).
 
         Returns:
-            dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), and
-            with ``keep_pixels`` pixels: the (N0, H, W, C) decoded views, which the codes' ``px``
-            are views of (one buffer: no per-view copies to gather at the end).
+            dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), kept
+            (``keep_pixels`` was asked: the pass a file may be written from, pixels held or not),
+            and with ``keep_pixels`` and :attr:`keep_decoded` pixels: the (N0, H, W, C) decoded
+            views, which the codes' ``px`` are views of (one buffer: no per-view copies to gather
+            at the end).
         """
         s16 = self.steps16(step)
         keep = bool(keep_pixels) and self.keep_decoded      # (the run is "kept" all the same: res["kept"])
