@@ -212,8 +212,10 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     t0 = time.perf_counter()
     prog = _Progress(a.quiet)
     try:
+        # a grid's views stay in their files until the codec reads them (the tx encoder reads
+        # them view by view, so the light field's pixels are never all in memory at once)
         lf = read_scene(scene, baseline=a.baseline, focal=a.focal, split=a.split, allow_outside=a.allow_outside_paths,
-                        grid=_grid(a.grid) if a.grid else None, progress=prog)
+                        grid=_grid(a.grid) if a.grid else None, progress=prog, lazy=True)
     finally:
         prog.close()
     if str(out.resolve()) in set(lf.meta.get("input_paths", ())):
@@ -288,30 +290,16 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     return 0
 
 
-def _trim_heap() -> None:
-    """Give the memory an encode freed back to the system (glibc's ``malloc_trim``; elsewhere
-    nothing): without it, the decoder that measures the file allocates beside the encoder's
-    freed arenas (hci_antinous at 40 dB with --json: the measuring peaked at 378 MB, above the
-    encode's 342; with it, 334)."""
-    import ctypes
-    import ctypes.util
-
-    if sys.platform.startswith("linux"):
-        try:
-            ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").malloc_trim(0)
-        except (OSError, AttributeError):       # not glibc (musl has no malloc_trim)
-            pass
-
-
 def _quality_of_file(path: Path, lf, *, with_ssim: bool, quiet: bool) -> dict:
     """:func:`formats.metrics.quality_report` of the file at ``path`` against the scene's views,
     decoded and compared a few views at a time (as the metrics chunk a light field: never a
     second copy of it)."""
+    from .heap import trim
     from .lfcfile import open_lfc
     from .metrics import QualityAccumulator, views_per_chunk
     from .registry import open_decoder
 
-    _trim_heap()
+    trim()           # (the decoder allocates beside the encoder's freed arenas otherwise)
     acc = QualityAccumulator(with_ssim=with_ssim, ssim_threads=1)    # (below the encode's peak)
     n = lf.rows * lf.cols
     k = views_per_chunk(lf.height * lf.width * lf.channels)
@@ -1119,6 +1107,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from .heap import limit_arenas
+
+    limit_arenas(1)                  # one malloc arena for the coding threads (formats.heap)
     parser = build_parser()
     a = parser.parse_args(argv)
     try:

@@ -152,11 +152,12 @@ def _call(fn, args):
 
 
 def _init_worker():
-    try:
-        import torch
-        torch.set_num_threads(1)
-    except ImportError:                                          # pragma: no cover
-        pass
+    """A pool worker's start: one malloc arena (:mod:`formats.heap`). Its threads are already
+    limited to one by the environment it starts with (``OMP_NUM_THREADS``, which torch also
+    reads when a task imports it; importing torch here cost each worker ~185 MiB)."""
+    from .heap import limit_arenas
+
+    limit_arenas(1)
 
 
 class PoolRunner(Runner):

@@ -265,15 +265,22 @@ class TxEncoder:
     #: passes keep each view's error only (``EncodeOptions.keep_decoded``; the same file)
     keep_decoded = True
 
-    def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0, runner=None):
+    def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0, runner=None,
+                 hold_all: bool = False):
         """``side_lambda``: luma squared error worth one bit of side information at the quality
         expected (:func:`side_lambda`); ``runner``: where views are coded
-        (:class:`formats.parallel.Runner`; None = here, one after another)."""
+        (:class:`formats.parallel.Runner`; None = here, one after another); ``hold_all``: keep
+        every view's pixels once read (:meth:`hold`; for encodes whose passes all cover every
+        view)."""
         from .profiles.tx import plane_limits
 
         if lf.views.dtype not in (np.uint8, np.uint16):
             raise ParameterError(f"tx codes 8- or 16-bit views; this light field is {lf.views.dtype}")
         self.lf, self.p, self.runner, self._shared = lf, params, runner, None
+        self._hold: frozenset = frozenset()       # views whose pixels are kept once read (hold)
+        self._held: dict = {}
+        if hold_all:
+            self.hold(range(lf.views.shape[0] * lf.views.shape[1]))
         B = params.block_size
         r, c, h, w, ch = lf.views.shape
         self.hdr = RlfcHeader.for_views("tx", r, c, (h, w, ch), lf.views.dtype, B)
@@ -340,20 +347,37 @@ class TxEncoder:
         return np.pad(np.asarray(pixels), pad, mode="edge")
 
     def view_pixels(self, v: int) -> np.ndarray:
-        """(H, W, C) pixels of view v (row-major view index)."""
-        return view_of(self.lf.views, v)
+        """(H, W, C) pixels of view v (row-major view index): read from the light field, or the
+        copy :meth:`hold` keeps."""
+        px = self._held.get(v)
+        if px is None:
+            px = view_of(self.lf.views, v)
+            if v in self._hold:
+                self._held[v] = px
+        return px
+
+    def hold(self, views) -> None:
+        """Keep the pixels of ``views`` (row-major indices) once read, and drop any other kept,
+        when the light field's views are read from elsewhere (a
+        :class:`formats.viewstack.ViewStack` over image files, zarr, dask): the rate search
+        re-reads its views at every pass. Views already in memory (a numpy array) are never
+        copied. ``hold(())`` lets them all go."""
+        lazy = not isinstance(self.lf.views, np.ndarray)
+        self._hold = frozenset(int(v) for v in views) if lazy else frozenset()
+        self._held = {v: x for v, x in self._held.items() if v in self._hold}
 
     def __getstate__(self):
         """What a worker needs to code views (:func:`_code_task`): everything but the light
         field and the runner."""
         st = dict(self.__dict__)
-        for k in ("lf", "runner", "_shared", "_view_handles"):
+        for k in ("lf", "runner", "_shared", "_view_handles", "_held"):
             st.pop(k, None)
         return st
 
     def __setstate__(self, st):
         self.__dict__.update(st)
         self.lf = self.runner = self._shared = None
+        self._held = {}
 
     # -- steps -----------------------------------------------------------------------------
     DEFAULT_KEY_RATIO = 1.6
@@ -1380,7 +1404,11 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
     from .ratecontrol import depth_scale
 
-    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner)
+    # a PSNR search codes a sample of the views at each pass (held once known, below); other
+    # encodes code every view at each of their passes, so every view is kept once read
+    sampled = (options.target_psnr is not None and params.search_sample and not params.lossless
+               and params.step is None)
+    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner, hold_all=not sampled)
     enc.keep_decoded = options.keep_decoded
     scale = depth_scale(lf.views.dtype)
     nv = lf.rows * lf.cols
@@ -1402,9 +1430,9 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     # sample of the others (their errors stand for the rest; every view is independent given the
     # keys), and the chosen step is then checked on every view (below: corrected if it misses)
     others = np.flatnonzero(~enc.is_key)
-    sample = others[::SEARCH_STRIDE] if (options.target_psnr is not None and params.search_sample
-                                         and not params.lossless and params.step is None
-                                         and others.size >= SEARCH_MIN_VIEWS) else None
+    sample = others[::SEARCH_STRIDE] if sampled and others.size >= SEARCH_MIN_VIEWS else None
+    if sampled:
+        enc.hold(np.arange(nv) if sample is None else np.union1d(enc.s.keys, sample))
     if params.key_ratio == 0 and not params.lossless and others.size:
         probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
@@ -1506,6 +1534,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         if n_alone:
             notes.append(f"{n_alone} views that are not key views cost less coded alone (JPEG 2000) than "
                          f"predicted; they are key views of this file")
+    enc.hold(())
     cfg, sections = enc.pack(res)
     split = enc.key_split(res)
     if params.key_split and split != params.key_split and enc.coded_keys(res):

@@ -53,7 +53,7 @@ def read_npy(p: Path, grid: tuple[int, int] | None, limits: Limits = DEFAULT) ->
 
 def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float | None = None,
                focal: float | None = None, allow_outside: bool = False, limits: Limits = DEFAULT,
-               grid: tuple[int, int] | None = None, progress=None) -> LightField:
+               grid: tuple[int, int] | None = None, progress=None, lazy: bool = False) -> LightField:
     """Read a light field from a folder (or a transforms JSON file), detecting its layout.
 
     Args:
@@ -68,6 +68,10 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         grid: (rows, cols) for a plain folder of images (natural name order, row-major); a
             folder with its own layout file ignores it.
         progress: ``progress(stage, done, total)`` as views are decoded, or None.
+        lazy: leave a grid's views in their image files, each decoded when a codec asks for it
+            (``lf.views`` is then a :class:`formats.viewstack.ViewStack`): the ``tx`` encoder
+            then holds no copy of the light field's pixels, at the cost of decoding each file a
+            few times. Posed captures are read whole either way.
 
     Returns:
         the light field; ``meta["input_paths"]`` lists every file read (resolved).
@@ -76,7 +80,7 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         SceneError: not a folder, empty, no recognizable layout, unreadable/mismatched views,
             paths outside the scene, or sizes over the limits.
     """
-    opts = ReadOptions(limits, allow_outside, progress)
+    opts = ReadOptions(limits, allow_outside, progress, lazy)
     if split not in ("train", "val", "test") and not (isinstance(split, str) and split.isidentifier()):
         raise SceneError(f"split must be a plain name like train or test, got {split!r}")
     p = Path(path)

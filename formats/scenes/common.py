@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Callable
@@ -26,11 +27,14 @@ class ReadOptions:
             symlinks leading out). Off by default: a scene file from elsewhere must not pull in
             arbitrary images from the host.
         progress: ``progress(stage, done, total)`` as views are decoded (the CLI's bars), or None.
+        lazy: grid readers leave the views in their files (:class:`ImageFiles`), each decoded
+            when a codec asks for it, instead of decoding them all into memory first.
     """
 
     limits: Limits = DEFAULT
     allow_outside: bool = False
     progress: Callable[[str, int, int], None] | None = field(default=None, compare=False)
+    lazy: bool = False
 
 
 NPY_MAGIC = b"\x93NUMPY"
@@ -95,7 +99,7 @@ def number(v, what: str, *, positive: bool = False) -> float:
     return x
 
 
-def load_views(paths: list[Path], what: str, opts: ReadOptions = ReadOptions()) -> np.ndarray:
+def load_views(paths: list[Path], what: str, opts: ReadOptions = ReadOptions(), lazy: bool = False):
     """Read image files that must all share size, channels and depth.
 
     Every header is read first (sizes, channels, depth checked against each other and the
@@ -104,9 +108,11 @@ def load_views(paths: list[Path], what: str, opts: ReadOptions = ReadOptions()) 
     Args:
         paths: image files in view order.
         what: the scene's name for messages.
+        lazy: return the files unread (:class:`ImageFiles`, decoded per view when indexed).
 
     Returns:
-        (N, H, W, C) array in the files' common dtype.
+        (N, H, W, C) array in the files' common dtype (decoded into one array on a few threads,
+        never a second copy), or :class:`ImageFiles` when ``lazy``.
 
     Raises:
         SceneError: a missing or unreadable file, or files that disagree in size/channels/depth
@@ -130,16 +136,97 @@ def load_views(paths: list[Path], what: str, opts: ReadOptions = ReadOptions()) 
             raise SceneError(
                 f"{what}: view {p.name} is {hd[0]}x{hd[1]}x{hd[2]} {hd[3]}, but {paths[0].name} is "
                 f"{h}x{w}x{c} {fmt}; all views must share size, channels and bit depth")
-    workers = min(4, len(paths))
-    imgs = []
-    with native_stderr(), ThreadPoolExecutor(workers) as ex:
-        for im in ex.map(lambda p: read_image(p, opts.limits.max_view_pixels), paths):
-            imgs.append(im)
-            if opts.progress is not None:
-                opts.progress("read views", len(imgs), len(paths))
-    first = imgs[0]
-    for p, im in zip(paths, imgs):
-        if im.shape != first.shape or im.dtype != first.dtype:
-            raise SceneError(f"{what}: view {p.name} decodes to {im.shape} {im.dtype}, but {paths[0].name} to "
-                             f"{first.shape} {first.dtype}")
-    return np.stack(imgs)
+    files = ImageFiles(paths, (h, w, c, fmt), what, opts)
+    return files if lazy else np.asarray(files)
+
+
+def _sample_dtype(fmt: str) -> np.dtype:
+    """The dtype :func:`formats.imageio.read_image` gives a file whose header names ``fmt``."""
+    return np.dtype(np.uint8 if fmt in ("uint8", "int8") else np.uint16 if fmt in ("uint16", "int16")
+                    else np.float32)
+
+
+class ImageFiles:
+    """(N, H, W, C) views that stay in their image files, each decoded when indexed.
+
+    What :func:`load_views` returns with ``lazy=True``: a scene read this way costs no memory for
+    its pixels until a view is asked for (``files[i]``, decoded from its file each time: the
+    ``tx`` encoder reads each view about twice and keeps the few its rate search re-reads).
+    ``np.asarray(files)`` decodes them all into one array, on a few threads. Every read checks
+    that the file still has the size and modification time it had when the scene was opened and
+    that it decodes to the shape and depth of the others; a view changed or replaced under an
+    encode is a SceneError, never pixels of another scene mixed into the file.
+
+    Attributes:
+        shape: (N, H, W, C); dtype: uint8, uint16 or float32; paths: the files in view order.
+        decodes: how many files were decoded so far.
+    """
+
+    ndim = 4
+
+    def __init__(self, paths: list[Path], head: tuple[int, int, int, str], what: str, opts: ReadOptions):
+        h, w, c, fmt = head
+        self.paths, self.what, self.opts = list(paths), what, opts
+        self.shape = (len(self.paths), h, w, c)
+        self.dtype = _sample_dtype(fmt)
+        self.nbytes = int(np.prod(self.shape)) * self.dtype.itemsize
+        self.decodes = 0
+        self._stamps = [self._stamp(p) for p in self.paths]
+
+    def _stamp(self, p: Path) -> tuple[int, int]:
+        try:
+            st = os.stat(p)
+        except OSError as e:
+            raise SceneError(f"{self.what}: cannot read view {p} ({e.strerror or e})") from None
+        return st.st_size, st.st_mtime_ns
+
+    def __getitem__(self, i):
+        if isinstance(i, (int, np.integer)) and not isinstance(i, bool):
+            i = range(self.shape[0])[i]
+            if threading.current_thread() is not threading.main_thread():
+                return self.read(i)
+            with native_stderr():           # (what libpng prints about a broken file: the error says it)
+                return self.read(i)
+        return np.asarray(self)[i]
+
+    def read(self, i: int) -> np.ndarray:
+        """(H, W, C) pixels of view i, decoded from its file now."""
+        p = self.paths[i]
+        self.decodes += 1
+        if self._stamp(p) != self._stamps[i]:
+            raise SceneError(f"{self.what}: view {p.name} changed on disk after the scene was opened")
+        im = read_image(p, self.opts.limits.max_view_pixels)
+        if im.shape != self.shape[1:] or im.dtype != self.dtype:
+            raise SceneError(f"{self.what}: view {p.name} decodes to {im.shape} {im.dtype}, but its header and "
+                             f"{self.paths[0].name} say {self.shape[1:]} {self.dtype}")
+        return im
+
+    def __len__(self) -> int:
+        return self.shape[0]
+
+    def __array__(self, dtype=None, copy=None):
+        out = np.empty(self.shape, self.dtype)
+        n = self.shape[0]
+
+        def one(i):
+            out[i] = self.read(i)
+            return i
+
+        with native_stderr(), ThreadPoolExecutor(min(4, n)) as ex:
+            for k, _ in enumerate(ex.map(one, range(n)), 1):
+                if self.opts.progress is not None:
+                    self.opts.progress("read views", k, n)
+        return out if dtype is None else out.astype(dtype)
+
+    def __repr__(self) -> str:
+        return f"ImageFiles({self.shape[0]} views of {self.shape[1:]} {self.dtype} in {self.what})"
+
+
+def as_grid(views, rows: int, cols: int):
+    """(rows, cols, H, W, C) views from :func:`load_views`' (N, H, W, C): the array reshaped, or
+    :class:`ImageFiles` behind a :class:`formats.viewstack.ViewStack` (still unread)."""
+    if isinstance(views, np.ndarray):
+        return views.reshape(rows, cols, *views.shape[1:])
+    from ..viewstack import ViewStack
+
+    return ViewStack(views, (rows, cols))

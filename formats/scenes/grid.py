@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import SceneError
 from ..lightfield import LightField, grid_positions
 from ..viewnames import relative_names
-from .common import ReadOptions, check_count, confine, load_views, number
+from .common import ReadOptions, as_grid, check_count, confine, load_views, number
 
 _SPEC = re.compile(r"^0?\d{0,2}d?$")          # {row:02d}, {col:d}, {row} … nothing wider than 99
 
@@ -60,8 +60,7 @@ def read_grid(folder: Path, baseline: float | None = None, focal: float | None =
         check_pattern(pattern, where)
         names = [pattern.format(row=r, col=c) for r in range(rows) for c in range(cols)]
     paths = [confine(folder / n, folder, opts, where) for n in names]
-    views = load_views(paths, str(folder), opts)
-    views = views.reshape(rows, cols, *views.shape[1:])
+    views = as_grid(load_views(paths, str(folder), opts, lazy=opts.lazy), rows, cols)
     assumed = []
     b = cfg.get("baseline") if baseline is None else baseline
     if b is None:
@@ -102,8 +101,7 @@ def read_image_folder(folder: Path, grid: tuple[int, int], baseline: float | Non
     if len(files) != rows * cols:
         raise SceneError(f"{where}: --grid {rows}x{cols} needs {rows * cols} images, the folder has {len(files)}")
     paths = [confine(p, folder, opts, where) for p in files]
-    views = load_views(paths, where, opts)
-    views = views.reshape(rows, cols, *views.shape[1:])
+    views = as_grid(load_views(paths, where, opts, lazy=opts.lazy), rows, cols)
     assumed = []
     if baseline is None:
         baseline = 1.0

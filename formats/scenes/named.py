@@ -9,7 +9,7 @@ from pathlib import Path
 from ..errors import SceneError
 from ..lightfield import LightField, grid_positions
 from ..viewnames import relative_names
-from .common import ReadOptions, check_count, confine, is_image, load_views, number
+from .common import ReadOptions, as_grid, check_count, confine, is_image, load_views, number
 
 HCI_RE = re.compile(r"^input_Cam(\d{3})\.\w+$")
 STANFORD_RE = re.compile(r"^out_(\d+)_(\d+)(_.*)?\.\w+$")
@@ -45,8 +45,7 @@ def read_hci(folder: Path, baseline: float | None = None, focal: float | None = 
         raise SceneError(f"{folder}: HCI grid {rows}x{cols} needs input_Cam000..{rows * cols - 1:03d}; "
                          f"found {n} views" + (f", missing e.g. input_Cam{missing[0]:03d}" if missing else ""))
     files = [confine(p, folder, opts, str(folder)) for p in files]
-    views = load_views(files, str(folder), opts)
-    views = views.reshape(rows, cols, *views.shape[1:])
+    views = as_grid(load_views(files, str(folder), opts, lazy=opts.lazy), rows, cols)
     assumed = []
     f = focal
     if f is None and "focal_length_mm" in cfg and "sensor_size_mm" in cfg:
@@ -86,8 +85,7 @@ def read_stanford(folder: Path, baseline: float | None = None, focal: float | No
     if missing:
         raise SceneError(f"{folder}: Stanford grid {rows}x{cols} is missing view out_{missing[0][0]:02d}_{missing[0][1]:02d}")
     files = [confine(items[(r, c)], folder, opts, str(folder)) for r in range(r0, r0 + rows) for c in range(c0, c0 + cols)]
-    views = load_views(files, str(folder), opts)
-    views = views.reshape(rows, cols, *views.shape[1:])
+    views = as_grid(load_views(files, str(folder), opts, lazy=opts.lazy), rows, cols)
     f = float(focal) if focal else float(max(views.shape[2:4]))
     b = float(baseline) if baseline else 1.0
     return LightField(views=views, positions=grid_positions(rows, cols, (b, b)), focal=(f, f), layout="grid",

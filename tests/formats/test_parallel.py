@@ -108,3 +108,16 @@ def test_unreachable_scheduler_is_a_worker_error(monkeypatch):
     with pytest.raises(WorkerError, match="cannot reach"):
         make_runner(1, "tcp://127.0.0.1:9")
     assert issubclass(WorkerError, LfcError)
+
+
+def test_pool_encode_of_views_left_in_their_files_is_the_same_file(small_lf, serial_file, tmp_path):
+    """Views read from their files as the encoder asks (``lfcodec encode``'s way) and shipped to
+    a process pool: the same file as the serial encode from memory."""
+    from formats.imageio import write_image
+
+    for i in range(25):
+        write_image(tmp_path / f"input_Cam{i:03d}.png", small_lf.views[i // 5, i % 5])
+    lf = read_scene(tmp_path, lazy=True)
+    assert not isinstance(lf.views, np.ndarray)
+    blob, enc = _encode(lf, workers=2)
+    assert enc.summary["runner"] == "pool" and blob == serial_file[0]

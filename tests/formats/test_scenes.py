@@ -298,3 +298,100 @@ def test_bad_camera_matrices_are_refused_before_any_view_is_read(tmp_path, monke
         with pytest.raises(SceneError, match=needle):
             read_scene(tmp_path)
     assert reads == []
+
+
+# -- views left in their files (read_scene(lazy=True); what `lfcodec encode` reads) -----------
+
+def _hci(tmp_path, n=9, **kw):
+    for i in range(n):
+        write_image(tmp_path / f"input_Cam{i:03d}.png", _img(seed=i, **kw))
+
+
+def _stanford(tmp_path, **kw):
+    for r in range(2):
+        for c in range(2):
+            write_image(tmp_path / f"out_{r:02d}_{c:02d}_-100.5_200.25.png", _img(seed=r * 2 + c, **kw))
+
+
+def _folder(tmp_path, **kw):
+    for i in range(6):
+        write_image(tmp_path / f"img{i}.png", _img(seed=i, **kw))
+
+
+@pytest.mark.parametrize("make,grid", [(_grid, None), (_hci, None), (_stanford, None), (_folder, (2, 3))])
+@pytest.mark.parametrize("dtype,c", [(np.uint8, 3), (np.uint16, 3), (np.uint8, 1), (np.uint8, 4), (np.uint16, 2)])
+def test_lazy_grid_readers_decode_nothing_until_asked_and_give_the_same_views(tmp_path, make, grid, dtype, c):
+    make(tmp_path, dtype=dtype, c=c)
+    eager = read_scene(tmp_path, grid=grid)
+    lazy = read_scene(tmp_path, grid=grid, lazy=True)
+    files = lazy.views.arr
+    assert isinstance(eager.views, np.ndarray) and files.decodes == 0
+    assert lazy.views.shape == eager.views.shape and lazy.views.dtype == eager.views.dtype == dtype
+    assert (lazy.focal, lazy.layout, lazy.meta) == (eager.focal, eager.layout, eager.meta)
+    assert np.array_equal(lazy.positions, eager.positions)
+    r, cc = lazy.rows - 1, lazy.cols - 1
+    assert np.array_equal(lazy.views[r, cc], eager.views[r, cc]) and files.decodes == 1
+    assert np.array_equal(np.asarray(lazy.views), eager.views)
+
+
+def test_a_lazy_view_changed_or_broken_after_opening_is_a_scene_error(tmp_path):
+    import os
+
+    _grid(tmp_path)
+    lf = read_scene(tmp_path, lazy=True)
+    write_image(tmp_path / "v" / "0_1.png", _img(seed=99))          # replaced under the reader
+    os.utime(tmp_path / "v" / "0_1.png", ns=(1, 1))
+    with pytest.raises(SceneError, match="0_1.png changed on disk"):
+        lf.views[0, 1]
+    with pytest.raises(SceneError, match="changed on disk"):
+        np.asarray(lf.views)
+    assert np.array_equal(lf.views[1, 1], _img(seed=11))            # the others still read
+    p = tmp_path / "v" / "1_0.png"
+    data = p.read_bytes()
+    lf = read_scene(tmp_path, lazy=True)
+    with open(p, "r+b") as f:                                        # same size and time, pixels cut
+        f.seek(len(data) // 2)
+        f.write(b"\0" * (len(data) - len(data) // 2))
+    st = os.stat(p)
+    os.utime(p, ns=(st.st_atime_ns, lf.views.arr._stamps[3][1]))
+    with pytest.raises(SceneError, match="1_0.png"):
+        lf.views[1, 0]
+
+
+@pytest.mark.parametrize("opts,most", [({"target_psnr": 38}, 2), ({"target_bpp": 1.5}, 1), ({}, 1),
+                                       ({"lossless": True}, 1)])
+def test_an_encode_from_files_left_on_disk_writes_the_same_file(tmp_path, capsys, opts, most):
+    """An encode from views left in their files gives the same bytes as one from the views in
+    memory. Each view is decoded once where every pass codes every view (they are kept once
+    read), at most twice under a PSNR search (its keys and sample kept; the others decoded again
+    for the full pass); an encoder given views in memory keeps no copies."""
+    from formats import EncodeOptions
+    from formats.cli import main
+    from rlfc import txencode
+    from rlfc.codec import RlfcCodec
+    from tests.rlfc.helpers import smooth_lf
+
+    src = smooth_lf(rows=5, cols=5, h=32, w=40)
+    for r in range(5):
+        for c in range(5):
+            write_image(tmp_path / f"input_Cam{r * 5 + c:03d}.png", src.views[r, c])
+    opts = EncodeOptions(keep_decoded=False, **opts)
+    held = []
+    real = txencode.TxEncoder.hold
+    txencode.TxEncoder.hold = lambda self, v: (real(self, v), held.append(len(self._hold)))[0]
+    try:
+        ref = RlfcCodec().encode(read_scene(tmp_path), opts)
+        assert held and max(held) == 0                      # views in memory: nothing kept
+        lazy = read_scene(tmp_path, lazy=True)
+        enc = RlfcCodec().encode(lazy, opts)
+    finally:
+        txencode.TxEncoder.hold = real
+    assert [(k, bytes(x)) for k, x in enc.sections] == [(k, bytes(x)) for k, x in ref.sections]
+    assert 25 <= lazy.views.arr.decodes <= most * 25 and held[-1] == 0
+    if "target_psnr" in opts.__dict__ and opts.target_psnr:
+        assert 0 < held[-2] < 25                            # the search's keys and sample
+        out = tmp_path / "out" / "a.lfc"
+        out.parent.mkdir()
+        assert main(["encode", str(tmp_path), str(out), "--target-psnr", "38", "--quiet", "--json"]) == 0
+        rep = json.loads(capsys.readouterr().out)
+        assert rep["psnr_rgb"] == pytest.approx(ref.summary["psnr_rgb"], abs=1e-9) and rep["target_met"]
