@@ -20,6 +20,7 @@ from formats.codec_api import EncodeOptions, Encoded, check_field_types, is_real
 from formats.errors import ParameterError
 from formats.metrics import colour_sq_error, finite, psnr_from_sq_error
 from formats.parallel import Runner, make_runner
+from formats.scenes.common import ImageFile, ImageFiles
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
@@ -355,6 +356,16 @@ class TxEncoder:
             if v in self._hold:
                 self._held[v] = px
         return px
+
+    def _worker_views(self, runner, views) -> dict:
+        """View → what a worker codes it from: where the views are image files left on this
+        machine's disk and the workers run here (a process pool), the file, which the worker reads
+        itself (the parent then never holds every view's pixels at once); else the pixels,
+        scattered to the workers."""
+        files = getattr(self.lf.views, "arr", None)
+        if runner.kind == "pool" and isinstance(files, ImageFiles):
+            return {int(v): files.file(int(v)) for v in views}
+        return dict(zip(views, runner.scatter([self.view_pixels(v) for v in views])))
 
     def hold(self, views) -> None:
         """Keep the pixels of ``views`` (row-major indices) once read, and drop any other kept,
@@ -840,7 +851,7 @@ class TxEncoder:
         else:
             if self._shared is None:
                 self._shared = runner.share(self)
-                self._view_handles = dict(zip(all_others, runner.scatter([self.view_pixels(v) for v in all_others])))
+                self._view_handles = self._worker_views(runner, all_others)
             keys_h, model_h = runner.share(kp), runner.share(model)
 
             def take(i, c):             # a worker's decoded pixels go into the pass's buffer as they arrive
@@ -1186,7 +1197,10 @@ def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.
                step16: np.ndarray, lam: float, keep_pixels) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
     ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_atlas`, or planar planes);
-    ``keep_pixels`` as :meth:`TxEncoder.code_view`."""
+    ``keep_pixels`` as :meth:`TxEncoder.code_view`; ``pixels`` the view's (H, W, C) pixels or
+    its image file (read here)."""
+    if isinstance(pixels, ImageFile):
+        pixels = pixels.read()
     return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels)
 
 

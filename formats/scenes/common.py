@@ -146,12 +146,55 @@ def _sample_dtype(fmt: str) -> np.dtype:
                     else np.float32)
 
 
+@dataclass(frozen=True)
+class ImageFile:
+    """One view's image file as the scene was opened: its size and modification time, and the
+    shape and depth it must decode to. Small and picklable, so that a worker process on the same
+    machine reads its view itself (the ``tx`` encoder's process pool)."""
+
+    path: Path
+    stamp: tuple[int, int]             # (bytes, st_mtime_ns)
+    shape: tuple[int, int, int]        # (H, W, C)
+    dtype: np.dtype
+    what: str                          # the scene, for messages
+    max_pixels: int
+    first: str                         # the scene's first file, for messages
+
+    @staticmethod
+    def stamp_of(p: Path, what: str) -> tuple[int, int]:
+        try:
+            st = os.stat(p)
+        except OSError as e:
+            raise SceneError(f"{what}: cannot read view {p} ({e.strerror or e})") from None
+        return st.st_size, st.st_mtime_ns
+
+    def read(self) -> np.ndarray:
+        """(H, W, C) pixels, decoded from the file now. SceneError if the file changed since the
+        scene was opened or decodes to another shape or depth. On a process's main thread what
+        libpng prints about a broken file is held back (the error says it)."""
+        if threading.current_thread() is not threading.main_thread():
+            return self._read()
+        with native_stderr():
+            return self._read()
+
+    def _read(self) -> np.ndarray:
+        p = self.path
+        if self.stamp_of(p, self.what) != self.stamp:
+            raise SceneError(f"{self.what}: view {p.name} changed on disk after the scene was opened")
+        im = read_image(p, self.max_pixels)
+        if im.shape != self.shape or im.dtype != self.dtype:
+            raise SceneError(f"{self.what}: view {p.name} decodes to {im.shape} {im.dtype}, but its header and "
+                             f"{self.first} say {self.shape} {self.dtype}")
+        return im
+
+
 class ImageFiles:
     """(N, H, W, C) views that stay in their image files, each decoded when indexed.
 
     What :func:`load_views` returns with ``lazy=True``: a scene read this way costs no memory for
     its pixels until a view is asked for (``files[i]``, decoded from its file each time: the
-    ``tx`` encoder reads each view about twice and keeps the few its rate search re-reads).
+    ``tx`` encoder reads each view about twice and keeps the few its rate search re-reads;
+    its process pool's workers read their views themselves, ``files.file(i)``).
     ``np.asarray(files)`` decodes them all into one array, on a few threads. Every read checks
     that the file still has the size and modification time it had when the scene was opened and
     that it decodes to the shape and depth of the others; a view changed or replaced under an
@@ -159,7 +202,7 @@ class ImageFiles:
 
     Attributes:
         shape: (N, H, W, C); dtype: uint8, uint16 or float32; paths: the files in view order.
-        decodes: how many files were decoded so far.
+        decodes: how many files were decoded so far (in this process).
     """
 
     ndim = 4
@@ -171,35 +214,23 @@ class ImageFiles:
         self.dtype = _sample_dtype(fmt)
         self.nbytes = int(np.prod(self.shape)) * self.dtype.itemsize
         self.decodes = 0
-        self._stamps = [self._stamp(p) for p in self.paths]
+        first = self.paths[0].name
+        self._files = [ImageFile(p, ImageFile.stamp_of(p, what), (h, w, c), self.dtype, what,
+                                 opts.limits.max_view_pixels, first) for p in self.paths]
 
-    def _stamp(self, p: Path) -> tuple[int, int]:
-        try:
-            st = os.stat(p)
-        except OSError as e:
-            raise SceneError(f"{self.what}: cannot read view {p} ({e.strerror or e})") from None
-        return st.st_size, st.st_mtime_ns
+    def file(self, i: int) -> ImageFile:
+        """View i's file (read it with ``.read()``, here or in another process)."""
+        return self._files[i]
 
     def __getitem__(self, i):
         if isinstance(i, (int, np.integer)) and not isinstance(i, bool):
-            i = range(self.shape[0])[i]
-            if threading.current_thread() is not threading.main_thread():
-                return self.read(i)
-            with native_stderr():           # (what libpng prints about a broken file: the error says it)
-                return self.read(i)
+            return self.read(range(self.shape[0])[i])
         return np.asarray(self)[i]
 
     def read(self, i: int) -> np.ndarray:
         """(H, W, C) pixels of view i, decoded from its file now."""
-        p = self.paths[i]
         self.decodes += 1
-        if self._stamp(p) != self._stamps[i]:
-            raise SceneError(f"{self.what}: view {p.name} changed on disk after the scene was opened")
-        im = read_image(p, self.opts.limits.max_view_pixels)
-        if im.shape != self.shape[1:] or im.dtype != self.dtype:
-            raise SceneError(f"{self.what}: view {p.name} decodes to {im.shape} {im.dtype}, but its header and "
-                             f"{self.paths[0].name} say {self.shape[1:]} {self.dtype}")
-        return im
+        return self._files[i].read()
 
     def __len__(self) -> int:
         return self.shape[0]

@@ -111,8 +111,9 @@ def test_unreachable_scheduler_is_a_worker_error(monkeypatch):
 
 
 def test_pool_encode_of_views_left_in_their_files_is_the_same_file(small_lf, serial_file, tmp_path):
-    """Views read from their files as the encoder asks (``lfcodec encode``'s way) and shipped to
-    a process pool: the same file as the serial encode from memory."""
+    """Views read from their files as the encoder asks (``lfcodec encode``'s way), the pool's
+    workers reading the views they code themselves: the same file as the serial encode from
+    memory, and the parent decodes no view a third time (it did, to ship the pixels)."""
     from formats.imageio import write_image
 
     for i in range(25):
@@ -121,3 +122,5 @@ def test_pool_encode_of_views_left_in_their_files_is_the_same_file(small_lf, ser
     assert not isinstance(lf.views, np.ndarray)
     blob, enc = _encode(lf, workers=2)
     assert enc.summary["runner"] == "pool" and blob == serial_file[0]
+    # the parent: every view once for the maps, the search's keys and sample once more
+    assert lf.views.arr.decodes < 2 * 25

@@ -353,7 +353,7 @@ def test_a_lazy_view_changed_or_broken_after_opening_is_a_scene_error(tmp_path):
         f.seek(len(data) // 2)
         f.write(b"\0" * (len(data) - len(data) // 2))
     st = os.stat(p)
-    os.utime(p, ns=(st.st_atime_ns, lf.views.arr._stamps[3][1]))
+    os.utime(p, ns=(st.st_atime_ns, lf.views.arr.file(3).stamp[1]))
     with pytest.raises(SceneError, match="1_0.png"):
         lf.views[1, 0]
 
@@ -395,3 +395,41 @@ def test_an_encode_from_files_left_on_disk_writes_the_same_file(tmp_path, capsys
         assert main(["encode", str(tmp_path), str(out), "--target-psnr", "38", "--quiet", "--json"]) == 0
         rep = json.loads(capsys.readouterr().out)
         assert rep["psnr_rgb"] == pytest.approx(ref.summary["psnr_rgb"], abs=1e-9) and rep["target_met"]
+
+
+def _with_chunk(png: bytes, kind: bytes, body: bytes) -> bytes:
+    """``png`` with a chunk inserted after IHDR (CRC computed)."""
+    import struct
+    import zlib
+
+    chunk = struct.pack(">I", len(body)) + kind + body + struct.pack(">I", zlib.crc32(kind + body) & 0xFFFFFFFF)
+    return png[:33] + chunk + png[33:]
+
+
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+@pytest.mark.parametrize("c", [1, 2, 3, 4])
+def test_plain_pngs_decode_as_openimageio_decodes_them(tmp_path, monkeypatch, dtype, c):
+    """The libpng fast path (imagecodecs) gives OpenImageIO's samples for every plain PNG kind;
+    PNGs with transparency or significant-bits chunks, and broken ones, go to OpenImageIO."""
+    import formats.imageio as io
+
+    im = _img(h=9, w=13, c=c, dtype=dtype, seed=c)
+    p = tmp_path / "a.png"
+    write_image(p, im)
+    fast = io._plain_png(str(p), None)
+    assert fast is not None and fast.dtype == dtype and np.array_equal(fast, im)
+    monkeypatch.setattr(io, "_plain_png", lambda path, m: None)        # OpenImageIO alone
+    assert np.array_equal(read_image(p), fast)
+    monkeypatch.undo()
+    with pytest.raises(SceneError, match="exceed the limit"):
+        io._plain_png(str(p), 100)
+    data = p.read_bytes()
+    for kind, body in ((b"tRNS", b"\0\0" if c == 1 else b"\0\0\0\0\0\0"), (b"sBIT", bytes([8] * c))):
+        q = tmp_path / f"{kind.decode()}.png"
+        q.write_bytes(_with_chunk(data, kind, body))
+        assert io._plain_png(str(q), None) is None
+    q = tmp_path / "cut.png"
+    q.write_bytes(data[:len(data) - 30])
+    assert io._plain_png(str(q), None) is None
+    with pytest.raises(SceneError, match="cut.png"):
+        read_image(q)
