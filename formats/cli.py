@@ -756,8 +756,8 @@ def _kept_outputs(d, outdir: Path, name, views: list, level, layouts: list, over
         p = output_path(outdir, name(r, c))
         if not p.exists():
             continue
-        try:
-            old = read_image(p)
+        try:                          # (an image larger than a view is not it: never decoded)
+            old = read_image(p, max_pixels=d.height * d.width)
         except LfcError:
             old = None
         new = d.decode_view(r, c, level=level)

@@ -92,10 +92,18 @@ def image_size(path: str | os.PathLike) -> tuple[int, int, int, str]:
     Raises:
         SceneError: the file is missing or not a readable image.
     """
-    oiio = _oiio()
     path = str(path)
     if not os.path.isfile(path):
         raise SceneError(f"{path}: no such image file")
+    if path.lower().endswith(".png"):
+        try:
+            with open(path, "rb") as f:
+                head = _plain_png_header(f.read(1 << 16))
+        except OSError:
+            head = None
+        if head is not None:
+            return head[0], head[1], head[2], "uint8" if head[3] == 8 else "uint16"
+    oiio = _oiio()
     inp = oiio.ImageInput.open(path)
     if inp is None:
         raise SceneError(f"{path}: not a readable image ({_one_line(oiio.geterror())})")
@@ -112,37 +120,47 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _PNG_SPECIAL = {b"tRNS", b"sBIT", b"PLTE"}
 
 
-def _plain_png(path: str, max_pixels: int | None) -> np.ndarray | None:
-    """(H, W, C) pixels of a plain PNG (8- or 16-bit grey, grey + alpha, RGB or RGBA, no
-    palette, transparency or significant-bits chunk) decoded by libpng through imagecodecs in
-    0.72–0.90× the time OpenImageIO takes (best of 3 over 24 views: hci_antinous 512² RGB 5.6
-    against 7.5 ms, llff_statue 960×540 8.9 against 12.3, mitsuba 256² RGBA 1.05 against 1.19),
-    with the same samples (tested against OpenImageIO for every kind; equal on all 527 PNG views
-    of the shared scenes); None for any other file, which :func:`read_image` reads with
-    OpenImageIO (and its messages)."""
+def _plain_png_header(data: bytes) -> tuple[int, int, int, int] | None:
+    """(height, width, channels, bit depth) from the first bytes of a plain PNG file (8- or
+    16-bit grey, grey + alpha, RGB or RGBA, with no palette, transparency or significant-bits
+    chunk before its pixels); None for any other file or when ``data`` ends before the first
+    pixel chunk."""
     import struct
 
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError:
-        return None
     if len(data) < 45 or data[:8] != PNG_SIGNATURE or data[12:16] != b"IHDR":
         return None
     w, h = struct.unpack(">II", data[16:24])
     depth, ctype = data[24], data[25]
-    if depth not in (8, 16) or ctype not in (0, 2, 4, 6):
+    if depth not in (8, 16) or ctype not in (0, 2, 4, 6) or not (h and w):
         return None
     pos = 8
     while pos + 8 <= len(data):                    # the chunks before the pixels
         n, kind = struct.unpack(">I4s", data[pos:pos + 8])
         if kind == b"IDAT":
-            break
+            return h, w, {0: 1, 2: 3, 4: 2, 6: 4}[ctype], depth
         if kind in _PNG_SPECIAL:
             return None
         pos += 12 + n
-    else:
+    return None
+
+
+def _plain_png(path: str, max_pixels: int | None) -> np.ndarray | None:
+    """(H, W, C) pixels of a plain PNG (:func:`_plain_png_header`) decoded by libpng through
+    imagecodecs in 0.72–0.90× the time OpenImageIO takes (best of 3 over 24 views: hci_antinous
+    512² RGB 5.6 against 7.5 ms, llff_statue 960×540 8.9 against 12.3, mitsuba 256² RGBA 1.05
+    against 1.19), with the same samples (tested against OpenImageIO for every kind; equal on
+    all 527 PNG views of the shared scenes); None for any other file, which :func:`read_image`
+    reads with OpenImageIO (and its messages). A scene of plain PNGs never loads OpenImageIO
+    (31 MiB resident)."""
+    try:
+        with open(path, "rb") as f:
+            data = f.read()
+    except OSError:
         return None
+    head = _plain_png_header(data)
+    if head is None:
+        return None
+    h, w, c, depth = head
     if max_pixels is not None and w * h > max_pixels:
         raise SceneError(f"{path}: {h}x{w} pixels exceed the limit of {max_pixels} per view")
     try:
@@ -151,7 +169,6 @@ def _plain_png(path: str, max_pixels: int | None) -> np.ndarray | None:
         arr = imagecodecs.png_decode(data)
     except Exception:                              # (OpenImageIO says what is wrong)
         return None
-    c = {0: 1, 2: 3, 4: 2, 6: 4}[ctype]
     if arr.ndim == 2:
         arr = arr[:, :, None]
     if arr.shape != (h, w, c) or arr.dtype != (np.uint8 if depth == 8 else np.uint16):

@@ -421,6 +421,11 @@ def test_plain_pngs_decode_as_openimageio_decodes_them(tmp_path, monkeypatch, dt
     monkeypatch.setattr(io, "_plain_png", lambda path, m: None)        # OpenImageIO alone
     assert np.array_equal(read_image(p), fast)
     monkeypatch.undo()
+    oiio = io._oiio()
+    inp = oiio.ImageInput.open(str(p))
+    spec = inp.spec()
+    inp.close()
+    assert io.image_size(p) == (spec.height, spec.width, spec.nchannels, str(spec.format))
     with pytest.raises(SceneError, match="exceed the limit"):
         io._plain_png(str(p), 100)
     data = p.read_bytes()
@@ -433,3 +438,16 @@ def test_plain_pngs_decode_as_openimageio_decodes_them(tmp_path, monkeypatch, dt
     assert io._plain_png(str(q), None) is None
     with pytest.raises(SceneError, match="cut.png"):
         read_image(q)
+
+
+def test_a_scene_of_plain_pngs_never_loads_openimageio(tmp_path):
+    """Headers and pixels of plain PNGs come from the files and libpng (imagecodecs): reading
+    such a scene costs no OpenImageIO (31 MiB resident)."""
+    import subprocess
+    import sys
+
+    _hci(tmp_path)
+    code = ("import sys; from formats.scenes import read_scene; lf = read_scene(sys.argv[1], lazy=True); "
+            "lf.views[1, 1]; read_scene(sys.argv[1]); print('OpenImageIO' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code, str(tmp_path)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0 and out.stdout.strip() == "False", out.stderr
