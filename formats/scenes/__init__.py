@@ -70,8 +70,9 @@ def read_scene(path: str | os.PathLike, *, split: str = "train", baseline: float
         progress: ``progress(stage, done, total)`` as views are decoded, or None.
         lazy: leave a grid's views in their image files, each decoded when a codec asks for it
             (``lf.views`` is then a :class:`formats.viewstack.ViewStack`): the ``tx`` encoder
-            then holds no copy of the light field's pixels, at the cost of decoding each file a
-            few times. Posed captures are read whole either way.
+            then holds no copy of the light field's pixels, at the cost of decoding most files
+            twice (a 9×9 grid at 40 dB: 3.6× the raw input at peak instead of 4.2×; other
+            codecs read every view first). Posed captures are read whole either way.
 
     Returns:
         the light field; ``meta["input_paths"]`` lists every file read (resolved).
