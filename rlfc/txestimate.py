@@ -94,6 +94,12 @@ class Estimator:
             out.append(c)
         return out
 
+    def drop_handle(self) -> None:
+        """Forget the runner's handle of this estimator. The serial runner's handle is the
+        estimator itself: the reference cycle kept the views' luma (a third of an RGB light field)
+        alive through the whole encode, until the cyclic garbage collector happened to run."""
+        self._shared = None
+
     def _handle(self, runner):
         if getattr(self, "_shared", None) is None or self._shared[0] is not runner:
             self._shared = (runner, runner.share(self))
@@ -269,4 +275,5 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
         upd = follow & ok[None, :]
         disp, cur, full = np.where(upd, cand, disp), np.where(upd, cc, cur), np.where(upd[:, None], fc, full)
     modes = (full + pen).argmin(axis=1)
+    est.drop_handle()                  # (a cycle through the runner's handle kept the luma alive)
     return base, disp, modes

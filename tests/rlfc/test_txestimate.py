@@ -42,3 +42,22 @@ def test_threads_give_the_serial_maps(monkeypatch):
         assert np.array_equal(a, b)
     assert cv2.getNumThreads() == before   # OpenCV's own pool is given back
     assert np.any(out[1][0] != 0)          # the maps found the shift (not a trivial all-zero answer)
+
+
+def test_the_views_luma_is_freed_when_the_maps_are_made():
+    """Nothing the estimation leaves behind holds the luma stack (a third of an RGB light field):
+    its runner handle made a reference cycle that kept it alive until a garbage collection."""
+    import gc
+    import weakref
+
+    rng = np.random.default_rng(6)
+    base = cv2.GaussianBlur(rng.integers(0, 256, (40, 56)).astype(np.float32), (5, 5), 1.5)
+    luma = np.stack([np.roll(base, (r, c), (0, 1)) for r in range(3) for c in range(3)]).astype(np.uint8)
+    alive = weakref.ref(luma)
+    gc.disable()
+    try:
+        maps = txestimate.estimate_maps(luma, build(3, 3, 2), max_disparity=4)
+        del luma
+        assert alive() is None and len(maps) == 3
+    finally:
+        gc.enable()
