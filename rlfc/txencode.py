@@ -365,7 +365,15 @@ class TxEncoder:
         files = getattr(self.lf.views, "arr", None)
         if runner.kind == "pool" and isinstance(files, ImageFiles):
             return {int(v): files.file(int(v)) for v in views}
-        return dict(zip(views, runner.scatter([self.view_pixels(v) for v in views])))
+        out: dict = {}
+        for a in range(0, len(views), self.SCATTER_VIEWS):      # (a cluster holds what it was sent)
+            part = views[a:a + self.SCATTER_VIEWS]
+            out.update(zip(part, runner.scatter([self.view_pixels(v) for v in part])))
+        return out
+
+    #: views sent to a cluster's workers at a time (:meth:`_worker_views`): the parent never
+    #: holds more of them than this for the sending
+    SCATTER_VIEWS = 8
 
     def hold(self, views) -> None:
         """Keep the pixels of ``views`` (row-major indices) once read, and drop any other kept,
