@@ -553,6 +553,47 @@ def test_close_in_takes_the_largest_step_that_meets_the_target_between_two_full_
     assert T._close_in(enc2, ok, (math.log2(90.625), 34.63), 36.0, None, []) is ok and not enc2.runs
 
 
+class _LambdaEncoder:
+    """Stands in for TxEncoder at one step: PSNR falls ``slope`` dB per octave of λ's
+    multiplier from ``ps0``."""
+
+    def __init__(self, ps0, slope):
+        self.ps0, self.slope, self.runs = ps0, slope, []
+
+    def model_of(self, r):
+        return None
+
+    def run(self, step, model, progress=None, keep_pixels=False, lam_scale=1.0):
+        self.runs.append(lam_scale)
+        return {"step": step, "model": model, "lam_scale": lam_scale, "kept": True, "codes": [1]}
+
+    def psnr(self, r):
+        return self.ps0 + self.slope * math.log2(r.get("lam_scale", 1.0))
+
+
+def test_lambda_trim_hits_with_its_first_pass_and_gives_up_on_a_staircase():
+    """The trim's first multiplier comes from the prior slope (no fixed minimum): one pass where
+    the slope is near the prior. Where λ's smallest move already misses (a staircase), a miss
+    within TRIM_GIVE_UP of the last multiplier that met the target ends it."""
+    import rlfc.txencode as T
+
+    for slope in (-1.0, -1.25, -1.6):
+        enc = _LambdaEncoder(36.09, slope)
+        res = enc.run(12.0, None)
+        enc.runs.clear()
+        got = T._trim_lambda(enc, res, 36.0, None, [])
+        assert got["lam_scale"] > 1 and 36.0 <= enc.psnr(got) <= 36.0 + T.TRIM_DB and len(enc.runs) == 1
+
+    class Staircase(_LambdaEncoder):
+        def psnr(self, r):
+            return self.ps0 if r.get("lam_scale", 1.0) == 1.0 else 35.99
+
+    enc = Staircase(36.084, -1.25)
+    res = enc.run(112.6875, None)
+    enc.runs.clear()
+    assert T._trim_lambda(enc, res, 36.0, None, []) is res and len(enc.runs) == 1
+
+
 def test_ablate_switches_decode_the_closed_loop_and_are_recorded():
     """Each lever ``tools/ablation_tx.py`` turns off gives a valid file: it decodes to the
     encoder's closed loop, records what was turned off, and changes what the lever decides."""
