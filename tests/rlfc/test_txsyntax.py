@@ -60,6 +60,23 @@ def test_streams_parse_back_exactly(seed, S, nt, P, density, big, tail):
     assert (cat.modes == modes).all() and (cat.levels == levels).all()
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 2 ** 31), st.integers(1, 40), st.sampled_from([1, 4, 9]), st.sampled_from([1, 2, 3, 4]),
+       st.floats(0, 1), st.booleans())
+def test_counts_only_are_the_packed_symbols_counts(seed, S, nt, P, density, big):
+    """The rate search's counts (``counts_only``: no order, lanes or raw bits) equal the counts
+    of the symbols the packer codes, escapes and last position 64 included, levels under a skip
+    mode ignored as the packer ignores them."""
+    rng = np.random.default_rng(seed)
+    modes, levels = _random_blocks(rng, S, nt, P, density, big)
+    levels[rng.random((S, nt, P, 64)) < 0.02] = 17                # full tbs, escapes of the first
+    levels[:, :, :, 63][rng.random((S, nt, P)) < 0.3] = -40       # symbol, and levels under skips
+    kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
+    lane, ctx, sym, rl, rb = tx.block_symbols(modes, levels, kind, key, pcs)
+    assert np.array_equal(tx.block_symbols(modes, levels, kind, key, pcs, counts_only=True),
+                          tx.count_symbols(ctx, sym))
+
+
 @pytest.mark.parametrize("tail", [0, 32, 10 ** 6])
 def test_malformed_streams_raise(tail, monkeypatch):
     monkeypatch.setattr(tx, "TAIL_LANES", tail)
