@@ -572,7 +572,8 @@ class TxEncoder:
             if act.size == 0:
                 continue
             Ta = act.size
-            ax = np.abs(X[act])
+            xa = X[act]
+            ax = np.abs(xa)
             # A = [cost of each coefficient as chosen | cost past the last position (not coded)]
             A = np.empty((Ta, 128), np.float32)
             dz = A[:, 64:]
@@ -625,9 +626,10 @@ class TxEncoder:
             delta = np.where(use_lo, b_lo, b_ln) - zero_bits[col]
             Rb[act] += zcum[L] + lastb[L] + np.bincount(row, weights=delta * (nz & keep), minlength=Ta)
             lvs = lvs * keep
-            tb = act[row]
-            lvs -= 2 * lvs * (Xall.ravel()[((tb * tr.size + ip) << 6) + col] < 0)
-            levels.ravel()[((tb * P + p) << 6) + col] = lvs
+            np.negative(lvs, out=lvs, where=xa.ravel()[nzi] < 0)        # the coefficients' signs
+            lp = np.zeros((Ta, 64), np.int32)
+            lp.ravel()[nzi] = lvs
+            levels[act, p] = lp
         return levels, J, D0, must, Rb
 
     def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
