@@ -177,7 +177,7 @@ def _drop_pad(a: np.ndarray, C: int, P: int) -> np.ndarray:
     return a[..., :P]
 
 
-def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int) -> np.ndarray:
+def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int, out: np.ndarray | None = None) -> np.ndarray:
     """:func:`predict` of whole rows of 8×8 blocks that all blend the same references with the
     same weights (tb mode 0), sampled in raster order: one remap per reference over the band
     (its maps are the pixel grid shifted per block), no per-block bookkeeping, no transposes.
@@ -188,7 +188,8 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int) -> n
             blocks; ty0: the band's first block row.
 
     Returns:
-        (8·n, 8·n8x, P) int32: the integers :func:`predict` gives for those blocks.
+        (8·n, 8·n8x, P) int32: the integers :func:`predict` gives for those blocks (written to
+        ``out`` where given: a C-contiguous int32 array of that shape).
     """
     R, n, n8x = disp_y.shape
     yb = ((ty0 + np.arange(n)) * TB) << DISP_BITS
@@ -214,7 +215,10 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int) -> n
             cv2.scaleAdd(smp, w, acc, dst=acc)                                           # integers < 2^24: exact
     if acc is None:                                                                      # (weights sum to 64)
         raise ValueError("predict_rows needs a reference of nonzero weight")
-    out = _drop_pad(acc.reshape(n * TB, n8x * TB, atlas.C), atlas.C, atlas.P).astype(np.int32)
+    blend = _drop_pad(acc.reshape(n * TB, n8x * TB, atlas.C), atlas.C, atlas.P)
+    if out is None:
+        out = np.empty(blend.shape, np.int32)
+    np.copyto(out, blend, casting="unsafe")                                             # (integers: exact)
     out += 1 << (W_BITS - 1)
     out >>= W_BITS
     return out
@@ -224,7 +228,8 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int) -> n
 BAND_TBS = 1024
 
 
-def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n8x: int) -> np.ndarray:
+def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n8x: int,
+                 out: np.ndarray | None = None) -> np.ndarray:
     """The prediction of a whole view with references: the blend-mode blocks by
     :func:`predict_rows` in bands, the single-reference blocks by :func:`predict`.
 
@@ -235,16 +240,18 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
             = disparity × offset, in 1/16 pixel).
 
     Returns:
-        (8·n8y, 8·n8x, P) int32, the integers of :func:`predict` for every block.
+        (8·n8y, 8·n8x, P) int32, the integers of :func:`predict` for every block (written to
+        ``out`` where given: a C-contiguous int32 array of that shape; no band is copied).
     """
     R, P = slots.size, atlas.P
     d = np.asarray(disp).reshape(1, n8y, n8x)
     dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]                  # (R, n8y, n8x)
-    out = np.empty((n8y * TB, n8x * TB, P), np.int32)
+    if out is None:
+        out = np.empty((n8y * TB, n8x * TB, P), np.int32)
     band = max(1, BAND_TBS // n8x)
     for a in range(0, n8y, band):
         b = min(n8y, a + band)
-        out[a * TB:b * TB] = predict_rows(atlas, slots, weights, dy[:, a:b], dx[:, a:b], a)
+        predict_rows(atlas, slots, weights, dy[:, a:b], dx[:, a:b], a, out=out[a * TB:b * TB])
     other = np.flatnonzero(np.asarray(modes) != 0)
     if other.size:
         ty, tx = np.divmod(other, n8x)

@@ -542,10 +542,11 @@ class TxDecoder(ProfileDecoder):
         np.minimum(np.maximum(flat, self.lo_tb, out=flat), self.hi_tb, out=flat)   # ufuncs: np.clip costs µs
         return base
 
-    def _view_planes(self, v: int, level: int, parsed=None) -> np.ndarray:
+    def _view_planes(self, v: int, level: int, parsed=None, out=None) -> np.ndarray:
         """(Hp, Wp, P) int32 planes of a view with references: its 8×8 blocks predicted in
         raster order, the coded blocks' residuals added where they lie (``parsed``: their
-        syntax, when the caller parsed several views together)."""
+        syntax, when the caller parsed several views together; ``out``: where to write them,
+        a C-contiguous int32 array of that shape)."""
         n8y, n8x, tpb, P = self.nby8, self.nbx8, self.tpb, self.P
         T = n8y * n8x
         if self.atlas is None:
@@ -555,12 +556,16 @@ class TxDecoder(ProfileDecoder):
             for a in range(0, T, PRED_TBS):
                 b = min(T, a + PRED_TBS)
                 pred[a:b] = self._pred(vv[:b - a], ty[a:b], tx[a:b])
-            out = pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
+            planes = pred.reshape(n8y, n8x, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, P)
+            if out is None:
+                out = planes
+            else:
+                out[...] = planes
         else:                           # raster bands of blend (mode 0) blocks, then the other blocks
             slots, wmode, dpos = self._view_refs(v)
             cell = self.lay.cell[v]
             disp, modes = self._maps_of([v])
-            out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x)
+            out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x, out=out)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
             by, bx = np.divmod(locs, self.nbx)
@@ -716,7 +721,7 @@ class TxDecoder(ProfileDecoder):
             if self.is_key[v]:
                 out[i] = self.keyplanes[self.key_slot[v]]
                 continue
-            out[i] = self._view_planes(v, level, parsed.get(v))
+            self._view_planes(v, level, parsed.get(v), out=out[i])
         return out
 
     def prepare(self, views, by):
