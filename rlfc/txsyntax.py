@@ -42,7 +42,6 @@ BAND = np.array([0] + [1] * 2 + [2] * 3 + [3] * 4 + [4] * 11 + [5] * 43, dtype=n
 N_BANDS = 6
 _BAND8 = [8 * int(b) for b in BAND]      # band·8: the band's offset among magnitude contexts
 _BAND8_ARR = np.array(_BAND8, np.int64)
-_BAND8_65 = _BAND8_ARR * 65               # (the same, × ALPHABET: a magnitude's flat count index)
 N_PC = 3          # plane classes
 _MASK = RANS_M - 1
 #: a magnitude parse finishes in plain Python once fewer lanes than this have symbols left
@@ -55,6 +54,7 @@ CTX_MAG = CTX_LAST + N_PC * 2 * 2               # 3 pc × 6 bands × 2 key × 4 
 CTX_ESC = CTX_MAG + N_PC * N_BANDS * 2 * 4      # 3 pc
 N_CTX = CTX_ESC + N_PC
 ALPHABET = 65
+_BAND8_65 = _BAND8_ARR * ALPHABET        # band·8·ALPHABET: a magnitude's band in flat count indices
 
 
 def plane_classes(planes: int) -> np.ndarray:
