@@ -73,6 +73,13 @@ class Estimator:
         np.copyto(out, self.luma[v], casting="unsafe")
         return out
 
+    def _grid(self) -> tuple[np.ndarray, np.ndarray]:
+        """(Hp, Wp) float32 rows and columns of every pixel (cached; 2 × 4 bytes a pixel)."""
+        if getattr(self, "_gyx", None) is None:
+            gy, gx = np.indices((self.hp, self.wp), np.float32)
+            self._gyx = (gy, gx)
+        return self._gyx
+
     def _nrefs(self, m: int) -> int:
         return int((self.s.refs[self.cells[m][0]] >= 0).sum())
 
@@ -108,6 +115,7 @@ class Estimator:
     def __getstate__(self):
         st = dict(self.__dict__)
         st.pop("_shared", None)
+        st.pop("_gyx", None)          # (rebuilt where needed)
         return st
 
     def _global_cell(self, m: int, d: float) -> np.ndarray:
@@ -153,8 +161,7 @@ class Estimator:
         nr = self._nrefs(m)
         acc = np.zeros((1 + nr, self.nby8 * self.nbx8))
         dpix = np.repeat(np.repeat(d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16, TB, 0), TB, 1)
-        gy = np.arange(self.hp, dtype=np.float32)[:, None]
-        gx = np.arange(self.wp, dtype=np.float32)[None, :]
+        gy, gx = self._grid()
         y, yk, p, e, wp, blend, mx, my = (np.empty((self.hp, self.wp), np.float32) for _ in range(8))
         for v in views.tolist():
             r = s.refs[v, :nr]
@@ -163,8 +170,8 @@ class Estimator:
             wb = s.weights[v, :nr] / 64.0
             blend.fill(0)
             for j in range(nr):               # each reference alone, and their blend
-                np.add(gx, np.multiply(dpix, dpos[j, 1], out=mx), out=mx)
-                np.add(gy, np.multiply(dpix, dpos[j, 0], out=my), out=my)
+                cv2.scaleAdd(dpix, float(dpos[j, 1]), gx, dst=mx)      # gx + dpix·Δx in one pass (float32,
+                cv2.scaleAdd(dpix, float(dpos[j, 0]), gy, dst=my)      # the same values as numpy's two)
                 cvremap.remap(self._y(r[j], yk), mx, my, cv2.INTER_LINEAR, out=p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
                 blend += np.multiply(p, np.float32(wb[j]), out=wp)
