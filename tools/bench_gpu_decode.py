@@ -1,7 +1,11 @@
 """Batched random-access decode: numpy (CPU) against torch (GPU when present), same requests.
 
-Usage: python -m tools.bench_gpu_decode FILE.lfc [--counts 20000,200000,1000000]
-Prints µs per block and Mpix/s (median of 3 after a warm-up) and checks the two agree bit for bit.
+Usage: python -m tools.bench_gpu_decode FILE.lfc [--counts 20000,200000,1000000] [--parse host,steps,triton]
+Prints µs per block and Mpix/s (median of 3 after a warm-up) and checks every path agrees with
+numpy bit for bit. ``--parse`` times the torch decoder once per way of parsing residual streams,
+side by side on the same requests: ``host`` (numpy lanes on the CPU, then copied), ``steps``
+(torch operations on the device), ``triton`` (the Triton kernel; CUDA only), ``auto`` (the
+decoder's own choice, the default).
 """
 from __future__ import annotations
 
@@ -24,36 +28,50 @@ def main(argv=None) -> int:
     ap.add_argument("--device", default=None)
     ap.add_argument("--numpy-max", type=int, default=200000,
                     help="time numpy only for calls of at most this many requests (it takes ~1 min per 1M)")
+    ap.add_argument("--parse", default="",
+                    help="comma-separated: host, steps, triton, auto (the decoder's choice; the default)")
     ap.add_argument("--profile", type=int, default=0,
                     help="also profile one torch call of this many requests (cProfile, device synchronized)")
     a = ap.parse_args(argv)
     d = RlfcDecoder(open_lfc(a.file))
     td = TorchBlockDecoder(d, a.device)
     sync = torch.cuda.synchronize if td.dev.type == "cuda" else (lambda: None)
+    ways = {}
+    for w in [x for x in a.parse.split(",") if x]:
+        ways[w] = TorchBlockDecoder(d, a.device)
+        if w != "auto":
+            ways[w].core.device_parse_min = None if w == "host" else 0
+            ways[w].core.triton = {"host": None, "steps": False, "triton": True}[w]
+    ways = ways or {"torch": td}
     rng = np.random.default_rng(0)
     print(f"device {td.dev} ({torch.cuda.get_device_name() if td.dev.type == 'cuda' else 'cpu'}), "
           f"{d.rows}x{d.cols} views, {d.nby}x{d.nbx} blocks of {d.block_size}")
     for n in [int(x) for x in a.counts.split(",")]:
         v, by, bx = rng.integers(0, d.rows * d.cols, n), rng.integers(0, d.nby, n), rng.integers(0, d.nbx, n)
         ref = d.decode_blocks(v[:20000], by[:20000], bx[:20000])
-        assert (td.decode_blocks(v[:20000], by[:20000], bx[:20000]) == ref).all(), "torch != numpy"
+        for w, t in ways.items():
+            t0 = time.perf_counter()
+            assert (t.decode_blocks(v[:20000], by[:20000], bx[:20000]) == ref).all(), f"torch ({w}) != numpy"
+            print(f"  {w}: first call (compiles) {time.perf_counter() - t0:.2f} s, equal to numpy")
         res = {}
-        fns = [("torch", lambda: (td.decode_blocks(v, by, bx, to_numpy=False), sync()))]
+        fns = [(w, lambda t=t: (t.decode_blocks(v, by, bx, to_numpy=False), sync())) for w, t in ways.items()]
         if n <= a.numpy_max:
             fns.insert(0, ("numpy", lambda: d.decode_blocks(v, by, bx)))
+        ts = {name: [] for name, _ in fns}
         for name, fn in fns:
             fn()
-            ts = []
-            for _ in range(3):
+        for _ in range(3):                              # rounds interleaved: the ways side by side
+            for name, fn in fns:
                 t = time.perf_counter()
                 fn()
-                ts.append(time.perf_counter() - t)
-            res[name] = statistics.median(ts) / n * 1e6
+                ts[name].append(time.perf_counter() - t)
+        res = {name: statistics.median(x) / n * 1e6 for name, x in ts.items()}
         px = d.block_size ** 2
         np_txt = (f"numpy {res['numpy']:.3f} µs/block ({px / res['numpy']:.1f} Mpix/s), " if "numpy" in res
                   else "numpy not timed, ")
-        print(f"{n} blocks: {np_txt}torch {res['torch']:.3f} µs/block ({px / res['torch']:.1f} Mpix/s"
-              + (f", {res['numpy'] / res['torch']:.1f}x)" if "numpy" in res else ")"))
+        print(f"{n} blocks: {np_txt}" + ", ".join(
+            f"torch {w} {res[w]:.3f} µs/block ({px / res[w]:.1f} Mpix/s"
+            + (f", {res['numpy'] / res[w]:.1f}x numpy)" if "numpy" in res else ")") for w in ways))
     if a.profile:
         import cProfile
         import pstats

@@ -13,6 +13,7 @@ Levels: 0 = full quality; 1 = prediction only (key views stay full).
 """
 from __future__ import annotations
 
+import os
 import threading
 
 import numpy as np
@@ -25,6 +26,7 @@ from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb
 from ..txmaps import LazyMaps
+from ..txparse_torch import pair_words, parse_lanes_torch
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import (KeyAtlas, block_pixel_refs, block_refs, predict as remap_predict, predict_block,
                         predict_block_pixels, predict_view)
@@ -41,6 +43,11 @@ PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their str
 #: key rows: one key's 19-27 rows parse 3-9× faster one by one)
 ONE_BY_ONE_RATIO = 48
 GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
+#: streams in a torch call from which a CUDA device parses them itself (measured on an H100,
+#: µs per block parsed on the host / on the device: lytro_dino_2067's 53 streams in 20 000
+#: requests 0.48 / 0.91; stanford_chess's 5 800 in 200 000, two runs, 0.42 / 0.41 and 0.33 /
+#: 0.42; stanford_lytro_general_11's 12 800 in 20 000, 15.9 / 1.1 and 18.8 / 1.4)
+DEVICE_PARSE_MIN = 8192
 KEY_PARSE_TBS = 1 << 20  # tbs of key-view rows parsed together (bounds the parsed coefficients held)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
 
@@ -790,6 +797,42 @@ class TorchTx:
         # the request bookkeeping of a call runs on the device, from these tables (the host's
         # numpy indexing over every 8×8 block of a call was most of a batched GPU decode)
         self.tables = tuple(self.xp.asarray(a) for a in dec.pred_tables())
+        # residual streams parsed where they are reconstructed: on a GPU, not on the host (whose
+        # numpy parse was 92% of a call on grids whose blocks carry residuals), for calls of at
+        # least this many streams (fewer parse faster on the host, overlapped with the device's
+        # prediction); None: always on the host. LFC_DEVICE_PARSE = 1 / 0 forces either way (the
+        # CPU device parses faster in numpy)
+        env = os.environ.get("LFC_DEVICE_PARSE")
+        cuda_min = DEVICE_PARSE_MIN if self.xp.device.type == "cuda" else None
+        self.device_parse_min = cuda_min if env is None else (0 if env == "1" else None)
+        self.triton = None                  # the Triton magnitude kernel: None = where CUDA and Triton are
+        self._section = None
+
+    def _parse(self, views, locs):
+        """(modes (S, nt) int64, levels (S, nt, P, 64) int64 in scan order) device tensors of the
+        streams of (view, location) pairs (numpy), parsed on the device
+        (:func:`rlfc.txparse_torch.parse_lanes_torch`) or on the host, per :attr:`device_parse_min`."""
+        import torch
+
+        d, xp = self.d, self.xp
+        if self.device_parse_min is None or views.size < self.device_parse_min:
+            parsed = d._parse(views, locs)
+            return xp.asarray(parsed.modes), xp.asarray(parsed.levels)
+        buf, s2, e2 = d._streams(d.start[views, locs], d.end[views, locs])     # checksums verified here
+        if buf is d.buf:                                  # the whole section: copied to the device once
+            if self._section is None:
+                dbuf = xp.asarray(buf)
+                self._section = (dbuf, pair_words(dbuf))
+            dbuf, w16 = self._section
+        else:                                             # a byte-range source: this call's streams
+            dbuf = xp.asarray(buf)
+            w16 = pair_words(dbuf)
+        a = xp.asarray(np.stack([s2, e2, d.lay.intra[views], d.is_key[views]]).astype(np.int64))   # one upload
+        modes, index, values = parse_lanes_torch(dbuf, w16, a[0], a[1], d.tables, d.nt, d.pcs, a[2], a[3],
+                                                 d.container.name, self.triton)
+        levels = torch.zeros(views.size * d.nt * d.P * 64, dtype=torch.int64, device=xp.device)
+        levels[index] = values
+        return modes, levels.reshape(views.size, d.nt, d.P, 64)
 
     def _pred(self, v, locs):
         """As :meth:`TxDecoder._pred` of :meth:`TxDecoder._tb_coords`: ``v``, ``locs`` (n,) int64
@@ -820,10 +863,9 @@ class TorchTx:
             if level == 0:
                 have = np.flatnonzero(d.coded[v, locs])
                 if have.size:
-                    parsed = d._parse(v[have], locs[have])
+                    modes, lv = self._parse(v[have], locs[have])
                     lay = d.lay
                     step = xp.asarray(lay.step16[np.where(d.is_key[v[have]], 0, 1)])[:, None, :, None]
-                    lv = xp.asarray(parsed.levels)
                     raster = torch.where(xp.asarray(lay.bypass)[None, None, :, None], lv, lv[..., xp.asarray(UNZIG)])
                     deq = dequantize(xp, raster, step).clamp(-COEF_MAX, COEF_MAX)
                     blk = deq.reshape(have.size, nt, P, TB, TB)
@@ -832,7 +874,7 @@ class TorchTx:
                         trt = xp.asarray(np.flatnonzero(tr))
                         blk[:, :, trt] = inverse(blk[:, :, trt])
                     res = blk.permute(0, 1, 3, 4, 2)
-                    intra = xp.asarray(parsed.modes == MODE_INTRA)[:, :, None, None, None]
+                    intra = (modes == MODE_INTRA)[:, :, None, None, None]
                     hv = xp.asarray(have)
                     pred[hv] = torch.where(intra, self.flat.to(torch.int64), pred[hv]) + res
             rec = torch.maximum(torch.minimum(pred, self.hi), self.lo).to(torch.int32)

@@ -65,6 +65,27 @@ def test_torch_decoder_in_chunks_equals_one_call(rng, monkeypatch):
     assert (whole == d.decode_blocks(v, by, bx)).all()
 
 
+@pytest.mark.parametrize("remote", [False, True])
+def test_torch_decoder_parsing_on_the_device_equals_numpy(rng, monkeypatch, remote):
+    """Residual streams parsed by the device (a GPU's path: LFC_DEVICE_PARSE=1 forces it on the
+    CPU) give numpy's blocks, from a local file (its section copied once) and over byte ranges
+    (each call's streams)."""
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48)
+    noise = np.random.default_rng(0).integers(-6, 7, lf.views.shape)
+    lf.views[:] = np.clip(lf.views.astype(int) + noise, 0, 255)
+    local, blob = open_encoded(lf, tx(lf, step=3.0))
+    assert local.core.coded[~local.core.is_key].all()           # every non-key block carries a residual
+    d = RlfcDecoder(open_lfc(ByteRangeSource(lambda a, b: blob[a:b], len(blob)))) if remote else local
+    monkeypatch.setenv("LFC_DEVICE_PARSE", "1")
+    t = TorchBlockDecoder(d, "cpu")
+    assert t.core.device_parse_min == 0
+    v, by, bx = rng.integers(0, 25, 400), rng.integers(0, d.nby, 400), rng.integers(0, d.nbx, 400)
+    for _ in range(2):                                          # the second call reuses the device's copy
+        assert (t.decode_blocks(v, by, bx) == local.decode_blocks(v, by, bx)).all()
+    monkeypatch.delenv("LFC_DEVICE_PARSE")
+    assert TorchBlockDecoder(d, "cpu").core.device_parse_min is None      # the CPU device parses in numpy
+
+
 def test_byte_range_source_equals_memory_and_fetches_one_stream():
     lf = smooth_lf(rows=5, cols=5, h=40, w=48)
     e = tx(lf, step=3.0)

@@ -133,3 +133,75 @@ def test_slot_words_are_symbol_freq_and_offset_per_slot(seed, C, A):
     assert (w & 127 == s).all()
     assert ((w >> 7) & 0x1FFF == t.freq[ci, s]).all()
     assert (w >> 20 == np.arange(M)[None, :] - t.cum[ci, s]).all()
+
+
+def _device_parse(streams, tables, nt, pcs, kind, key, triton=False):
+    """parse_lanes_torch on the CPU device: (modes, index, values) as numpy."""
+    import torch
+
+    from rlfc.txparse_torch import pair_words, parse_lanes_torch
+
+    starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
+    buf = torch.as_tensor(np.frombuffer(b"".join(streams) + bytes(8), np.uint8).copy())
+    t = [torch.as_tensor(np.asarray(a, np.int64)) for a in (starts[:-1], starts[1:], kind, key)]
+    m, i, v = parse_lanes_torch(buf, pair_words(buf), t[0], t[1], tables, nt, pcs, t[2], t[3], "x", triton)
+    return m.numpy(), i.numpy(), v.numpy()
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(0, 2 ** 31), st.integers(1, 60), st.sampled_from([1, 4]), st.sampled_from([1, 2, 3, 4]),
+       st.floats(0, 1), st.booleans())
+def test_device_parser_equals_the_numpy_parser(seed, S, nt, P, density, big):
+    """The torch lanes parser (a GPU decode's) gives the numpy parser's modes, indices and
+    values, escapes of every bucket included; a mutated stream raises or parses as numpy does."""
+    rng = np.random.default_rng(seed)
+    modes, levels = _random_blocks(rng, S, nt, P, density, big)
+    kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    m, i, v = _device_parse(streams, tables, nt, pcs, kind, key)
+    ref = tx.Parsed(m, i, v, P)
+    assert (ref.modes == modes).all() and (ref.levels == levels).all()
+    k = int(rng.integers(0, S))
+    b = bytearray(streams[k])
+    b[int(rng.integers(0, len(b)))] ^= int(rng.integers(1, 256))
+    bad = streams[:k] + [bytes(b)] + streams[k + 1:]
+    starts = np.concatenate([[0], np.cumsum([len(x) for x in bad])]).astype(np.int64)
+    try:
+        want = tx.parse_lanes(np.frombuffer(b"".join(bad) + bytes(8), np.uint8), starts[:-1], starts[1:], tables, nt,
+                              pcs, kind, key)
+    except FormatError:
+        with pytest.raises(FormatError):
+            _device_parse(bad, tables, nt, pcs, kind, key)
+    else:
+        m, i, v = _device_parse(bad, tables, nt, pcs, kind, key)
+        assert (m == want.modes).all() and (i == want.index).all() and (v == want.values).all()
+
+
+def test_device_parser_refuses_malformed_streams():
+    rng = np.random.default_rng(1)
+    modes, levels = _random_blocks(rng, 20, 4, 3, 0.5, False)
+    modes[:, 0] = 1
+    levels[:, 0, 0, 0] = 3
+    kind, key, pcs = np.zeros(20, int), np.zeros(20, int), tx.plane_classes(3)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    for cut in (lambda b: b[:-1], lambda b: b + b"\x00", lambda b: bytes([b[0] ^ 0x55]) + b[1:]):
+        with pytest.raises(FormatError):
+            _device_parse([cut(b) for b in streams], tables, 4, pcs, kind, key)
+
+
+def test_triton_magnitude_kernel_equals_the_numpy_parser():
+    """The Triton kernel of a CUDA decode, run by Triton's interpreter on the CPU (where Triton
+    is installed; CI has none, and a lent GPU runs it compiled: tools/bench_gpu_decode)."""
+    pytest.importorskip("triton")
+    import os
+
+    if os.environ.get("TRITON_INTERPRET") != "1":
+        pytest.skip("needs TRITON_INTERPRET=1 (set before Triton is imported) on a machine without CUDA")
+    rng = np.random.default_rng(5)
+    for S, nt, P, density, big in [(40, 4, 3, 0.6, False), (7, 1, 1, 1.0, True), (300, 4, 2, 0.2, False)]:
+        modes, levels = _random_blocks(rng, S, nt, P, density, big)
+        kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
+        streams, tables = _encode(modes, levels, kind, key, pcs)
+        m, i, v = _device_parse(streams, tables, nt, pcs, kind, key, triton=True)
+        got = tx.Parsed(m, i, v, P)
+        assert (got.modes == modes).all() and (got.levels == levels).all()

@@ -130,3 +130,16 @@ def test_bench_rate_speed_reports_a_curve_per_grid(tmp_path, monkeypatch):
         assert (r["coded_share"] is None or 0 <= r["coded_share"] <= 1) and r["views"] == 9 and r["key_views"] >= 1
         assert r["speed"]["batch_mpix_t1"] > 0 and r["j2k_view_mpix"] > 0
     assert "| tiny | 44 |" in (out / "rate_speed.md").read_text()
+
+
+def test_bench_gpu_decode_times_every_way_of_parsing(tmp_path, capsys):
+    """The GPU decode benchmark runs on the CPU device too: each way of parsing asserted equal to
+    numpy, each timed."""
+    from tools import bench_gpu_decode
+
+    f = _tiny(tmp_path)
+    assert bench_gpu_decode.main([str(f), "--device", "cpu", "--counts", "200", "--parse", "host,steps,auto"]) == 0
+    out = capsys.readouterr().out
+    assert out.count("equal to numpy") == 3
+    for w in ("numpy", "torch host", "torch steps", "torch auto"):
+        assert f"{w} " in out, w
