@@ -1,11 +1,13 @@
 """Batched random-access decode: numpy (CPU) against torch (GPU when present), same requests.
 
 Usage: python -m tools.bench_gpu_decode FILE.lfc [--counts 20000,200000,1000000] [--parse host,steps,triton]
+       [--old DIR]
 Prints µs per block and Mpix/s (median of 3 after a warm-up) and checks every path agrees with
 numpy bit for bit. ``--parse`` times the torch decoder once per way of parsing residual streams,
 side by side on the same requests: ``host`` (numpy lanes on the CPU, then copied), ``steps``
 (torch operations on the device), ``triton`` (the Triton kernel; CUDA only), ``auto`` (the
-decoder's own choice, the default).
+decoder's own choice, the default). ``--old DIR`` adds another checkout's torch decoder as way
+``old`` (before/after in one process: separate runs on the lent machines differ by ±30%).
 """
 from __future__ import annotations
 
@@ -30,6 +32,9 @@ def main(argv=None) -> int:
                     help="time numpy only for calls of at most this many requests (it takes ~1 min per 1M)")
     ap.add_argument("--parse", default="",
                     help="comma-separated: host, steps, triton, auto (the decoder's choice; the default)")
+    ap.add_argument("--old", default=None,
+                    help="another checkout (e.g. `git archive REV rlfc | tar -x -C .old`): its torch decoder "
+                         "timed as way 'old', in this process")
     ap.add_argument("--profile", type=int, default=0,
                     help="also profile one torch call of this many requests (cProfile, device synchronized)")
     a = ap.parse_args(argv)
@@ -43,6 +48,14 @@ def main(argv=None) -> int:
             ways[w].core.device_parse_min = None if w == "host" else 0
             ways[w].core.triton = {"host": None, "steps": False, "triton": True}[w]
     ways = ways or {"torch": td}
+    if a.old:
+        import importlib
+
+        from tools.bench_render_ab import import_old
+
+        old = import_old(a.old)
+        ways["old"] = importlib.import_module("rlfc_old.torch_decode").TorchBlockDecoder(
+            old.RlfcDecoder(open_lfc(a.file)), a.device)
     rng = np.random.default_rng(0)
     print(f"device {td.dev} ({torch.cuda.get_device_name() if td.dev.type == 'cuda' else 'cpu'}), "
           f"{d.rows}x{d.cols} views, {d.nby}x{d.nbx} blocks of {d.block_size}")
