@@ -35,6 +35,9 @@ def main(argv=None) -> int:
     ap.add_argument("--old", default=None,
                     help="another checkout (e.g. `git archive REV rlfc | tar -x -C .old`): its torch decoder "
                          "timed as way 'old', in this process")
+    ap.add_argument("--torch-profile", type=int, default=0,
+                    help="also run torch's profiler on one torch call of this many requests (device time per kernel, "
+                         "the parse and the prediction labelled)")
     ap.add_argument("--profile", type=int, default=0,
                     help="also profile one torch call of this many requests (cProfile, device synchronized)")
     a = ap.parse_args(argv)
@@ -99,7 +102,29 @@ def main(argv=None) -> int:
         sync()
         pr.disable()
         pstats.Stats(pr).sort_stats("cumulative").print_stats(25)
+    if a.torch_profile:
+        from torch.profiler import ProfilerActivity, profile, record_function
+
+        n = a.torch_profile
+        v, by, bx = rng.integers(0, d.rows * d.cols, n), rng.integers(0, d.nby, n), rng.integers(0, d.nbx, n)
+        td.decode_blocks(v, by, bx, to_numpy=False)
+        sync()
+        acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if td.dev.type == "cuda" else [])
+        core = td.core
+        for name in ("_parse", "_pred"):                     # the two halves of a call, labelled
+            fn = getattr(core, name)
+            setattr(core, name, lambda *x, fn=fn, name=name: _labelled(record_function, name, fn, *x))
+        with profile(activities=acts) as prof:
+            td.decode_blocks(v, by, bx, to_numpy=False)
+            sync()
+        key = "self_cuda_time_total" if td.dev.type == "cuda" else "self_cpu_time_total"
+        print(prof.key_averages().table(sort_by=key, row_limit=30))
     return 0
+
+
+def _labelled(record_function, name, fn, *args):
+    with record_function(name):
+        return fn(*args)
 
 
 if __name__ == "__main__":
