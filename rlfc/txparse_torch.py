@@ -42,6 +42,21 @@ def device_words(tables: Tables, device):
     return cache[key]
 
 
+_CONSTANTS: dict = {}
+
+
+def _constants(pcs, device):
+    """(plane classes (P,), band·8 per scan position (64,)) int64 tensors on ``device``, cached
+    (a copy from the host waits for every kernel queued before it)."""
+    import torch
+
+    key = (str(device), tuple(int(c) for c in pcs))
+    if key not in _CONSTANTS:
+        _CONSTANTS[key] = (torch.as_tensor(np.asarray(pcs, np.int64), device=device),
+                           torch.as_tensor(_BAND8_ARR, device=device))
+    return _CONSTANTS[key]
+
+
 def pair_words(buf):
     """(N,) int64 tensor: byte i << 8 | byte i+1 of a uint8 tensor (the last byte paired with
     itself): one gather serves a decode step's one or two bytes in."""
@@ -103,51 +118,56 @@ def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.n
         s, x, p = _step(words, w16, top, x, p, ctx_mode(kind, prev))
         modes[:, t] = s
         prev = s.clamp(max=3)
-    if bool((modes >= N_MODES).any()):
-        raise FormatError(f"{name}: tx block has an undefined tb mode")
-    last = torch.zeros((S, nt, P), **i64)
+    last = torch.zeros((S, nt, P), **i64)         # (an undefined mode counts as coded here; refused below)
     for t in range(nt):
         act = modes[:, t] != MODE_SKIP
         for pi in range(P):
             s, xn, pn = _step(words, w16, top, x, p, ctx_last(int(pcs[pi]), modes[:, t], key))
             x, p = torch.where(act, xn, x), torch.where(act, pn, p)
             last[:, t, pi] = torch.where(act, s, 0)
-    if bool((last > 64).any()):
-        raise FormatError(f"{name}: tx block has a last position past 64")
     # magnitudes: per lane, groups g = (lane, t, p) in order, each of length last; symbol j of a
     # group is at scan position last − 1 − j (lane-major, as the numpy parser)
     flat_len = last.reshape(-1)
     G = flat_len.numel()
     cs = torch.cumsum(flat_len, 0)
-    tot = int(cs[-1])
+    bad_mode, bad_last, tot = torch.stack([(modes >= N_MODES).any(), (last > 64).any(), cs[-1]]).tolist()  # one sync
+    if bad_mode:
+        raise FormatError(f"{name}: tx block has an undefined tb mode")
+    if bad_last:
+        raise FormatError(f"{name}: tx block has a last position past 64")
     per_lane = last.reshape(S, nt * P).sum(1)
     lane_start = torch.cumsum(per_lane, 0) - per_lane
-    g_of = torch.repeat_interleave(torch.arange(G, **i64), flat_len, output_size=tot)
+    # per group first (S·nt·P of them), then one gather per symbol: the symbols outnumber the
+    # groups ~10 to 1, and int64 division on a GPU is slow
+    pcs_t, band8 = _constants(pcs, dev)
+    g = torch.arange(G, **i64)
+    g_lane = g // (nt * P)
+    g_pc = pcs_t.repeat(S * nt)
+    g_ctx = ctx_mag(g_pc, 0, key[g_lane], 0)
+    g_of = torch.repeat_interleave(g, flat_len, output_size=tot)
     j = torch.arange(tot, **i64) - (cs - flat_len)[g_of]
-    index = (g_of << 6) + flat_len[g_of] - 1 - j                      # g·64 + position: ascending
-    lane = g_of // (nt * P)
-    s_pc = torch.as_tensor(np.asarray(pcs, np.int64), device=dev)[g_of % P]
-    band8 = torch.as_tensor(_BAND8_ARR, device=dev)
-    ctx1 = ctx_mag(s_pc, 0, key[lane], 0) + band8[index & 63] + (j >= 1).long()
+    index = ((g << 6) + flat_len - 1)[g_of] - j                       # g·64 + position: ascending
+    ctx1 = g_ctx[g_of] + band8[index & 63] + (j >= 1)
     jm = j.clamp(max=2)
     use_triton = _triton_wanted(dev) if triton is None else triton
     if use_triton:
         sym, x, p = _magnitudes_triton(words, w16, top, x, p, ctx1, jm, per_lane, lane_start)
     else:
-        sym, x, p = _magnitudes_steps(words, w16, top, x, p, ctx1, jm, per_lane, lane_start, lane)
+        sym, x, p = _magnitudes_steps(words, w16, top, x, p, ctx1, jm, per_lane, lane_start, g_lane[g_of])
     if tot and int(sym.max()) > ESC:
         raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
     # escapes (symbol ESC: |c| >= ESC + first), a lane's in order after its magnitudes
     esc = torch.nonzero(sym == ESC).reshape(-1)
     E = int(esc.numel())
     buckets = torch.zeros(E, **i64)
-    e_lane = lane[esc]
+    e_grp = g_of[esc]
+    e_lane = g_lane[e_grp]
     if E:
         ec = torch.bincount(e_lane, minlength=S)
         col = torch.arange(E, **i64) - (torch.cumsum(ec, 0) - ec)[e_lane]      # k-th escape of its lane
         by_col = torch.argsort(col, stable=True)
         ncol = torch.bincount(col).tolist()
-        e_ctx = ctx_esc(s_pc[esc])
+        e_ctx = ctx_esc(g_pc[e_grp])
         a = 0
         for n in ncol:
             sel = by_col[a:a + n]
@@ -162,7 +182,7 @@ def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.n
     first = j == 0
     nz = (sym > 0) | first
     sidx = torch.nonzero(nz).reshape(-1)
-    s_lane = lane[sidx]
+    s_lane = g_lane[g_of[sidx]]
     nsign = torch.bincount(s_lane, minlength=S)
     nsuf = torch.zeros(S, **i64).index_add_(0, e_lane, buckets)
     nbits = nsign + nsuf
