@@ -9,7 +9,8 @@ Two kernels decode the magnitude symbols, which are most of a stream:
 - a Triton kernel, where Triton and a CUDA device are present: each lane decodes its own
   symbols in one loop (lanes sorted by length so that a program's lanes end together). One
   launch instead of tens of thousands; Triton ships with PyTorch's CUDA builds and is never
-  required (``LFC_TRITON=0`` turns it off).
+  required (``LFC_TRITON=0`` turns it off; a kernel that fails to build falls back to the torch
+  steps for the rest of the process, the reason kept in ``_TRITON_FAILED``).
 
 Everything else (modes, last positions, escape buckets, raw bits) is a few dozen vectorized
 torch operations. Malformed streams raise :class:`~formats.errors.FormatError` as on the host;
@@ -149,11 +150,13 @@ def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.n
     index = ((g << 6) + flat_len - 1)[g_of] - j                       # g·64 + position: ascending
     ctx1 = g_ctx[g_of] + band8[index & 63] + (j >= 1)
     jm = j.clamp(max=2)
-    use_triton = _triton_wanted(dev) if triton is None else triton
-    if use_triton:
-        sym, x, p = _magnitudes_triton(words, w16, top, x, p, ctx1, jm, per_lane, lane_start)
-    else:
-        sym, x, p = _magnitudes_steps(words, w16, top, x, p, ctx1, jm, per_lane, lane_start, g_lane[g_of])
+    got = None
+    if (_triton_wanted(dev) if triton is None else triton) and not _TRITON_FAILED:
+        try:
+            got = _magnitudes_triton(words, w16, top, x, p, ctx1, jm, per_lane, lane_start)
+        except Exception as e:            # a Triton or driver that cannot build the kernel: torch steps
+            _TRITON_FAILED.append(f"{type(e).__name__}: {e}")
+    sym, x, p = got or _magnitudes_steps(words, w16, top, x, p, ctx1, jm, per_lane, lane_start, g_lane[g_of])
     if tot and int(sym.max()) > ESC:
         raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
     # escapes (symbol ESC: |c| >= ESC + first), a lane's in order after its magnitudes
@@ -257,6 +260,10 @@ def _magnitudes_steps(words, w16, top, x, p, ctx1, jm, per_lane, lane_start, lan
     x, p = x.clone(), p.clone()
     x[order], p[order] = xs, ps
     return sym, x, p
+
+
+#: why the Triton kernel failed, once it has (the process then parses in torch steps)
+_TRITON_FAILED: list = []
 
 
 def _triton_wanted(device) -> bool:

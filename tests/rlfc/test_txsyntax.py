@@ -205,3 +205,22 @@ def test_triton_magnitude_kernel_equals_the_numpy_parser():
         m, i, v = _device_parse(streams, tables, nt, pcs, kind, key, triton=True)
         got = tx.Parsed(m, i, v, P)
         assert (got.modes == modes).all() and (got.levels == levels).all()
+
+
+def test_a_triton_kernel_that_fails_to_build_falls_back_to_torch_steps(monkeypatch):
+    """Triton is optional: a kernel that cannot be built (old GPU, broken toolchain) leaves the
+    parse to the torch steps, the same integers, and says why."""
+    import rlfc.txparse_torch as tp
+
+    def broken():
+        raise RuntimeError("no compiler for this GPU")
+
+    monkeypatch.setattr(tp, "_magnitude_kernel", broken)
+    monkeypatch.setattr(tp, "_TRITON_FAILED", [])
+    rng = np.random.default_rng(3)
+    modes, levels = _random_blocks(rng, 30, 4, 3, 0.7, False)
+    kind, key, pcs = rng.integers(0, 2, 30), rng.integers(0, 2, 30), tx.plane_classes(3)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    got = tx.Parsed(*_device_parse(streams, tables, 4, pcs, kind, key, triton=True), 3)
+    assert (got.modes == modes).all() and (got.levels == levels).all()
+    assert tp._TRITON_FAILED == ["RuntimeError: no compiler for this GPU"]
