@@ -46,7 +46,7 @@ def main(argv=None) -> int:
     sync = torch.cuda.synchronize if td.dev.type == "cuda" else (lambda: None)
     ways = {}
     for w in [x for x in a.parse.split(",") if x]:
-        ways[w] = TorchBlockDecoder(d, a.device)
+        ways[w] = td if w == "auto" else TorchBlockDecoder(d, a.device)        # (auto: the decoder's own choice)
         if w != "auto":
             ways[w].core.device_parse_min = None if w == "host" else 0
             ways[w].core.triton = {"host": None, "steps": False, "triton": True}[w]
@@ -60,16 +60,19 @@ def main(argv=None) -> int:
         ways["old"] = importlib.import_module("rlfc_old.torch_decode").TorchBlockDecoder(
             old.RlfcDecoder(open_lfc(a.file)), a.device)
     rng = np.random.default_rng(0)
+
+    def requests(n):
+        return rng.integers(0, d.rows * d.cols, n), rng.integers(0, d.nby, n), rng.integers(0, d.nbx, n)
+
     print(f"device {td.dev} ({torch.cuda.get_device_name() if td.dev.type == 'cuda' else 'cpu'}), "
           f"{d.rows}x{d.cols} views, {d.nby}x{d.nbx} blocks of {d.block_size}")
     for n in [int(x) for x in a.counts.split(",")]:
-        v, by, bx = rng.integers(0, d.rows * d.cols, n), rng.integers(0, d.nby, n), rng.integers(0, d.nbx, n)
+        v, by, bx = requests(n)
         ref = d.decode_blocks(v[:20000], by[:20000], bx[:20000])
         for w, t in ways.items():
             t0 = time.perf_counter()
             assert (t.decode_blocks(v[:20000], by[:20000], bx[:20000]) == ref).all(), f"torch ({w}) != numpy"
             print(f"  {w}: first call (compiles) {time.perf_counter() - t0:.2f} s, equal to numpy")
-        res = {}
         fns = [(w, lambda t=t: (t.decode_blocks(v, by, bx, to_numpy=False), sync())) for w, t in ways.items()]
         if n <= a.numpy_max:
             fns.insert(0, ("numpy", lambda: d.decode_blocks(v, by, bx)))
@@ -92,9 +95,8 @@ def main(argv=None) -> int:
         import cProfile
         import pstats
 
-        n = a.profile
-        v, by, bx = rng.integers(0, d.rows * d.cols, n), rng.integers(0, d.nby, n), rng.integers(0, d.nbx, n)
-        td.decode_blocks(v, by, bx, to_numpy=False)
+        v, by, bx = requests(a.profile)
+        td.decode_blocks(v, by, bx, to_numpy=False)                 # (warm)
         sync()
         pr = cProfile.Profile()
         pr.enable()
@@ -105,9 +107,8 @@ def main(argv=None) -> int:
     if a.torch_profile:
         from torch.profiler import ProfilerActivity, profile, record_function
 
-        n = a.torch_profile
-        v, by, bx = rng.integers(0, d.rows * d.cols, n), rng.integers(0, d.nby, n), rng.integers(0, d.nbx, n)
-        td.decode_blocks(v, by, bx, to_numpy=False)
+        v, by, bx = requests(a.torch_profile)
+        td.decode_blocks(v, by, bx, to_numpy=False)                 # (warm)
         sync()
         acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if td.dev.type == "cuda" else [])
         core = td.core

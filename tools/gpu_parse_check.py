@@ -15,13 +15,12 @@ import torch
 from formats.errors import FormatError
 from rlfc import txsyntax as tx
 from rlfc.txparse_torch import pair_words, parse_lanes_torch
-from tests.rlfc.test_txsyntax import _encode, _random_blocks
+from tests.rlfc.test_txsyntax import _encode, _packed, _random_blocks
 
 
 def agrees(dev, streams, tables, nt, pcs, kind, key, triton) -> bool:
     """The device parse equals the numpy parse, or both refuse the streams."""
-    starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
-    buf = np.frombuffer(b"".join(streams) + bytes(8), np.uint8)
+    buf, starts = _packed(streams)
     try:
         ref = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     except FormatError:

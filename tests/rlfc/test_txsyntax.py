@@ -32,6 +32,12 @@ def _encode(modes, levels, kind, key, pcs):
     return tx.pack_streams(len(modes), lane, ctx, sym, rl, rb, tables), tables
 
 
+def _packed(streams):
+    """(buffer of the streams back to back with 8 bytes of slack, (S + 1,) int64 starts)."""
+    starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
+    return np.frombuffer(b"".join(streams) + bytes(8), np.uint8), starts
+
+
 @settings(max_examples=40)
 @given(st.integers(0, 2 ** 31), st.integers(1, 60), st.sampled_from([1, 4]), st.sampled_from([1, 2, 3, 4]),
        st.floats(0, 1), st.booleans(), st.sampled_from([0, 3, 32, 10 ** 6]))
@@ -42,8 +48,7 @@ def test_streams_parse_back_exactly(seed, S, nt, P, density, big, tail):
     modes, levels = _random_blocks(rng, S, nt, P, density, big)
     kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
     streams, tables = _encode(modes, levels, kind, key, pcs)
-    starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
-    buf = np.frombuffer(b"".join(streams) + bytes(8), np.uint8)
+    buf, starts = _packed(streams)
     old = tx.TAIL_LANES
     try:
         tx.TAIL_LANES = tail
@@ -88,8 +93,7 @@ def test_malformed_streams_raise(tail, monkeypatch):
     streams, tables = _encode(modes, levels, kind, key, pcs)
     for cut in (lambda b: b[:-1], lambda b: b + b"\x00", lambda b: bytes([b[0] ^ 0x55]) + b[1:]):
         bad = [cut(b) for b in streams]
-        starts = np.concatenate([[0], np.cumsum([len(b) for b in bad])]).astype(np.int64)
-        buf = np.frombuffer(b"".join(bad) + bytes(8), np.uint8)
+        buf, starts = _packed(bad)
         with pytest.raises(FormatError):
             tx.parse_lanes(buf, starts[:-1], starts[1:], tables, 4, pcs, kind, key)
         with pytest.raises(FormatError):
@@ -141,8 +145,8 @@ def _device_parse(streams, tables, nt, pcs, kind, key, triton=False):
 
     from rlfc.txparse_torch import pair_words, parse_lanes_torch
 
-    starts = np.concatenate([[0], np.cumsum([len(b) for b in streams])]).astype(np.int64)
-    buf = torch.as_tensor(np.frombuffer(b"".join(streams) + bytes(8), np.uint8).copy())
+    packed, starts = _packed(streams)
+    buf = torch.as_tensor(packed.copy())
     t = [torch.as_tensor(np.asarray(a, np.int64)) for a in (starts[:-1], starts[1:], kind, key)]
     m, i, v = parse_lanes_torch(buf, pair_words(buf), t[0], t[1], tables, nt, pcs, t[2], t[3], "x", triton)
     return m.numpy(), i.numpy(), v.numpy()
@@ -165,10 +169,9 @@ def test_device_parser_equals_the_numpy_parser(seed, S, nt, P, density, big):
     b = bytearray(streams[k])
     b[int(rng.integers(0, len(b)))] ^= int(rng.integers(1, 256))
     bad = streams[:k] + [bytes(b)] + streams[k + 1:]
-    starts = np.concatenate([[0], np.cumsum([len(x) for x in bad])]).astype(np.int64)
+    buf, starts = _packed(bad)
     try:
-        want = tx.parse_lanes(np.frombuffer(b"".join(bad) + bytes(8), np.uint8), starts[:-1], starts[1:], tables, nt,
-                              pcs, kind, key)
+        want = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     except FormatError:
         with pytest.raises(FormatError):
             _device_parse(bad, tables, nt, pcs, kind, key)
