@@ -27,9 +27,10 @@ from formats.errors import FormatError
 
 from .rans import BACK_BITS, L as RANS_L, PROB_BITS, STATE_BYTES, Tables
 from .txsyntax import (_BAND8_ARR, _MASK, ESC, MODE_SKIP, N_BUCKETS, N_MODES, ctx_esc, ctx_last, ctx_mag, ctx_mode,
-                       slot_words)
+                       slot_words, symbol_parts)
 
 _L2 = RANS_L >> 8          # a state under this needs two bytes in
+MAX_DEVICE_SYMBOLS = 1 << 24   # magnitude symbols parsed together on a device (~1–2 GB of temporaries)
 
 
 def device_words(tables: Tables, device):
@@ -78,7 +79,7 @@ def _step(words, w16, top, x, p, ctx):
 
 
 def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.ndarray, kind, key, name: str = "",
-                      triton: bool | None = None):
+                      triton: bool | None = None, max_symbols: int | None = None):
     """Parse S streams at once on ``buf``'s device.
 
     Args:
@@ -89,6 +90,9 @@ def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.n
         pcs: (P,) numpy plane classes.
         triton: use the Triton magnitude kernel (None: where it is available and the device is
             CUDA, unless ``LFC_TRITON=0``).
+        max_symbols: magnitude symbols parsed together (default :data:`MAX_DEVICE_SYMBOLS`);
+            streams that claim more are parsed in runs of lanes of at most that many, as the
+            numpy parser does.
 
     Returns:
         (modes (S, nt) int64, index (K,) int64, values (K,) int64) tensors, as
@@ -137,6 +141,15 @@ def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.n
     if bad_last:
         raise FormatError(f"{name}: tx block has a last position past 64")
     per_lane = last.reshape(S, nt * P).sum(1)
+    budget = MAX_DEVICE_SYMBOLS if max_symbols is None else max_symbols
+    if tot > budget and S > 1:                    # bounded temporaries, whatever the streams claim
+        bounds = symbol_parts(per_lane.cpu().numpy(), budget)
+        parts = [parse_lanes_torch(buf, w16, starts[a:b], ends[a:b], tables, nt, pcs, kind[a:b], key[a:b], name,
+                                   triton, budget) for a, b in zip(bounds[:-1], bounds[1:])]
+        per = nt * P * 64
+        return (torch.cat([m for m, _, _ in parts]),
+                torch.cat([i + a * per for (_, i, _), a in zip(parts, bounds[:-1])]),
+                torch.cat([v for _, _, v in parts]))
     lane_start = torch.cumsum(per_lane, 0) - per_lane
     # per group first (S·nt·P of them), then one gather per symbol: the symbols outnumber the
     # groups ~10 to 1, and int64 division on a GPU is slow

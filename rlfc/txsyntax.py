@@ -46,6 +46,7 @@ N_PC = 3          # plane classes
 _MASK = RANS_M - 1
 #: a magnitude parse finishes in plain Python once fewer lanes than this have symbols left
 TAIL_LANES = 32
+MAX_PARSE_SYMBOLS = 1 << 21   # magnitude symbols parsed together (~134 B each of temporaries: ~280 MB)
 
 # context layout: one table set, contexts numbered by kind of symbol
 CTX_MODE = 0                                    # 2 kinds × 4 previous modes
@@ -397,10 +398,28 @@ def concat_parsed(parts: list) -> "Parsed":
                   np.concatenate([p.values for p in parts]), parts[0].P)
 
 
+def symbol_parts(per_lane: np.ndarray, budget: int) -> list:
+    """Bounds [0, …, S] of runs of consecutive lanes whose symbol counts ``per_lane`` (S,) sum
+    to at most ``budget`` each (a lane over it alone is a run of its own)."""
+    bounds = [0]
+    cs = np.cumsum(per_lane)
+    while bounds[-1] < per_lane.size:
+        a = bounds[-1]
+        base = int(cs[a - 1]) if a else 0
+        b = int(np.searchsorted(cs, base + budget, side="right"))
+        bounds.append(max(b, a + 1))
+    return bounds
+
+
 def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: Tables, nt: int, pcs: np.ndarray,
-                kind: np.ndarray, key: np.ndarray, name: str = "") -> Parsed:
+                kind: np.ndarray, key: np.ndarray, name: str = "", max_symbols: int | None = None) -> Parsed:
     """Parse S streams at once (numpy lanes). ``buf`` holds the streams (8 bytes of slack after
     the last); stream i is ``buf[starts[i]:ends[i]]``.
+
+    The streams' last positions say how many magnitude symbols follow (up to 64 per tb and
+    plane, whatever the stream's length: a few bytes can claim them all). Where they sum to more
+    than ``max_symbols`` (default :data:`MAX_PARSE_SYMBOLS`), the lanes are parsed in runs of at
+    most that many, so a call's temporaries stay bounded whatever a file claims.
 
     Raises:
         FormatError: a stream that is malformed (bad symbol, overrun, wrong end state).
@@ -433,6 +452,11 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     gl = last.reshape(S, nt * P)
     per_lane = gl.sum(axis=1)
     tot = int(per_lane.sum())
+    budget = MAX_PARSE_SYMBOLS if max_symbols is None else max_symbols
+    if tot > budget and S > 1:
+        bounds = symbol_parts(per_lane, budget)
+        return concat_parsed([parse_lanes(buf, starts[a:b], ends[a:b], tables, nt, pcs, kind[a:b], key[a:b], name,
+                                          budget) for a, b in zip(bounds[:-1], bounds[1:])])
     lane_start = np.cumsum(per_lane) - per_lane
     flat_len = gl.reshape(-1)
     G = flat_len.size

@@ -227,3 +227,43 @@ def test_a_triton_kernel_that_fails_to_build_falls_back_to_torch_steps(monkeypat
     got = tx.Parsed(*_device_parse(streams, tables, 4, pcs, kind, key, triton=True), 3)
     assert (got.modes == modes).all() and (got.levels == levels).all()
     assert tp._TRITON_FAILED == ["RuntimeError: no compiler for this GPU"]
+
+
+@settings(max_examples=60)
+@given(st.lists(st.integers(0, 800), min_size=1, max_size=50), st.integers(1, 3000))
+def test_symbol_parts_cover_the_lanes_in_runs_within_the_budget(per_lane, budget):
+    n = np.array(per_lane, np.int64)
+    b = tx.symbol_parts(n, budget)
+    assert b[0] == 0 and b[-1] == n.size and all(x < y for x, y in zip(b, b[1:]))
+    for a, c in zip(b, b[1:]):
+        assert c - a == 1 or n[a:c].sum() <= budget
+        if c < n.size:                                  # a run stops only where the next lane would not fit
+            assert n[a:c + 1].sum() > budget
+
+
+@pytest.mark.parametrize("device", [False, True])
+def test_streams_that_claim_many_symbols_parse_in_bounded_runs(device, monkeypatch):
+    """However many magnitude symbols the streams' last positions claim (a few bytes can claim
+    768 per block), one magnitude pass handles at most the budget; the integers are the same."""
+    import rlfc.txparse_torch as tp
+
+    rng = np.random.default_rng(11)
+    S, nt, P = 40, 4, 3
+    modes, levels = _random_blocks(rng, S, nt, P, 0.9, False)
+    kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    budget = int((levels != 0).sum() // 5)
+    sizes = []
+    if device:
+        real = tp._magnitudes_steps
+        monkeypatch.setattr(tp, "_magnitudes_steps", lambda *a: sizes.append(int(a[5].numel())) or real(*a))
+        monkeypatch.setattr(tp, "MAX_DEVICE_SYMBOLS", budget)
+        got = tx.Parsed(*_device_parse(streams, tables, nt, pcs, kind, key), P)
+    else:
+        real = tx._magnitudes
+        monkeypatch.setattr(tx, "_magnitudes", lambda *a: sizes.append(int(a[-1].size)) or real(*a))
+        monkeypatch.setattr(tx, "MAX_PARSE_SYMBOLS", budget)
+        buf, starts = _packed(streams)
+        got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+    assert (got.modes == modes).all() and (got.levels == levels).all()
+    assert len(sizes) >= 5 and max(sizes) <= budget and sum(sizes) >= (levels != 0).sum()
