@@ -882,6 +882,29 @@ class TxEncoder:
             self._gather_pixels(res)
         return res
 
+    def run_j2k(self, levels: np.ndarray, step: float, progress=None) -> dict:
+        """Every view (a posed capture's: each an intra key) as JPEG 2000 at its own OpenJPEG
+        quality ``levels`` (n0,) (dB): a run as :meth:`run` returns it, with no transform-coded
+        view (``step`` is only recorded). The views are coded on a few threads (OpenJPEG releases
+        the GIL); their decoded pixels are kept where :attr:`keep_decoded` says."""
+        keep = self.keep_decoded
+        done = [0]
+
+        def tick(n):
+            done[0] += n
+            if progress:
+                progress("code views", done[0], self.n0)
+
+        out = Runner().map_threaded(_j2k_task, [(self, v, float(levels[v]), keep) for v in range(self.n0)], tick)
+        res = {"steps16": self.steps16(step), "thumb16": 16, "thumbs": {}, "codes": [c for _, c in out], "step": step,
+               "keyimg": {v: data for v, (data, _) in enumerate(out)}, "model": Model(default_counts()),
+               "promoted": [], "j2k_ref": None, "lam_scale": 1.0, "j2k_hints": {}, "trial_counts": None,
+               "kept": True, "j2k_levels": np.asarray(levels, np.float64)}
+        if keep:
+            res["pixels"] = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
+            self._gather_pixels(res)
+        return res
+
     @staticmethod
     def _gather_pixels(res: dict) -> None:
         """Copy into ``res["pixels"]`` the decoded views that live elsewhere (JPEG 2000 views,
@@ -1203,6 +1226,32 @@ class TxEncoder:
         return cfg, sections
 
 
+def _dct_task(enc: TxEncoder, v: int) -> tuple[tuple[np.ndarray, int], float]:
+    """(:func:`rlfc.j2kalloc.dct_samples`, :func:`rlfc.j2kalloc.smooth_psnr`) of view v."""
+    from .j2kalloc import dct_samples, smooth_psnr
+
+    px = enc.view_pixels(v)
+    return dct_samples(px), smooth_psnr(px)
+
+
+def _j2k_task(enc: TxEncoder, v: int, level: float, keep: bool) -> tuple[bytes, ViewCode]:
+    """View v's padded image as JPEG 2000 at OpenJPEG's quality ``level`` (dB): (codestream,
+    its code: no tbs, the colour error over the view's own pixels, the pixels where ``keep``)."""
+    import imagecodecs
+
+    from .topcodec import decode_image
+
+    orig = enc.view_pixels(v)
+    img = enc.padded(orig)
+    data = bytes(imagecodecs.jpeg2k_encode(img[..., 0] if img.shape[-1] == 1 else img, level=level,
+                                           codecformat="J2K"))
+    crop = decode_image("j2k", data, img.shape, img.dtype)[:enc.h, :enc.w_px]
+    sse, cnt = colour_sq_error(orig, crop)
+    return data, ViewCode(np.zeros(enc.nby8 * enc.nbx8, np.int8), np.zeros(0, np.int64),
+                          np.zeros((0, enc.P, 64), np.int16), np.zeros(enc.nby * enc.nbx, bool),
+                          np.ascontiguousarray(crop) if keep else None, None, 0.0, sse, cnt)
+
+
 def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
                step16: np.ndarray, lam: float, keep_pixels) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
@@ -1259,6 +1308,48 @@ MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the 
                       # nearest to its step where one is this near (else it measures one first)
 PSNR_SLOPE = -2.5    # dB per octave of the step around 40 dB (dense grids: 2.2-2.8), the search's prior
 BPP_SLOPE = -1.0     # log2 bpp per octave of the step, the same for a bpp target
+
+#: posed captures coded as JPEG 2000 (a PSNR target): the first shift of the views' levels
+#: above their shares of the error (OpenJPEG lands 0.3–0.7 dB under the level asked on the LLFF
+#: captures), and how far above the target a pass may land and end the search (dB)
+J2K_FIRST_DB = 0.45
+J2K_TOL_DB = 0.03
+#: every view's thumbnail alone (:func:`rlfc.j2kalloc.smooth_psnr`) must stay this far below the
+#: target for JPEG 2000 to be taken without trying the transform path (dB; the LLFF captures are
+#: 2.3 dB and more below at 36 dB, where the full search coded every view as JPEG 2000)
+J2K_SMOOTH_MARGIN_DB = 2.0
+
+
+def _search_j2k_levels(enc: TxEncoder, target: float, step: float, trace: list, progress) -> tuple[dict | None, bool]:
+    """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target``, searched on
+    OpenJPEG's own quality levels instead of through the transform path (which coded every view
+    both ways in every pass): each view's share of the error from one uniform quantizer step
+    (:func:`rlfc.j2kalloc.share_psnrs`, open loop), then a secant on one shift of every view's
+    level. Returns (the run of the largest shift that met the target, else the closest; whether
+    one met it), or (None, False) where a view is smooth enough for the transform path to
+    compete (:data:`J2K_SMOOTH_MARGIN_DB`): the full search decides those."""
+    from .j2kalloc import MAX_LEVEL, MIN_LEVEL, share_psnrs
+
+    n = enc.n0
+    got = Runner().map_threaded(_dct_task, [(enc, v) for v in range(n)])
+    if max(sm for _, sm in got) > target - J2K_SMOOTH_MARGIN_DB:
+        return None, False
+    share = share_psnrs([s for s, _ in got], np.ones(n), float(enc.peak), target)
+    del got
+
+    def value(q):                              # q = −shift: the PSNR falls as q grows
+        levels = np.clip(share - q, MIN_LEVEL, MAX_LEVEL)
+        res = enc.run_j2k(levels, step, progress)
+        ps = enc.psnr(res)
+        nbytes = sum(len(b) for b in res["keyimg"].values())
+        trace.append({"j2k_shift": -q, "psnr_rgb": ps, "bpp": 8 * nbytes / (n * enc.h * enc.w_px)})
+        return ps, res
+
+    sr = secant_search(value, -J2K_FIRST_DB, target, feasible_above=True, slope0=-1.0,
+                       lo=float(share.min() - MAX_LEVEL), hi=float(share.max() - MIN_LEVEL), tol=J2K_TOL_DB,
+                       snap=lambda q: round(q * 256) / 256)
+    return sr.result, sr.found
+
 
 SIDE_SCALE = 6.0   # side information is judged open loop on the original key views, which flatters it:
                    # measured best at 6..10 × the coding λ on the dense grids (BENCHMARKS.md)
@@ -1468,7 +1559,17 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
     # (a first pass measures the entropy model; its codes are dropped before the pass that
     # uses the model, so the two passes' levels never exist at once)
-    if params.lossless:
+    j2k_only = (lf.layout != "grid" and enc.all_intra and enc.intra_codec == "j2k" and options.target_psnr is not None
+                and options.target_bpp is None and params.step is None and not params.lossless)
+    if j2k_only:
+        # every view of a posed capture coded alone as JPEG 2000: searched on JPEG 2000's own
+        # levels; smooth views, or a target beyond JPEG 2000's finest lossy level, go on to the
+        # full search below (the transform path or JPEG 2000, per view)
+        res, found = _search_j2k_levels(enc, options.target_psnr, step0, trace, progress)
+        j2k_only = res is not None
+    if j2k_only and found:
+        pass                                  # (that search's run is the file)
+    elif params.lossless:
         measured = enc.model_of(run(1.0))
         res = enc.run(1.0, measured, progress, keep_pixels=True)
     elif options.target_psnr is None and options.target_bpp is None:

@@ -1,0 +1,123 @@
+"""Sharing a pooled PSNR target among images coded independently by JPEG 2000 (posed captures):
+the open-loop shares, the smoothness screen, and the encoder's search on JPEG 2000's levels."""
+import math
+
+import numpy as np
+import pytest
+
+from formats.codec_api import EncodeOptions
+from formats.metrics import psnr_rgb
+from formats.pixels import rgb_mse_weights, to_planes
+from formats.scenes import read_scene
+from rlfc import encode
+from rlfc import j2kalloc as J
+from tests.conftest import ROOT
+from tests.rlfc.helpers import check_agreement, make_lf, open_encoded
+
+
+def _texture(rng, h=64, w=80, sigma=1.0, dtype=np.uint8):
+    import cv2
+
+    x = cv2.GaussianBlur(rng.random((h, w, 3)).astype(np.float32), (0, 0), sigma)
+    x = (x - x.min()) / (x.max() - x.min())
+    return (x * np.iinfo(dtype).max).round().astype(dtype)
+
+
+def _gradient(h=64, w=80, c=90):
+    yy, xx = np.mgrid[0:h, 0:w]
+    return np.stack([xx * 255 // w, yy * 255 // h, np.full_like(xx, c)], -1).astype(np.uint8)
+
+
+def test_dct_samples_keep_each_planes_weighted_energy(rng):
+    img = _texture(rng)
+    c, px = J.dct_samples(img)
+    planes = to_planes(img).astype(np.float64)
+    s = J.SAMPLE_STRIDE
+    blocks = planes[:64, :80].reshape(8, 8, 10, 8, 3)[::s, :, ::s]
+    want = sum(w * np.square(blocks[..., p]).sum() for p, w in enumerate(rgb_mse_weights(3)))
+    assert px == blocks.shape[0] * blocks.shape[2] * 64
+    assert np.isclose(np.square(c.astype(np.float64)).sum(), want, rtol=1e-4)       # (orthonormal DCT)
+
+
+def test_shares_pool_to_the_target_and_give_textured_images_more_of_the_error(rng):
+    imgs = [_texture(rng, sigma=0.7), _texture(rng, sigma=3.0), _texture(rng, sigma=1.5)]
+    for target in (32.0, 40.0, 46.0):
+        sh = J.share_psnrs([J.dct_samples(i) for i in imgs], np.ones(3), 255.0, target)
+        pooled = 10 * np.log10(255.0 ** 2 * 3 / np.sum(255.0 ** 2 / 10 ** (sh / 10)))
+        assert abs(pooled - target) <= 0.02
+        assert sh[0] < sh[2] < sh[1]                 # the most textured image takes the most error
+
+
+def test_an_image_no_step_errs_on_gets_the_target():
+    black = np.zeros((32, 40, 3), np.uint8)                # every coefficient 0: no step errs
+    sh = J.share_psnrs([J.dct_samples(black), J.dct_samples(black)], np.ones(2), 255.0, 40.0)
+    assert (sh == 40.0).all()
+    assert J.dct_samples(np.zeros((4, 40, 3), np.uint8))[1] == 0          # (smaller than a block)
+
+
+def test_smooth_psnr_tells_gradients_from_texture(rng):
+    assert J.smooth_psnr(_gradient()) > 40 and J.smooth_psnr(_gradient(256, 320)) > 45
+    assert J.smooth_psnr(_texture(rng, sigma=0.7)) < 30
+    assert J.smooth_psnr(np.full((16, 16, 3), 9, np.uint8)) == math.inf
+    grey16 = (_texture(rng, sigma=0.7)[..., :1].astype(np.uint16) * 257)
+    assert J.smooth_psnr(grey16) < 30
+
+
+def _posed(views):
+    lf = make_lf(np.ascontiguousarray(views)[None])
+    lf.layout = "posed"
+    return lf
+
+
+def _dino(n=6):
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    return lf.views.reshape((-1,) + lf.views.shape[2:])[:n]
+
+
+def test_posed_psnr_targets_search_jpeg2000_levels_and_cost_what_the_full_search_costs(monkeypatch):
+    """A posed capture of natural views at a PSNR target: every view JPEG 2000 at its share of
+    the error, found in a few passes on JPEG 2000's levels; no larger than the full search, which
+    codes every view with the transform path and JPEG 2000 in every pass."""
+    import rlfc.txencode as T
+
+    lf = _posed(_dino())
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=40.0))
+    assert e.target_met and len(e.trace) <= 6 and all("j2k_shift" in t for t in e.trace)
+    assert min(e.config["tx"]["key_images"]) > 0                         # every view JPEG 2000
+    d, _ = open_encoded(lf, e)
+    full = d.decode_all()
+    assert (full == e.decoded).all() and psnr_rgb(lf.views, full) >= 40.0
+    check_agreement(d, e.decoded.shape)
+    monkeypatch.setattr(T, "J2K_SMOOTH_MARGIN_DB", math.inf)            # the full search, forced
+    ref = encode(lf, EncodeOptions(profile="tx", target_psnr=40.0))
+    assert ref.target_met and not any("j2k_shift" in t for t in ref.trace)
+    size = sum(len(x) for _, x in e.sections)
+    assert size <= 1.01 * sum(len(x) for _, x in ref.sections), (size, [len(x) for _, x in ref.sections])
+
+
+def test_posed_grey16_views_take_the_jpeg2000_search():
+    grey = (to_planes(_dino(4))[..., :1].clip(0, 255).astype(np.uint16) * 257)
+    lf = _posed(grey)
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=44.0))
+    assert e.target_met and all("j2k_shift" in t for t in e.trace)
+    d, _ = open_encoded(lf, e)
+    full = d.decode_all()
+    assert full.dtype == np.uint16 and (full == e.decoded).all() and psnr_rgb(lf.views, full) >= 44.0
+
+
+def test_smooth_posed_views_go_to_the_full_search():
+    """A gradient is cheaper through the thumbnail + transform path: a capture with one takes
+    the full search, which keeps it transform-coded beside JPEG 2000 views."""
+    v = np.concatenate([_gradient(128, 160)[None], _dino(3)])
+    e = encode(_posed(v), EncodeOptions(profile="tx", target_psnr=38.0))
+    assert e.target_met and not any("j2k_shift" in t for t in e.trace)
+    imgs = e.config["tx"]["key_images"]
+    assert imgs[0] == 0 and min(imgs[1:]) > 0
+
+
+def test_a_target_beyond_jpeg2000s_finest_lossy_level_still_gets_a_file_that_meets_it():
+    lf = _posed(_dino(3))
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=75.0))
+    assert e.target_met and any("j2k_shift" in t for t in e.trace)
+    d, _ = open_encoded(lf, e)
+    assert psnr_rgb(lf.views, d.decode_all()) >= 75.0
