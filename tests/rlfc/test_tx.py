@@ -65,6 +65,42 @@ def test_torch_decoder_in_chunks_equals_one_call(rng, monkeypatch):
     assert (whole == d.decode_blocks(v, by, bx)).all()
 
 
+def test_torch_chunks_follow_free_memory_and_halve_when_the_device_runs_out(rng, monkeypatch):
+    """A call's requests go to the device in chunks sized by its free memory (~80 KB each at
+    peak), and a chunk that still runs out of memory is decoded again in halves: same blocks."""
+    import torch
+
+    import rlfc.torch_decode as td
+
+    cuda = torch.device("cuda")
+    for free, want in ((8 << 30, int(td.DEVICE_SHARE * (8 << 30)) // td.BYTES_PER_REQUEST),
+                       (1 << 20, td.MIN_CHUNK), (1 << 40, td.CHUNK)):
+        monkeypatch.setattr(torch.cuda, "mem_get_info", lambda dev=None, f=free: (f, 2 * f))
+        assert td.chunk_for(cuda) == want
+    assert td.chunk_for(torch.device("cpu")) == td.CPU_BUDGET // td.BYTES_PER_REQUEST
+    d, _ = open_encoded(smooth_lf(), tx(smooth_lf(), step=6.0))
+    v, by, bx = rng.integers(0, d.rows * d.cols, 1000), rng.integers(0, d.nby, 1000), rng.integers(0, d.nbx, 1000)
+    t = td.TorchBlockDecoder(d, "cpu")
+    real, sizes = t.core.blocks, []
+
+    def blocks(views, *a):
+        sizes.append(views.size)
+        if views.size > 300:
+            raise torch.OutOfMemoryError("CUDA out of memory (simulated)")
+        return real(views, *a)
+
+    t.core.blocks = blocks
+    monkeypatch.setattr(td, "MIN_CHUNK", 100)
+    assert (t.decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
+    assert sizes[:3] == [1000, 500, 250] and max(sizes[3:]) <= 250
+    monkeypatch.setattr(td, "MIN_CHUNK", 400)                   # too little memory even for the least
+    with pytest.raises(torch.OutOfMemoryError):
+        t.decode_blocks(v, by, bx)
+    t.core.blocks = lambda *a: (_ for _ in ()).throw(ValueError("not a memory error"))
+    with pytest.raises(ValueError):
+        t.decode_blocks(v, by, bx)
+
+
 @pytest.mark.parametrize("remote", [False, True])
 def test_torch_decoder_parsing_on_the_device_equals_numpy(rng, monkeypatch, remote):
     """Residual streams parsed by the device (a GPU's path: LFC_DEVICE_PARSE=1 forces it on the
