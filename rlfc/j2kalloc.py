@@ -77,10 +77,12 @@ def quantizer_mse(samples: list, step: float) -> np.ndarray:
     return np.array([float(np.square(y - s * np.rint(y / s)).sum()) / px if px else 0.0 for y, px in samples])
 
 
-def share_psnrs(samples: list, cnt: np.ndarray, peak: float, target: float, tol: float = 0.02) -> np.ndarray:
-    """(n,) each image's PSNR (dB) at the one quantizer step whose pooled PSNR is ``target``:
-    the images' shares of the error. ``cnt`` (n,): each image's weight in the pooled PSNR (its
-    samples). Images a step does not err on (flat, or no sample) get the target."""
+def common_step(samples: list, cnt: np.ndarray, peak: float, target: float, tol: float = 0.02
+                ) -> tuple[float, np.ndarray]:
+    """The one quantizer step whose pooled PSNR is ``target`` (within ``tol`` dB), and (n,) each
+    image's mean squared error there. ``cnt`` (n,): each image's weight in the pooled PSNR (its
+    samples). (An all-zero set of coefficients, which no step errs on, gives the largest step
+    tried and zeros.)"""
     cnt = np.asarray(cnt, np.float64)
 
     def pooled(step):
@@ -104,9 +106,28 @@ def share_psnrs(samples: list, cnt: np.ndarray, peak: float, target: float, tol:
             break
         q = nq
         mse, p = pooled(2.0 ** q)
+    return 2.0 ** q, mse
+
+
+def share_psnrs(samples: list, cnt: np.ndarray, peak: float, target: float, tol: float = 0.02) -> np.ndarray:
+    """(n,) each image's PSNR (dB) at the :func:`common_step` of ``target``: the images' shares
+    of the error. Images a step does not err on (flat, or no sample) get the target."""
+    _, mse = common_step(samples, cnt, peak, target, tol)
     with np.errstate(divide="ignore"):
         out = 10 * np.log10(peak ** 2 / mse)
     return np.where(np.isfinite(out), out, target)
 
 
-__all__ = ["MIN_LEVEL", "MAX_LEVEL", "SAMPLE_STRIDE", "dct_samples", "quantizer_mse", "share_psnrs", "smooth_psnr"]
+def step_prior(samples: list, cnt: np.ndarray, peak: float, target: float) -> tuple[float, float]:
+    """(the :func:`common_step` of ``target``, dB of pooled PSNR per octave of the step there),
+    from the steps of target ± 1 dB: where a quantizer search over these images may start, and
+    its prior slope (< 0)."""
+    s_lo, _ = common_step(samples, cnt, peak, target - 1.0)
+    s_hi, _ = common_step(samples, cnt, peak, target + 1.0)
+    s, _ = common_step(samples, cnt, peak, target)
+    octaves = float(np.log2(s_lo / s_hi))
+    return s, (-2.0 / octaves if octaves > 1e-6 else -6.0)
+
+
+__all__ = ["MIN_LEVEL", "MAX_LEVEL", "SAMPLE_STRIDE", "common_step", "dct_samples", "quantizer_mse", "share_psnrs",
+           "smooth_psnr", "step_prior"]

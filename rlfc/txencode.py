@@ -1318,24 +1318,24 @@ J2K_TOL_DB = 0.03
 #: target for JPEG 2000 to be taken without trying the transform path (dB; the LLFF captures are
 #: 2.3 dB and more below at 36 dB, where the full search coded every view as JPEG 2000)
 J2K_SMOOTH_MARGIN_DB = 2.0
+#: the transform path's step at a PSNR over the open-loop step that rounds the views' 8×8 DCT to
+#: that PSNR (:func:`rlfc.j2kalloc.step_prior`; its rate-distortion decisions zero more): 1.21–1.65
+#: on six posed encodes (the LLFF captures at 36 and 40 dB, mitsuba_objects_360 at 40 dB)
+PROXY_STEP_RATIO = 1.4
 
 
-def _search_j2k_levels(enc: TxEncoder, target: float, step: float, trace: list, progress) -> tuple[dict | None, bool]:
+def _search_j2k_levels(enc: TxEncoder, target: float, step: float, samples: list, trace: list, progress
+                       ) -> tuple[dict, bool]:
     """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target``, searched on
     OpenJPEG's own quality levels instead of through the transform path (which coded every view
     both ways in every pass): each view's share of the error from one uniform quantizer step
-    (:func:`rlfc.j2kalloc.share_psnrs`, open loop), then a secant on one shift of every view's
-    level. Returns (the run of the largest shift that met the target, else the closest; whether
-    one met it), or (None, False) where a view is smooth enough for the transform path to
-    compete (:data:`J2K_SMOOTH_MARGIN_DB`): the full search decides those."""
+    (:func:`rlfc.j2kalloc.share_psnrs` of the views' ``samples``, open loop), then a secant on
+    one shift of every view's level. Returns (the run of the largest shift that met the target,
+    else the closest; whether one met it)."""
     from .j2kalloc import MAX_LEVEL, MIN_LEVEL, share_psnrs
 
     n = enc.n0
-    got = Runner().map_threaded(_dct_task, [(enc, v) for v in range(n)])
-    if max(sm for _, sm in got) > target - J2K_SMOOTH_MARGIN_DB:
-        return None, False
-    share = share_psnrs([s for s, _ in got], np.ones(n), float(enc.peak), target)
-    del got
+    share = share_psnrs(samples, np.ones(n), float(enc.peak), target)
 
     def value(q):                              # q = −shift: the PSNR falls as q grows
         levels = np.clip(share - q, MIN_LEVEL, MAX_LEVEL)
@@ -1559,14 +1559,26 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
     # (a first pass measures the entropy model; its codes are dropped before the pass that
     # uses the model, so the two passes' levels never exist at once)
-    j2k_only = (lf.layout != "grid" and enc.all_intra and enc.intra_codec == "j2k" and options.target_psnr is not None
-                and options.target_bpp is None and params.step is None and not params.lossless)
-    if j2k_only:
-        # every view of a posed capture coded alone as JPEG 2000: searched on JPEG 2000's own
-        # levels; smooth views, or a target beyond JPEG 2000's finest lossy level, go on to the
+    slope0 = PSNR_SLOPE
+    j2k_only = False
+    if (lf.layout != "grid" and enc.all_intra and options.target_psnr is not None and options.target_bpp is None
+            and params.step is None and not params.lossless):
+        # every view of a posed capture coded alone: each view's 8×8 DCT rounded to one step
+        # (open loop) says how the views share the error and where the quantizer search starts
+        from .j2kalloc import step_prior
+
+        got = Runner().map_threaded(_dct_task, [(enc, v) for v in range(nv)])
+        samples = [s for s, _ in got]
+        # natural views as JPEG 2000, searched on JPEG 2000's own levels; smooth views (the
+        # transform path may win), or a target beyond JPEG 2000's finest lossy level, take the
         # full search below (the transform path or JPEG 2000, per view)
-        res, found = _search_j2k_levels(enc, options.target_psnr, step0, trace, progress)
-        j2k_only = res is not None
+        if enc.intra_codec == "j2k" and max(sm for _, sm in got) <= options.target_psnr - J2K_SMOOTH_MARGIN_DB:
+            res, found = _search_j2k_levels(enc, options.target_psnr, step0, samples, trace, progress)
+            j2k_only = True
+        if not (j2k_only and found):
+            s_p, slope0 = step_prior(samples, np.ones(nv), float(enc.peak), options.target_psnr)
+            step0 = PROXY_STEP_RATIO * s_p
+        del got, samples
     if j2k_only and found:
         pass                                  # (that search's run is the file)
     elif params.lossless:
@@ -1619,7 +1631,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             return qn > qo if floor else enc.psnr(rn) >= enc.psnr(ro)
 
         sr = secant_search(value, q0, options.target_psnr if floor else math.log2(options.target_bpp),
-                           feasible_above=floor, slope0=PSNR_SLOPE if floor else BPP_SLOPE, lo=lo_q, hi=hi_q,
+                           feasible_above=floor, slope0=slope0 if floor else BPP_SLOPE, lo=lo_q, hi=hi_q,
                            tol=0.03 if floor else 0.01, prefer=prefer,
                            snap=lambda q: math.log2(enc.grid_step(2.0 ** q)))
         found, res = sr.found, sr.result
