@@ -34,8 +34,8 @@ def chunk_for(device) -> int:
 
 
 def _out_of_memory(e: BaseException) -> bool:
-    oom = getattr(torch, "OutOfMemoryError", None) or getattr(torch.cuda, "OutOfMemoryError", ())
-    return isinstance(e, oom) if oom else False
+    oom = getattr(torch, "OutOfMemoryError", None) or getattr(torch.cuda, "OutOfMemoryError", None)
+    return oom is not None and isinstance(e, oom)
 
 
 class TorchBlockDecoder:

@@ -899,7 +899,7 @@ class TxEncoder:
         res = {"steps16": self.steps16(step), "thumb16": 16, "thumbs": {}, "codes": [c for _, c in out], "step": step,
                "keyimg": {v: data for v, (data, _) in enumerate(out)}, "model": Model(default_counts()),
                "promoted": [], "j2k_ref": None, "lam_scale": 1.0, "j2k_hints": {}, "trial_counts": None,
-               "kept": True, "j2k_levels": np.asarray(levels, np.float64)}
+               "kept": True}
         if keep:
             res["pixels"] = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
             self._gather_pixels(res)

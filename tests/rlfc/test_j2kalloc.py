@@ -3,7 +3,6 @@ the open-loop shares, the smoothness screen, and the encoder's search on JPEG 20
 import math
 
 import numpy as np
-import pytest
 
 from formats.codec_api import EncodeOptions
 from formats.metrics import psnr_rgb
