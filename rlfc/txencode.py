@@ -1226,13 +1226,12 @@ class TxEncoder:
         return cfg, sections
 
 
-def _dct_task(enc: TxEncoder, v: int, smooth: bool = False) -> tuple[tuple[np.ndarray, int], float | None]:
-    """(:func:`rlfc.j2kalloc.dct_samples`, and where ``smooth`` :func:`rlfc.j2kalloc.smooth_psnr`)
-    of view v."""
+def _dct_task(enc: TxEncoder, v: int) -> tuple[tuple[np.ndarray, int], float]:
+    """(:func:`rlfc.j2kalloc.dct_samples`, :func:`rlfc.j2kalloc.smooth_psnr`) of view v."""
     from .j2kalloc import dct_samples, smooth_psnr
 
     px = enc.view_pixels(v)
-    return dct_samples(px), (smooth_psnr(px) if smooth else None)
+    return dct_samples(px), smooth_psnr(px)
 
 
 def _j2k_task(enc: TxEncoder, v: int, level: float, keep: bool) -> tuple[bytes, ViewCode]:
@@ -1581,7 +1580,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         # (open loop) says how the views share the error and where the quantizer search starts
         from .j2kalloc import step_prior
 
-        got = Runner().map_threaded(_dct_task, [(enc, v, True) for v in range(nv)])
+        got = Runner().map_threaded(_dct_task, [(enc, v) for v in range(nv)])
         samples = [s for s, _ in got]
         # natural views as JPEG 2000, searched on JPEG 2000's own levels; smooth views (the
         # transform path may win), or a target beyond JPEG 2000's finest lossy level, take the
