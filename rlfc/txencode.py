@@ -1322,9 +1322,6 @@ J2K_SMOOTH_MARGIN_DB = 2.0
 #: that PSNR (:func:`rlfc.j2kalloc.step_prior`; its rate-distortion decisions zero more): 1.21–1.65
 #: on six posed encodes (the LLFF captures at 36 and 40 dB, mitsuba_objects_360 at 40 dB)
 PROXY_STEP_RATIO = 1.4
-#: the same ratio on the dense grids, where most views are predicted: 0.88–2.10 at 40 dB on the
-#: six grids in ../shared/data (geometric mean 1.18); the probe pass starts there
-GRID_PROXY_RATIO = 1.2
 
 
 def _search_j2k_levels(enc: TxEncoder, target: float, step: float, samples: list, trace: list, progress
@@ -1556,16 +1553,6 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     sample = others[::SEARCH_STRIDE] if sampled and others.size >= SEARCH_MIN_VIEWS else None
     if sampled:
         enc.hold(np.arange(nv) if sample is None else np.union1d(enc.s.keys, sample))
-    if (lf.layout == "grid" and options.target_psnr is not None and options.target_bpp is None
-            and params.step is None and not params.lossless and others.size):
-        # the probe where the views' own 8×8 DCT, rounded to one step (open loop), meets the
-        # target, rather than where the target's MSE puts a step: nearer the step found
-        from .j2kalloc import common_step
-
-        seen = np.arange(nv) if sample is None else np.union1d(enc.s.keys, sample)
-        got = Runner().map_threaded(_dct_task, [(enc, int(v)) for v in seen])
-        step0 = GRID_PROXY_RATIO * common_step([s for s, _ in got], np.ones(len(got)), peak, options.target_psnr)[0]
-        del got
     if params.key_ratio == 0 and not params.lossless and others.size:
         probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit

@@ -140,24 +140,3 @@ def test_transform_coded_posed_views_start_their_search_near_the_target():
         assert e.target_met and e.config["tx"]["intra_codec"] == "tx"
         assert abs(e.trace[0]["psnr_rgb"] - target) < 1.0, e.trace[0]
         assert len(e.trace) <= 8
-
-
-def test_a_grids_probe_runs_at_the_open_loop_step(monkeypatch):
-    """A dense grid's probe pass (the key ratio, the search's start) runs at GRID_PROXY_RATIO ×
-    the step that rounds the sampled views' DCT to the target, not at the target's MSE step."""
-    import rlfc.txencode as T
-
-    lf = read_scene(ROOT / "samples" / "dino_crop")
-    seen, steps = [], []
-    real = J.common_step
-
-    def spy(samples, *a, **k):
-        seen.append(len(samples))
-        return 12.345, real(samples, *a, **k)[1]
-
-    monkeypatch.setattr(J, "common_step", spy)
-    run = T.TxEncoder.run
-    monkeypatch.setattr(T.TxEncoder, "run", lambda self, step, *a, **k: steps.append(step) or run(self, step, *a, **k))
-    e = encode(lf, EncodeOptions(profile="tx", target_psnr=38.0))
-    assert e.target_met and seen and steps[0] == T.GRID_PROXY_RATIO * 12.345
-    assert seen[0] < lf.rows * lf.cols                    # the search's sample of views, not all
