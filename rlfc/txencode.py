@@ -1318,35 +1318,60 @@ J2K_TOL_DB = 0.03
 #: target for JPEG 2000 to be taken without trying the transform path (dB; the LLFF captures are
 #: 2.3 dB and more below at 36 dB, where the full search coded every view as JPEG 2000)
 J2K_SMOOTH_MARGIN_DB = 2.0
+#: a size target's first pass takes the views' shares at this PSNR (dB), then at the PSNR that
+#: pass says the size reaches, at this many dB per doubling of the size (JPEG 2000 on the LLFF
+#: captures between 36 and 40 dB: 3.2–4.6)
+J2K_BPP_FIRST_DB = 40.0
+J2K_DB_PER_OCTAVE = 4.0
 #: the transform path's step at a PSNR over the open-loop step that rounds the views' 8×8 DCT to
 #: that PSNR (:func:`rlfc.j2kalloc.step_prior`; its rate-distortion decisions zero more): 1.21–1.65
 #: on six posed encodes (the LLFF captures at 36 and 40 dB, mitsuba_objects_360 at 40 dB)
 PROXY_STEP_RATIO = 1.4
 
 
-def _search_j2k_levels(enc: TxEncoder, target: float, step: float, samples: list, trace: list, progress
-                       ) -> tuple[dict, bool]:
-    """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target``, searched on
+def _search_j2k_levels(enc: TxEncoder, target_psnr: float | None, target_bpp: float | None, step: float,
+                       samples: list, trace: list, progress) -> tuple[dict, bool]:
+    """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target_psnr`` (a
+    floor) or a file size ``target_bpp`` (a ceiling: the best quality within it), searched on
     OpenJPEG's own quality levels instead of through the transform path (which coded every view
     both ways in every pass): each view's share of the error from one uniform quantizer step
     (:func:`rlfc.j2kalloc.share_psnrs` of the views' ``samples``, open loop), then a secant on
-    one shift of every view's level. Returns (the run of the largest shift that met the target,
-    else the closest; whether one met it)."""
+    one shift of every view's level. For a size, the shares are taken at the PSNR a first pass
+    (shares at J2K_BPP_FIRST_DB) says the size reaches. Returns (the run the search prefers among
+    those that met the target, else the closest; whether one met it)."""
+    from formats.metrics import bpp as bpp_of
+
     from .j2kalloc import MAX_LEVEL, MIN_LEVEL, share_psnrs
 
-    n = enc.n0
-    share = share_psnrs(samples, np.ones(n), float(enc.peak), target)
+    n, peak, ones = enc.n0, float(enc.peak), np.ones(enc.n0)
 
-    def value(q):                              # q = −shift: the PSNR falls as q grows
-        levels = np.clip(share - q, MIN_LEVEL, MAX_LEVEL)
-        res = enc.run_j2k(levels, step, progress)
+    def code(share, q):
+        res = enc.run_j2k(np.clip(share - q, MIN_LEVEL, MAX_LEVEL), step, progress)
         ps = enc.psnr(res)
-        nbytes = sum(len(b) for b in res["keyimg"].values())
-        trace.append({"j2k_shift": -q, "psnr_rgb": ps, "bpp": 8 * nbytes / (n * enc.h * enc.w_px)})
-        return ps, res
+        cfg, secs = enc.pack(res)
+        b = bpp_of(file_bytes(enc.lf, cfg, secs), n, enc.h, enc.w_px)
+        trace.append({"j2k_shift": -q, "psnr_rgb": ps, "bpp": b})
+        return res, ps, b
 
-    sr = secant_search(value, -J2K_FIRST_DB, target, feasible_above=True, slope0=-1.0,
-                       lo=float(share.min() - MAX_LEVEL), hi=float(share.max() - MIN_LEVEL), tol=J2K_TOL_DB,
+    if target_bpp is None:
+        share = share_psnrs(samples, ones, peak, target_psnr)
+        target, slope0, tol = target_psnr, -1.0, J2K_TOL_DB
+
+        def value(q):                          # q = −shift: the PSNR falls as q grows
+            res, ps, _ = code(share, q)
+            return ps, res
+    else:
+        _, p0, b0 = code(share_psnrs(samples, ones, peak, J2K_BPP_FIRST_DB), -J2K_FIRST_DB)
+        at = p0 + J2K_DB_PER_OCTAVE * (math.log2(target_bpp) - math.log2(b0))
+        share = share_psnrs(samples, ones, peak, min(max(at, 10.0), 120.0))
+        target, slope0, tol = math.log2(target_bpp), -1.0 / J2K_DB_PER_OCTAVE, 0.01
+
+        def value(q):                          # log2 bpp falls as q grows
+            res, _, b = code(share, q)
+            return math.log2(max(b, 1e-12)), res
+
+    sr = secant_search(value, -J2K_FIRST_DB, target, feasible_above=target_bpp is None, slope0=slope0,
+                       lo=float(share.min() - MAX_LEVEL), hi=float(share.max() - MIN_LEVEL), tol=tol,
                        snap=lambda q: round(q * 256) / 256)
     return sr.result, sr.found
 
@@ -1561,7 +1586,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     # uses the model, so the two passes' levels never exist at once)
     slope0 = PSNR_SLOPE
     j2k_only = False
-    if (lf.layout != "grid" and enc.all_intra and options.target_psnr is not None and options.target_bpp is None
+    if (lf.layout != "grid" and enc.all_intra and (options.target_psnr is not None or options.target_bpp is not None)
             and params.step is None and not params.lossless):
         # every view of a posed capture coded alone: each view's 8×8 DCT rounded to one step
         # (open loop) says how the views share the error and where the quantizer search starts
@@ -1569,13 +1594,16 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
         got = Runner().map_threaded(_dct_task, [(enc, v) for v in range(nv)])
         samples = [s for s, _ in got]
+        smooth = max(sm for _, sm in got)
         # natural views as JPEG 2000, searched on JPEG 2000's own levels; smooth views (the
-        # transform path may win), or a target beyond JPEG 2000's finest lossy level, take the
-        # full search below (the transform path or JPEG 2000, per view)
-        if enc.intra_codec == "j2k" and max(sm for _, sm in got) <= options.target_psnr - J2K_SMOOTH_MARGIN_DB:
-            res, found = _search_j2k_levels(enc, options.target_psnr, step0, samples, trace, progress)
-            j2k_only = True
-        if not (j2k_only and found):
+        # transform path may win at the quality reached), or a target beyond JPEG 2000's finest
+        # lossy level, take the full search below (the transform path or JPEG 2000, per view)
+        if enc.intra_codec == "j2k" and (options.target_psnr is None
+                                         or smooth <= options.target_psnr - J2K_SMOOTH_MARGIN_DB):
+            res, found = _search_j2k_levels(enc, options.target_psnr, options.target_bpp, step0, samples, trace,
+                                            progress)
+            j2k_only = options.target_psnr is not None or smooth <= enc.psnr(res) - J2K_SMOOTH_MARGIN_DB
+        if not (j2k_only and found) and options.target_psnr is not None:
             s_p, slope0 = step_prior(samples, np.ones(nv), float(enc.peak), options.target_psnr)
             step0 = PROXY_STEP_RATIO * s_p
         del got, samples

@@ -140,3 +140,35 @@ def test_transform_coded_posed_views_start_their_search_near_the_target():
         assert e.target_met and e.config["tx"]["intra_codec"] == "tx"
         assert abs(e.trace[0]["psnr_rgb"] - target) < 1.0, e.trace[0]
         assert len(e.trace) <= 8
+
+
+def test_posed_bpp_targets_search_jpeg2000_levels_too(monkeypatch):
+    """A size target on natural posed views: JPEG 2000 at the views' shares, the best quality
+    within the size, in a few passes; about the quality the full search reaches in the same size."""
+    import rlfc.txencode as T
+    from formats.metrics import bpp
+
+    lf = _posed(_dino())
+    e = encode(lf, EncodeOptions(profile="tx", target_bpp=0.6))
+    assert all("j2k_shift" in t for t in e.trace) and len(e.trace) <= 7
+    d, blob = open_encoded(lf, e)
+    full = d.decode_all()
+    assert (full == e.decoded).all()
+    assert min(e.config["tx"]["key_images"]) > 0
+    monkeypatch.setattr(T, "J2K_SMOOTH_MARGIN_DB", math.inf)            # the full search, forced
+    ref = encode(lf, EncodeOptions(profile="tx", target_bpp=0.6))
+    assert "step" in ref.trace[-1]                  # (after the JPEG 2000 passes it set aside)
+    _, ref_blob = open_encoded(lf, ref)
+    n, h, w = 6, lf.height, lf.width
+    assert bpp(len(blob), n, h, w) <= 0.6 * 1.02 and bpp(len(ref_blob), n, h, w) <= 0.6 * 1.02
+    assert psnr_rgb(lf.views, full) >= ref.summary["psnr_rgb"] - 0.15
+
+
+def test_a_posed_bpp_target_whose_quality_nears_the_views_smoothness_takes_the_full_search():
+    """At 0.3 bpp dino_crop's views reach ~36.3 dB, within 2 dB of their thumbnails' 35–36 dB:
+    the transform path may win there, so the JPEG 2000 passes are set aside for the full search."""
+    lf = _posed(_dino())
+    e = encode(lf, EncodeOptions(profile="tx", target_bpp=0.3))
+    assert any("j2k_shift" in t for t in e.trace) and "step" in e.trace[-1]
+    d, _ = open_encoded(lf, e)
+    assert (d.decode_all() == e.decoded).all()
