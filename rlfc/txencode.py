@@ -1323,6 +1323,8 @@ J2K_SMOOTH_MARGIN_DB = 2.0
 #: captures between 36 and 40 dB: 3.2–4.6)
 J2K_BPP_FIRST_DB = 40.0
 J2K_DB_PER_OCTAVE = 4.0
+#: a per-view floor lifts the views' shares to this much above it (dB)
+J2K_FLOOR_MARGIN_DB = 0.1
 #: the transform path's step at a PSNR over the open-loop step that rounds the views' 8×8 DCT to
 #: that PSNR (:func:`rlfc.j2kalloc.step_prior`; its rate-distortion decisions zero more): 1.21–1.65
 #: on six posed encodes (the LLFF captures at 36 and 40 dB, mitsuba_objects_360 at 40 dB)
@@ -1330,15 +1332,17 @@ PROXY_STEP_RATIO = 1.4
 
 
 def _search_j2k_levels(enc: TxEncoder, target_psnr: float | None, target_bpp: float | None, step: float,
-                       samples: list, trace: list, progress) -> tuple[dict, bool]:
+                       samples: list, trace: list, progress, floor: float | None = None) -> tuple[dict, bool]:
     """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target_psnr`` (a
     floor) or a file size ``target_bpp`` (a ceiling: the best quality within it), searched on
     OpenJPEG's own quality levels instead of through the transform path (which coded every view
     both ways in every pass): each view's share of the error from one uniform quantizer step
     (:func:`rlfc.j2kalloc.share_psnrs` of the views' ``samples``, open loop), then a secant on
     one shift of every view's level. For a size, the shares are taken at the PSNR a first pass
-    (shares at J2K_BPP_FIRST_DB) says the size reaches. Returns (the run the search prefers among
-    those that met the target, else the closest; whether one met it)."""
+    (shares at J2K_BPP_FIRST_DB) says the size reaches. A per-view ``floor`` (dB, with a PSNR
+    target) lifts the shares below it to it and is searched with the pooled target: the shift
+    stops where either would be missed. Returns (the run the search prefers among those that
+    met the target, else the closest; whether one met it)."""
     from formats.metrics import bpp as bpp_of
 
     from .j2kalloc import MAX_LEVEL, MIN_LEVEL, share_psnrs
@@ -1356,9 +1360,13 @@ def _search_j2k_levels(enc: TxEncoder, target_psnr: float | None, target_bpp: fl
     if target_bpp is None:
         share = share_psnrs(samples, ones, peak, target_psnr)
         target, slope0, tol = target_psnr, -1.0, J2K_TOL_DB
+        if floor is not None:                  # (the views' landing spreads ~0.1 dB about their levels)
+            share = np.maximum(share, floor + J2K_FLOOR_MARGIN_DB)
 
         def value(q):                          # q = −shift: the PSNR falls as q grows
             res, ps, _ = code(share, q)
+            if floor is not None:              # the margin the nearer of the two targets leaves
+                ps = target + min(ps - target, float(enc.view_psnrs(res).min()) - floor)
             return ps, res
     else:
         _, p0, b0 = code(share_psnrs(samples, ones, peak, J2K_BPP_FIRST_DB), -J2K_FIRST_DB)
@@ -1601,7 +1609,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         if enc.intra_codec == "j2k" and (options.target_psnr is None
                                          or smooth <= options.target_psnr - J2K_SMOOTH_MARGIN_DB):
             res, found = _search_j2k_levels(enc, options.target_psnr, options.target_bpp, step0, samples, trace,
-                                            progress)
+                                            progress, options.min_view_psnr if options.target_bpp is None else None)
             j2k_only = options.target_psnr is not None or smooth <= enc.psnr(res) - J2K_SMOOTH_MARGIN_DB
         if not (j2k_only and found) and options.target_psnr is not None:
             s_p, slope0 = step_prior(samples, np.ones(nv), float(enc.peak), options.target_psnr)
