@@ -972,9 +972,14 @@ class TxEncoder:
         rec = to_planes(dec)
         crop = self._pixels(rec)                      # the view's own size (the image coded is padded)
         sse, cnt = colour_sq_error(orig, crop)
-        return data, ViewCode(np.zeros_like(tx_code.modes), np.zeros(0, np.int64),
-                              np.zeros((0,) + tx_code.lv.shape[1:], np.int16), np.zeros_like(tx_code.coded), crop,
-                              rec, 0.0, sse, cnt), len(data)
+        return data, self.image_code(crop, rec, sse, cnt), len(data)
+
+    def image_code(self, px: np.ndarray | None, planes: np.ndarray | None, sse: float, cnt: float) -> ViewCode:
+        """The code of a view coded alone as an image (JPEG 2000): no tbs, no coded block; its
+        decoded pixels and planes where kept, its colour squared error ``sse`` over ``cnt``."""
+        return ViewCode(np.zeros(self.nby8 * self.nbx8, np.int8), np.zeros(0, np.int64),
+                        np.zeros((0, self.P, 64), np.int16), np.zeros(self.nby * self.nbx, bool), px, planes,
+                        0.0, sse, cnt)
 
     def _code_psnr(self, code: ViewCode) -> float:
         """Colour PSNR (dB) of one coded view."""
@@ -1247,9 +1252,7 @@ def _j2k_task(enc: TxEncoder, v: int, level: float, keep: bool) -> tuple[bytes, 
                                            codecformat="J2K"))
     crop = decode_image("j2k", data, img.shape, img.dtype)[:enc.h, :enc.w_px]
     sse, cnt = colour_sq_error(orig, crop)
-    return data, ViewCode(np.zeros(enc.nby8 * enc.nbx8, np.int8), np.zeros(0, np.int64),
-                          np.zeros((0, enc.P, 64), np.int16), np.zeros(enc.nby * enc.nbx, bool),
-                          np.ascontiguousarray(crop) if keep else None, None, 0.0, sse, cnt)
+    return data, enc.image_code(np.ascontiguousarray(crop) if keep else None, None, sse, cnt)
 
 
 def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
@@ -1333,8 +1336,8 @@ PROXY_STEP_RATIO = 1.4
 
 def _search_j2k_levels(enc: TxEncoder, target_psnr: float | None, target_bpp: float | None, step: float,
                        samples: list, trace: list, progress, floor: float | None = None) -> tuple[dict, bool]:
-    """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target_psnr`` (a
-    floor) or a file size ``target_bpp`` (a ceiling: the best quality within it), searched on
+    """A posed capture's views as JPEG 2000 meeting a pooled colour PSNR ``target_psnr`` (at
+    least) or a file size ``target_bpp`` (at most: the best quality within it), searched on
     OpenJPEG's own quality levels instead of through the transform path (which coded every view
     both ways in every pass): each view's share of the error from one uniform quantizer step
     (:func:`rlfc.j2kalloc.share_psnrs` of the views' ``samples``, open loop), then a secant on
