@@ -1537,10 +1537,29 @@ def _or_inf(psnr: float | None) -> float:
     return math.inf if psnr is None else psnr
 
 
+#: a size target whose search left this share of the size unspent (the finest lossy setting
+#: reached, or a staircase) tries the lossless file, kept where it fits
+BPP_UNSPENT = 0.1
+
+
 def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:
-    """One encode for ``options``' target; a PSNR target that no lossy setting reaches gets the
-    lossless file."""
+    """One encode for ``options``' target. A PSNR target that no lossy setting reaches gets the
+    lossless file; so does a size target that the lossless file fits (the best quality within
+    it: the search of the lossy settings stops at the finest quantizer)."""
     out = _encode_tx(lf, options, params, progress, runner)
+    if (options.target_bpp is not None and not params.lossless and params.step is None
+            and out.summary["psnr_rgb"] is not None
+            and _bpp_of(lf, out) < (1 - BPP_UNSPENT) * options.target_bpp):
+        exact = _encode_tx(lf, replace(options, target_bpp=None, lossless=True), replace(params, lossless=True),
+                           progress, runner)
+        b = _bpp_of(lf, exact)
+        if b <= options.target_bpp:
+            exact.notes = [f"the lossless file fits within {options.target_bpp:g} bpp ({b:.3f} bpp; the finest "
+                           f"lossy setting gives {out.summary['psnr_rgb']:.2f} dB): it is written"] + exact.notes
+            exact.trace = out.trace + exact.trace
+            exact.target_met = True
+            return exact
+        out.trace += exact.trace
     if options.target_psnr is not None and out.target_met is False and not params.lossless:
         # no lossy setting reaches the target (8-bit views above 50-59 dB: the finest quantizer
         # step is 1): the lossless file does, and is then the smallest file that does
@@ -1553,6 +1572,13 @@ def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner)
         exact.target_met = True
         return exact
     return out
+
+
+def _bpp_of(lf, out: Encoded) -> float:
+    """bpp of the file an encode makes (as the CLI writes it)."""
+    from formats.metrics import bpp
+
+    return bpp(file_bytes(lf, out.config, out.sections), lf.rows * lf.cols, lf.height, lf.width)
 
 
 def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:

@@ -1065,3 +1065,23 @@ def test_posed_captures_meet_rate_targets(target):
     e = encode(lf, EncodeOptions(profile="tx", **target))
     d, _ = open_encoded(lf, e)
     assert (d.decode_all() == e.decoded).all()
+
+
+@pytest.mark.parametrize("posed", [False, True])
+def test_a_size_target_the_lossless_file_fits_gets_the_lossless_file(posed):
+    # "the best quality within X bpp": where the lossless file fits, that is it (the lossy search
+    # stops at its finest setting, well under such a size); a size between the finest lossy file
+    # and the lossless one keeps the lossy file
+    lf = smooth_lf(rows=2, cols=3, h=24, w=32, seed=5)
+    if posed:
+        lf.layout = "posed"
+    exact = encode(lf, EncodeOptions(profile="tx", lossless=True))
+    lossless_bpp = bpp(sum(len(x) for _, x in exact.sections), 6, lf.height, lf.width)
+    for target in (math.inf, 2 * lossless_bpp):
+        e = encode(lf, EncodeOptions(profile="tx", target_bpp=target))
+        assert e.target_met and e.summary["psnr_rgb"] is None and "lossless file fits" in e.notes[0]
+        d, _ = open_encoded(lf, e)
+        assert np.array_equal(d.decode_all(), lf.views)
+    finest = encode(lf, EncodeOptions(profile="tx", target_bpp=0.7 * lossless_bpp))
+    assert finest.target_met and finest.summary["psnr_rgb"] is not None
+    assert not any("lossless" in n for n in finest.notes)
