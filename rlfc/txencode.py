@@ -50,6 +50,16 @@ INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be bea
 INTRA_ENERGY_RATIO = 4.0
 #: auto key_split: the shortest estimated key-row stream worth its own state and index entry
 KEY_SEGMENT_BYTES = 256
+#: auto key_split: a decoder parses the streams of many key rows as lanes in lockstep, one step
+#: per symbol of the longest (~30 µs a numpy step on the 2-core box, whatever the lanes), so rows
+#: that KEY_SEGMENT_BYTES splits are split further until no stream holds more magnitude symbols
+#: than this (a first frame's key rows then parse in ≲ 60 ms), while streams keep at least
+#: KEY_MIN_SEGMENT_BYTES. Grids only, and rows that are split already: lytro_dino_2067's rows
+#: of one stream at 40 dB split in 3 cost 1.2% and made its first frame slower (42 → 72 ms: lanes
+#: instead of one by one); mitsuba_objects_360's (every view intra, a request reads one view's
+#: rows) 4 → 8 cost 0.8% and decoded no faster.
+KEY_LANE_SYMBOLS = 2048
+KEY_MIN_SEGMENT_BYTES = 64
 FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
 PAD = 8
 
@@ -1127,7 +1137,10 @@ class TxEncoder:
         """Streams per key-view block row for the file of a run: ``TxParams.key_split`` (the
         largest divisor of the blocks per row not above it), or, when 0, the most streams whose
         estimated length stays at least :data:`KEY_SEGMENT_BYTES` (each costs a 3-byte state and
-        an index entry; a decoder parses a row's streams as parallel lanes)."""
+        an index entry; a decoder parses a row's streams as parallel lanes); where that splits the
+        rows of a grid, more where the longest stream would hold over :data:`KEY_LANE_SYMBOLS` magnitude symbols
+        (the decoder's steps: the fewest streams that bring it under, of at least
+        :data:`KEY_MIN_SEGMENT_BYTES`)."""
         divs = [d for d in range(1, self.nbx + 1) if self.nbx % d == 0]
         if self.p.key_split:
             return max(d for d in divs if d <= self.p.key_split)
@@ -1135,7 +1148,27 @@ class TxEncoder:
         if not ck:
             return 1
         row_bytes = sum(res["codes"][k].bits for k in ck) / 8 / (len(ck) * self.nby)
-        return max(d for d in divs if d == 1 or row_bytes / d >= KEY_SEGMENT_BYTES)
+        split = max(d for d in divs if d == 1 or row_bytes / d >= KEY_SEGMENT_BYTES)
+        if split == 1 or self.all_intra:    # (see KEY_LANE_SYMBOLS)
+            return split
+        blocks = np.stack([self._block_symbols(res["codes"][k]) for k in ck])      # (keys, nby, nbx)
+        for d in divs:
+            if d <= split:
+                continue
+            if (blocks.reshape(len(ck), self.nby, split, -1).sum(3).max() <= KEY_LANE_SYMBOLS
+                    or row_bytes / d < KEY_MIN_SEGMENT_BYTES):
+                break
+            split = d
+        return split
+
+    def _block_symbols(self, c: ViewCode) -> np.ndarray:
+        """(nby, nbx) magnitude symbols of each random-access block of a coded view: the tbs'
+        last positions (1 + the last nonzero level's scan index), summed over planes and tbs."""
+        per_tb = np.zeros(self.nby8 * self.nbx8, np.int64)
+        if c.tbs.size:
+            nz = c.lv != 0
+            per_tb[c.tbs] = np.where(nz.any(-1), 64 - np.argmax(nz[..., ::-1], -1), 0).sum(1)
+        return per_tb[self._ra_tbs()].sum(1).reshape(self.nby, self.nbx)
 
     def counts_of(self, res: dict, split: int = 1) -> np.ndarray:
         """(N_CTX, ALPHABET) symbol counts of a run (part by part; ``split`` streams per key row)."""

@@ -87,6 +87,54 @@ def test_auto_split_keeps_streams_of_at_least_the_segment_bytes(wide):
     assert enc.key_split(with_row_bytes(0)) == 3
 
 
+
+def test_auto_split_bounds_the_longest_stream_in_magnitude_symbols(wide, monkeypatch):
+    """``key_split`` 0 splits rows that the bytes split further while the longest stream holds
+    more than KEY_LANE_SYMBOLS magnitude symbols (the decoder's lockstep steps), never into
+    streams under KEY_MIN_SEGMENT_BYTES; the per-block counts are the parser's lane lengths."""
+    import numpy as np
+
+    import rlfc.txencode as T
+    import rlfc.txsyntax as ts
+
+    enc = T.TxEncoder(wide, T._params_from(EncodeOptions(params={"block_size": 8, "step": 2.0})), None, 10.0, None)
+    res = enc.run(2.0, T.Model(T.default_counts()))
+    ck = enc.coded_keys(res)
+    blocks = np.stack([enc._block_symbols(res["codes"][k]) for k in ck])          # (keys, nby, 9)
+    longest = {d: int(blocks.reshape(len(ck), enc.nby, d, -1).sum(3).max()) for d in (1, 3, 9)}
+    assert longest[1] > longest[3] > longest[9] > 0
+
+    def with_row_bytes(b):
+        codes = list(res["codes"])
+        for k in ck:
+            codes[k] = dataclasses.replace(codes[k], bits=8.0 * b * enc.nby)
+        return {**res, "codes": codes}
+
+    rows3 = with_row_bytes(3 * T.KEY_SEGMENT_BYTES)                     # the bytes alone: 3 streams
+    monkeypatch.setattr(T, "KEY_LANE_SYMBOLS", longest[3])
+    assert enc.key_split(rows3) == 3
+    monkeypatch.setattr(T, "KEY_LANE_SYMBOLS", longest[3] - 1)
+    assert enc.key_split(rows3) == 9
+    monkeypatch.setattr(T, "KEY_MIN_SEGMENT_BYTES", T.KEY_SEGMENT_BYTES / 3 + 1)
+    assert enc.key_split(rows3) == 3                                    # 9 streams would be too short
+    monkeypatch.setattr(T, "KEY_LANE_SYMBOLS", 1)
+    assert enc.key_split(with_row_bytes(2.9 * T.KEY_SEGMENT_BYTES)) == 1  # rows of one stream stay so
+
+    # the counts are the lanes the decoder steps through (one stream per block: a lane per block)
+    import rlfc.profiles.tx as P
+
+    monkeypatch.setattr(P, "ONE_BY_ONE_RATIO", 0)                      # (lanes, however few)
+    seen = []
+    orig = ts._magnitudes
+    monkeypatch.setattr(ts, "_magnitudes", lambda dec, tables, S, per_lane, *a: seen.append(per_lane.copy())
+                        or orig(dec, tables, S, per_lane, *a))
+    enc.p = dataclasses.replace(enc.p, key_split=9)
+    cfg, sections = enc.pack(res)
+    d = RlfcDecoder(open_lfc(b"".join(bytes(p) for p in build_container(encode_meta("rlfc", 1, cfg, wide.geometry()),
+                                                                         sections))))
+    d.core.decode_keys()
+    assert np.array_equal(np.sort(np.concatenate(seen)), np.sort(blocks.reshape(-1)))
+
 def _with_tx(lf, e, **changes):
     cfg = copy.deepcopy(e.config)
     for k, v in changes.items():
