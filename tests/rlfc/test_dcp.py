@@ -186,3 +186,20 @@ def test_corrupt_disparity_stream_is_a_format_error():
             unpack_disparity(bad, dt, (4, 20), "x.lfc")
     with pytest.raises(FormatError, match="x.lfc"):
         unpack_disparity(data, dt, (5, 20), "x.lfc")
+
+
+@pytest.mark.parametrize("target", [60.0, 70.0])
+def test_near_lossless_targets_are_never_larger_than_the_lossless_file(target):
+    # the largest quantizer step that meets a PSNR target near lossless (lossy key views plus
+    # residuals at Q ~ 1) gave a file larger than the lossless one, which meets any target
+    from formats.codec_api import EncodeOptions
+    from rlfc import encode
+
+    lf = smooth_lf(rows=3, cols=3, h=24, w=32, seed=3)
+    noise = np.random.default_rng(0).integers(-2, 3, lf.views.shape)
+    lf.views[:] = np.clip(lf.views.astype(int) + noise, 0, 255).astype(np.uint8)
+    exact = encode(lf, EncodeOptions(profile="dcp", lossless=True))
+    e = encode(lf, EncodeOptions(profile="dcp", target_psnr=target))
+    assert e.target_met and sum(len(x) for _, x in e.sections) <= sum(len(x) for _, x in exact.sections)
+    assert any("lossless file is smaller" in n for n in e.notes)
+    assert np.array_equal(e.decoded, lf.views)
