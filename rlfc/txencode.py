@@ -1137,10 +1137,10 @@ class TxEncoder:
         """Streams per key-view block row for the file of a run: ``TxParams.key_split`` (the
         largest divisor of the blocks per row not above it), or, when 0, the most streams whose
         estimated length stays at least :data:`KEY_SEGMENT_BYTES` (each costs a 3-byte state and
-        an index entry; a decoder parses a row's streams as parallel lanes); where that splits the
-        rows of a grid, more where the longest stream would hold over :data:`KEY_LANE_SYMBOLS` magnitude symbols
-        (the decoder's steps: the fewest streams that bring it under, of at least
-        :data:`KEY_MIN_SEGMENT_BYTES`)."""
+        an index entry; a decoder parses a row's streams as parallel lanes). Where that splits
+        the rows of a grid, more while the longest stream would hold over
+        :data:`KEY_LANE_SYMBOLS` magnitude symbols (the decoder's steps), in streams of at least
+        :data:`KEY_MIN_SEGMENT_BYTES`."""
         divs = [d for d in range(1, self.nbx + 1) if self.nbx % d == 0]
         if self.p.key_split:
             return max(d for d in divs if d <= self.p.key_split)

@@ -91,7 +91,7 @@ def encode_keyfamily(lf, options: EncodeOptions, strategy, progress=None, search
     if options.target_psnr is not None and found and options.target_psnr >= near:
         # near lossless, the largest step that meets the target need not be the smallest file:
         # the lossless file can be smaller (dcp on dino_crop at 70 dB: 10.21 bpp at Q 1.06,
-        # 10.15 lossless), and it meets any PSNR target
+        # 9.76 lossless), and it meets any PSNR target
         plain = {k: v for k, v in options.params.items() if k not in ("quant", "threshold", "energy", "top_psnr")}
         exact = encode_keyfamily(lf, EncodeOptions(profile=options.profile, lossless=True, params=plain), strategy,
                                  progress, None, allowed, defaults={k: v for k, v in (defaults or {}).items()
