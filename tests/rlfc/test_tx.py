@@ -1085,3 +1085,16 @@ def test_a_size_target_the_lossless_file_fits_gets_the_lossless_file(posed):
     finest = encode(lf, EncodeOptions(profile="tx", target_bpp=0.7 * lossless_bpp))
     assert finest.target_met and finest.summary["psnr_rgb"] is not None
     assert not any("lossless" in n for n in finest.notes)
+
+
+def test_a_posed_search_pass_is_the_file_without_another_pass():
+    # every view of a posed capture is coded in every pass of the search (keeping its pixels):
+    # where the chosen pass's entropy model was measured near its step, that pass is the file,
+    # with no further ("refined") pass; the file decodes to the pixels the encoder reports
+    lf = smooth_lf(rows=1, cols=4, c=4)
+    lf.layout = "posed"
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0))
+    assert e.target_met and e.summary["psnr_rgb"] >= 36.0
+    assert [t for t in e.trace if "step" in t] and not any(t.get("refined") for t in e.trace)
+    d, _ = open_encoded(lf, e)
+    assert np.array_equal(d.decode_all(), e.decoded)
