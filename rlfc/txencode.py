@@ -754,8 +754,9 @@ class TxEncoder:
     def run(self, step: float, model: Model, progress=None, keep_pixels: bool = False, views=None,
             lam_scale: float = 1.0) -> dict:
         """Code every view at luma step Δ = ``step``: key views in order, then the others (only
-        those in ``views`` where given: a sample for rate control; the others' codes are None);
-        ``lam_scale`` multiplies λ (rate control's trim between two quantizer steps).
+        those in ``views`` where given: a sample for rate control; the others' codes are None;
+        where every view is an intra key, the keys in ``views`` and the first); ``lam_scale``
+        multiplies λ (rate control's trim between two quantizer steps).
 
         Returns:
             dict with steps16, thumb16, thumbs (per intra key), codes (per view ViewCode), kept
@@ -800,9 +801,12 @@ class TxEncoder:
             nonlocal trial_counts
             trial_counts = tc if trial_counts is None else trial_counts + tc
         pre: dict = {}                # intra keys coded ahead, together (every view intra: posed captures)
-        for i, k in enumerate(self.s.keys):
-            if i == 1 and self.all_intra and len(self.s.keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
-                pre = self._code_intra_keys(self.s.keys[1:], thumb16, s16[0], lam_k, model,
+        keys = self.s.keys
+        if views is not None and self.all_intra:       # (every view an intra key: a sample of them, and the first)
+            keys = [k for k in keys if k == keys[0] or k in set(np.asarray(views).tolist())]
+        for i, k in enumerate(keys):
+            if i == 1 and self.all_intra and len(keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
+                pre = self._code_intra_keys(keys[1:], thumb16, s16[0], lam_k, model,
                                              pix if pix is not None else own_px)
             ahead = k in pre
             if ahead:                           # (JPEG 2000 tried there too)
@@ -1184,7 +1188,7 @@ class TxEncoder:
 
     def coded_keys(self, res: dict) -> list:
         """Key views coded as row streams (not JPEG 2000), in key order."""
-        return [k for k in self.s.keys if k not in res["keyimg"]]
+        return [k for k in self.s.keys if k not in res["keyimg"] and res["codes"][k] is not None]
 
     def structure_of(self, res: dict):
         """(keys, refs, weights, cell, intra) of a run: the plan with the views it coded alone
@@ -1651,6 +1655,9 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     # keys), and the chosen step is then checked on every view (below: corrected if it misses)
     others = np.flatnonzero(~enc.is_key)
     sample = others[::SEARCH_STRIDE] if sampled and others.size >= SEARCH_MIN_VIEWS else None
+    # every view of a posed capture is coded in each pass of its search; a pass that only
+    # measures an entropy model codes every SEARCH_STRIDE-th view
+    model_sample = np.arange(0, nv, SEARCH_STRIDE) if enc.all_intra and nv >= SEARCH_MIN_VIEWS else None
     if sampled:
         enc.hold(np.arange(nv) if sample is None else np.union1d(enc.s.keys, sample))
     if params.key_ratio == 0 and not params.lossless and others.size:
@@ -1697,10 +1704,12 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         def evaluate(logq):
             step = 2.0 ** logq
             near = min(models, key=lambda k: abs(math.log2(k) - logq)) if models else None
-            r = enc.run(step, models[near] if near is not None else model, progress, views=sample)
+            far = near is None or abs(math.log2(near) - logq) > MODEL_REACH
+            r = enc.run(step, models[near] if near is not None else model, progress,
+                        views=model_sample if far and model_sample is not None else sample)
             r["model_step"] = near
-            if near is None or abs(math.log2(near) - logq) > MODEL_REACH:
-                r = enc.run(step, enc.model_of(r), progress, views=sample)   # far from any model: measure first
+            if far:                   # far from any model: measure one first (on a sample of a posed capture's views)
+                r = enc.run(step, enc.model_of(r), progress, views=sample)
                 r["model_step"] = step
             models[step] = r["measured"] = enc.model_of(r)
             ps = enc.psnr(r)

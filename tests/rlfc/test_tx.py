@@ -1098,3 +1098,26 @@ def test_a_posed_search_pass_is_the_file_without_another_pass():
     assert [t for t in e.trace if "step" in t] and not any(t.get("refined") for t in e.trace)
     d, _ = open_encoded(lf, e)
     assert np.array_equal(d.decode_all(), e.decoded)
+
+
+def test_a_posed_search_measures_a_far_model_on_a_sample_of_views(monkeypatch):
+    # a pass that only measures the entropy model (far from every model measured) codes every
+    # SEARCH_STRIDE-th view of a posed capture (and the first); the passes that decide code them all
+    from rlfc import txencode as T
+
+    lf = smooth_lf(rows=2, cols=8, c=4)
+    lf.layout = "posed"
+    seen = []
+    orig = T.TxEncoder.run
+
+    def run(self, step, model, progress=None, keep_pixels=False, views=None, lam_scale=1.0):
+        r = orig(self, step, model, progress, keep_pixels, views, lam_scale)
+        seen.append(sum(c is not None for c in r["codes"]))
+        return r
+
+    monkeypatch.setattr(T.TxEncoder, "run", run)
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0))
+    assert seen[0] == 16 // T.SEARCH_STRIDE and all(n == 16 for n in seen[1:])
+    assert e.target_met and e.summary["psnr_rgb"] >= 36.0
+    d, _ = open_encoded(lf, e)
+    assert np.array_equal(d.decode_all(), e.decoded)
