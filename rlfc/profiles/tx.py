@@ -294,6 +294,10 @@ class TxDecoder(ProfileDecoder):
         if not self._keys_all:
             self._have_keys(np.ones(self._key_done.shape, bool))
 
+    def decode_maps(self) -> None:
+        """Decode every map now (:meth:`_maps_of` of every view)."""
+        self._maps_of(None)
+
     def _decode_key_rows(self, need: np.ndarray) -> None:
         """Under the key lock: ``need``'s missing rows and the rows of other keys they are
         predicted from, keys in coding order (a key is predicted from keys before it). Block rows

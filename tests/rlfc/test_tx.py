@@ -757,6 +757,10 @@ def test_key_views_are_decoded_by_rows_on_demand(kw, rng):
     r, q = divmod(v, lf.cols)
     assert (d.decode_block(r, q, 1, 1) == full[r, q, B:2 * B, B:2 * B]).all()
     assert (d.decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
+    d = RlfcDecoder(open_lfc(blob))
+    d.decode_maps()                                    # every map up front, on request
+    assert d.core._map_done.all() and not d.core._key_done.all()
+    assert (d.decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
 
 
 def test_a_block_request_reads_only_the_key_rows_it_needs():
