@@ -210,10 +210,11 @@ class RlfcDecoder(Decoder):
         getattr(self.core, "decode_keys", lambda: None)()
 
     def decode_maps(self) -> None:
-        """Decode every view's disparity map now. ``tx`` files decode a map when a request first
-        needs it (a few ms each); after :meth:`decode_keys` and this, a request costs only its
-        own block (hci_antinous, 2 000 random single blocks: p99 128 → 94 µs, worst 3.1 → 0.14
-        ms). Other profiles decode them at open."""
+        """Decode every view's disparity map now, with each view's constants of single-block
+        requests. ``tx`` files decode a map when a request first needs it (a few ms each); after
+        :meth:`decode_keys` and this, a request costs only its own block (hci_antinous, 2 000
+        random single blocks: p99 104 → 65 µs, worst 2.9 → 0.14 ms). Other profiles decode them
+        at open."""
         getattr(self.core, "decode_maps", lambda: None)()
 
     def decode_view(self, row: int, col: int, level: int = 0) -> np.ndarray:

@@ -295,8 +295,13 @@ class TxDecoder(ProfileDecoder):
             self._have_keys(np.ones(self._key_done.shape, bool))
 
     def decode_maps(self) -> None:
-        """Decode every map now (:meth:`_maps_of` of every view)."""
+        """Decode every map now (:meth:`_maps_of` of every view), with what a single request of
+        each view reads from it (:meth:`_pixel_refs`, :meth:`_cell_map`)."""
         self._maps_of(None)
+        if self.atlas is not None:
+            for v in np.flatnonzero(~self.is_key & (self.lay.cell >= 0)).tolist():
+                if self._pixel_refs(v) is not None:
+                    self._cell_map(int(self.lay.cell[v]))
 
     def _decode_key_rows(self, need: np.ndarray) -> None:
         """Under the key lock: ``need``'s missing rows and the rows of other keys they are
@@ -652,21 +657,32 @@ class TxDecoder(ProfileDecoder):
         otherwise (the caller takes :meth:`block`)."""
         if self.is_key[view] or self.atlas is None or (level == 0 and self.coded[view, by * self.nbx + bx]):
             return None
+        prefs = self._pixel_refs(view)
+        if prefs is None:
+            return None
+        cell = self._one_ready(view, by)
+        dm = self._cell_map(cell)
+        B, tpb = self.block_size, self.tpb
+        loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off
+        return predict_block_pixels(self.atlas, prefs, dm[0][loc8], dm[1][loc8], by * B, bx * B, tpb,
+                                    self.atlas.ftype(self._peak), self.dtype)
+
+    def _pixel_refs(self, view: int):
+        """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references
+        lie in more than one atlas group)."""
         prefs = self._pixref_cache.get(view, False)
         if prefs is False:
             refs = self._block_refs(view)
             prefs = self._pixref_cache[view] = None if refs is None else \
                 block_pixel_refs(self.atlas, refs, self._tb_y, self._tb_x)
-        if prefs is None:
-            return None
-        cell = self._one_ready(view, by)
+        return prefs
+
+    def _cell_map(self, cell: int) -> tuple:
+        """(disparities as float32, modes) of a decoded map (cached)."""
         dm = self._cell_maps.get(cell)
         if dm is None:
             dm = self._cell_maps[cell] = (self._map_store.disp[cell].astype(np.float32), self._map_store.modes[cell])
-        B, tpb = self.block_size, self.tpb
-        loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off
-        return predict_block_pixels(self.atlas, prefs, dm[0][loc8], dm[1][loc8], by * B, bx * B, tpb,
-                                    self.atlas.ftype(self._peak), self.dtype)
+        return dm
 
     def _one_rows(self, view: int, by: int) -> None:
         """For one request: the key-view rows its block row reaches, decoded where they are not

@@ -760,6 +760,8 @@ def test_key_views_are_decoded_by_rows_on_demand(kw, rng):
     d = RlfcDecoder(open_lfc(blob))
     d.decode_maps()                                    # every map up front, on request
     assert d.core._map_done.all() and not d.core._key_done.all()
+    if d.core.atlas is not None:                       # (and every predicted view's one-request constants)
+        assert set(d.core._pixref_cache) == set(np.flatnonzero(~d.core.is_key & (d.core.lay.cell >= 0)).tolist())
     assert (d.decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
 
 
