@@ -49,6 +49,17 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 # -- the worker (one process per file, round and code version) ----------------------------------
+def _single_us(d, sv, sy, sx) -> list:
+    """µs of each ``decode_block`` call, one per request (flat view, block row, block column)."""
+    lat = []
+    for v, by, bx in zip(sv.tolist(), sy.tolist(), sx.tolist()):
+        row, col = divmod(v, d.cols)
+        t = time.perf_counter()
+        d.decode_block(row, col, by, bx)
+        lat.append((time.perf_counter() - t) * 1e6)
+    return lat
+
+
 def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, threads: list[int]) -> dict:
     import inspect
 
@@ -120,26 +131,14 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
     sv, sy, sx = rng.integers(0, n, n_single), rng.integers(0, d.nby, n_single), rng.integers(0, d.nbx, n_single)
     for i in range(min(20, n_single)):                                  # warm-up
         d.decode_block(*divmod(int(sv[i]), d.cols), int(sy[i]), int(sx[i]))
-    lat = []
-    for i in range(n_single):
-        row, col = divmod(int(sv[i]), d.cols)
-        t = time.perf_counter()
-        d.decode_block(row, col, int(sy[i]), int(sx[i]))
-        lat.append(time.perf_counter() - t)
-    r["single_us"] = [x * 1e6 for x in lat]
+    r["single_us"] = _single_us(d, sv, sy, sx)
     # as many other requests once every key view and map is decoded and every view's constants
     # of the one-request path are built (what a user who will sweep pays up front: the p99 above
     # counts those first touches)
     d.decode_keys()
     getattr(d, "decode_maps", lambda: None)()           # (older checkouts, --against, have none)
-    sv, sy, sx = rng.integers(0, n, n_single), rng.integers(0, d.nby, n_single), rng.integers(0, d.nbx, n_single)
-    lat = []
-    for i in range(n_single):
-        row, col = divmod(int(sv[i]), d.cols)
-        t = time.perf_counter()
-        d.decode_block(row, col, int(sy[i]), int(sx[i]))
-        lat.append(time.perf_counter() - t)
-    r["single_warm_us"] = [x * 1e6 for x in lat]
+    r["single_warm_us"] = _single_us(d, rng.integers(0, n, n_single), rng.integers(0, d.nby, n_single),
+                                     rng.integers(0, d.nbx, n_single))
     r["block_size"], r["pixels"] = B, d.height * d.width
     return r
 
