@@ -803,7 +803,8 @@ class TxEncoder:
         pre: dict = {}                # intra keys coded ahead, together (every view intra: posed captures)
         keys = self.s.keys
         if views is not None and self.all_intra:       # (every view an intra key: a sample of them, and the first)
-            keys = [k for k in keys if k == keys[0] or k in set(np.asarray(views).tolist())]
+            wanted = set(np.asarray(views).tolist())
+            keys = [k for k in keys if k == keys[0] or k in wanted]
         for i, k in enumerate(keys):
             if i == 1 and self.all_intra and len(keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
                 pre = self._code_intra_keys(keys[1:], thumb16, s16[0], lam_k, model,
@@ -1388,17 +1389,14 @@ def _search_j2k_levels(enc: TxEncoder, target_psnr: float | None, target_bpp: fl
     target) lifts the shares below it to it and is searched with the pooled target: the shift
     stops where either would be missed. Returns (the run the search prefers among those that
     met the target, else the closest; whether one met it)."""
-    from formats.metrics import bpp as bpp_of
-
     from .j2kalloc import MAX_LEVEL, MIN_LEVEL, share_psnrs
 
-    n, peak, ones = enc.n0, float(enc.peak), np.ones(enc.n0)
+    peak, ones = float(enc.peak), np.ones(enc.n0)
 
     def code(share, q):
         res = enc.run_j2k(np.clip(share - q, MIN_LEVEL, MAX_LEVEL), step, progress)
         ps = enc.psnr(res)
-        cfg, secs = enc.pack(res)
-        b = bpp_of(file_bytes(enc.lf, cfg, secs), n, enc.h, enc.w_px)
+        b = file_bpp(enc.lf, *enc.pack(res))
         trace.append({"j2k_shift": -q, "psnr_rgb": ps, "bpp": b})
         return res, ps, b
 
@@ -1460,6 +1458,13 @@ def file_bytes(lf, cfg: dict, sections: list) -> int:
     meta = len(encode_meta("rlfc", 1, cfg, lf.geometry())) + 1024
     data = [meta] + [len(x) for _, x in sections]
     return HEADER_SIZE + ENTRY_SIZE * len(data) + 4 * sum(-(-n // DEFAULT_CHUNK) for n in data) + sum(data)
+
+
+def file_bpp(lf, cfg: dict, sections: list) -> float:
+    """bpp of the .lfc file these sections make (:func:`file_bytes`, per view pixel)."""
+    from formats.metrics import bpp
+
+    return bpp(file_bytes(lf, cfg, sections), lf.rows * lf.cols, lf.height, lf.width)
 
 
 TRIM_DB = 0.08         # a file this far above its PSNR target has λ trimmed at the chosen step
@@ -1591,10 +1596,10 @@ def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner)
     out = _encode_tx(lf, options, params, progress, runner)
     if (options.target_bpp is not None and not params.lossless and params.step is None
             and out.summary["psnr_rgb"] is not None
-            and _bpp_of(lf, out) < (1 - BPP_UNSPENT) * options.target_bpp):
+            and file_bpp(lf, out.config, out.sections) < (1 - BPP_UNSPENT) * options.target_bpp):
         exact = _encode_tx(lf, replace(options, target_bpp=None, lossless=True), replace(params, lossless=True),
                            progress, runner)
-        b = _bpp_of(lf, exact)
+        b = file_bpp(lf, exact.config, exact.sections)
         if b <= options.target_bpp:
             exact.notes = [f"the lossless file fits within {options.target_bpp:g} bpp ({b:.3f} bpp; the finest "
                            f"lossy setting gives {out.summary['psnr_rgb']:.2f} dB): it is written"] + exact.notes
@@ -1616,16 +1621,7 @@ def _encode_psnr(lf, options: EncodeOptions, params: TxParams, progress, runner)
     return out
 
 
-def _bpp_of(lf, out: Encoded) -> float:
-    """bpp of the file an encode makes (as the CLI writes it)."""
-    from formats.metrics import bpp
-
-    return bpp(file_bytes(lf, out.config, out.sections), lf.rows * lf.cols, lf.height, lf.width)
-
-
 def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -> Encoded:
-    from formats.metrics import bpp as bpp_of
-
     from .ratecontrol import depth_scale
 
     # a PSNR search codes a sample of the views at each pass (held once known, below); other
@@ -1715,8 +1711,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             ps = enc.psnr(r)
             b = None
             if options.target_bpp is not None:
-                cfg, secs = enc.pack(r)
-                b = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
+                b = file_bpp(lf, *enc.pack(r))
             trace.append({"step": step, "psnr_rgb": ps, "bpp": b, **({"views": "sample"} if sample is not None else {})})
             ok = ps >= options.target_psnr if options.target_psnr is not None else b <= options.target_bpp
             return ok, r
@@ -1728,8 +1723,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             if options.target_psnr is not None:
                 q0 = q0 + (options.target_psnr - ps0) / PSNR_SLOPE
             else:
-                cfg, secs = enc.pack(probe)
-                b0 = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
+                b0 = file_bpp(lf, *enc.pack(probe))
                 q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
             q0 = min(max(q0, lo_q), hi_q)
             models[probe["step"]] = enc.model_of(probe)   # the first evaluation's model, where near
@@ -1782,8 +1776,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                         again, ps = res, enc.psnr(res)
                     keep = True              # (the search's own run covered a sample only)
             else:
-                cfg, secs = enc.pack(again)
-                b = bpp_of(file_bytes(lf, cfg, secs), nv, lf.height, lf.width)
+                b = file_bpp(lf, *enc.pack(again))
                 keep = b <= options.target_bpp and ps >= enc.psnr(res)
                 trace.append({"step": res["step"], "psnr_rgb": ps, "bpp": b, "refined": True})
             if keep:
