@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import os
 import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -315,7 +316,7 @@ class TxDecoder(ProfileDecoder):
             self._in_keys.active = False
 
     def _decode_key_rows_now(self, need: np.ndarray) -> None:
-        lay, B, nby = self.lay, self.block_size, self.nby
+        lay = self.lay
         keys = [int(k) for k in lay.keys]
         need = need & ~self._key_done
         for s in range(len(keys) - 1, -1, -1):          # rows of the references a needed row samples
@@ -336,22 +337,48 @@ class TxDecoder(ProfileDecoder):
         group = max(1, KEY_PARSE_TBS // (self.nbx * self.nt))       # block rows per parse
         parsed: dict = {}
         pos = 0
+
+        def parse_next():                                  # the next keys' rows, about a group
+            nonlocal pos
+            chunk, n = [], 0
+            while pos < len(pending) and (not chunk or n + int(need[pending[pos]].sum()) <= group):
+                t = pending[pos]
+                chunk += [(t, r) for r in np.flatnonzero(need[t]).tolist()]
+                n += int(need[t].sum())
+                pos += 1
+            parsed.update(self._parse_key_rows(chunk))
+
+        images = [keys[s] for s in range(len(keys)) if keys[s] in self.img_of and need[s].any()]
+        # JPEG 2000 keys decode on a thread of their own (OpenJPEG releases the GIL) while the
+        # first group of transform-coded rows is parsed: a first frame waits for both
+        pool = ThreadPoolExecutor(1) if images and pending else None
+        try:
+            got = {k: pool.submit(self._key_image, k, 1) for k in images} if pool else {}
+            if pool:
+                parse_next()
+            self._key_rows_in_order(keys, need, parsed, parse_next, got)
+        finally:
+            if pool:
+                pool.shutdown()
+        if self._key_done.all():
+            self._keys_all = True
+            self._thumb_up.clear()
+
+    def _key_rows_in_order(self, keys, need, parsed, parse_next, got) -> None:
+        """:meth:`_decode_key_rows_now`'s rows ``need``, key by key in coding order: JPEG 2000
+        keys from ``got`` (futures) or decoded now, the others reconstructed from ``parsed``
+        (filled by ``parse_next``)."""
+        lay, B, nby = self.lay, self.block_size, self.nby
         for s in range(len(keys)):
             rr = np.flatnonzero(need[s])
             if rr.size == 0:
                 continue
             k = keys[s]
             if k in self.img_of:
-                self._decode_key_image(k)
+                self._set_key_image(k, got[k].result() if k in got else self._key_image(k, LOCAL_THREADS))
                 continue
-            if s not in parsed:                            # parse the next keys' rows, about a group
-                chunk, n = [], 0
-                while pos < len(pending) and (not chunk or n + int(need[pending[pos]].sum()) <= group):
-                    t = pending[pos]
-                    chunk += [(t, r) for r in np.flatnonzero(need[t]).tolist()]
-                    n += int(need[t].sum())
-                    pos += 1
-                parsed.update(self._parse_key_rows(chunk))
+            if s not in parsed:
+                parse_next()
             p = parsed.pop(s)
             locs = (rr[:, None] * self.nbx + np.arange(self.nbx)).reshape(-1)
             pred = None
@@ -367,9 +394,6 @@ class TxDecoder(ProfileDecoder):
             rows = blocks.reshape(rr.size, self.nbx, B, B, self.P).transpose(0, 2, 1, 3, 4).reshape(
                 rr.size, B, self.Wp, self.P)
             self._set_key_rows(s, rr, rows)
-        if self._key_done.all():
-            self._keys_all = True
-            self._thumb_up.clear()
 
     def _parse_key_rows(self, rows: list) -> dict:
         """{key slot: Parsed (that key's rows × nbx lanes of nt tbs, rows ascending)} of the
@@ -596,15 +620,20 @@ class TxDecoder(ProfileDecoder):
             o4[ty, :, tx] = self._add_residual(got, self._residual(vs, parsed), parsed.modes).reshape(-1, TB, TB, P)
         return out
 
-    def _decode_key_image(self, k: int) -> None:
-        """Decode JPEG 2000 intra key view ``k`` (all its rows)."""
-        from formats.pixels import to_planes
-
+    def _key_image(self, k: int, threads: int) -> np.ndarray:
+        """(Hp, Wp, C) pixels of JPEG 2000 intra key view ``k``, decoded on ``threads`` of
+        OpenJPEG's threads (its bytes read under the I/O lock: a byte-range source is shared)."""
         from ..topcodec import decode_image
 
         a, b = self.img_of[k]
-        img = decode_image("j2k", bytes(self.container.read("tx.keyimg", a, b)), (self.Hp, self.Wp, self.P), self.dtype,
-                           threads=LOCAL_THREADS)            # (one key at a time, under the key lock)
+        with self._io:
+            data = bytes(self.container.read("tx.keyimg", a, b))
+        return decode_image("j2k", data, (self.Hp, self.Wp, self.P), self.dtype, threads=threads)
+
+    def _set_key_image(self, k: int, img: np.ndarray) -> None:
+        """Store the pixels of JPEG 2000 intra key view ``k`` (all its rows)."""
+        from formats.pixels import to_planes
+
         B = self.block_size
         self._set_key_rows(int(self.key_slot[k]), np.arange(self.nby),
                            to_planes(img).reshape(self.nby, B, self.Wp, self.P))

@@ -765,6 +765,41 @@ def test_key_views_are_decoded_by_rows_on_demand(kw, rng):
     assert (d.decode_blocks(vs, bys, bxs) == ref.decode_blocks(vs, bys, bxs)).all()
 
 
+def test_a_jpeg2000_key_decodes_beside_the_parse_of_the_other_keys(monkeypatch):
+    """Where a request needs a JPEG 2000 key and transform-coded key rows, the JPEG 2000 key is
+    decoded on a thread of its own (one OpenJPEG thread) while the rows are parsed: the same
+    pixels, and an error of that decode reaches the caller typed."""
+    import threading
+
+    from formats.errors import ChecksumError
+    from rlfc.profiles import tx as txp
+
+    lf = _tall_parallax_lf(3, np.uint8)
+    e = tx(lf, step=2.0, key_spacing=2, intra_codec="j2k")
+    ref, blob = open_encoded(lf, e)
+    full = ref.decode_all()
+    d = RlfcDecoder(open_lfc(blob))
+    assert d.core.img_of and len(d.core.lay.keys) > len(d.core.img_of)
+    calls = []
+    real = txp.TxDecoder._key_image
+
+    def spy(self, k, threads):
+        calls.append((threading.current_thread() is threading.main_thread(), threads))
+        return real(self, k, threads)
+
+    monkeypatch.setattr(txp.TxDecoder, "_key_image", spy)
+    d.decode_keys()
+    assert calls == [(False, 1)] * len(d.core.img_of)
+    assert (d.decode_all() == full).all()
+
+    def broken(self, k, threads):
+        raise ChecksumError("tx.keyimg: broken on purpose")
+
+    monkeypatch.setattr(txp.TxDecoder, "_key_image", broken)
+    with pytest.raises(ChecksumError, match="on purpose"):
+        RlfcDecoder(open_lfc(blob)).decode_keys()
+
+
 def test_a_block_request_reads_only_the_key_rows_it_needs():
     """The first block of a view asks the file for the key-view rows it samples (and their
     references' rows), not the key views' whole streams; the rest are read when needed."""
