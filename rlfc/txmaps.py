@@ -26,7 +26,7 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, ScalarDecoder, Tables, encode_lanes
+from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, Tables, encode_lanes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
 from . import txsyntax
 from .txsyntax import quantize_counts, slot_word_view, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
@@ -51,8 +51,8 @@ def _digit_ctx(version: int, k: int) -> int:
 
 
 def _med(a, b, c):
-    return np.median(np.stack([a, b, a + b - c]), axis=0).astype(np.int64) if isinstance(a, np.ndarray) \
-        else sorted((a, b, a + b - c))[1]
+    """MED(a, b, c) = median(a, b, a + b − c) of arrays (the decoder's scalar form: :func:`_shared_map`)."""
+    return np.median(np.stack([a, b, a + b - c]), axis=0).astype(np.int64)
 
 
 def _escape(e):
@@ -219,24 +219,11 @@ class LazyMaps:
             raise FormatError(f"{what}: stream lengths do not add up to the section")
         pos = head + int(lens[0])
         tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
+        self.words = slot_word_view(tables)
         # the shared map: one stream, sequential (MED needs the decoded neighbours)
-        d = ScalarDecoder(raw[pos:pos + int(lens[1])], tables)
-        base = np.zeros((ny, nx), np.int64)
-        vals = base.reshape(-1)
-        for i in range(nloc):
-            y, x = divmod(i, nx)
-            a = vals[i - 1] if x else (vals[i - nx] if y else 0)
-            bb = vals[i - nx] if y else a
-            c = vals[i - nx - 1] if (x and y) else bb if y else a
-            s = d.get(CTX_BASE + (0 if a == c and bb == c else (1 if abs(a - c) + abs(bb - c) <= 16 else 2)))
-            e = _unescape_scalar(d, s, what, ver)
-            vals[i] = (0 if i == 0 else _med(int(a), int(bb), int(c))) + e
-        if not d.done(int(lens[1])):
-            raise FormatError(f"{what}: the shared map's stream is malformed")
+        self.base = np.asarray(_shared_map(raw[pos:pos + int(lens[1])], self.words, ny, nx, ver, what), np.int64)
         pos += int(lens[1])
-        self.base = vals
         self.starts = pos + np.concatenate([[0], np.cumsum(lens[2:])]).astype(np.int64)    # (n_maps + 1,)
-        self.words = slot_word_view(tables) if n_maps else None
         self.shape, self.n_modes, self.what = (ny, nx), n_modes, what
         self.max_mode = np.full(n_maps, n_modes - 1, np.int64) if max_mode is None else np.asarray(max_mode)
         self.disp = np.zeros((n_maps, nloc), np.int64)
@@ -266,6 +253,65 @@ class LazyMaps:
         """(disp, modes) with every map decoded."""
         self.need(np.arange(self.done.size))
         return self.disp, self.modes
+
+
+def _shared_map(data: bytes, words, ny: int, nx: int, ver: int, what: str) -> list:
+    """The shared map's ny·nx values (a list of ints, raster order) from its stream ``data``:
+    each value MED(a, b, c) + e, e's symbol in the context of the activity at that block (the
+    module's docstring); the rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined, one
+    look-up per symbol in ``words`` (:func:`rlfc.txsyntax.slot_word_view`), on Python ints
+    (numpy scalars made this 4x slower: it is paid by every open)."""
+    if len(data) < STATE_BYTES:
+        raise FormatError(f"{what}: the shared map's stream is shorter than its state")
+    x = int.from_bytes(data[:STATE_BYTES], "little")
+    p = STATE_BYTES
+    vals = [0] * (ny * nx)
+    digits = [_digit_ctx(ver, k) << PROB_BITS for k in range(3)]
+    act_ctx = [(CTX_BASE + k) << PROB_BITS for k in range(3)]
+    mask = (1 << PROB_BITS) - 1
+    i = 0
+    try:
+        for y in range(ny):
+            for xx in range(nx):
+                if xx:
+                    a = vals[i - 1]
+                    b = vals[i - nx] if y else a
+                    c = vals[i - nx - 1] if y else a
+                else:
+                    a = vals[i - nx] if y else 0
+                    b = c = a
+                act = abs(a - c) + abs(b - c)
+                w = words[act_ctx[0 if act == 0 else 1 if act <= 16 else 2] | (x & mask)]
+                x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                while x < RANS_L:
+                    x = (x << 8) | data[p]
+                    p += 1
+                s = w & 127
+                if s == 0 or s == 2 * R:                  # an escape: three 6-bit digits of |e| − R
+                    e = 0
+                    for dc in digits:
+                        w = words[dc | (x & mask)]
+                        x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                        while x < RANS_L:
+                            x = (x << 8) | data[p]
+                            p += 1
+                        e = (e << 6) | (w & 127)
+                    e = R + e if s else -(R + e)
+                elif s > 2 * R:
+                    raise FormatError(f"{what}: undefined map symbol {s}")
+                else:
+                    e = s - R
+                if i == 0:
+                    vals[0] = e
+                else:                                     # MED = median(a, b, a + b − c)
+                    lo, hi = (a, b) if a <= b else (b, a)
+                    vals[i] = e + (lo if c >= hi else hi if c <= lo else a + b - c)
+                i += 1
+    except IndexError:
+        raise FormatError(f"{what}: the shared map's stream reads past its end") from None
+    if p != len(data) or x != RANS_L:
+        raise FormatError(f"{what}: the shared map's stream is malformed")
+    return vals
 
 
 def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_modes: int, ver: int,
@@ -335,17 +381,6 @@ def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_mo
     if p != end or x != RANS_L:
         raise FormatError(f"{what}: a map stream is malformed")
     return corr, modes[nx:]
-
-
-def _unescape_scalar(d: ScalarDecoder, s: int, what: str, version: int) -> int:
-    if s > 2 * R:
-        raise FormatError(f"{what}: undefined map symbol {s}")
-    if s not in (0, 2 * R):
-        return s - R
-    x = 0
-    for k in range(3):
-        x = (x << 6) | d.get(_digit_ctx(version, k))
-    return (R + x) * (1 if s == 2 * R else -1)
 
 
 __all__ = ["pack_maps", "maps_sizes", "unpack_maps", "LazyMaps", "MAX_VARINT_BYTES"]
