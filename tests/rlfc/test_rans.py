@@ -90,3 +90,29 @@ def test_malformed_streams_are_detected():
         Tables.from_bytes(b"junk", 2, 8, "x")
     with pytest.raises(FormatError):
         ScalarDecoder(b"\x00\x01", tables)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True)
+@given(st.integers(1, 6), st.integers(1, 200), st.integers(0, 3), st.integers(0, 2**32 - 1))
+def test_tables_of_many_rows_are_each_rows_own(C, A, kind, seed):
+    """``normalize_int_rows`` (every table of a file at once) gives each row exactly what
+    ``normalize_int`` gives it alone: small counts, huge weights, few used symbols beside a
+    dominant one, all-zero rows, and rows whose floors at 1 overshoot M."""
+    from rlfc.rans import normalize_int, normalize_int_rows
+
+    rng = np.random.default_rng(seed)
+    if kind == 0:
+        w = rng.integers(0, 50, (C, A))
+        w[0] *= seed % 2                                   # (an all-zero row: a flat table)
+    elif kind == 1:
+        w = rng.integers(0, 1 << 40, (C, A)) * (rng.random((C, A)) < 0.3)
+    elif kind == 2:
+        w = (rng.random((C, A)) < 0.1) * rng.integers(1, 3, (C, A))
+        w[:, 0] = rng.integers(0, 1 << 35, C)
+    else:
+        w = np.zeros((C, 4096), np.int64)                  # 4 095 symbols floored to 1: over M
+        w[:, 1:] = rng.integers(0, 2, (C, 4095))
+        w[:, 0] = 1 << 30
+    got = normalize_int_rows(w)
+    assert np.array_equal(got, np.stack([normalize_int(r) for r in w]))
+    assert (got.sum(axis=1) == M).all()
