@@ -522,7 +522,12 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     lanes active at step k are ranks [0, m_k) and symbol k of rank r sits at offs[k] + r: every
     per-step read and write is a contiguous slice (the lanes' states too, kept in rank order),
     and a symbol's two predecessors in its lane are at the same rank in the two steps before.
-    ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1).
+    ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1). A group's
+    first symbol always counts as a nonzero neighbour, so the symbols after it (j = 1, 2) get
+    that +1 up front and look back only at symbols of their group past the first (j >= 2, 3);
+    the contexts are kept shifted to their slot-table rows (<< PROB_BITS). Each step is one
+    :func:`mag_words` look-up; the buffer is padded by two bytes a step, so the reads need no
+    clamping (the caller's end check refuses a stream that reads past its own bytes).
     """
     tot = ctx1.size
     order = np.argsort(-per_lane, kind="stable")
@@ -536,54 +541,59 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     c1 = np.empty(tot, np.uint32)
     c1[sm] = ctx1
     jm = np.empty(tot, np.int8)
-    jm[sm] = np.minimum(j, 2)
-    first = jm == 0
-    g1 = ~first                                                        # the previous symbol is of my group
-    g2 = jm == 2                                                       # ... and the one before it
-    sym = np.zeros(tot, np.int64)
+    jm[sm] = np.minimum(j, 3)
+    c1 += (jm == 1) | (jm == 2)                                        # (contiguous passes from here)
+    c1 <<= PROB_BITS
+    g1 = (jm >= 2).astype(np.uint32) << PROB_BITS                      # the previous symbol counts
+    g2 = (jm >= 3).astype(np.uint32) << PROB_BITS                      # ... and the one before it
+    del jm
+    words = np.empty(tot, np.uint32)                                   # each symbol's table word
     nz = np.zeros(tot, bool)
-    tab = slot_words(tables)
+    tab = mag_words(tables)
     x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order]
     buf, top = dec.buf, dec.top
+    bufp = np.concatenate([buf[:top + 1], np.zeros(2 * K + 2, np.uint8)])
     offl = offs.tolist()
     for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
         if m < TAIL_LANES:                                             # few lanes left: plain Python
-            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, first, nz, sym, x_all, p_all, buf, top, tables)
+            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables)
             break
-        c = c1[o:o + m]
         if k >= 1:
             o1 = offl[k - 1]
-            c = c + (nz[o1:o1 + m] & g1[o:o + m])
+            c = c1[o:o + m] + nz[o1:o1 + m] * g1[o:o + m]
             if k >= 2:
                 o2 = offl[k - 2]
-                c += nz[o2:o2 + m] & g2[o:o + m]
+                c += nz[o2:o2 + m] * g2[o:o + m]
+        else:
+            c = c1[o:o + m].copy()
         x = x_all[:m]
-        w = tab[(c << PROB_BITS) | (x & _MASK)]                         # symbol | freq << 7 | (slot − cum) << 20
-        x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+        c |= x & _MASK
+        w = words[o:o + m]
+        np.take(tab, c, out=w, mode="clip")        # (c is in range; "raise" buffers the output)
+        fr = (w >> 12) & 0x1FFF
+        fr *= x >> PROB_BITS
+        np.add(fr, w & 0xFFF, out=x)
         p = p_all[:m]
         need = x < RANS_L
-        x = np.where(need, (x << 8) | buf[np.minimum(p, top)], x)
+        np.copyto(x, (x << 8) | bufp[p], where=need)
         p += need
-        need = x < RANS_L
-        if need.any():                                                 # a second byte: rare
-            x = np.where(need, (x << 8) | buf[np.minimum(p, top)], x)
+        if x.min() < RANS_L:                                           # a second byte (most steps of many lanes)
+            need = x < RANS_L
+            np.copyto(x, (x << 8) | bufp[p], where=need)
             p += need
-        x_all[:m] = x
-        s = w & 127
-        sym[o:o + m] = s
-        np.logical_or(s > 0, first[o:o + m], out=nz[o:o + m])
+        np.greater_equal(w, _MAG_NZ, out=nz[o:o + m])
     dec.x[order], dec.ptr[order] = x_all, p_all
-    return sym[sm]
+    return (words >> 25).astype(np.uint8)[sm].astype(np.int64)
 
 
-def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, first, nz, sym, x_all, p_all, buf, top, tables) -> None:
+def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables) -> None:
     """:func:`_magnitudes` from step ``k`` on, where only ranks [0, m) have symbols left: each
-    lane to its end in plain Python (the same integers; a numpy step costs ~25 calls whatever
+    lane to its end in plain Python (the same integers; a numpy step costs ~20 calls whatever
     the lanes). Reads past the buffer are clamped as in the numpy steps (the caller's end check
     refuses such a stream)."""
     o0 = offl[k]
-    c1l, g1l, g2l, fl = c1[o0:].tolist(), g1[o0:].tolist(), g2[o0:].tolist(), first[o0:].tolist()
-    words = slot_word_view(tables)
+    c1l, g1l, g2l = c1[o0:].tolist(), g1[o0:].tolist(), g2[o0:].tolist()
+    tab = memoryview(mag_words(tables))
     data = memoryview(buf)
     out = []
     for r in range(m):
@@ -592,19 +602,42 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, first, nz, sym, x_all, p_all,
         n2 = bool(nz[offl[k - 2] + r]) if k >= 2 else False
         for kk in range(k, int(lens[r])):
             i = offl[kk] + r - o0
-            c = c1l[i] + (n1 and g1l[i]) + (n2 and g2l[i])
-            w = words[(c << PROB_BITS) | (x & _MASK)]
-            x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+            c = c1l[i] + (g1l[i] if n1 else 0) + (g2l[i] if n2 else 0)
+            w = tab[c | (x & _MASK)]
+            x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
             while x < RANS_L:
                 x = (x << 8) | data[p if p < top else top]
                 p += 1
-            s = w & 127
-            out.append((i, s))
-            n2, n1 = n1, s > 0 or fl[i]
+            out.append((i, w))
+            n2, n1 = n1, w >= _MAG_NZ_INT
         x_all[r], p_all[r] = x, p
     if out:
         idx, val = np.array(out, np.int64).T
-        sym[o0 + idx] = val
+        words[o0 + idx] = val
+
+
+_MAG_NZ_INT = 1 << 25
+_MAG_NZ = np.uint32(_MAG_NZ_INT)          # a word of a nonzero symbol is at least this
+
+
+def mag_words(tables: Tables) -> np.ndarray:
+    """(C·M,) uint32 per context and slot: (slot − cum) | freq << 12 | symbol << 25 (the layout of
+    the numpy magnitude steps: the symbol's test for zero one comparison); alphabets up to 128
+    symbols. Cached on the tables."""
+    got = getattr(tables, "_mag_words", None)
+    if got is None:
+        C, A = tables.freq.shape
+        if A > 128:
+            raise ValueError("magnitude words hold alphabets of at most 128 symbols")
+        f = tables.freq.reshape(-1).astype(np.int64)
+        # as slot_words: each symbol's word minus its flat start, repeated over its slots, plus
+        # the flat slot index g (uint32 arithmetic wraps; the result, g − start < freq, does not)
+        start = (np.arange(C, dtype=np.int64)[:, None] * RANS_M + tables.cum[:, :A]).reshape(-1)
+        word = ((np.tile(np.arange(A, dtype=np.int64), C) << 25) | (f << 12)) - start
+        got = np.repeat((word & 0xFFFFFFFF).astype(np.uint32), f)
+        got += np.arange(C * RANS_M, dtype=np.uint32)
+        tables._mag_words = got
+    return got
 
 
 def slot_words(tables: Tables) -> np.ndarray:
