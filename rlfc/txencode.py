@@ -1692,7 +1692,10 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         res = enc.run(1.0, measured, progress, keep_pixels=True)
     elif options.target_psnr is None and options.target_bpp is None:
         step = params.step if params.step is not None else 8.0 * scale
-        measured = enc.model_of(run(step))
+        # the probe coded every view at this step: its model stands for the pass that would
+        # measure one (with the key ratio the probe set, the keys' symbols shift a little)
+        measured = enc.model_of(probe if probe is not None and probe["step"] == step else run(step))
+        probe = None
         res = enc.run(step, measured, progress, keep_pixels=True)
     else:
         models: dict = {}                     # step → the entropy model measured there

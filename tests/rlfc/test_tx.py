@@ -828,6 +828,28 @@ def test_a_block_request_reads_only_the_key_rows_it_needs():
     assert core._keys_all and first + sum(asked) == key_bytes
 
 
+def test_a_default_encode_takes_its_model_from_the_probe(monkeypatch):
+    """Without a target the probe pass (every view, at the file's step) measures the entropy
+    model the file is coded with: two coding passes, not three; the file decodes to the
+    encoder's pixels."""
+    import rlfc.txencode as T
+
+    lf = smooth_lf()
+    calls = []
+    real = T.TxEncoder.run
+
+    def spy(self, step, *a, **k):
+        calls.append(step)
+        return real(self, step, *a, **k)
+
+    monkeypatch.setattr(T.TxEncoder, "run", spy)
+    e = encode(lf, EncodeOptions(profile="tx"))
+    assert len(calls) == 2 and calls[0] == calls[1]
+    d, _ = open_encoded(lf, e)
+    assert (d.decode_all() == e.decoded).all() and e.target_met is None
+    assert psnr_rgb(lf.views, e.decoded) > 35
+
+
 def test_a_rerun_codes_the_same_jpeg2000_key_views():
     """JPEG 2000 searches start where earlier passes learnt OpenJPEG lands, so a pass depends on
     the passes before it; rerunning a pass to get its pixels (``with_pixels``) starts from the
