@@ -1348,6 +1348,8 @@ def _params_from(options: EncodeOptions) -> TxParams:
     return TxParams(**p)
 
 
+COARSEST_NOTE = ("even the coarsest quantizer (and the smallest key views) cannot reach this bpp; the closest "
+                 "setting is written")
 SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key view …
 SEARCH_MIN_VIEWS = 16  # … where there are at least this many
 MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the entropy model measured
@@ -1664,6 +1666,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     # uses the model, so the two passes' levels never exist at once)
     slope0 = PSNR_SLOPE
     j2k_only = False
+    j2k_met = None
     if (lf.layout != "grid" and enc.all_intra and (options.target_psnr is not None or options.target_bpp is not None)
             and params.step is None and not params.lossless):
         # every view of a posed capture coded alone: each view's 8×8 DCT rounded to one step
@@ -1681,6 +1684,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             res, found = _search_j2k_levels(enc, options.target_psnr, options.target_bpp, step0, samples, trace,
                                             progress, options.min_view_psnr if options.target_bpp is None else None)
             j2k_only = options.target_psnr is not None or smooth <= enc.psnr(res) - J2K_SMOOTH_MARGIN_DB
+            if found and not j2k_only:
+                j2k_met = res                 # a size JPEG 2000 met: the full search must beat it
         if not (j2k_only and found) and options.target_psnr is not None:
             s_p, slope0 = step_prior(samples, np.ones(nv), float(enc.peak), options.target_psnr)
             step0 = PROXY_STEP_RATIO * s_p
@@ -1748,8 +1753,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         found, res = sr.found, sr.result
         if not found:
             notes.append("even the finest quantizer misses the target; the closest setting is written" if floor else
-                         "even the coarsest quantizer (and the smallest key views) cannot reach this bpp; the "
-                         "closest setting is written")
+                         COARSEST_NOTE)
         # one more pass with the model of the chosen point, kept where it meets the target and,
         # for a bpp target, gives better quality; but a posed capture's search pass coded every
         # view (each keeping its pixels), and where its model was measured within MODEL_REACH
@@ -1786,6 +1790,14 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 res = again
         if options.target_psnr is not None and found and "lambda_trim" not in params.ablate:
             res = _trim_lambda(enc, res, options.target_psnr, progress, trace)
+        if j2k_met is not None and (not found or enc.psnr(j2k_met) > enc.psnr(res)):
+            # the views as JPEG 2000 met the size where the search did not, or at a better quality
+            if not found:
+                notes.remove(COARSEST_NOTE)
+            notes.append("the views as JPEG 2000 meet this size " + ("at a better quality than the transform path"
+                         if found else "where the transform path cannot") + ": they are the file")
+            res, found = j2k_met, True
+        j2k_met = None
     if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid" and "promote" not in params.ablate:
         res = enc.with_pixels(res)
         n_alone = len(enc.promote_views(res))

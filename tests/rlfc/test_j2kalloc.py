@@ -174,6 +174,40 @@ def test_a_posed_bpp_target_whose_quality_nears_the_views_smoothness_takes_the_f
     assert (d.decode_all() == e.decoded).all()
 
 
+def test_a_posed_size_target_keeps_jpeg2000_where_it_does_better(monkeypatch):
+    """A size target whose JPEG 2000 passes are set aside for the full search (views near their
+    smoothness): the file is the better of the two within the size, and where only JPEG 2000 meets
+    the size (llff_statue at 0.01 bpp: the transform path's coarsest quantizer is 0.023 bpp), the
+    target is met with JPEG 2000's file, not missed with the transform path's closest."""
+    import cv2
+
+    import rlfc.txencode as T
+    from formats.metrics import bpp
+    from rlfc.ratesearch import SearchResult
+
+    views = np.stack([cv2.resize(v, (v.shape[1] * 2, v.shape[0] * 2), interpolation=cv2.INTER_CUBIC) for v in _dino(4)])
+    lf = _posed(views)
+    e = encode(lf, EncodeOptions(profile="tx", target_bpp=0.1))
+    full = [t for t in e.trace if "step" in t and t["bpp"] <= 0.1]
+    assert e.target_met and full and any("j2k_shift" in t for t in e.trace)       # both searches ran
+    assert any("JPEG 2000 meet this size at a better quality" in n for n in e.notes)
+    d, blob = open_encoded(lf, e)
+    assert (d.decode_all() == e.decoded).all() and min(e.config["tx"]["key_images"]) > 0
+    assert bpp(len(blob), 4, lf.height, lf.width) <= 0.1
+    assert e.summary["psnr_rgb"] > max(t["psnr_rgb"] for t in full)
+    real = T.secant_search
+
+    def transform_misses(*a, **k):          # the full search (it alone passes `prefer`) finds nothing
+        r = real(*a, **k)
+        return SearchResult(False, r.q, r.result, r.points) if "prefer" in k else r
+
+    monkeypatch.setattr(T, "secant_search", transform_misses)
+    e2 = encode(lf, EncodeOptions(profile="tx", target_bpp=0.1))
+    assert e2.target_met and not any("coarsest" in n for n in e2.notes)
+    assert any("where the transform path cannot" in n for n in e2.notes)
+    assert (e2.decoded == e.decoded).all()
+
+
 def test_a_per_view_floor_on_posed_views_is_searched_with_the_pooled_target(monkeypatch):
     """--min-view-psnr on natural posed views: the shares below the floor are lifted to it and
     the shift stops where the worst view would miss it, in one encode. Raising the pooled target
