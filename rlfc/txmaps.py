@@ -255,6 +255,23 @@ class LazyMaps:
         return self.disp, self.modes
 
 
+def _escape_digits(words, digits: list, x: int, p: int, data) -> tuple[int, int, int]:
+    """An escape's excess |e| − R from its three 6-bit digits (contexts ``digits``, already
+    shifted to their table rows; most significant first), the rANS state x at byte p of
+    ``data``: (excess, x, p) after them. (Reads past ``data`` raise IndexError: the callers
+    make it a FormatError.)"""
+    e = 0
+    mask = (1 << PROB_BITS) - 1
+    for dc in digits:
+        w = words[dc | (x & mask)]
+        x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+        while x < RANS_L:
+            x = (x << 8) | data[p]
+            p += 1
+        e = (e << 6) | (w & 127)
+    return e, x, p
+
+
 def _shared_map(data: bytes, words, ny: int, nx: int, ver: int, what: str) -> list:
     """The shared map's ny·nx values (a list of ints, raster order) from its stream ``data``:
     each value MED(a, b, c) + e, e's symbol in the context of the activity at that block (the
@@ -288,14 +305,7 @@ def _shared_map(data: bytes, words, ny: int, nx: int, ver: int, what: str) -> li
                     p += 1
                 s = w & 127
                 if s == 0 or s == 2 * R:                  # an escape: three 6-bit digits of |e| − R
-                    e = 0
-                    for dc in digits:
-                        w = words[dc | (x & mask)]
-                        x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
-                        while x < RANS_L:
-                            x = (x << 8) | data[p]
-                            p += 1
-                        e = (e << 6) | (w & 127)
+                    e, x, p = _escape_digits(words, digits, x, p, data)
                     e = R + e if s else -(R + e)
                 elif s > 2 * R:
                     raise FormatError(f"{what}: undefined map symbol {s}")
@@ -345,14 +355,7 @@ def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_mo
                     left = 0
                 else:
                     if s == 0 or s == 2 * R:          # an escape: three 6-bit digits of |c| − R
-                        e = 0
-                        for dc in digits:
-                            w = words[dc | (x & mask)]
-                            x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
-                            while x < RANS_L:
-                                x = (x << 8) | data[p]
-                                p += 1
-                            e = (e << 6) | (w & 127)
+                        e, x, p = _escape_digits(words, digits, x, p, data)
                         corr[i] = R + e if s else -(R + e)
                     elif s > 2 * R:
                         raise FormatError(f"{what}: undefined map symbol {s}")
