@@ -1689,6 +1689,10 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         if not (j2k_only and found) and options.target_psnr is not None:
             s_p, slope0 = step_prior(samples, np.ones(nv), float(enc.peak), options.target_psnr)
             step0 = PROXY_STEP_RATIO * s_p
+        elif j2k_met is not None:
+            # a size JPEG 2000 met: the full search starts at the step of the quality it reached
+            # there (the transform path lands near it), not at the default step
+            step0 = PROXY_STEP_RATIO * step_prior(samples, np.ones(nv), float(enc.peak), enc.psnr(j2k_met))[0]
         del got, samples
     if j2k_only and found:
         pass                                  # (that search's run is the file)

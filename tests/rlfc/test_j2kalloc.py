@@ -176,7 +176,8 @@ def test_a_posed_bpp_target_whose_quality_nears_the_views_smoothness_takes_the_f
 
 def test_a_posed_size_target_keeps_jpeg2000_where_it_does_better(monkeypatch):
     """A size target whose JPEG 2000 passes are set aside for the full search (views near their
-    smoothness): the file is the better of the two within the size, and where only JPEG 2000 meets
+    smoothness): the full search starts where JPEG 2000's quality puts the step, the file is the
+    better of the two within the size, and where only JPEG 2000 meets
     the size (llff_statue at 0.01 bpp: the transform path's coarsest quantizer is 0.023 bpp), the
     target is met with JPEG 2000's file, not missed with the transform path's closest."""
     import cv2
@@ -190,6 +191,8 @@ def test_a_posed_size_target_keeps_jpeg2000_where_it_does_better(monkeypatch):
     e = encode(lf, EncodeOptions(profile="tx", target_bpp=0.1))
     full = [t for t in e.trace if "step" in t and t["bpp"] <= 0.1]
     assert e.target_met and full and any("j2k_shift" in t for t in e.trace)       # both searches ran
+    # the full search started at the step of the quality JPEG 2000 reached, not at step 8
+    assert [t["step"] for t in e.trace if "step" in t][0] > 2 * 8.0
     assert any("JPEG 2000 meet this size at a better quality" in n for n in e.notes)
     d, blob = open_encoded(lf, e)
     assert (d.decode_all() == e.decoded).all() and min(e.config["tx"]["key_images"]) > 0
