@@ -172,6 +172,7 @@ class Model:
     """Code lengths (bits) for decisions, from (N_CTX, ALPHABET) counts (add-one smoothed)."""
 
     def __init__(self, counts: np.ndarray):
+        self.counts = counts                  # (kept: models between two steps interpolate them)
         c = counts + 0.5
         bits = -np.log2(c / c.sum(axis=1, keepdims=True))
         self.mode = np.zeros((2, 3))
@@ -1354,6 +1355,10 @@ SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key v
 SEARCH_MIN_VIEWS = 16  # … where there are at least this many
 MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the entropy model measured
                       # nearest to its step where one is this near (else it measures one first)
+MODEL_SPAN = 1.5      # octaves: a search evaluation between two measured models at most this far apart
+                      # codes with their counts interpolated (no pass of its own to measure one)
+SEARCH_MIN_WIDTH = 1 / 32   # octaves: a PSNR search ends when a step that met the target and one that
+                            # missed are this close (the staircase below it is noise: BENCHMARKS.md)
 PSNR_SLOPE = -2.5    # dB per octave of the step around 40 dB (dense grids: 2.2-2.8), the search's prior
 BPP_SLOPE = -1.0     # log2 bpp per octave of the step, the same for a bpp target
 
@@ -1509,6 +1514,21 @@ def _trim_lambda(enc: TxEncoder, res: dict, target: float, progress, trace: list
             miss = q if miss is None else min(miss, q)
         q = min(lo[0] + (target + 0.03 - lo[1]) / slope, 4.0)
     return best
+
+
+def _between_models(models: dict, logq: float) -> "Model | None":
+    """The entropy model of a search evaluation at log2 step ``logq`` that lies between two
+    measured models (``models``: step → Model) at most MODEL_SPAN octaves apart: their counts
+    interpolated geometrically in log2 of the step (symbol counts move smoothly with the step;
+    on six grids at 36/40/45 dB the files stayed within ±0.01% where the search took the same
+    path). None where no measured step lies on each side within that span."""
+    lo = max(((math.log2(k), k) for k in models if math.log2(k) < logq), default=None)
+    hi = min(((math.log2(k), k) for k in models if math.log2(k) > logq), default=None)
+    if lo is None or hi is None or hi[0] - lo[0] > MODEL_SPAN:
+        return None
+    t = (logq - lo[0]) / (hi[0] - lo[0])
+    ca, cb = (np.maximum(models[k].counts, 1e-12) for _, k in (lo, hi))
+    return Model(np.exp((1 - t) * np.log(ca) + t * np.log(cb)))
 
 
 CLOSE_TRIES = 2         # full passes that close in on the target after a corrected miss
@@ -1713,8 +1733,12 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             step = 2.0 ** logq
             near = min(models, key=lambda k: abs(math.log2(k) - logq)) if models else None
             far = near is None or abs(math.log2(near) - logq) > MODEL_REACH
-            r = enc.run(step, models[near] if near is not None else model, progress,
-                        views=model_sample if far and model_sample is not None else sample)
+            use = models[near] if near is not None else model
+            if far:                   # between two measured models: theirs, interpolated
+                between = _between_models(models, logq)
+                if between is not None:
+                    use, far = between, False
+            r = enc.run(step, use, progress, views=model_sample if far and model_sample is not None else sample)
             r["model_step"] = near
             if far:                   # far from any model: measure one first (on a sample of a posed capture's views)
                 r = enc.run(step, enc.model_of(r), progress, views=sample)
@@ -1752,7 +1776,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
 
         sr = secant_search(value, q0, options.target_psnr if floor else math.log2(options.target_bpp),
                            feasible_above=floor, slope0=slope0 if floor else BPP_SLOPE, lo=lo_q, hi=hi_q,
-                           tol=0.03 if floor else 0.01, prefer=prefer,
+                           tol=0.03 if floor else 0.01, prefer=prefer, min_width=SEARCH_MIN_WIDTH if floor else 1 / 64,
                            snap=lambda q: math.log2(enc.grid_step(2.0 ** q)))
         found, res = sr.found, sr.result
         if not found:

@@ -1186,3 +1186,57 @@ def test_a_posed_search_measures_a_far_model_on_a_sample_of_views(monkeypatch):
     assert e.target_met and e.summary["psnr_rgb"] >= 36.0
     d, _ = open_encoded(lf, e)
     assert np.array_equal(d.decode_all(), e.decoded)
+
+
+def test_an_entropy_model_between_two_measured_ones_interpolates_their_counts():
+    """A search step between two steps whose entropy models were measured (at most MODEL_SPAN
+    octaves apart) gets their counts interpolated geometrically in log2 of the step; outside
+    them, or farther apart, none (the search measures one)."""
+    from rlfc.txencode import MODEL_SPAN, Model, _between_models, default_counts
+
+    ca = default_counts().astype(np.float64) + 1.0
+    cb = 4.0 * ca
+    cb[0, 0] = 0.0                                    # (a count of 0 stays finite)
+    models = {4.0: Model(ca), 8.0: Model(cb)}
+    mid = _between_models(models, math.log2(4.0) + 0.5)
+    assert np.allclose(mid.counts.reshape(-1)[1:], 2.0 * ca.reshape(-1)[1:]) and np.isfinite(mid.counts).all()
+    quarter = _between_models(models, math.log2(4.0) + 0.25)
+    assert np.allclose(quarter.counts[1:], 2.0 ** 0.5 * ca[1:])
+    assert _between_models(models, 1.5) is None and _between_models(models, 3.5) is None     # below, above
+    assert _between_models(models, 2.0) is None                                               # at a measured step
+    far = 2.0 ** (2 + MODEL_SPAN + 0.25)
+    assert _between_models({4.0: Model(ca), far: Model(cb)}, 2.5) is None                     # too far apart
+
+
+def test_a_search_step_between_two_measured_models_is_coded_once(monkeypatch):
+    """Rate control codes a sampled step twice where it is far from every measured entropy
+    model (once to measure one), but once where it lies between two measured ones (their counts
+    interpolated); the file still meets its target and decodes to the encoder's pixels."""
+    from rlfc import txencode as T
+    from rlfc.ratesearch import SearchResult
+
+    lf = _noisy_grid()
+    sampled = []
+    orig = T.TxEncoder.run
+
+    def run(self, step, model, progress=None, keep_pixels=False, views=None, lam_scale=1.0):
+        if views is not None:
+            sampled.append(step)
+        return orig(self, step, model, progress, keep_pixels, views, lam_scale)
+
+    def three_steps(value, q0, target, **k):         # after the probe: 1.2 octaves finer, then between
+        qp = math.log2(sampled[0])
+        qs = [qp - 1.2, qp - 0.6]
+        got = [(q, *value(q)) for q in qs]
+        ok = [g for g in got if g[1] >= target]
+        q, _, r = max(ok) if ok else got[0]
+        return SearchResult(bool(ok), q, r, [(g[0], g[1]) for g in got])
+
+    monkeypatch.setattr(T.TxEncoder, "run", run)
+    monkeypatch.setattr(T, "secant_search", three_steps)
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
+    probe, far, between = sampled[0], sampled[1], sampled[3]
+    assert sampled[:4] == [probe, far, far, between] and between not in sampled[4:]
+    assert math.log2(between) == pytest.approx((math.log2(probe) + math.log2(far)) / 2, abs=0.01)
+    d, _ = open_encoded(lf, e)
+    assert np.array_equal(d.decode_all(), e.decoded)
