@@ -28,7 +28,7 @@ from .header import RlfcHeader
 from .kernels import dequantize
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
-from .txestimate import estimate_maps
+from .txestimate import estimate_maps, reprice_maps
 from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
@@ -42,7 +42,7 @@ from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_C
 from .xp import NUMPY
 
 #: encoder decisions :attr:`TxParams.ablate` may turn off
-ABLATE = ("intra_tbs", "lambda_trim", "promote", "rdoq", "ref_modes")
+ABLATE = ("intra_tbs", "lambda_trim", "maps_reprice", "promote", "rdoq", "ref_modes")
 INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be beaten by intra coding
 #: intra 8×8 blocks are tried only where the block's energy about its mean is below this many
 #: times its prediction residual's (measured on the six dense grids at 40 dB: 98.7–99.9% of the
@@ -87,7 +87,8 @@ class TxParams:
             its references; no single-reference modes), "rdoq" (levels rounded to nearest, the
             last position is the last nonzero: no rate-distortion quantization), "intra_tbs" (no
             intra 8×8 blocks), "promote" (no view coded alone as a JPEG 2000 key), "lambda_trim"
-            (no λ trim between two quantizer steps).
+            (no λ trim between two quantizer steps), "maps_reprice" (the maps' corrections are
+            not judged again at the coding λ the probe predicts).
         key_split: streams per key-view block row (0 = chosen from the rows' estimated bytes:
             :meth:`TxEncoder.key_split`); more streams parse faster as parallel lanes and cost
             about 4 bytes each.
@@ -278,12 +279,13 @@ class TxEncoder:
     keep_decoded = True
 
     def __init__(self, lf, params: TxParams, progress=None, side_lambda: float = 10.0, runner=None,
-                 hold_all: bool = False):
+                 hold_all: bool = False, keep_luma: bool = False):
         """``side_lambda``: luma squared error worth one bit of side information at the quality
         expected (:func:`side_lambda`); ``runner``: where views are coded
         (:class:`formats.parallel.Runner`; None = here, one after another); ``hold_all``: keep
         every view's pixels once read (:meth:`hold`; for encodes whose passes all cover every
-        view)."""
+        view); ``keep_luma``: keep the views' luma the maps were estimated from until
+        :meth:`drop_luma` (for :meth:`reprice_maps`, without reading every view again)."""
         from .profiles.tx import plane_limits
 
         if lf.views.dtype not in (np.uint8, np.uint16):
@@ -335,15 +337,57 @@ class TxEncoder:
             progress("disparity", 0, None)
         n_maps = len(self.s.cell_views)
         nloc8 = self.nby8 * self.nbx8
-        if params.max_disparity > 0 and n_maps:
-            luma = np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])   # Y in [0, peak]
+        self.side_lambda = side_lambda
+        self._maps_before = None                  # the maps as estimated, while repriced (reprice_maps)
+        self.has_maps = bool(params.max_disparity > 0 and n_maps)
+        self._kept_luma = None
+        if self.has_maps:
+            luma = self._luma()
             self.base, self.disp, self.modes = estimate_maps(
                 luma, self.s, max_disparity=params.max_disparity, runner=runner,
                 side_lambda=side_lambda, progress=progress, ref_modes="ref_modes" not in params.ablate)
+            self._kept_luma = luma if keep_luma else None
+            del luma
         else:
             self.base = np.zeros(nloc8, np.int64)
             self.disp = np.zeros((n_maps, nloc8), np.int64)
             self.modes = np.zeros((n_maps, nloc8), np.int64)
+
+    def _luma(self) -> np.ndarray:
+        """(n0, Hp, Wp) luma (Y) of every view, in [0, peak], in the views' dtype (the copy kept
+        since the maps were estimated, where there is one)."""
+        if self._kept_luma is not None:
+            return self._kept_luma
+        return np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])
+
+    def drop_luma(self) -> None:
+        """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field)."""
+        self._kept_luma = None
+
+    def reprice_maps(self, side_lambda: float) -> None:
+        """The maps as estimated with their per-cell corrections judged again at ``side_lambda``
+        (larger than the λ they were estimated at: :func:`rlfc.txestimate.reprice_maps`); what
+        was measured of the maps before (their bytes per key) is forgotten."""
+        if not self.has_maps or side_lambda <= self.side_lambda:
+            return
+        if self._maps_before is None:
+            self._maps_before = (self.base, self.disp, self.modes, self.side_lambda)
+        base, disp, _, lam = self._maps_before
+        self.base, self.disp, self.modes = reprice_maps(
+            self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
+            runner=self.runner, ref_modes="ref_modes" not in self.p.ablate)
+        self.side_lambda = side_lambda
+        self._map_cost = {}
+        self._shared = None                       # (workers get the encoder with these maps)
+
+    def restore_maps(self) -> None:
+        """The maps as estimated, before :meth:`reprice_maps` (where the step rate control
+        settled on did not bear out the λ they were repriced at)."""
+        if self._maps_before is not None:
+            self.base, self.disp, self.modes, self.side_lambda = self._maps_before
+            self._maps_before = None
+            self._map_cost = {}
+            self._shared = None
 
     def planes(self, v: int, pixels: np.ndarray | None = None) -> np.ndarray:
         """(Hp, Wp, P) int32 YCoCg-R planes of view v (edge-padded), from ``pixels`` (H, W, C)
@@ -400,13 +444,13 @@ class TxEncoder:
         """What a worker needs to code views (:func:`_code_task`): everything but the light
         field and the runner."""
         st = dict(self.__dict__)
-        for k in ("lf", "runner", "_shared", "_view_handles", "_held"):
+        for k in ("lf", "runner", "_shared", "_view_handles", "_held", "_kept_luma"):
             st.pop(k, None)
         return st
 
     def __setstate__(self, st):
         self.__dict__.update(st)
-        self.lf = self.runner = self._shared = None
+        self.lf = self.runner = self._shared = self._kept_luma = None
         self._held = {}
 
     # -- steps -----------------------------------------------------------------------------
@@ -1355,6 +1399,8 @@ SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key v
 SEARCH_MIN_VIEWS = 16  # … where there are at least this many
 MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the entropy model measured
                       # nearest to its step where one is this near (else it measures one first)
+MAPS_REPRICE_RATIO = 4.0   # a PSNR target's maps are repriced where the probe puts the coding λ at least
+                           # this many times the λ they were estimated for (BENCHMARKS.md)
 MODEL_SPAN = 1.5      # octaves: a search evaluation between two measured models at most this far apart
                       # codes with their counts interpolated (no pass of its own to measure one)
 SEARCH_MIN_WIDTH = 1 / 32   # octaves: a PSNR search ends when a step that met the target and one that
@@ -1531,6 +1577,47 @@ def _between_models(models: dict, logq: float) -> "Model | None":
     return Model(np.exp((1 - t) * np.log(ca) + t * np.log(cb)))
 
 
+#: log2 bytes that one dB of PSNR costs near a target (BPP_SLOPE / PSNR_SLOPE): how two runs at one
+#: step compare (:func:`_maps_pay_repriced`)
+LOG2_BYTES_PER_DB = BPP_SLOPE / PSNR_SLOPE
+
+
+def _run_cost(enc: "TxEncoder", res: dict, share: float) -> float:
+    """log2 of a (sampled) run's estimated file bytes less LOG2_BYTES_PER_DB per dB of its PSNR:
+    the smaller, the better at equal quality. The sampled views' stream bits stand for the
+    share of the others they are; key streams, JPEG 2000 codestreams and the maps count once."""
+    key = oth = 0.0
+    for v, c in enumerate(res["codes"]):
+        if c is not None:
+            if enc.is_key[v]:
+                key += c.bits
+            else:
+                oth += c.bits
+    images = sum(len(x) for x in res["keyimg"].values())
+    maps = maps_sizes(enc.base, [(enc.disp, enc.modes)], (enc.nby8, enc.nbx8))[0] if enc.has_maps else 0
+    return math.log2(max(key / 8 + oth / 8 / share + images + maps, 1.0)) - LOG2_BYTES_PER_DB * enc.psnr(res)
+
+
+def _maps_pay_repriced(enc: "TxEncoder", step: float, model, ratio: float, sample, n_others: int, models: dict,
+                       progress) -> bool:
+    """Code the search's first step with the maps as estimated and with them repriced at λ ×
+    ``ratio`` (:meth:`TxEncoder.reprice_maps`), the same entropy model; keep the repriced maps
+    where that run costs less at equal quality (:func:`_run_cost`). Corrections that are noise
+    at a coarse step go; those that follow an occluder's edge stay (hci_buddha with an occluder
+    at 32 dB: +24% bytes had they gone). The better run's model is the search's at that step."""
+    share = (len(sample) / n_others) if sample is not None and n_others else 1.0
+    old = enc.run(step, model, progress, views=sample)
+    c_old = _run_cost(enc, old, share)
+    enc.reprice_maps(enc.side_lambda * ratio)
+    new = enc.run(step, model, progress, views=sample)
+    c_new = _run_cost(enc, new, share)
+    keep = c_new < c_old
+    if not keep:
+        enc.restore_maps()
+    models[step] = enc.model_of(new if keep else old)
+    return keep
+
+
 CLOSE_TRIES = 2         # full passes that close in on the target after a corrected miss
 
 
@@ -1650,7 +1737,10 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     # encodes code every view at each of their passes, so every view is kept once read
     sampled = (options.target_psnr is not None and params.search_sample and not params.lossless
                and params.step is None)
-    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner, hold_all=not sampled)
+    reprice = (options.target_psnr is not None and params.step is None and not params.lossless
+               and "maps_reprice" not in params.ablate)
+    enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner, hold_all=not sampled,
+                    keep_luma=reprice)
     enc.keep_decoded = options.keep_decoded
     scale = depth_scale(lf.views.dtype)
     nv = lf.rows * lf.cols
@@ -1668,6 +1758,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     else:
         step0 = 8.0 * scale
     probe = None
+    maps_ratio = None                         # the λ ratio the maps were repriced at, if they were
     # a PSNR target on a grid with many views: the probe and the search code the key views and a
     # sample of the others (their errors stand for the rest; every view is independent given the
     # keys), and the chosen step is then checked on every view (below: corrected if it misses)
@@ -1681,6 +1772,16 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     if params.key_ratio == 0 and not params.lossless and others.size:
         probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
+        if reprice and enc.has_maps:
+            # the maps were estimated at the λ of the step the target's MSE suggests (step0); views
+            # that predict well are coded at a much coarser one (hci_antinous at 40 dB: 41, not
+            # 8.8), where λ is (41 / 8.8)² as large and corrections no longer pay their bits
+            q_pred = math.log2(step0) + (options.target_psnr - enc.psnr(probe)) / PSNR_SLOPE
+            lam_ratio = (2.0 ** q_pred / step0) ** 2
+            if lam_ratio >= MAPS_REPRICE_RATIO:
+                maps_ratio = lam_ratio            # (tried at the search's first step, below)
+    if maps_ratio is None:
+        enc.drop_luma()
 
     # (a first pass measures the entropy model; its codes are dropped before the pass that
     # uses the model, so the two passes' levels never exist at once)
@@ -1763,6 +1864,13 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
             q0 = min(max(q0, lo_q), hi_q)
             models[probe["step"]] = enc.model_of(probe)   # the first evaluation's model, where near
+            if maps_ratio is not None:
+                q0 = math.log2(enc.grid_step(2.0 ** q0))
+                step = 2.0 ** q0
+                if not _maps_pay_repriced(enc, step, models[probe["step"]], maps_ratio, sample, others.size, models,
+                                          progress):
+                    maps_ratio = None
+                enc.drop_luma()
         probe = None                   # (its coded views are not needed any more)
         floor = options.target_psnr is not None
 
@@ -1779,6 +1887,11 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                            tol=0.03 if floor else 0.01, prefer=prefer, min_width=SEARCH_MIN_WIDTH if floor else 1 / 64,
                            snap=lambda q: math.log2(enc.grid_step(2.0 ** q)))
         found, res = sr.found, sr.result
+        if maps_ratio is not None and (res["step"] / step0) ** 2 < MAPS_REPRICE_RATIO:
+            # the probe's prior slope put the step far coarser than the search found it (PSNR
+            # falling faster with the step than the prior): the maps as estimated code the file
+            enc.restore_maps()
+            maps_ratio = None
         if not found:
             notes.append("even the finest quantizer misses the target; the closest setting is written" if floor else
                          COARSEST_NOTE)
@@ -1844,7 +1957,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     return Encoded(cfg, sections, enc.decoded(res), trace, notes, found,
                    summary={"profile": "tx", "params": {**params_info(params), "step": res["step"],
                                                         "lam_scale": res.get("lam_scale", 1.0),
-                                                        "key_ratio": enc.key_ratio()},
+                                                        "key_ratio": enc.key_ratio(),
+                                                        "maps_repriced": maps_ratio},
                             "key_views": len(enc.structure_of(res)[0]),
                             "views_coded_alone": len(res.get("promoted", ())),
                             "psnr_rgb": finite(enc.psnr(res)), "psnr_view_min": finite(float(enc.view_psnrs(res).min())),

@@ -268,7 +268,16 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
             disp, cur, full = np.where(better, dc, disp), np.where(better, cc, cur), np.where(better[:, None], fc, full)
         if progress:
             progress("disparity", len(costs) + 2 * (5 - step.bit_length()), None)
-    # regularize the shared map: the 3×3 median where it costs less than ~2 bits more overall
+    base, disp, cur, full = _regularize(est, total, base, disp, cur, full, side_lambda)
+    modes = (full + pen).argmin(axis=1)
+    est.drop_handle()                  # (a cycle through the runner's handle kept the luma alive)
+    return base, disp, modes
+
+
+def _regularize(est: Estimator, total, base, disp, cur, full, side_lambda: float):
+    """The shared map's 3×3 median where it costs less than ~2 bits more overall (twice), for
+    the blocks that follow it: (base, disp, cur, full) updated (``total``: per-block
+    disparities → (every mode's costs, the best mode's))."""
     nby8, nbx8 = est.nby8, est.nbx8
     for _ in range(2):
         g = np.pad(base.reshape(nby8, nbx8), 1, mode="edge")
@@ -281,6 +290,39 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
         base = np.where(ok, med, base)
         upd = follow & ok[None, :]
         disp, cur, full = np.where(upd, cand, disp), np.where(upd, cc, cur), np.where(upd[:, None], fc, full)
+    return base, disp, cur, full
+
+
+def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *, side_lambda: float,
+                 correction_lambda: float, runner=None, ref_modes: bool = True):
+    """Maps of :func:`estimate_maps` (at ``side_lambda``) with each cell's own disparity judged
+    again at ``correction_lambda`` (larger): dropped for the shared one where it no longer pays
+    its side cost. Modes and the shared map's regularization stay at ``side_lambda``: a block
+    seen by one reference only (an occlusion) needs its mode whatever λ is. Four cost
+    evaluations instead of an estimation's 15 or more (rate control learns the coding λ only
+    after its probe pass; :func:`rlfc.txencode._maps_pay_repriced` checks the result coded).
+
+    Returns:
+        (base, disp, modes) as :func:`estimate_maps`.
+    """
+    est = Estimator(luma, struct, list(struct.keys))
+    if len(est.cells) == 0:
+        return base, disp, np.zeros_like(disp)
+    pen = np.zeros((1, 1 + MAX_REFS, 1))
+    pen[0, 1:] = 6.0 * side_lambda if ref_modes else np.inf
+    pen_delta = 6.0 * correction_lambda
+
+    def total(dmaps):
+        f = est.costs_maps(dmaps, runner)
+        return f, (f + pen).min(axis=1)
+
+    full, cur = total(disp)
+    shared = np.broadcast_to(base[None, :], disp.shape)
+    fb, cb = total(np.ascontiguousarray(shared))
+    drop = (disp != shared) & (cb <= cur + pen_delta)
+    disp = np.where(drop, shared, disp)
+    cur, full = np.where(drop, cb, cur), np.where(drop[:, None], fb, full)
+    base, disp, cur, full = _regularize(est, total, base, disp, cur, full, side_lambda)
     modes = (full + pen).argmin(axis=1)
-    est.drop_handle()                  # (a cycle through the runner's handle kept the luma alive)
+    est.drop_handle()
     return base, disp, modes

@@ -46,7 +46,7 @@ from rlfc.codec import RlfcCodec
 from tools.bench import random_access_times
 from tools.common import log, open_encoded
 
-OFF_ALL = ["ref_modes", "rdoq", "intra_tbs", "promote", "lambda_trim"]
+OFF_ALL = ["ref_modes", "rdoq", "intra_tbs", "promote", "lambda_trim", "maps_reprice"]
 
 #: (name, params) of each row; params as ``EncodeOptions.params`` of the tx profile
 ROWS = [
@@ -55,16 +55,17 @@ ROWS = [
     ("+ disparity per 8x8 block",
      {"key_ratio": 1.0, "intra_codec": "tx", "ablate": OFF_ALL}),
     ("+ single-reference modes",
-     {"key_ratio": 1.0, "intra_codec": "tx", "ablate": ["rdoq", "intra_tbs", "promote", "lambda_trim"]}),
+     {"key_ratio": 1.0, "intra_codec": "tx", "ablate": ["rdoq", "intra_tbs", "promote", "lambda_trim", "maps_reprice"]}),
     ("+ RDO quantization",
-     {"key_ratio": 1.0, "intra_codec": "tx", "ablate": ["intra_tbs", "promote", "lambda_trim"]}),
+     {"key_ratio": 1.0, "intra_codec": "tx", "ablate": ["intra_tbs", "promote", "lambda_trim", "maps_reprice"]}),
     ("+ intra 8x8 blocks",
-     {"key_ratio": 1.0, "intra_codec": "tx", "ablate": ["promote", "lambda_trim"]}),
+     {"key_ratio": 1.0, "intra_codec": "tx", "ablate": ["promote", "lambda_trim", "maps_reprice"]}),
     ("+ key step ratio sqrt(pi)",
-     {"intra_codec": "tx", "ablate": ["promote", "lambda_trim"]}),
+     {"intra_codec": "tx", "ablate": ["promote", "lambda_trim", "maps_reprice"]}),
     ("+ JPEG 2000 intra keys, views coded alone",
-     {"ablate": ["lambda_trim"]}),
-    ("+ lambda trim (default)", {}),
+     {"ablate": ["lambda_trim", "maps_reprice"]}),
+    ("+ lambda trim", {"ablate": ["maps_reprice"]}),
+    ("+ maps repriced at the coding lambda (default)", {}),
     ("default, 8x8 random-access blocks", {"block_size": 8}),
     ("default, 32x32 random-access blocks", {"block_size": 32}),
     ("default, key spacing 2", {"key_spacing": 2}),
@@ -77,6 +78,7 @@ ROWS = [
     ("default without key step ratio (1)", {"key_ratio": 1.0}),
     ("default without JPEG 2000 (transform keys, no view alone)", {"intra_codec": "tx"}),
     ("default without lambda trim", {"ablate": ["lambda_trim"]}),
+    ("default without maps repriced", {"ablate": ["maps_reprice"]}),
 ]
 
 

@@ -1240,3 +1240,92 @@ def test_a_search_step_between_two_measured_models_is_coded_once(monkeypatch):
     assert math.log2(between) == pytest.approx((math.log2(probe) + math.log2(far)) / 2, abs=0.01)
     d, _ = open_encoded(lf, e)
     assert np.array_equal(d.decode_all(), e.decoded)
+
+
+def test_maps_are_repriced_where_rate_control_codes_far_coarser_than_they_assumed():
+    """The maps are estimated at the λ of the step the target's MSE suggests; where the probe
+    puts the coding step much coarser (views that predict well: the bundled Lytro crop at 36 dB,
+    λ ~17x), their corrections are judged again at that λ and kept so where a coded pass at the
+    search's first step says the file is smaller at equal quality: a smaller maps section and a
+    smaller file at the target, decoding to the encoder's pixels; "maps_reprice" turns it off."""
+    from formats.scenes import read_scene
+    from rlfc.txencode import MAPS_REPRICE_RATIO
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
+    off = encode(lf, EncodeOptions(profile="tx", target_psnr=36, params={"ablate": ["maps_reprice"]}))
+    assert e.summary["params"]["maps_repriced"] >= MAPS_REPRICE_RATIO and off.summary["params"]["maps_repriced"] is None
+    s, s_off = dict(e.sections), dict(off.sections)
+    assert len(s["tx.maps"]) < 0.9 * len(s_off["tx.maps"])
+    assert sum(map(len, s.values())) < sum(map(len, s_off.values()))
+    assert e.target_met and e.summary["psnr_rgb"] >= 36
+    d, _ = open_encoded(lf, e)
+    assert np.array_equal(d.decode_all(), e.decoded)
+
+
+def _sharp_rendered_grid(n=5, h=64, w=96, step=1.5, blur=2.5, seed=3):
+    """A noise-free rendered grid (one smooth texture shifted `step` px per view): PSNR falls
+    with the quantizer step much faster than on captures."""
+    import cv2
+
+    rng = np.random.default_rng(seed)
+    base = cv2.GaussianBlur(rng.integers(0, 256, (h + 40, w + 40, 3)).astype(np.float32), (0, 0), blur)
+    base = (base - base.min()) / (base.max() - base.min()) * 255
+    views = np.zeros((n, n, h, w, 3), np.uint8)
+    for r in range(n):
+        for c in range(n):
+            mat = np.float32([[1, 0, 20 + (c - n // 2) * step], [0, 1, 20 + (r - n // 2) * step]])
+            views[r, c] = np.clip(np.rint(cv2.warpAffine(base, mat, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)),
+                                  0, 255)
+    return make_lf(views)
+
+
+def test_repriced_maps_are_restored_where_the_search_settles_near_the_assumed_step(monkeypatch):
+    """The probe's prior slope can put the step far too coarse (a noise-free rendered grid: PSNR
+    falls fast with the step); where the search then settles at a step whose λ is within
+    MAPS_REPRICE_RATIO of the assumed one, the file is coded with the maps as estimated (here the
+    coded check at the first step is made to keep the repriced maps, so the guard decides)."""
+    from rlfc import txencode as T
+
+    calls = []
+    for name in ("reprice_maps", "restore_maps"):
+        real = getattr(T.TxEncoder, name)
+        monkeypatch.setattr(T.TxEncoder, name, lambda self, *a, _r=real, _n=name: (calls.append(_n), _r(self, *a))[1])
+
+    def keep_repriced(enc, step, model, ratio, *rest):
+        enc.reprice_maps(enc.side_lambda * ratio)
+        return True
+
+    monkeypatch.setattr(T, "_maps_pay_repriced", keep_repriced)
+    lf = _sharp_rendered_grid()
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=32))
+    off = encode(lf, EncodeOptions(profile="tx", target_psnr=32, params={"ablate": ["maps_reprice"]}))
+    step0 = math.sqrt(12 * 255 ** 2 * 10 ** -3.2)
+    assert calls == ["reprice_maps", "restore_maps"] and e.summary["params"]["maps_repriced"] is None
+    assert (e.summary["params"]["step"] / step0) ** 2 < T.MAPS_REPRICE_RATIO
+    assert dict(e.sections)["tx.maps"] == dict(off.sections)["tx.maps"]
+    assert e.target_met
+    d, _ = open_encoded(lf, e)
+    assert np.array_equal(d.decode_all(), e.decoded)
+
+
+def test_repriced_maps_are_dropped_where_the_coded_check_finds_them_costlier(monkeypatch):
+    """The search's first step is coded with the maps as estimated and repriced; where the
+    repriced run costs more at equal quality, the estimated maps code the file."""
+    from formats.scenes import read_scene
+    from rlfc import txencode as T
+
+    real = T._run_cost
+    seen = []
+
+    def cost(enc, res, share):
+        seen.append(enc._maps_before is not None)          # (the second run: repriced maps)
+        return real(enc, res, share) + (100.0 if seen[-1] else 0.0)
+
+    monkeypatch.setattr(T, "_run_cost", cost)
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
+    off = encode(lf, EncodeOptions(profile="tx", target_psnr=36, params={"ablate": ["maps_reprice"]}))
+    assert seen == [False, True] and e.summary["params"]["maps_repriced"] is None
+    assert dict(e.sections)["tx.maps"] == dict(off.sections)["tx.maps"]
+    assert e.target_met

@@ -61,3 +61,31 @@ def test_the_views_luma_is_freed_when_the_maps_are_made():
         assert alive() is None and len(maps) == 3
     finally:
         gc.enable()
+
+
+def _noisy_shifted(seed=7, n=5):
+    rng = np.random.default_rng(seed)
+    base = cv2.GaussianBlur(rng.integers(0, 256, (48, 64)).astype(np.float32), (5, 5), 1.5)
+    views = [np.roll(base, (int(r * 1.5), int(c * 1.5)), (0, 1)) + rng.normal(0, 6, base.shape)
+             for r in range(n) for c in range(n)]
+    return np.clip(np.stack(views), 0, 255).astype(np.uint8)
+
+
+def test_repriced_maps_drop_the_corrections_that_no_longer_pay():
+    """Maps estimated cheaply (side information worth little: noise buys many corrections) and
+    then repriced at a larger correction λ keep fewer corrections; at an overwhelming one none
+    is left (every block follows the shared map); at the λ they were estimated for, repricing
+    adds none. Modes stay judged at the estimate's λ (an occluded block needs its reference)."""
+    luma, s = _noisy_shifted(), build(5, 5, 2)
+    base, disp, modes = txestimate.estimate_maps(luma, s, max_disparity=8, side_lambda=0.5)
+    own = int((disp != base[None, :]).sum())
+    assert own > 20 and (modes != 0).sum() > 20                  # (the cheap maps took many)
+    for lam, most in ((0.5, own), (40.0, own - 1)):
+        b2, d2, m2 = txestimate.reprice_maps(luma, s, base, disp, side_lambda=0.5, correction_lambda=lam)
+        assert b2.shape == base.shape and d2.shape == disp.shape and m2.shape == modes.shape
+        assert b2.dtype == d2.dtype == m2.dtype == np.int64
+        assert (d2 != b2[None, :]).sum() <= most
+    b3, d3, m3 = txestimate.reprice_maps(luma, s, base, disp, side_lambda=0.5, correction_lambda=1e12)
+    assert np.array_equal(d3, np.broadcast_to(b3, d3.shape)) and m3.any()     # (modes were not repriced)
+    _, _, m4 = txestimate.reprice_maps(luma, s, base, disp, side_lambda=1e12, correction_lambda=1e12)
+    assert not m4.any()
