@@ -179,6 +179,19 @@ class Estimator:
         return acc
 
 
+#: bits a cell's own disparity for a block, or a block's single-reference mode, is taken to cost
+#: (about what they cost coded: BENCHMARKS.md)
+SIDE_BITS = 6.0
+
+
+def _mode_penalty(side_lambda: float, ref_modes: bool) -> np.ndarray:
+    """(1, 1 + MAX_REFS, 1) cost added to each mode's error: 0 for the blend, SIDE_BITS bits at
+    ``side_lambda`` for a single reference (never one where ``ref_modes`` is False)."""
+    pen = np.zeros((1, 1 + MAX_REFS, 1))
+    pen[0, 1:] = SIDE_BITS * side_lambda if ref_modes else np.inf
+    return pen
+
+
 def _global_task(est: Estimator, m: int, d: float) -> np.ndarray:
     return est._global_cell(m, d)
 
@@ -208,9 +221,8 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     if n_maps == 0:
         z = np.zeros((0, nloc8), np.int64)
         return np.zeros(nloc8, np.int64), z, z
-    pen_mode = pen_delta = 6.0 * side_lambda
-    pen = np.zeros((1, 1 + MAX_REFS, 1))
-    pen[0, 1:] = pen_mode if ref_modes else np.inf
+    pen_delta = SIDE_BITS * side_lambda
+    pen = _mode_penalty(side_lambda, ref_modes)
 
     def best_mode(c):                       # (n_maps, modes, nloc8) → (n_maps, nloc8) cost with the best mode
         return (c + pen).min(axis=1)
@@ -308,9 +320,8 @@ def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *
     est = Estimator(luma, struct, list(struct.keys))
     if len(est.cells) == 0:
         return base, disp, np.zeros_like(disp)
-    pen = np.zeros((1, 1 + MAX_REFS, 1))
-    pen[0, 1:] = 6.0 * side_lambda if ref_modes else np.inf
-    pen_delta = 6.0 * correction_lambda
+    pen = _mode_penalty(side_lambda, ref_modes)
+    pen_delta = SIDE_BITS * correction_lambda
 
     def total(dmaps):
         f = est.costs_maps(dmaps, runner)
