@@ -1772,16 +1772,6 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     if params.key_ratio == 0 and not params.lossless and others.size:
         probe = enc.run(step0, model, progress, views=sample)
         enc.kr = enc.auto_key_ratio(probe)      # one probe run measures how much views inherit
-        if reprice and enc.has_maps:
-            # the maps were estimated at the λ of the step the target's MSE suggests (step0); views
-            # that predict well are coded at a much coarser one (hci_antinous at 40 dB: 41, not
-            # 8.8), where λ is (41 / 8.8)² as large and corrections no longer pay their bits
-            q_pred = math.log2(step0) + (options.target_psnr - enc.psnr(probe)) / PSNR_SLOPE
-            lam_ratio = (2.0 ** q_pred / step0) ** 2
-            if lam_ratio >= MAPS_REPRICE_RATIO:
-                maps_ratio = lam_ratio            # (tried at the search's first step, below)
-    if maps_ratio is None:
-        enc.drop_luma()
 
     # (a first pass measures the entropy model; its codes are dropped before the pass that
     # uses the model, so the two passes' levels never exist at once)
@@ -1858,19 +1848,25 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         if probe is not None:          # the probe pass says where the target lies (prior slope)
             ps0 = enc.psnr(probe)
             if options.target_psnr is not None:
-                q0 = q0 + (options.target_psnr - ps0) / PSNR_SLOPE
+                shift = (options.target_psnr - ps0) / PSNR_SLOPE
+                q0 = q0 + shift
             else:
                 b0 = file_bpp(lf, *enc.pack(probe))
                 q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
             q0 = min(max(q0, lo_q), hi_q)
             models[probe["step"]] = enc.model_of(probe)   # the first evaluation's model, where near
-            if maps_ratio is not None:
+            # the maps were estimated at the λ of the step the target's MSE suggests (step0); views
+            # that predict well are coded at a much coarser one (hci_antinous at 40 dB: 41, not
+            # 8.8), where λ is (41 / 8.8)² as large and corrections no longer pay their bits: the
+            # prior's step shift in octaves is a λ ratio of 4 ** shift
+            if reprice and enc.has_maps and 4.0 ** shift >= MAPS_REPRICE_RATIO:
+                maps_ratio = 4.0 ** shift
                 q0 = math.log2(enc.grid_step(2.0 ** q0))
                 step = 2.0 ** q0
                 if not _maps_pay_repriced(enc, step, models[probe["step"]], maps_ratio, sample, others.size, models,
                                           progress):
                     maps_ratio = None
-                enc.drop_luma()
+        enc.drop_luma()                # (kept for the maps' repricing only)
         probe = None                   # (its coded views are not needed any more)
         floor = options.target_psnr is not None
 
