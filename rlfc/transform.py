@@ -71,9 +71,16 @@ def _inverse_gemm(X: np.ndarray) -> np.ndarray:
     return inverse_float(X.astype(np.float64)).astype(np.int64)
 
 
-def inverse_float(X: np.ndarray) -> np.ndarray:
+def inverse_float(X):
     """:func:`inverse` of (..., 8, 8) float64 blocks holding integers of magnitude below
-    2^40, as float64 integers (exact)."""
+    2^40, as float64 integers (exact), numpy or torch (on any device: the products and sums
+    are integers below 2^53, exact in any order and with fused multiply-adds)."""
+    if not isinstance(X, np.ndarray):
+        import torch
+
+        t = _torch_t8f(X.device)
+        Y = torch.matmul(t.T, X).add_(64).mul_(1 / 128).floor_()
+        return torch.matmul(Y, t).add_(128).mul_(1 / 256).floor_()
     Y = np.matmul(_T8F.T, X)
     Y += 64
     Y *= 1 / 128
@@ -85,6 +92,16 @@ def inverse_float(X: np.ndarray) -> np.ndarray:
 
 
 _T8_TORCH: dict = {}
+_T8F_TORCH: dict = {}
+
+
+def _torch_t8f(device):
+    import torch
+
+    key = str(device)
+    if key not in _T8F_TORCH:
+        _T8F_TORCH[key] = torch.as_tensor(_T8F, device=device)
+    return _T8F_TORCH[key]
 
 
 def _torch_t8(device):

@@ -6,7 +6,7 @@ Prints µs per block and Mpix/s (median of 3 after a warm-up) and checks every p
 numpy bit for bit. ``--parse`` times the torch decoder once per way of parsing residual streams,
 side by side on the same requests: ``host`` (numpy lanes on the CPU, then copied), ``steps``
 (torch operations on the device), ``triton`` (the Triton kernel; CUDA only), ``auto`` (the
-decoder's own choice, the default). ``--old DIR`` adds another checkout's torch decoder as way
+decoder's own choice, the default), ``serial`` (auto, one chunk in flight at a time). ``--old DIR`` adds another checkout's torch decoder as way
 ``old`` (before/after in one process: separate runs on the lent machines differ by ±30%).
 """
 from __future__ import annotations
@@ -31,13 +31,16 @@ def main(argv=None) -> int:
     ap.add_argument("--numpy-max", type=int, default=200000,
                     help="time numpy only for calls of at most this many requests (it takes ~1 min per 1M)")
     ap.add_argument("--parse", default="",
-                    help="comma-separated: host, steps, triton, auto (the decoder's choice; the default)")
+                    help="comma-separated: host, steps, triton, auto (the decoder's choice; the default), serial (auto with "
+                         "one chunk in flight at a time), inflightN (auto with N in flight)")
     ap.add_argument("--old", default=None,
                     help="another checkout (e.g. `git archive REV rlfc | tar -x -C .old`): its torch decoder "
                          "timed as way 'old', in this process")
     ap.add_argument("--torch-profile", type=int, default=0,
                     help="also run torch's profiler on one torch call of this many requests (device time per kernel, "
                          "the parse and the prediction labelled)")
+    ap.add_argument("--shapes", action="store_true",
+                    help="with --torch-profile: record input shapes and group the table by them")
     ap.add_argument("--profile", type=int, default=0,
                     help="also profile one torch call of this many requests (cProfile, device synchronized)")
     a = ap.parse_args(argv)
@@ -47,7 +50,9 @@ def main(argv=None) -> int:
     ways = {}
     for w in [x for x in a.parse.split(",") if x]:
         ways[w] = td if w == "auto" else TorchBlockDecoder(d, a.device)        # (auto: the decoder's own choice)
-        if w != "auto":
+        if w == "serial" or w.startswith("inflight"):     # one (or inflightN: N) chunks in flight at a time
+            ways[w].in_flight = 1 if w == "serial" else int(w[8:])
+        elif w != "auto":
             ways[w].core.device_parse_min = None if w == "host" else 0
             ways[w].core.triton = {"host": None, "steps": False, "triton": True}[w]
     ways = ways or {"torch": td}
@@ -112,14 +117,14 @@ def main(argv=None) -> int:
         sync()
         acts = [ProfilerActivity.CPU] + ([ProfilerActivity.CUDA] if td.dev.type == "cuda" else [])
         core = td.core
-        for name in ("_parse", "_pred"):                     # the two halves of a call, labelled
+        for name in ("_parse_device", "_pred", "_add_residual"):        # the parts of a call, labelled
             fn = getattr(core, name)
             setattr(core, name, lambda *x, fn=fn, name=name: _labelled(record_function, name, fn, *x))
-        with profile(activities=acts) as prof:
+        with profile(activities=acts, record_shapes=a.shapes) as prof:
             td.decode_blocks(v, by, bx, to_numpy=False)
             sync()
         key = "self_cuda_time_total" if td.dev.type == "cuda" else "self_cpu_time_total"
-        print(prof.key_averages().table(sort_by=key, row_limit=30))
+        print(prof.key_averages(group_by_input_shape=a.shapes).table(sort_by=key, row_limit=40 if a.shapes else 30))
     return 0
 
 

@@ -23,7 +23,7 @@ from formats.errors import FormatError, UnsupportedError
 from formats.parallel import LOCAL_THREADS
 
 from ..kernels import dequantize
-from ..transform import COEF_MAX, UNZIG, ZIGZAG, inverse, inverse_float
+from ..transform import COEF_MAX, ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb
 from ..txmaps import LazyMaps
@@ -856,32 +856,81 @@ class TorchTx:
         self.device_parse_min = cuda_min if env is None else (0 if env == "1" else None)
         self.triton = None                  # the Triton magnitude kernel: None = where CUDA and Triton are
         self._section = None
+        self._res_consts = None
+        self._lock = threading.Lock()
 
-    def _parse(self, views, locs):
-        """(modes (S, nt) int64, levels (S, nt, P, 64) int64 in scan order) device tensors of the
-        streams of (view, location) pairs (numpy), parsed on the device
-        (:func:`rlfc.txparse_torch.parse_lanes_torch`) or on the host, per :attr:`device_parse_min`."""
-        import torch
-
+    def _parse_host(self, views, locs):
+        """What the streams of (view, location) pairs (numpy) need uploaded, as a list of
+        int64-able numpy arrays, and how :meth:`_parse_device` reads them back: parsed here
+        (numpy lanes: modes, index, values) or, per :attr:`device_parse_min`, only located here
+        (their starts and ends in the device's copy of the section, view kinds and key flags) and
+        parsed on the device. Checksums are verified here."""
         d, xp = self.d, self.xp
         if self.device_parse_min is None or views.size < self.device_parse_min:
             parsed = d._parse(views, locs)
-            return xp.asarray(parsed.modes), xp.asarray(parsed.levels)
+            return [parsed.modes.reshape(-1), parsed.index, parsed.values], ("host", views.size, parsed.index.size)
         buf, s2, e2 = d._streams(d.start[views, locs], d.end[views, locs])     # checksums verified here
         if buf is d.buf:                                  # the whole section: copied to the device once
-            if self._section is None:
-                dbuf = xp.asarray(buf)
-                self._section = (dbuf, pair_words(dbuf))
-            dbuf, w16 = self._section
+            with self._lock:                              # (chunks may be in flight on two threads)
+                if self._section is None:
+                    dbuf = xp.asarray(buf)
+                    self._section = (dbuf, pair_words(dbuf))
+            section = self._section
         else:                                             # a byte-range source: this call's streams
             dbuf = xp.asarray(buf)
-            w16 = pair_words(dbuf)
-        a = xp.asarray(np.stack([s2, e2, d.lay.intra[views], d.is_key[views]]).astype(np.int64))   # one upload
-        modes, index, values = parse_lanes_torch(dbuf, w16, a[0], a[1], d.tables, d.nt, d.pcs, a[2], a[3],
-                                                 d.container.name, self.triton)
-        levels = torch.zeros(views.size * d.nt * d.P * 64, dtype=torch.int64, device=xp.device)
-        levels[index] = values
-        return modes, levels.reshape(views.size, d.nt, d.P, 64)
+            section = (dbuf, pair_words(dbuf))
+        return [s2, e2, d.lay.intra[views], d.is_key[views]], ("device", views.size, section)
+
+    def _parse_device(self, how, parts):
+        """(modes (S, nt), index (K,), values (K,)) int64 device tensors, as
+        :class:`rlfc.txsyntax.Parsed` holds them (the nonzero levels, sparse), from
+        :meth:`_parse_host`'s arrays uploaded (``parts``)."""
+        d = self.d
+        kind, S, extra = how
+        if kind == "host":
+            return parts[0].reshape(S, d.nt), parts[1], parts[2]
+        dbuf, w16 = extra
+        return parse_lanes_torch(dbuf, w16, parts[0], parts[1], d.tables, d.nt, d.pcs, parts[2], parts[3],
+                                 d.container.name, self.triton)
+
+    def _add_residual(self, pred, hv, notkey, modes, index, values):
+        """``pred`` (n, nt, 8, 8, P) int64 with the parsed residuals of its rows ``hv`` (S,)
+        added (``notkey`` (S,): 1 where the row's view is not a key view; device tensors), as
+        :meth:`TxDecoder._residual` and :meth:`TxDecoder._add_residual` do (clipping comes
+        after): intra tbs start from the flat value; the nonzero coefficients are dequantized
+        where they are, and only the 8×8 blocks that have any are inverse-transformed (float64,
+        exact) and added in place. Nothing here waits for the device."""
+        import torch
+
+        d, xp = self.d, self.xp
+        nt, P = d.nt, d.P
+        i64 = dict(dtype=torch.int64, device=xp.device)
+        intra = torch.zeros(pred.shape[:2], dtype=torch.bool, device=xp.device)
+        intra[hv] = modes == MODE_INTRA                 # a select over every tb: no count to wait for
+        pred = torch.where(intra[:, :, None, None, None], self.flat.to(torch.int64), pred)
+        with self._lock:
+            if self._res_consts is None:
+                lay = d.lay
+                self._res_consts = (xp.asarray(lay.step16.astype(np.int64)), xp.asarray(lay.bypass),
+                                    xp.asarray(ZIGZAG), torch.arange(0, 64 * P, P, **i64))
+        step16, bypass, zigzag, cols = self._res_consts
+        blk, pos = index >> 6, index & 63                                    # (lane, tb, plane), scan position
+        plane = blk % P
+        deq = dequantize(xp, values, step16[notkey[blk // (nt * P)], plane]).clamp_(-COEF_MAX, COEF_MAX)
+        new = torch.ones_like(blk, dtype=torch.bool)
+        new[1:] = blk[1:] != blk[:-1]
+        ub = blk[new]                                                        # blocks with coefficients
+        X = torch.zeros((ub.numel(), 64), dtype=torch.float64, device=xp.device)
+        X[torch.cumsum(new, 0) - 1, torch.where(bypass[plane], pos, zigzag[pos])] = deq.to(torch.float64)
+        if d.lay.bypass.any():
+            tr = ~bypass[ub % P]
+            X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
+        else:
+            X = inverse_float(X.reshape(-1, TB, TB)).reshape(-1, 64)
+        g = ub // P                                                          # lane · nt + tb
+        first = ((hv[g // nt] * nt + g % nt) * 64) * P + ub % P            # flat (n, nt, 8, 8, P) of pixel 0
+        return pred.view(-1).index_add_(0, (first[:, None] + cols).reshape(-1), X.to(torch.int64).reshape(-1)).view(
+            pred.shape)
 
     def _pred(self, v, locs):
         """As :meth:`TxDecoder._pred` of :meth:`TxDecoder._tb_coords`: ``v``, ``locs`` (n,) int64
@@ -891,44 +940,39 @@ class TorchTx:
         return predict_tbs(self.xp, self.kp, (d.Hp, d.Wp), *args)
 
     def blocks(self, views, by, bx, level):
-        """(M,) validated numpy requests → (M, B·B, P) int32 tensor."""
+        """(M,) validated numpy requests → (M, B·B, P) int32 tensor. Everything the device needs
+        from the host goes up in one copy (a copy from pageable memory waits for the kernels
+        queued before it); the residual streams are parsed first (their parse waits for the
+        device where sizes depend on the data), then the prediction and the residuals are queued
+        without waiting."""
         import torch
 
         d, xp = self.d, self.xp
         M, B, nt, P = views.size, d.block_size, d.nt, d.P
         out = torch.empty((M, B, B, P), dtype=torch.int32, device=xp.device)
         key = d.is_key[views]
-        if key.any():
-            kk = np.flatnonzero(key)
-            ys = xp.asarray(by[kk][:, None] * B + np.arange(B))
-            xs = xp.asarray(bx[kk][:, None] * B + np.arange(B))
-            slot = xp.asarray(d.key_slot[views[kk]])[:, None, None]     # gather the blocks, not whole planes
-            out[xp.asarray(kk)] = self.keyplanes[slot, ys[:, :, None], xs[:, None, :]]
-        nk = np.flatnonzero(~key)
+        kk, nk = np.flatnonzero(key), np.flatnonzero(~key)
+        v, locs = views[nk], by[nk] * d.nbx + bx[nk]
+        have = np.flatnonzero(d.coded[v, locs]) if level == 0 and nk.size else np.zeros(0, np.int64)
+        parts = [kk, by[kk], bx[kk], d.key_slot[views[kk]], nk, v, locs, have, ~d.is_key[v[have]]]
+        how = None
+        if have.size:
+            more, how = self._parse_host(v[have], locs[have])
+            parts += more
+        sizes = [p.size for p in parts]
+        up = xp.asarray(np.concatenate([p.astype(np.int64, copy=False) for p in parts]))      # one upload
+        kk_t, kby, kbx, kslot, nk_t, v_t, locs_t, hv, notkey, *rest = torch.split(up, sizes)
+        if kk.size:                                   # key views: gather the blocks, not whole planes
+            ar = torch.arange(B, dtype=torch.int64, device=xp.device)
+            ys, xs = kby[:, None] * B + ar, kbx[:, None] * B + ar
+            out[kk_t] = self.keyplanes[kslot[:, None, None], ys[:, :, None], xs[:, None, :]]
         if nk.size:
-            v, locs = views[nk], by[nk] * d.nbx + bx[nk]
-            vl = xp.asarray(np.stack([v, locs]))                                       # one upload
-            pred = self._pred(vl[0], vl[1]).reshape(nk.size, nt, TB, TB, P).to(torch.int64)
-            if level == 0:
-                have = np.flatnonzero(d.coded[v, locs])
-                if have.size:
-                    modes, lv = self._parse(v[have], locs[have])
-                    lay = d.lay
-                    step = xp.asarray(lay.step16[np.where(d.is_key[v[have]], 0, 1)])[:, None, :, None]
-                    raster = torch.where(xp.asarray(lay.bypass)[None, None, :, None], lv, lv[..., xp.asarray(UNZIG)])
-                    deq = dequantize(xp, raster, step).clamp(-COEF_MAX, COEF_MAX)
-                    blk = deq.reshape(have.size, nt, P, TB, TB)
-                    tr = ~lay.bypass
-                    if tr.any():
-                        trt = xp.asarray(np.flatnonzero(tr))
-                        blk[:, :, trt] = inverse(blk[:, :, trt])
-                    res = blk.permute(0, 1, 3, 4, 2)
-                    intra = (modes == MODE_INTRA)[:, :, None, None, None]
-                    hv = xp.asarray(have)
-                    pred[hv] = torch.where(intra, self.flat.to(torch.int64), pred[hv]) + res
+            parsed = self._parse_device(how, rest) if have.size else None
+            pred = self._pred(v_t, locs_t).reshape(nk.size, nt, TB, TB, P).to(torch.int64).contiguous()
+            if parsed is not None:
+                pred = self._add_residual(pred, hv, notkey, *parsed)
             rec = torch.maximum(torch.minimum(pred, self.hi), self.lo).to(torch.int32)
-            out[xp.asarray(nk)] = rec.reshape(nk.size, d.tpb, d.tpb, TB, TB, P).permute(0, 1, 3, 2, 4, 5).reshape(
-                nk.size, B, B, P)
+            out[nk_t] = rec.reshape(nk.size, d.tpb, d.tpb, TB, TB, P).permute(0, 1, 3, 2, 4, 5).reshape(nk.size, B, B, P)
         return out.reshape(M, B * B, P)
 
 

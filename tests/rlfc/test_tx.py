@@ -2,6 +2,7 @@
 agrees (full, view, block, batched, torch, byte range), hard cases, random-access bound, and
 bits on real data."""
 import math
+import threading
 
 import numpy as np
 import pytest
@@ -52,6 +53,32 @@ def test_lossy_decode_is_the_closed_loop_and_torch_agrees(kw, rng):
         assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level) == d.decode_blocks(v, by, bx, level)).all()
 
 
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(lossless=True, c=4)])
+@pytest.mark.parametrize("device_parse", ["0", "1"])
+def test_torch_residuals_equal_numpy(kw, device_parse, rng, monkeypatch):
+    """The torch decoder's residuals (sparse: only the 8×8 blocks with coefficients transformed,
+    in float64, and added in place) give numpy's blocks, the streams parsed on the host or on the
+    device: noisy views (every block coded), 16-bit, grey, alpha (planes without transform) and
+    lossless (no plane transformed)."""
+    kw = dict(kw)
+    lossless = kw.pop("lossless", False)
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48, **kw)
+    peak = 65535 if lf.views.dtype == np.uint16 else 255
+    amp = 6 * (257 if peak == 65535 else 1)
+    noise = np.random.default_rng(1).integers(-amp, amp + 1, lf.views.shape)
+    lf.views[:] = np.clip(lf.views.astype(np.int64) + noise, 0, peak)
+    e = tx(lf, lossless=True) if lossless else tx(lf, step=3.0 * amp / 6)
+    d, _ = open_encoded(lf, e)
+    assert d.core.coded[~d.core.is_key].any()
+    monkeypatch.setenv("LFC_DEVICE_PARSE", device_parse)
+    t = TorchBlockDecoder(d, "cpu")
+    v, by, bx = rng.integers(0, 25, 500), rng.integers(0, d.nby, 500), rng.integers(0, d.nbx, 500)
+    assert (t.decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
+    if lossless:
+        full = d.decode_all()
+        assert (full == lf.views).all()
+
+
 def test_torch_decoder_in_chunks_equals_one_call(rng, monkeypatch):
     """Large torch calls are decoded in chunks of requests (bounded device memory): same blocks,
     keys and predicted views mixed, chunk edges anywhere."""
@@ -63,6 +90,46 @@ def test_torch_decoder_in_chunks_equals_one_call(rng, monkeypatch):
     monkeypatch.setattr(td, "CHUNK", 37)
     assert (td.TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == whole).all()
     assert (whole == d.decode_blocks(v, by, bx)).all()
+
+
+@pytest.mark.parametrize("device_parse", ["0", "1"])
+def test_torch_chunks_in_flight_together_equal_one_call(device_parse, rng, monkeypatch):
+    """A large call's chunks decoded by two host threads at once (a CUDA device's default, here
+    forced on the CPU): the same blocks, noisy views whose blocks carry residuals, streams parsed
+    on the host or the device; a chunk that runs out of memory sends the call back to one chunk
+    at a time."""
+    import torch
+
+    import rlfc.torch_decode as td
+
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48)
+    lf.views[:] = np.clip(lf.views.astype(int) + np.random.default_rng(0).integers(-6, 7, lf.views.shape), 0, 255)
+    d, _ = open_encoded(lf, tx(lf, step=3.0))
+    v, by, bx = rng.integers(0, 25, 700), rng.integers(0, d.nby, 700), rng.integers(0, d.nbx, 700)
+    ref = d.decode_blocks(v, by, bx)
+    monkeypatch.setenv("LFC_DEVICE_PARSE", device_parse)
+    monkeypatch.setattr(td, "PIPELINE_MIN", 100)
+    monkeypatch.setattr(td, "MIN_CHUNK", 50)
+    monkeypatch.setattr(td, "CHUNK", 90)
+    t = td.TorchBlockDecoder(d, "cpu")
+    t.in_flight = 2
+    sizes, threads = [], set()
+    real = t.core.blocks
+
+    def blocks(views, *a):
+        sizes.append(views.size)
+        threads.add(threading.get_ident())
+        if len(sizes) == 1 and device_parse == "1":
+            raise torch.OutOfMemoryError("CUDA out of memory (simulated)")
+        return real(views, *a)
+
+    t.core.blocks = blocks
+    assert (t.decode_blocks(v, by, bx) == ref).all()
+    if device_parse == "1":                          # the first chunk ran out: one at a time, from the start
+        serial = sizes[-14:]                         # 700 requests in chunks of MIN_CHUNK
+        assert len(sizes) <= 14 + 3 and serial == [50] * 14
+    else:
+        assert sizes == [88] * 7 + [84] and len(threads) == 2
 
 
 def test_torch_chunks_follow_free_memory_and_halve_when_the_device_runs_out(rng, monkeypatch):
