@@ -1399,8 +1399,9 @@ SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key v
 SEARCH_MIN_VIEWS = 16  # … where there are at least this many
 MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the entropy model measured
                       # nearest to its step where one is this near (else it measures one first)
-MAPS_REPRICE_RATIO = 4.0   # a PSNR target's maps are repriced where the probe puts the coding λ at least
-                           # this many times the λ they were estimated for (BENCHMARKS.md)
+MAPS_REPRICE_RATIO = 1.25  # a PSNR target's maps are repriced where the probe puts the coding λ at least
+                           # this many times the λ they were estimated for, and kept where the coded check
+                           # says so (4 until stop 65: BENCHMARKS.md)
 MODEL_SPAN = 1.5      # octaves: a search evaluation between two measured models at most this far apart
                       # codes with their counts interpolated (no pass of its own to measure one)
 SEARCH_MIN_WIDTH = 1 / 32   # octaves: a PSNR search ends when a step that met the target and one that

@@ -1364,6 +1364,7 @@ def test_repriced_maps_are_restored_where_the_search_settles_near_the_assumed_st
         return True
 
     monkeypatch.setattr(T, "_maps_pay_repriced", keep_repriced)
+    monkeypatch.setattr(T, "MAPS_REPRICE_RATIO", 4.0)     # (this grid's search settles at λ x1.8-2.7)
     lf = _sharp_rendered_grid()
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=32))
     off = encode(lf, EncodeOptions(profile="tx", target_psnr=32, params={"ablate": ["maps_reprice"]}))
