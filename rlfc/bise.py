@@ -18,7 +18,7 @@ import numpy as np
 
 from formats.errors import ParameterError, TruncatedError
 
-from .xp import NUMPY
+from .xp import NUMPY, shared
 from .bise_tables import (QUINT_CODE, QUINT_DIGITS, QUINT_LAYOUT, RANGE_INDEX, RANGE_VALUES, RANGES, TRIT_CODE,
                           TRIT_DIGITS, TRIT_LAYOUT)
 
@@ -130,7 +130,7 @@ def _digit_table(xp, trits: bool):
     """TRIT_DIGITS / QUINT_DIGITS (uint8) in the backend, cached per backend and device."""
     key = (xp.name, str(getattr(xp, "device", "")), trits)
     if key not in _DIGITS:
-        _DIGITS[key] = xp.asarray(TRIT_DIGITS if trits else QUINT_DIGITS)
+        _DIGITS[key] = shared(xp.asarray(TRIT_DIGITS if trits else QUINT_DIGITS))
     return _DIGITS[key]
 
 

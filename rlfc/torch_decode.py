@@ -24,10 +24,13 @@ BYTES_PER_REQUEST = 80 << 10
 #: share of a CUDA device's free memory a call's temporaries may take; host memory for the CPU device
 DEVICE_SHARE = 0.5
 CPU_BUDGET = 1 << 30
-#: chunks in flight at once on a CUDA device, each from its own host thread on its own stream: a
-#: chunk's parse waits for the device several times (its sizes depend on the data), and the
-#: other chunk's kernels are queued meanwhile, so the device is not left idle while the host works
-PIPELINE = 2
+#: chunks in flight at once on a CUDA device by default, each from its own host thread on its own
+#: stream: a chunk's parse waits for the device several times (its sizes depend on the data), and
+#: the other chunk's kernels are queued meanwhile, so the device is not left idle while the host
+#: works. Two measured 1.0-1.56x the speed of one on an H200 (BENCHMARKS.md), but their pixels
+#: have been compared with numpy's on the CPU device only, so one stays the default until a GPU
+#: run checks them (``TorchBlockDecoder(d, in_flight=2)`` asks for two)
+PIPELINE = 1
 #: ... for calls of at least this many requests (split into at least PIPELINE chunks)
 PIPELINE_MIN = 1 << 15
 
@@ -55,15 +58,18 @@ class TorchBlockDecoder:
     Args:
         dec: an opened RLFC decoder (memory-mapped or in-memory file).
         device: torch device; default "cuda" when available, else "cpu".
+        in_flight: chunks of a large call (:data:`PIPELINE_MIN` requests or more) decoded at once
+            on a CUDA device, each by its own host thread on its own stream (default
+            :data:`PIPELINE`; always 1 off CUDA).
     """
 
-    def __init__(self, dec, device: str | None = None):
+    def __init__(self, dec, device: str | None = None, in_flight: int | None = None):
         self.d = dec
         self.dev = torch_device(device)
         self.core = dec.core.torch(self.dev)
         self.peak = int(np.iinfo(dec.dtype).max)
-        #: chunks in flight at once (:data:`PIPELINE` on a CUDA device, 1 elsewhere)
-        self.in_flight = PIPELINE if self.dev.type == "cuda" else 1
+        #: chunks in flight at once (``in_flight`` or :data:`PIPELINE` on a CUDA device, 1 elsewhere)
+        self.in_flight = max(1, int(PIPELINE if in_flight is None else in_flight)) if self.dev.type == "cuda" else 1
         self._local = threading.local()
         self._pool = None                   # (lanes, the host threads of :meth:`_pipelined`), kept: each keeps its stream
         self._pool_lock = threading.Lock()

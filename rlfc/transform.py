@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .xp import shared
+
 #: HEVC's 8-point DCT matrix (rows = basis functions); on-wire constants, do not change.
 T8 = np.array([
     [64, 64, 64, 64, 64, 64, 64, 64],
@@ -100,7 +102,7 @@ def _torch_t8f(device):
 
     key = str(device)
     if key not in _T8F_TORCH:
-        _T8F_TORCH[key] = torch.as_tensor(_T8F, device=device)
+        _T8F_TORCH[key] = shared(torch.as_tensor(_T8F, device=device))
     return _T8F_TORCH[key]
 
 
@@ -109,5 +111,5 @@ def _torch_t8(device):
 
     key = str(device)
     if key not in _T8_TORCH:
-        _T8_TORCH[key] = torch.as_tensor(T8, device=device)
+        _T8_TORCH[key] = shared(torch.as_tensor(T8, device=device))
     return _T8_TORCH[key]

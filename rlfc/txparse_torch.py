@@ -28,6 +28,7 @@ from formats.errors import FormatError
 from .rans import BACK_BITS, L as RANS_L, PROB_BITS, STATE_BYTES, Tables
 from .txsyntax import (_BAND8_ARR, _MASK, ESC, MODE_SKIP, N_BUCKETS, N_MODES, ctx_esc, ctx_last, ctx_mag, ctx_mode,
                        slot_words, symbol_parts)
+from .xp import shared
 
 _L2 = RANS_L >> 8          # a state under this needs two bytes in
 MAX_DEVICE_SYMBOLS = 1 << 24   # magnitude symbols parsed together on a device (~1–2 GB of temporaries)
@@ -40,7 +41,7 @@ def device_words(tables: Tables, device):
     cache = tables.__dict__.setdefault("_device_words", {})
     key = str(device)
     if key not in cache:
-        cache[key] = torch.as_tensor(slot_words(tables).astype(np.int64), device=device)
+        cache[key] = shared(torch.as_tensor(slot_words(tables).astype(np.int64), device=device))
     return cache[key]
 
 
@@ -54,8 +55,8 @@ def _constants(pcs, device):
 
     key = (str(device), tuple(int(c) for c in pcs))
     if key not in _CONSTANTS:
-        _CONSTANTS[key] = (torch.as_tensor(np.asarray(pcs, np.int64), device=device),
-                           torch.as_tensor(_BAND8_ARR, device=device))
+        _CONSTANTS[key] = shared(torch.as_tensor(np.asarray(pcs, np.int64), device=device),
+                                 torch.as_tensor(_BAND8_ARR, device=device))
     return _CONSTANTS[key]
 
 

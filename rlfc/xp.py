@@ -129,6 +129,20 @@ class TorchBackend:
 NUMPY = NumpyBackend()
 
 
+def shared(*tensors):
+    """Tensors made once and then read by any CUDA stream (caches of device constants), returned
+    once the stream that made them has finished making them: a decode may keep chunks in flight
+    on several streams (:mod:`rlfc.torch_decode`), and a stream that reads a tensor another
+    stream is still copying or computing reads garbage. Off CUDA: returned as they are."""
+    for t in tensors:
+        if getattr(t, "is_cuda", False):
+            import torch
+
+            torch.cuda.current_stream(t.device).synchronize()
+            break
+    return tensors[0] if len(tensors) == 1 else tensors
+
+
 def torch_backend(device) -> TorchBackend:
     import torch
 

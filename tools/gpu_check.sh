@@ -28,6 +28,7 @@ timeout 90 python3 -m tools.bench_lfn_ladder "$R/mitsuba/lfn.lfc" .gpu/mitsuba12
 el steps
 timeout 120 python3 -m tools.bench_lfn_steps .gpu/mitsuba128.npz --device cuda --out "$R/steps.json"
 el decode
-for f in .gpu/*.lfc; do timeout 45 python3 -m tools.bench_gpu_decode "$f" --counts 200000 --numpy-max 20000 --parse host,auto; done > "$R/decode.txt" 2>&1
+# (--check 200000: two chunks in flight compared with numpy, twice; rlfc.torch_decode.PIPELINE stays 1 until this passes)
+for f in .gpu/*.lfc; do timeout 60 python3 -m tools.bench_gpu_decode "$f" --counts 200000,1000000 --check 200000 --numpy-max 20000 --parse host,auto,inflight2; done > "$R/decode.txt" 2>&1
 el done
 cd "$OUT" && tar czf results.tgz r

@@ -32,7 +32,7 @@ from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import (KeyAtlas, block_pixel_refs, block_refs, predict as remap_predict, predict_block,
                         predict_block_pixels, predict_view)
 from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
-from ..xp import NUMPY
+from ..xp import NUMPY, shared
 from .base import Profile, ProfileDecoder
 
 PAD = 8
@@ -874,7 +874,7 @@ class TorchTx:
             with self._lock:                              # (chunks may be in flight on two threads)
                 if self._section is None:
                     dbuf = xp.asarray(buf)
-                    self._section = (dbuf, pair_words(dbuf))
+                    self._section = shared(dbuf, pair_words(dbuf))
             section = self._section
         else:                                             # a byte-range source: this call's streams
             dbuf = xp.asarray(buf)
@@ -911,8 +911,8 @@ class TorchTx:
         with self._lock:
             if self._res_consts is None:
                 lay = d.lay
-                self._res_consts = (xp.asarray(lay.step16.astype(np.int64)), xp.asarray(lay.bypass),
-                                    xp.asarray(ZIGZAG), torch.arange(0, 64 * P, P, **i64))
+                self._res_consts = shared(xp.asarray(lay.step16.astype(np.int64)), xp.asarray(lay.bypass),
+                                          xp.asarray(ZIGZAG), torch.arange(0, 64 * P, P, **i64))
         step16, bypass, zigzag, cols = self._res_consts
         blk, pos = index >> 6, index & 63                                    # (lane, tb, plane), scan position
         plane = blk % P
