@@ -1399,7 +1399,7 @@ SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key v
 SEARCH_MIN_VIEWS = 16  # … where there are at least this many
 MODEL_REACH = 0.25    # octaves of the step: a search evaluation codes with the entropy model measured
                       # nearest to its step where one is this near (else it measures one first)
-MAPS_REPRICE_RATIO = 1.25  # a PSNR target's maps are repriced where the probe puts the coding λ at least
+MAPS_REPRICE_RATIO = 1.25  # a PSNR or size target's maps are repriced where the probe puts the coding λ at least
                            # this many times the λ they were estimated for, and kept where the coded check
                            # says so (4 until stop 65: BENCHMARKS.md)
 MODEL_SPAN = 1.5      # octaves: a search evaluation between two measured models at most this far apart
@@ -1738,8 +1738,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
     # encodes code every view at each of their passes, so every view is kept once read
     sampled = (options.target_psnr is not None and params.search_sample and not params.lossless
                and params.step is None)
-    reprice = (options.target_psnr is not None and params.step is None and not params.lossless
-               and "maps_reprice" not in params.ablate)
+    reprice = ((options.target_psnr is not None or options.target_bpp is not None) and params.step is None
+               and not params.lossless and "maps_reprice" not in params.ablate)
     enc = TxEncoder(lf, params, progress, side_lambda(lf, options, params), runner, hold_all=not sampled,
                     keep_luma=reprice)
     enc.keep_decoded = options.keep_decoded
@@ -1853,7 +1853,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 q0 = q0 + shift
             else:
                 b0 = file_bpp(lf, *enc.pack(probe))
-                q0 = q0 + (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
+                shift = (math.log2(options.target_bpp) - math.log2(b0)) / BPP_SLOPE
+                q0 = q0 + shift
             q0 = min(max(q0, lo_q), hi_q)
             models[probe["step"]] = enc.model_of(probe)   # the first evaluation's model, where near
             # the maps were estimated at the λ of the step the target's MSE suggests (step0); views
