@@ -364,30 +364,42 @@ class TxEncoder:
         """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field)."""
         self._kept_luma = None
 
-    def reprice_maps(self, side_lambda: float) -> None:
-        """The maps as estimated with their per-cell corrections judged again at ``side_lambda``
-        (larger than the λ they were estimated at: :func:`rlfc.txestimate.reprice_maps`); what
-        was measured of the maps before (their bytes per key) is forgotten."""
-        if not self.has_maps or side_lambda <= self.side_lambda:
+    def reprice_maps(self, side_lambda: float, modes_too: bool = False) -> None:
+        """The maps as estimated with their per-cell corrections (and with ``modes_too`` their
+        modes) judged again at ``side_lambda`` (larger than the λ they were estimated at:
+        :func:`rlfc.txestimate.reprice_maps`), always from the maps as estimated; what was
+        measured of the maps before (their bytes per key) is forgotten."""
+        base, disp, _, lam = self._maps_before or (self.base, self.disp, self.modes, self.side_lambda)
+        if not self.has_maps or side_lambda <= lam:
             return
         if self._maps_before is None:
             self._maps_before = (self.base, self.disp, self.modes, self.side_lambda)
-        base, disp, _, lam = self._maps_before
-        self.base, self.disp, self.modes = reprice_maps(
-            self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
-            runner=self.runner, ref_modes="ref_modes" not in self.p.ablate)
-        self.side_lambda = side_lambda
+        self.use_maps(reprice_maps(self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
+                                   runner=self.runner, ref_modes="ref_modes" not in self.p.ablate,
+                                   modes_too=modes_too) + (side_lambda,))
+
+    def use_maps(self, maps: tuple) -> None:
+        """Code with ``maps`` = (base, disp, modes, the λ they were judged at) from here on (one
+        of :meth:`reprice_maps`'s results, kept by the caller)."""
+        self.base, self.disp, self.modes, self.side_lambda = maps
         self._map_cost = {}
         self._shared = None                       # (workers get the encoder with these maps)
+
+    @property
+    def estimated_lambda(self) -> float:
+        """The λ the maps were estimated at (before any :meth:`reprice_maps`)."""
+        return (self._maps_before or self.maps())[3]
+
+    def maps(self) -> tuple:
+        """(base, disp, modes, λ) of the maps coded now (for :meth:`use_maps`)."""
+        return self.base, self.disp, self.modes, self.side_lambda
 
     def restore_maps(self) -> None:
         """The maps as estimated, before :meth:`reprice_maps` (where the step rate control
         settled on did not bear out the λ they were repriced at)."""
         if self._maps_before is not None:
-            self.base, self.disp, self.modes, self.side_lambda = self._maps_before
+            self.use_maps(self._maps_before)
             self._maps_before = None
-            self._map_cost = {}
-            self._shared = None
 
     def planes(self, v: int, pixels: np.ndarray | None = None) -> np.ndarray:
         """(Hp, Wp, P) int32 YCoCg-R planes of view v (edge-padded), from ``pixels`` (H, W, C)
@@ -1600,23 +1612,35 @@ def _run_cost(enc: "TxEncoder", res: dict, share: float) -> float:
 
 
 def _maps_pay_repriced(enc: "TxEncoder", step: float, model, ratio: float, sample, n_others: int, models: dict,
-                       progress) -> bool:
-    """Code the search's first step with the maps as estimated and with them repriced at λ ×
-    ``ratio`` (:meth:`TxEncoder.reprice_maps`), the same entropy model; keep the repriced maps
-    where that run costs less at equal quality (:func:`_run_cost`). Corrections that are noise
-    at a coarse step go; those that follow an occluder's edge stay (hci_buddha with an occluder
-    at 32 dB: +24% bytes had they gone). The better run's model is the search's at that step."""
+                       progress) -> str | None:
+    """Code the search's first step with the maps as estimated, with their corrections repriced
+    at λ × ``ratio`` and with their modes repriced too (:meth:`TxEncoder.reprice_maps`), the same
+    entropy model; keep the maps whose run costs least at equal quality (:func:`_run_cost`; a
+    tie keeps the simpler). Corrections that are noise at a coarse step go; those that follow
+    an occluder's edge stay (hci_buddha with an occluder at 32 dB: +24% bytes had they gone).
+    Modes priced at the coding λ pay on some grids (hci_antinous at 32 dB −16%) and cost on
+    others (stanford_chess at 32 dB +2.6%): the three runs decide. The kept run's model is the
+    search's at that step.
+
+    Returns:
+        None (the maps as estimated), "corrections" or "modes" (which were repriced).
+    """
     share = (len(sample) / n_others) if sample is not None and n_others else 1.0
-    old = enc.run(step, model, progress, views=sample)
-    c_old = _run_cost(enc, old, share)
-    enc.reprice_maps(enc.side_lambda * ratio)
-    new = enc.run(step, model, progress, views=sample)
-    c_new = _run_cost(enc, new, share)
-    keep = c_new < c_old
-    if not keep:
+    lam = enc.estimated_lambda
+    runs, kept, cost = {}, {}, {}
+    for what in (None, "corrections", "modes"):
+        if what is not None:
+            enc.reprice_maps(lam * ratio, modes_too=what == "modes")
+        kept[what] = enc.maps()
+        runs[what] = enc.run(step, model, progress, views=sample)
+        cost[what] = _run_cost(enc, runs[what], share)            # (the maps' bytes: those coded now)
+    best = min(cost, key=lambda k: (cost[k], [None, "corrections", "modes"].index(k)))
+    if best is None:
         enc.restore_maps()
-    models[step] = enc.model_of(new if keep else old)
-    return keep
+    else:
+        enc.use_maps(kept[best])
+    models[step] = enc.model_of(runs[best])
+    return best
 
 
 CLOSE_TRIES = 2         # full passes that close in on the target after a corrected miss
@@ -1760,6 +1784,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         step0 = 8.0 * scale
     probe = None
     maps_ratio = None                         # the λ ratio the maps were repriced at, if they were
+    maps_kind = None                          # … and what was: "corrections" or "modes" (and corrections)
     # a PSNR target on a grid with many views: the probe and the search code the key views and a
     # sample of the others (their errors stand for the rest; every view is independent given the
     # keys), and the chosen step is then checked on every view (below: corrected if it misses)
@@ -1865,8 +1890,9 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 maps_ratio = 4.0 ** shift
                 q0 = math.log2(enc.grid_step(2.0 ** q0))
                 step = 2.0 ** q0
-                if not _maps_pay_repriced(enc, step, models[probe["step"]], maps_ratio, sample, others.size, models,
-                                          progress):
+                maps_kind = _maps_pay_repriced(enc, step, models[probe["step"]], maps_ratio, sample, others.size,
+                                               models, progress)
+                if maps_kind is None:
                     maps_ratio = None
         enc.drop_luma()                # (kept for the maps' repricing only)
         probe = None                   # (its coded views are not needed any more)
@@ -1889,7 +1915,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             # the probe's prior slope put the step far coarser than the search found it (PSNR
             # falling faster with the step than the prior): the maps as estimated code the file
             enc.restore_maps()
-            maps_ratio = None
+            maps_ratio = maps_kind = None
         if not found:
             notes.append("even the finest quantizer misses the target; the closest setting is written" if floor else
                          COARSEST_NOTE)
@@ -1956,7 +1982,8 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                    summary={"profile": "tx", "params": {**params_info(params), "step": res["step"],
                                                         "lam_scale": res.get("lam_scale", 1.0),
                                                         "key_ratio": enc.key_ratio(),
-                                                        "maps_repriced": maps_ratio},
+                                                        "maps_repriced": maps_ratio,
+                                                        "maps_repriced_modes": maps_kind == "modes"},
                             "key_views": len(enc.structure_of(res)[0]),
                             "views_coded_alone": len(res.get("promoted", ())),
                             "psnr_rgb": finite(enc.psnr(res)), "psnr_view_min": finite(float(enc.view_psnrs(res).min())),

@@ -306,13 +306,14 @@ def _regularize(est: Estimator, total, base, disp, cur, full, side_lambda: float
 
 
 def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *, side_lambda: float,
-                 correction_lambda: float, runner=None, ref_modes: bool = True):
+                 correction_lambda: float, runner=None, ref_modes: bool = True, modes_too: bool = False):
     """Maps of :func:`estimate_maps` (at ``side_lambda``) with each cell's own disparity judged
     again at ``correction_lambda`` (larger): dropped for the shared one where it no longer pays
-    its side cost. Modes and the shared map's regularization stay at ``side_lambda``: a block
-    seen by one reference only (an occlusion) needs its mode whatever λ is. Four cost
-    evaluations instead of an estimation's 15 or more (rate control learns the coding λ only
-    after its probe pass; :func:`rlfc.txencode._maps_pay_repriced` checks the result coded).
+    its side cost. The shared map's regularization stays at ``side_lambda``, and so do the modes
+    unless ``modes_too``: a block seen by one reference only (an occlusion) needs its mode
+    whatever λ is, but at a coarse enough step a mode's bits can cost more than it saves. Four
+    cost evaluations instead of an estimation's 15 or more (rate control learns the coding λ
+    only after its probe pass; :func:`rlfc.txencode._maps_pay_repriced` checks the result coded).
 
     Returns:
         (base, disp, modes) as :func:`estimate_maps`.
@@ -334,6 +335,8 @@ def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *
     disp = np.where(drop, shared, disp)
     cur, full = np.where(drop, cb, cur), np.where(drop[:, None], fb, full)
     base, disp, cur, full = _regularize(est, total, base, disp, cur, full, side_lambda)
+    if modes_too:
+        pen = _mode_penalty(correction_lambda, ref_modes)
     modes = (full + pen).argmin(axis=1)
     est.drop_handle()
     return base, disp, modes

@@ -1398,8 +1398,9 @@ def test_repriced_maps_are_restored_where_the_search_settles_near_the_assumed_st
 
 
 def test_repriced_maps_are_dropped_where_the_coded_check_finds_them_costlier(monkeypatch):
-    """The search's first step is coded with the maps as estimated and repriced; where the
-    repriced run costs more at equal quality, the estimated maps code the file."""
+    """The search's first step is coded with the maps as estimated, with their corrections
+    repriced and with their modes repriced too; where both repriced runs cost more at equal
+    quality, the estimated maps code the file."""
     from formats.scenes import read_scene
     from rlfc import txencode as T
 
@@ -1407,13 +1408,41 @@ def test_repriced_maps_are_dropped_where_the_coded_check_finds_them_costlier(mon
     seen = []
 
     def cost(enc, res, share):
-        seen.append(enc._maps_before is not None)          # (the second run: repriced maps)
+        seen.append(enc._maps_before is not None)          # (the second and third runs: repriced maps)
         return real(enc, res, share) + (100.0 if seen[-1] else 0.0)
 
     monkeypatch.setattr(T, "_run_cost", cost)
     lf = read_scene(ROOT / "samples" / "dino_crop")
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
     off = encode(lf, EncodeOptions(profile="tx", target_psnr=36, params={"ablate": ["maps_reprice"]}))
-    assert seen == [False, True] and e.summary["params"]["maps_repriced"] is None
+    assert seen == [False, True, True] and e.summary["params"]["maps_repriced"] is None
     assert dict(e.sections)["tx.maps"] == dict(off.sections)["tx.maps"]
     assert e.target_met
+
+
+@pytest.mark.parametrize("pick", ["corrections", "modes"])
+def test_the_coded_check_keeps_the_cheapest_of_three_maps(monkeypatch, pick):
+    """Of the three runs (maps as estimated, corrections repriced, modes repriced too) the one
+    the check finds cheapest codes the file, which decodes to the encoder's pixels; with the
+    modes repriced, fewer blocks take a single reference."""
+    from formats.scenes import read_scene
+    from rlfc import txencode as T
+
+    real, n = T._run_cost, []
+
+    def cost(enc, res, share):
+        n.append(1)
+        return real(enc, res, share) - (100.0 if len(n) == (2 if pick == "corrections" else 3) else 0.0)
+
+    monkeypatch.setattr(T, "_run_cost", cost)
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
+    p = e.summary["params"]
+    assert p["maps_repriced"] is not None and p["maps_repriced_modes"] == (pick == "modes")
+    assert e.target_met
+    d, _ = open_encoded(lf, e)
+    assert np.array_equal(d.decode_all(), e.decoded)
+    est = encode(lf, EncodeOptions(profile="tx", target_psnr=36, params={"ablate": ["maps_reprice"]}))
+    single = [int((dec.core._maps_of(None)[1] != 0).sum()) for dec in (d, open_encoded(lf, est)[0])]
+    if pick == "modes":                     # a mode priced at the coding λ: fewer single-reference blocks
+        assert single[0] < single[1]
