@@ -28,7 +28,7 @@ from .header import RlfcHeader
 from .kernels import dequantize
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
-from .txestimate import estimate_maps, reprice_maps
+from .txestimate import estimate_maps, reprice_maps_both
 from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
@@ -339,6 +339,7 @@ class TxEncoder:
         nloc8 = self.nby8 * self.nbx8
         self.side_lambda = side_lambda
         self._maps_before = None                  # the maps as estimated, while repriced (reprice_maps)
+        self._repriced = None                     # (λ, reprice_maps_both's result) of the last repricing
         self.has_maps = bool(params.max_disparity > 0 and n_maps)
         self._kept_luma = None
         if self.has_maps:
@@ -361,8 +362,9 @@ class TxEncoder:
         return np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])
 
     def drop_luma(self) -> None:
-        """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field)."""
-        self._kept_luma = None
+        """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field), and what
+        it last computed."""
+        self._kept_luma = self._repriced = None
 
     def reprice_maps(self, side_lambda: float, modes_too: bool = False) -> None:
         """The maps as estimated with their per-cell corrections (and with ``modes_too`` their
@@ -374,9 +376,12 @@ class TxEncoder:
             return
         if self._maps_before is None:
             self._maps_before = (self.base, self.disp, self.modes, self.side_lambda)
-        self.use_maps(reprice_maps(self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
-                                   runner=self.runner, ref_modes="ref_modes" not in self.p.ablate,
-                                   modes_too=modes_too) + (side_lambda,))
+        if self._repriced is None or self._repriced[0] != side_lambda:    # (both variants from one computation)
+            self._repriced = (side_lambda, reprice_maps_both(
+                self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
+                runner=self.runner, ref_modes="ref_modes" not in self.p.ablate))
+        b, d, modes, modes_repriced = self._repriced[1]
+        self.use_maps((b, d, modes_repriced if modes_too else modes, side_lambda))
 
     def use_maps(self, maps: tuple) -> None:
         """Code with ``maps`` = (base, disp, modes, the λ they were judged at) from here on (one
@@ -456,13 +461,13 @@ class TxEncoder:
         """What a worker needs to code views (:func:`_code_task`): everything but the light
         field and the runner."""
         st = dict(self.__dict__)
-        for k in ("lf", "runner", "_shared", "_view_handles", "_held", "_kept_luma"):
+        for k in ("lf", "runner", "_shared", "_view_handles", "_held", "_kept_luma", "_repriced"):
             st.pop(k, None)
         return st
 
     def __setstate__(self, st):
         self.__dict__.update(st)
-        self.lf = self.runner = self._shared = self._kept_luma = None
+        self.lf = self.runner = self._shared = self._kept_luma = self._repriced = None
         self._held = {}
 
     # -- steps -----------------------------------------------------------------------------

@@ -318,9 +318,20 @@ def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *
     Returns:
         (base, disp, modes) as :func:`estimate_maps`.
     """
+    base, disp, modes, modes_repriced = reprice_maps_both(luma, struct, base, disp, side_lambda=side_lambda,
+                                                          correction_lambda=correction_lambda, runner=runner,
+                                                          ref_modes=ref_modes)
+    return base, disp, modes_repriced if modes_too else modes
+
+
+def reprice_maps_both(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *, side_lambda: float,
+                      correction_lambda: float, runner=None, ref_modes: bool = True):
+    """:func:`reprice_maps` without and with ``modes_too`` from one computation (they differ only
+    in the modes' final choice): (base, disp, modes, modes repriced)."""
     est = Estimator(luma, struct, list(struct.keys))
     if len(est.cells) == 0:
-        return base, disp, np.zeros_like(disp)
+        z = np.zeros_like(disp)
+        return base, disp, z, z
     pen = _mode_penalty(side_lambda, ref_modes)
     pen_delta = SIDE_BITS * correction_lambda
 
@@ -335,8 +346,7 @@ def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *
     disp = np.where(drop, shared, disp)
     cur, full = np.where(drop, cb, cur), np.where(drop[:, None], fb, full)
     base, disp, cur, full = _regularize(est, total, base, disp, cur, full, side_lambda)
-    if modes_too:
-        pen = _mode_penalty(correction_lambda, ref_modes)
     modes = (full + pen).argmin(axis=1)
+    modes_repriced = (full + _mode_penalty(correction_lambda, ref_modes)).argmin(axis=1)
     est.drop_handle()
-    return base, disp, modes
+    return base, disp, modes, modes_repriced
