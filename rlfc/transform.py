@@ -48,17 +48,14 @@ _F = np.linalg.inv(T8.T.astype(np.float64)) * np.sqrt(2.0 ** 15)
 FORWARD_SCAN = np.ascontiguousarray(np.kron(_F, _F).T[:, ZIGZAG])
 
 
-def inverse(X, xp=None):
-    """Exact integer inverse of (..., 8, 8) int64 coefficient blocks (numpy or torch), (..., 8, 8) int64."""
-    if isinstance(X, np.ndarray):
-        n = X.size // 64
-        if n and int(np.abs(X).max()) < _FLOAT_EXACT:
-            return _inverse_gemm(X.reshape(n, 8, 8)).reshape(X.shape)
-        Y = (np.matmul(T8.T, X) + 64) >> 7
-        return (np.matmul(Y, T8) + 128) >> 8
-    t = _torch_t8(X.device)           # broadcast sums: integer matmul is not available on every device
-    Y = ((t[:, :, None] * X[..., :, None, :]).sum(-3) + 64) >> 7                # (..., i, j) = Σ_k T[k,i] X[k,j]
-    return ((Y[..., :, :, None] * t[None, :, :]).sum(-2) + 128) >> 8            # Σ_k Y[i,k] T[k,j]
+def inverse(X: np.ndarray) -> np.ndarray:
+    """Exact integer inverse of (..., 8, 8) int64 coefficient blocks, (..., 8, 8) int64 (the
+    definition; decoders call :func:`inverse_float`, numpy or torch, which gives its integers)."""
+    n = X.size // 64
+    if n and int(np.abs(X).max()) < _FLOAT_EXACT:
+        return _inverse_gemm(X.reshape(n, 8, 8)).reshape(X.shape)
+    Y = (np.matmul(T8.T, X) + 64) >> 7
+    return (np.matmul(Y, T8) + 128) >> 8
 
 
 #: coefficients below this magnitude are transformed in float64 exactly: every
@@ -93,7 +90,6 @@ def inverse_float(X):
     return np.floor(R, out=R)
 
 
-_T8_TORCH: dict = {}
 _T8F_TORCH: dict = {}
 
 
@@ -104,12 +100,3 @@ def _torch_t8f(device):
     if key not in _T8F_TORCH:
         _T8F_TORCH[key] = shared(torch.as_tensor(_T8F, device=device))
     return _T8F_TORCH[key]
-
-
-def _torch_t8(device):
-    import torch
-
-    key = str(device)
-    if key not in _T8_TORCH:
-        _T8_TORCH[key] = shared(torch.as_tensor(T8, device=device))
-    return _T8_TORCH[key]

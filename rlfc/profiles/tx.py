@@ -907,7 +907,7 @@ class TorchTx:
         i64 = dict(dtype=torch.int64, device=xp.device)
         intra = torch.zeros(pred.shape[:2], dtype=torch.bool, device=xp.device)
         intra[hv] = modes == MODE_INTRA                 # a select over every tb: no count to wait for
-        pred = torch.where(intra[:, :, None, None, None], self.flat.to(torch.int64), pred)
+        pred = torch.where(intra[:, :, None, None, None], self.flat.to(torch.int64), pred).contiguous()   # (viewed flat below)
         with self._lock:
             if self._res_consts is None:
                 lay = d.lay
@@ -968,7 +968,7 @@ class TorchTx:
             out[kk_t] = self.keyplanes[kslot[:, None, None], ys[:, :, None], xs[:, None, :]]
         if nk.size:
             parsed = self._parse_device(how, rest) if have.size else None
-            pred = self._pred(v_t, locs_t).reshape(nk.size, nt, TB, TB, P).to(torch.int64).contiguous()
+            pred = self._pred(v_t, locs_t).reshape(nk.size, nt, TB, TB, P).to(torch.int64)
             if parsed is not None:
                 pred = self._add_residual(pred, hv, notkey, *parsed)
             rec = torch.maximum(torch.minimum(pred, self.hi), self.lo).to(torch.int32)
