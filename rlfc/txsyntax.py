@@ -677,12 +677,17 @@ def _raw_bits(buf, start, back, kb, off):
 
 
 def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, key: int) -> Parsed:
-    """The reference parser: one stream in plain Python (same results as :func:`parse_lanes`)."""
+    """One stream in plain Python (the same results as :func:`parse_lanes`; faster than lanes
+    for a few streams).
+
+    The magnitudes' rANS steps are inlined on locals; each nonzero coefficient is one Python
+    int, ``(g·64 + position) << 8 | magnitude`` (g = tb·P + plane; an escape's magnitude
+    symbol, the rest of it added afterwards), and the signs are bits 0..K−1 of the raw bits,
+    unpacked at once."""
     P = len(pcs)
     pcl = [int(x) for x in pcs]
     d = ScalarDecoder(data, tables)
     get = d.get
-    slot_t, freq_t, cum_t, n_data = d.slot, d.freq, d.cum, len(data)
     modes, prev = [], 3
     for _ in range(nt):
         s = get(CTX_MODE + kind * 4 + prev)
@@ -690,7 +695,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
             raise FormatError("tx block has an undefined tb mode")
         modes.append(s)
         prev = s
-    last = [[0] * P for _ in range(nt)]
+    lasts = []                       # (g, last) of each coded (tb, plane), in order
     for t in range(nt):
         if modes[t] != MODE_SKIP:
             ci = modes[t] == MODE_INTRA
@@ -698,62 +703,84 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
                 v = get(CTX_LAST + (pcl[p] * 2 + ci) * 2 + key)
                 if v > 64:
                     raise FormatError("tx block has a last position past 64")
-                last[t][p] = v
-    coefs = []                       # nonzero coefficients: (t, p, pos, magnitude, escaped, first)
-    for t in range(nt):
-        for p in range(P):
-            n = last[t][p]
-            if not n:
-                continue
-            base = CTX_MAG + pcl[p] * N_BANDS * 8 + key * 4       # + band·8 + nb
+                if v:
+                    lasts.append((t * P + p, v))
+    slot_t, freq_t, cum_t = d.slot, d.freq, d.cum
+    x, ptr = d.x, d.ptr
+    words, esc = [], []              # esc: the places in words of escape symbols (and bad ones)
+    put = words.append
+    try:
+        for g, n in lasts:
+            bb = _mag_ctx_rows(pcl[g % P], key)      # per position: context of the first symbol
+            g8 = g << 14                             # (g·64) << 8
             pos = n - 1
-            s = get(base + _BAND8[pos])
-            if s > ESC:
-                raise FormatError("tx block has an undefined magnitude symbol")
-            h1, h2 = s + 1, 0
-            coefs.append([t, p, pos, s + 1, s == ESC, True])
-            # the rest of the group: the decoder's step inlined (this loop is most of a parse)
-            x, ptr = d.x, d.ptr
+            ctx = bb[pos]
+            sl = x & _MASK
+            s = slot_t[ctx][sl]
+            x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+            while x < RANS_L:
+                x = (x << 8) | data[ptr]
+                ptr += 1
+            if s >= ESC:
+                esc.append((len(words), s))
+            put(g8 | (pos << 8) | (s + 1))           # the first is nonzero: its magnitude is s + 1
+            n1, n2 = 1, 0
             for pos in range(n - 2, -1, -1):
-                ctx = base + _BAND8[pos] + 1 + (h1 > 0) + (h2 > 0)
+                ctx = bb[pos] + 1 + n1 + n2
                 sl = x & _MASK
                 s = slot_t[ctx][sl]
                 x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
                 while x < RANS_L:
-                    if ptr >= n_data:
-                        raise FormatError("rANS stream reads past its end")
                     x = (x << 8) | data[ptr]
                     ptr += 1
-                if s > ESC:
-                    raise FormatError("tx block has an undefined magnitude symbol")
-                h2, h1 = h1, s
-                if s:                                   # zeros carry no sign, escape or level
-                    coefs.append([t, p, pos, s, s == ESC, False])
-            d.x, d.ptr = x, ptr
-    for c in coefs:
-        if c[4]:
-            k = get(CTX_ESC + pcl[c[1]])
-            if k >= N_BUCKETS:
-                raise FormatError("tx block has an undefined escape bucket")
-            c.append(k)
-    nsign = sum(1 for c in coefs if c[3] > 0)
-    nbits = nsign + sum(c[6] for c in coefs if c[4])
+                n2 = n1
+                if s:                                # zeros carry no sign, escape or level
+                    if s >= ESC:
+                        esc.append((len(words), s))
+                    put(g8 | (pos << 8) | s)
+                    n1 = 1
+                else:
+                    n1 = 0
+    except IndexError:
+        raise FormatError("rANS stream reads past its end") from None
+    d.x, d.ptr = x, ptr
+    buckets = []
+    for i, s in esc:
+        if s > ESC:
+            raise FormatError("tx block has an undefined magnitude symbol")
+        k = get(CTX_ESC + pcl[(words[i] >> 14) % P])
+        if k >= N_BUCKETS:
+            raise FormatError("tx block has an undefined escape bucket")
+        buckets.append(k)
+    nsign = len(words)                               # every coefficient kept is nonzero
+    nbits = nsign + sum(buckets)
     kb = min(nbits, BACK_BITS)
     raw_start = len(data) - (nbits - kb + 7) // 8
     if not d.done(raw_start, kb):
         raise FormatError("tx block stream is malformed (its symbols do not end where its raw bits start)")
     raw = (d.x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
-    bit = 0
-    signs = []
-    for c in coefs:
-        if c[3] > 0:
-            signs.append((raw >> bit) & 1)
-            bit += 1
-    for c in coefs:
-        if c[4]:
-            k = c[6]
-            c[3] = ESC + c[5] + ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
-            bit += k
-    index = [((c[0] * P + c[1]) << 6) + c[2] for c in coefs]       # grouped by (tb, plane), ascending
-    values = [-c[3] if sg else c[3] for c, sg in zip(coefs, signs)]
-    return Parsed(np.array([modes], np.int64), np.array(index, np.int64), np.array(values, np.int64), P)
+    w = np.array(words, np.int64)
+    index, mag = w >> 8, w & 255
+    bit = nsign
+    for (i, _), k in zip(esc, buckets):          # |c| = ESC + first + 2^k − 1 + k raw bits
+        mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
+        bit += k
+    if nsign:
+        nb = (nsign + 7) >> 3
+        signs = np.unpackbits(np.frombuffer((raw & ((1 << (8 * nb)) - 1)).to_bytes(nb, "little"), np.uint8),
+                              count=nsign, bitorder="little")
+        np.negative(mag, out=mag, where=signs.view(bool))
+    return Parsed(np.array([modes], np.int64), index, mag, P)
+
+
+_MAG_ROWS: dict = {}
+
+
+def _mag_ctx_rows(pc: int, key: int) -> list:
+    """Per scan position, the context of a (tb, plane)'s first magnitude symbol (plane class
+    ``pc``, ``key``); the symbols after it add 1 + their count of nonzero neighbours."""
+    got = _MAG_ROWS.get((pc, key))
+    if got is None:
+        base = CTX_MAG + pc * N_BANDS * 8 + key * 4
+        got = _MAG_ROWS[(pc, key)] = [base + b for b in _BAND8]
+    return got

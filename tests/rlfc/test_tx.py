@@ -276,13 +276,47 @@ def test_posed_captures_are_coded_view_by_view():
     check_agreement(d, e.decoded.shape)
 
 
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=2), dict(c=4), dict(lossless=True, c=4),
+                                dict(lossless=True)])
+def test_single_coded_blocks_equal_the_whole_views(kw):
+    """decode_block of every block with a residual stream (its own one-stream parse and
+    residual) equals the whole views, the batched call, and the planes of the batched path:
+    noisy views (most blocks coded; some escapes), 16-bit, grey, grey + alpha, RGBA (planes
+    without transform) and lossless (no plane transformed)."""
+    kw = dict(kw)
+    lossless = kw.pop("lossless", False)
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48, **kw)
+    peak = 65535 if lf.views.dtype == np.uint16 else 255
+    amp = 9 * (257 if peak == 65535 else 1)
+    noise = np.random.default_rng(2).integers(-amp, amp + 1, lf.views.shape)
+    lf.views[:] = np.clip(lf.views.astype(np.int64) + noise, 0, peak)
+    e = tx(lf, lossless=True) if lossless else tx(lf, step=2.0 * amp / 9)
+    d, _ = open_encoded(lf, e)
+    core, B = d.core, d.block_size
+    full = d.decode_all()
+    assert (full == (lf.views if lossless else e.decoded)).all()
+    v, loc = np.nonzero(core.coded & ~core.is_key[:, None])
+    assert v.size > 50
+    by, bx = np.divmod(loc, core.nbx)
+    batched = d.decode_blocks(v, by, bx)
+    for i in range(v.size):
+        r, c = divmod(int(v[i]), lf.cols)
+        one = d.decode_block(r, c, int(by[i]), int(bx[i]))
+        ref = full[r, c, by[i] * B:(by[i] + 1) * B, bx[i] * B:(bx[i] + 1) * B]
+        assert (one == ref).all() and (batched[i][:ref.shape[0], :ref.shape[1]] == ref).all()
+        parsed = core._parse_one(int(v[i]), int(loc[i]))
+        assert (core._residual_one(int(v[i]), parsed)
+                == core._residual(v[i:i + 1], core._parse(v[i:i + 1], loc[i:i + 1]))[0]).all()
+
+
 def test_single_block_reads_at_most_one_stream():
     lf = smooth_lf(rows=5, cols=5, h=40, w=48)
     d, _ = open_encoded(lf, tx(lf, step=2.0))
     core = d.core
     seen = []
-    orig = core._parse
+    orig, orig_one = core._parse, core._parse_one
     core._parse = lambda v, l: seen.append(len(v)) or orig(v, l)
+    core._parse_one = lambda v, l: seen.append(1) or orig_one(v, l)
     for v in range(25):
         for loc in range(core.nby * core.nbx):
             seen.clear()
