@@ -361,10 +361,12 @@ class TxEncoder:
             return self._kept_luma
         return np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])
 
-    def drop_luma(self) -> None:
+    def drop_luma(self, repriced_too: bool = True) -> None:
         """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field), and what
-        it last computed."""
-        self._kept_luma = self._repriced = None
+        it last computed (unless not ``repriced_too``: both variants at that λ stay usable)."""
+        self._kept_luma = None
+        if repriced_too:
+            self._repriced = None
 
     def reprice_maps(self, side_lambda: float, modes_too: bool = False) -> None:
         """The maps as estimated with their per-cell corrections (and with ``modes_too`` their
@@ -1632,20 +1634,25 @@ def _maps_pay_repriced(enc: "TxEncoder", step: float, model, ratio: float, sampl
     """
     share = (len(sample) / n_others) if sample is not None and n_others else 1.0
     lam = enc.estimated_lambda
-    runs, kept, cost = {}, {}, {}
-    for what in (None, "corrections", "modes"):
+    enc.reprice_maps(lam * ratio)                 # both variants at once, from the kept luma, which
+    enc.drop_luma(repriced_too=False)             # then goes before any run (a third of an RGB light field)
+    enc.restore_maps()
+    best = None                                   # (cost, what, maps, the run's model): only the
+    for what in (None, "corrections", "modes"):   # cheapest run so far is held (each holds its views' codes)
         if what is not None:
             enc.reprice_maps(lam * ratio, modes_too=what == "modes")
-        kept[what] = enc.maps()
-        runs[what] = enc.run(step, model, progress, views=sample)
-        cost[what] = _run_cost(enc, runs[what], share)            # (the maps' bytes: those coded now)
-    best = min(cost, key=lambda k: (cost[k], [None, "corrections", "modes"].index(k)))
-    if best is None:
+        run = enc.run(step, model, progress, views=sample)
+        cost = _run_cost(enc, run, share)                         # (the maps' bytes: those coded now)
+        if best is None or cost < best[0]:
+            best = (cost, what, enc.maps(), enc.model_of(run))
+        del run
+    _, what, maps, best_model = best
+    if what is None:
         enc.restore_maps()
     else:
-        enc.use_maps(kept[best])
-    models[step] = enc.model_of(runs[best])
-    return best
+        enc.use_maps(maps)
+    models[step] = best_model
+    return what
 
 
 CLOSE_TRIES = 2         # full passes that close in on the target after a corrected miss
