@@ -1454,6 +1454,44 @@ def test_repriced_maps_are_dropped_where_the_coded_check_finds_them_costlier(mon
     assert e.target_met
 
 
+def test_the_coded_check_holds_one_run_at_a_time_and_no_luma(monkeypatch):
+    """Memory (issue 20): the maps' coded check codes its three runs one after the other, each
+    let go before the next is coded (a run holds its views' codes: three at once took a
+    17x17 grid's encode over 4x its raw input), and the luma kept for the repricing goes before
+    the first of them."""
+    import weakref
+
+    from formats.scenes import read_scene
+    from rlfc import txencode as T
+
+    class Run(dict):
+        pass
+
+    refs, seen, inside = [], [], [False]
+    real_run, real_check = T.TxEncoder.run, T._maps_pay_repriced
+
+    def run(self, *a, **k):
+        if inside[0]:
+            seen.append((sum(r() is not None for r in refs), self._kept_luma is not None))
+        got = Run(real_run(self, *a, **k))
+        if inside[0]:
+            refs.append(weakref.ref(got))
+        return got
+
+    def check(*a, **k):
+        inside[0] = True
+        try:
+            return real_check(*a, **k)
+        finally:
+            inside[0] = False
+
+    monkeypatch.setattr(T.TxEncoder, "run", run)
+    monkeypatch.setattr(T, "_maps_pay_repriced", check)
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    assert encode(lf, EncodeOptions(profile="tx", target_psnr=36)).target_met
+    assert seen == [(0, False)] * 3                   # (the check ran: three runs)
+
+
 @pytest.mark.parametrize("pick", ["corrections", "modes"])
 def test_the_coded_check_keeps_the_cheapest_of_three_maps(monkeypatch, pick):
     """Of the three runs (maps as estimated, corrections repriced, modes repriced too) the one
