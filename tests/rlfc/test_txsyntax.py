@@ -103,6 +103,41 @@ def test_malformed_streams_raise(tail, monkeypatch):
         tx.tables_from_bytes(b"\x78\x9c\x03\x00\x00\x00\x00\x01", "x")
 
 
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2 ** 31), st.sampled_from([1, 4]), st.sampled_from([1, 3, 4]), st.booleans(),
+       st.integers(1, 4), st.sampled_from(["flip", "cut", "extend"]))
+def test_one_stream_parser_and_lanes_agree_on_damaged_streams(seed, nt, P, big, hits, how):
+    """Damaged streams (bytes changed, cut short or lengthened): the one-stream parser and the
+    lanes parser both refuse a stream with a FormatError, or both give the same syntax (a
+    damaged stream may still be a valid one)."""
+    rng = np.random.default_rng(seed)
+    modes, levels = _random_blocks(rng, 6, nt, P, 0.7, big)
+    kind, key, pcs = rng.integers(0, 2, 6), rng.integers(0, 2, 6), tx.plane_classes(P)
+    streams, tables = _encode(modes, levels, kind, key, pcs)
+    for i, b in enumerate(streams):
+        b = bytearray(b)
+        if how == "flip":
+            for _ in range(hits):
+                b[int(rng.integers(0, len(b)))] ^= int(rng.integers(1, 256))
+        elif how == "cut":
+            b = b[:max(0, len(b) - hits)]
+        else:
+            b += bytes(rng.integers(0, 256, hits).astype(np.uint8))
+        b = bytes(b)
+        try:
+            one = tx.parse_one(b, tables, nt, pcs, int(kind[i]), int(key[i]))
+        except FormatError:
+            one = None
+        buf, starts = _packed([b])
+        try:
+            lanes = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind[i:i + 1], key[i:i + 1])
+        except FormatError:
+            lanes = None
+        assert (one is None) == (lanes is None)
+        if one is not None:
+            assert (one.modes == lanes.modes).all() and (one.levels == lanes.levels).all()
+
+
 @settings(max_examples=15)
 @given(st.integers(0, 2 ** 31), st.integers(2, 25), st.integers(1, 3000))
 def test_streams_packed_in_groups_are_the_same_bytes(seed, S, cells):
