@@ -281,14 +281,17 @@ def test_posed_captures_are_coded_view_by_view():
 def test_single_coded_blocks_equal_the_whole_views(kw):
     """decode_block of every block with a residual stream (its own one-stream parse and
     residual) equals the whole views, the batched call, and the planes of the batched path:
-    noisy views (most blocks coded; some escapes), 16-bit, grey, grey + alpha, RGBA (planes
-    without transform) and lossless (no plane transformed)."""
+    noisy views with saturated corners (most blocks coded; escapes, intra 8×8 blocks, planes
+    clipped), 16-bit, grey, grey + alpha, RGBA (planes without transform) and lossless (no
+    plane transformed)."""
     kw = dict(kw)
     lossless = kw.pop("lossless", False)
     lf = smooth_lf(rows=5, cols=5, h=40, w=48, **kw)
     peak = 65535 if lf.views.dtype == np.uint16 else 255
     amp = 9 * (257 if peak == 65535 else 1)
     noise = np.random.default_rng(2).integers(-amp, amp + 1, lf.views.shape)
+    lf.views[:, :, :12, :20, :min(lf.channels, 3)] = peak            # a saturated corner (planes clipped)
+    lf.views[:, :, 28:, 30:, :min(lf.channels, 3)] = 0
     lf.views[:] = np.clip(lf.views.astype(np.int64) + noise, 0, peak)
     e = tx(lf, lossless=True) if lossless else tx(lf, step=2.0 * amp / 9)
     d, _ = open_encoded(lf, e)
@@ -299,6 +302,7 @@ def test_single_coded_blocks_equal_the_whole_views(kw):
     assert v.size > 50
     by, bx = np.divmod(loc, core.nbx)
     batched = d.decode_blocks(v, by, bx)
+    intra = 0
     for i in range(v.size):
         r, c = divmod(int(v[i]), lf.cols)
         one = d.decode_block(r, c, int(by[i]), int(bx[i]))
@@ -307,6 +311,8 @@ def test_single_coded_blocks_equal_the_whole_views(kw):
         parsed = core._parse_one(int(v[i]), int(loc[i]))
         assert (core._residual_one(int(v[i]), parsed)
                 == core._residual(v[i:i + 1], core._parse(v[i:i + 1], loc[i:i + 1]))[0]).all()
+        intra += int((parsed.modes == 2).sum())
+    assert intra > 0 or lossless                      # (lossless files code no intra 8×8 block here)
 
 
 def test_single_block_reads_at_most_one_stream():
