@@ -373,17 +373,24 @@ class TxEncoder:
         modes) judged again at ``side_lambda`` (larger than the λ they were estimated at:
         :func:`rlfc.txestimate.reprice_maps`), always from the maps as estimated; what was
         measured of the maps before (their bytes per key) is forgotten."""
-        base, disp, _, lam = self._maps_before or (self.base, self.disp, self.modes, self.side_lambda)
+        lam = (self._maps_before or self.maps())[3]
         if not self.has_maps or side_lambda <= lam:
             return
+        b, d, modes, modes_repriced = self.price_maps_at(side_lambda)
         if self._maps_before is None:
-            self._maps_before = (self.base, self.disp, self.modes, self.side_lambda)
-        if self._repriced is None or self._repriced[0] != side_lambda:    # (both variants from one computation)
+            self._maps_before = self.maps()
+        self.use_maps((b, d, modes_repriced if modes_too else modes, side_lambda))
+
+    def price_maps_at(self, side_lambda: float) -> tuple:
+        """:func:`rlfc.txestimate.reprice_maps_both` of the maps as estimated at ``side_lambda``,
+        from the kept luma, computed once: both variants (corrections, and modes too) come from
+        one computation, and :meth:`reprice_maps` at that λ needs no luma afterwards."""
+        base, disp, _, lam = self._maps_before or self.maps()
+        if self._repriced is None or self._repriced[0] != side_lambda:
             self._repriced = (side_lambda, reprice_maps_both(
                 self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
                 runner=self.runner, ref_modes="ref_modes" not in self.p.ablate))
-        b, d, modes, modes_repriced = self._repriced[1]
-        self.use_maps((b, d, modes_repriced if modes_too else modes, side_lambda))
+        return self._repriced[1]
 
     def use_maps(self, maps: tuple) -> None:
         """Code with ``maps`` = (base, disp, modes, the λ they were judged at) from here on (one
@@ -1634,9 +1641,8 @@ def _maps_pay_repriced(enc: "TxEncoder", step: float, model, ratio: float, sampl
     """
     share = (len(sample) / n_others) if sample is not None and n_others else 1.0
     lam = enc.estimated_lambda
-    enc.reprice_maps(lam * ratio)                 # both variants at once, from the kept luma, which
+    enc.price_maps_at(lam * ratio)                # both variants at once, from the kept luma, which
     enc.drop_luma(repriced_too=False)             # then goes before any run (a third of an RGB light field)
-    enc.restore_maps()
     best = None                                   # (cost, what, maps, the run's model): only the
     for what in (None, "corrections", "modes"):   # cheapest run so far is held (each holds its views' codes)
         if what is not None:

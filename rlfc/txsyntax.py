@@ -711,7 +711,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
     put = words.append
     try:
         for g, n in lasts:
-            bb = _mag_ctx_rows(pcl[g % P], key)      # per position: context of the first symbol
+            bb = _MAG_ROWS[pcl[g % P], key]          # per position: context of the first symbol
             g8 = g << 14                             # (g·64) << 8
             pos = n - 1
             ctx = bb[pos]
@@ -773,14 +773,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
     return Parsed(np.array([modes], np.int64), index, mag, P)
 
 
-_MAG_ROWS: dict = {}
-
-
-def _mag_ctx_rows(pc: int, key: int) -> list:
-    """Per scan position, the context of a (tb, plane)'s first magnitude symbol (plane class
-    ``pc``, ``key``); the symbols after it add 1 + their count of nonzero neighbours."""
-    got = _MAG_ROWS.get((pc, key))
-    if got is None:
-        base = CTX_MAG + pc * N_BANDS * 8 + key * 4
-        got = _MAG_ROWS[(pc, key)] = [base + b for b in _BAND8]
-    return got
+#: per (plane class, key), per scan position: the context of a (tb, plane)'s first magnitude
+#: symbol; the symbols after it add 1 + their count of nonzero neighbours
+_MAG_ROWS = {(pc, key): [CTX_MAG + pc * N_BANDS * 8 + key * 4 + b for b in _BAND8]
+             for pc in range(N_PC) for key in (0, 1)}
