@@ -53,6 +53,24 @@ def test_lossy_decode_is_the_closed_loop_and_torch_agrees(kw, rng):
         assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx, level) == d.decode_blocks(v, by, bx, level)).all()
 
 
+def _noisy_grid_encoded(kw: dict, amp8: int, seed: int, step8: float, saturate: bool = False):
+    """(light field, encoded, lossless) of a 5×5 grid of 40×48 views (``kw``: smooth_lf's
+    layout, plus ``lossless``) with uniform noise of ±amp8 levels (×257 for 16-bit), coded at
+    step step8 (×257) or lossless: most blocks carry a residual stream. ``saturate``: two
+    corners pushed to 0 and the peak first (reconstructed planes then need clipping)."""
+    kw = dict(kw)
+    lossless = kw.pop("lossless", False)
+    lf = smooth_lf(rows=5, cols=5, h=40, w=48, **kw)
+    peak = 65535 if lf.views.dtype == np.uint16 else 255
+    scale = 257 if peak == 65535 else 1
+    noise = np.random.default_rng(seed).integers(-amp8 * scale, amp8 * scale + 1, lf.views.shape)
+    if saturate:
+        lf.views[:, :, :12, :20, :min(lf.channels, 3)] = peak
+        lf.views[:, :, 28:, 30:, :min(lf.channels, 3)] = 0
+    lf.views[:] = np.clip(lf.views.astype(np.int64) + noise, 0, peak)
+    return lf, (tx(lf, lossless=True) if lossless else tx(lf, step=step8 * scale)), lossless
+
+
 @pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(lossless=True, c=4)])
 @pytest.mark.parametrize("device_parse", ["0", "1"])
 def test_torch_residuals_equal_numpy(kw, device_parse, rng, monkeypatch):
@@ -60,14 +78,7 @@ def test_torch_residuals_equal_numpy(kw, device_parse, rng, monkeypatch):
     in float64, and added in place) give numpy's blocks, the streams parsed on the host or on the
     device: noisy views (every block coded), 16-bit, grey, alpha (planes without transform) and
     lossless (no plane transformed)."""
-    kw = dict(kw)
-    lossless = kw.pop("lossless", False)
-    lf = smooth_lf(rows=5, cols=5, h=40, w=48, **kw)
-    peak = 65535 if lf.views.dtype == np.uint16 else 255
-    amp = 6 * (257 if peak == 65535 else 1)
-    noise = np.random.default_rng(1).integers(-amp, amp + 1, lf.views.shape)
-    lf.views[:] = np.clip(lf.views.astype(np.int64) + noise, 0, peak)
-    e = tx(lf, lossless=True) if lossless else tx(lf, step=3.0 * amp / 6)
+    lf, e, lossless = _noisy_grid_encoded(kw, amp8=6, seed=1, step8=3.0)
     d, _ = open_encoded(lf, e)
     assert d.core.coded[~d.core.is_key].any()
     monkeypatch.setenv("LFC_DEVICE_PARSE", device_parse)
@@ -284,16 +295,7 @@ def test_single_coded_blocks_equal_the_whole_views(kw):
     noisy views with saturated corners (most blocks coded; escapes, intra 8×8 blocks, planes
     clipped), 16-bit, grey, grey + alpha, RGBA (planes without transform) and lossless (no
     plane transformed)."""
-    kw = dict(kw)
-    lossless = kw.pop("lossless", False)
-    lf = smooth_lf(rows=5, cols=5, h=40, w=48, **kw)
-    peak = 65535 if lf.views.dtype == np.uint16 else 255
-    amp = 9 * (257 if peak == 65535 else 1)
-    noise = np.random.default_rng(2).integers(-amp, amp + 1, lf.views.shape)
-    lf.views[:, :, :12, :20, :min(lf.channels, 3)] = peak            # a saturated corner (planes clipped)
-    lf.views[:, :, 28:, 30:, :min(lf.channels, 3)] = 0
-    lf.views[:] = np.clip(lf.views.astype(np.int64) + noise, 0, peak)
-    e = tx(lf, lossless=True) if lossless else tx(lf, step=2.0 * amp / 9)
+    lf, e, lossless = _noisy_grid_encoded(kw, amp8=9, seed=2, step8=2.0, saturate=True)
     d, _ = open_encoded(lf, e)
     core, B = d.core, d.block_size
     full = d.decode_all()
