@@ -373,8 +373,7 @@ class TxEncoder:
         modes) judged again at ``side_lambda`` (larger than the λ they were estimated at:
         :func:`rlfc.txestimate.reprice_maps`), always from the maps as estimated; what was
         measured of the maps before (their bytes per key) is forgotten."""
-        lam = (self._maps_before or self.maps())[3]
-        if not self.has_maps or side_lambda <= lam:
+        if not self.has_maps or side_lambda <= self.estimated_lambda:
             return
         b, d, modes, modes_repriced = self.price_maps_at(side_lambda)
         if self._maps_before is None:

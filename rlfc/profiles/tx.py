@@ -511,10 +511,8 @@ class TxDecoder(ProfileDecoder):
         if idx.size:
             blk, pos = idx >> 6, idx & 63                                    # (lane, tb, plane), scan position
             plane = blk % P
-            q16 = lay.step16[np.where(self.is_key[views[blk // (nt * P)]], 0, 1), plane]
-            deq = dequantize(NUMPY, q, q16)
-            np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
-            raster = np.where(lay.bypass[plane], pos, ZIGZAG[pos])
+            deq, raster = self._dequantized(q, lay.step16[np.where(self.is_key[views[blk // (nt * P)]], 0, 1), plane],
+                                            plane, pos)
             new = np.ones(blk.size, bool)
             new[1:] = blk[1:] != blk[:-1]
             ub = blk[new]                                                    # blocks with coefficients
@@ -525,6 +523,15 @@ class TxDecoder(ProfileDecoder):
                 X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
             res[ub // P, :, ub % P] = X           # (written planes-last: the sum with the prediction
         return res.reshape(S, nt, TB, TB, P)      # then reads it contiguously, 2x faster than a strided view)
+
+    def _dequantized(self, values, q16, plane, pos):
+        """(dequantized coefficients clipped to ±COEF_MAX, each one's raster position in its 8×8
+        block: zig-zag for transformed planes, as is for bypassed ones) of nonzero levels
+        ``values`` at scan positions ``pos`` of planes ``plane``, steps ``q16`` (1/16)."""
+        deq = dequantize(NUMPY, values, q16)
+        np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
+        bypass = self.lay.bypass
+        return deq, (np.where(bypass[plane], pos, ZIGZAG[pos]) if bypass.any() else ZIGZAG[pos])
 
     def _parse(self, views, locs):
         """Parse the streams of (view, location) pairs that have one."""
@@ -779,11 +786,10 @@ class TxDecoder(ProfileDecoder):
             return np.zeros((nt, TB, TB, P), np.int32)
         g, pos = idx >> 6, idx & 63                                          # tb·P + plane, scan position
         plane = g % P
-        deq = dequantize(NUMPY, parsed.values, lay.step16[0 if self.is_key[view] else 1][plane])
-        np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
+        deq, raster = self._dequantized(parsed.values, lay.step16[0 if self.is_key[view] else 1][plane], plane, pos)
         X = np.zeros((nt * P, 64))
+        X[g, raster] = deq
         bypass = lay.bypass
-        X[g, np.where(bypass[plane], pos, ZIGZAG[pos]) if bypass.any() else ZIGZAG[pos]] = deq
         if not bypass.any():
             X = inverse_float(X.reshape(-1, TB, TB))
         elif not bypass.all():
