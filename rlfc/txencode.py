@@ -33,7 +33,7 @@ from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, TxLayout
 from .ratesearch import secant_search
 from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
-from .txmaps import maps_sizes, pack_maps
+from .txmaps import maps_bytes, pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
 from .txstructure import build, build_intra
 from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
@@ -1086,9 +1086,10 @@ class TxEncoder:
     def _map_bytes(self, k: int) -> float:
         """Bytes of the maps section that predicted key k's own map costs (its cell holds k
         alone: coded alone as JPEG 2000, the key frees it): the section's size with and without
-        that map, for every such key at once on the first call (:func:`rlfc.txmaps.maps_sizes`);
-        0 where the cell has other views."""
-        if not self._map_cost:                   # every such key at once: one rANS pass for all variants
+        that map, for every such key at once on the first call (estimated:
+        :func:`rlfc.txmaps.maps_bytes`, as the transform path's streams are); 0 where the cell
+        has other views."""
+        if not self._map_cost:                   # every such key at once
             alone = [(int(v), int(self.s.cell[v])) for v in self.s.keys
                      if self.s.cell[v] >= 0 and list(self.s.cell_views[int(self.s.cell[v])]) == [v]]
             variants = [(self.disp, self.modes)]
@@ -1096,7 +1097,7 @@ class TxEncoder:
                 disp, modes = self.disp.copy(), self.modes.copy()
                 disp[c], modes[c] = self.base, 0
                 variants.append((disp, modes))
-            sizes = maps_sizes(self.base, variants, (self.nby8, self.nbx8))
+            sizes = maps_bytes(self.base, variants, (self.nby8, self.nbx8))
             self._map_cost = {"all": sizes[0], **{v: float(sizes[0] - n) for (v, _), n in zip(alone, sizes[1:])}}
         return self._map_cost.get(k, 0.0)
 
@@ -1620,7 +1621,7 @@ def _run_cost(enc: "TxEncoder", res: dict, share: float) -> float:
             else:
                 oth += c.bits
     images = sum(len(x) for x in res["keyimg"].values())
-    maps = maps_sizes(enc.base, [(enc.disp, enc.modes)], (enc.nby8, enc.nbx8))[0] if enc.has_maps else 0
+    maps = maps_bytes(enc.base, [(enc.disp, enc.modes)], (enc.nby8, enc.nbx8))[0] if enc.has_maps else 0
     return math.log2(max(key / 8 + oth / 8 / share + images + maps, 1.0)) - LOG2_BYTES_PER_DB * enc.psnr(res)
 
 

@@ -1015,7 +1015,8 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
 
 def test_a_predicted_key_weighs_its_own_map_against_jpeg2000():
     """A predicted key coded alone as JPEG 2000 frees its map (its cell holds it alone): the
-    comparison counts those bytes, measured by packing the maps without it. Left out, an honest
+    comparison counts those bytes, estimated (rlfc.txmaps.maps_bytes) within a few bytes of
+    packing the maps with and without it. Left out, an honest
     estimate of the key's streams kept hci_antinous's vignetted variant's 8 predicted keys and
     their maps: 0.0203 bpp against 0.0136 with the keys coded alone."""
     import rlfc.txencode as T
@@ -1034,7 +1035,7 @@ def test_a_predicted_key_weighs_its_own_map_against_jpeg2000():
     disp[c], modes[c] = enc.base, 0
     shape = (enc.nby8, enc.nbx8)
     want = len(pack_maps(enc.base, enc.disp, enc.modes, shape)) - len(pack_maps(enc.base, disp, modes, shape))
-    assert enc._map_bytes(k) == want and enc._map_cost[k] == want
+    assert want > 0 and abs(enc._map_bytes(k) - want) <= 0.01 * want + 4 and enc._map_cost[k] == enc._map_bytes(k)
     code = T.ViewCode(np.zeros(1, np.int8), np.zeros(0, np.int64), np.zeros((0, 3, 64), np.int16),
                       np.zeros(1, bool), None, bits=8000.0, sse=1e6, cnt=1e5)
     ref = (1250.0, enc._code_psnr(code))                # JPEG 2000 of the intra key: 1 250 bytes there

@@ -88,24 +88,25 @@ def test_every_byte_flip_of_a_maps_section_is_refused_or_in_range():
     assert refused > len(good)                          # most flips are caught
 
 
-@pytest.mark.parametrize("cells", [None, 1, 700])
-def test_sizes_of_many_variants_in_one_pass_equal_each_pack(cells, monkeypatch):
-    """maps_sizes codes several variants' streams in one rANS call (contexts offset per
-    variant): each size is exactly the length of that variant's own section, in groups of any
-    size (PACK_CELLS bounds a group's lane matrices: one variant per call, a few, all)."""
-    import rlfc.txsyntax as ts
-
-    if cells is not None:
-        monkeypatch.setattr(ts, "PACK_CELLS", cells)
-    rng = np.random.default_rng(7)
-    base, disp, modes = _maps(rng, 5, 6, 7, 80, 0.1)
+@pytest.mark.parametrize("seed, big", [(7, 0.1), (8, 0.4), (9, 0.0)])
+def test_estimated_sizes_are_the_coded_ones_within_a_few_bytes(seed, big):
+    """maps_bytes estimates each variant's section without coding it: every size within 1% + 8
+    bytes of the coded section, and what one map costs (the section with it less the section
+    without it: what the encoder asks) within 1% + 4 bytes."""
+    rng = np.random.default_rng(seed)
+    base, disp, modes = _maps(rng, 6, 12, 16, 80, big)
     variants = [(disp, modes)]
-    for c in range(3):
+    for c in range(4):
         d2, m2 = disp.copy(), modes.copy()
         d2[c], m2[c] = base, 0
         variants.append((d2, m2))
-    assert txmaps.maps_sizes(base, variants, (6, 7)) == [len(txmaps.pack_maps(base, d, m, (6, 7))) for d, m in variants]
-    assert txmaps.maps_sizes(base, [], (6, 7)) == []
+    est = np.array(txmaps.maps_bytes(base, variants, (12, 16)))
+    coded = np.array([len(txmaps.pack_maps(base, d, m, (12, 16))) for d, m in variants])
+    assert (np.abs(est - coded) <= 0.01 * coded + 8).all(), (est, coded)
+    cost, cost_coded = est[0] - est[1:], coded[0] - coded[1:]
+    assert (cost_coded > 0).all()
+    assert (np.abs(cost - cost_coded) <= 0.01 * cost_coded + 4).all(), (cost, cost_coded)
+    assert txmaps.maps_bytes(base, [], (12, 16)) == []
 
 
 def test_lazy_maps_decode_each_map_when_asked_and_check_it_then():
