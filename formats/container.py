@@ -409,12 +409,17 @@ class Container:
             if info.length:
                 self.read(info.name)
 
+    def check_open(self) -> None:
+        """A closed container reads nothing more: :meth:`check_unchanged`'s first half, for a
+        decode call that reads no bytes of the file (its decoder checks every read it makes)."""
+        if self._closed:
+            raise ParameterError(f"{self.name}: the file is closed")
+
     def check_unchanged(self) -> None:
         """A memory-mapped file must still have the size it had when opened (a file truncated
         under a map would kill the process with SIGBUS on the next read of a lost page); and a
         closed container reads nothing more (every read and every decode call checks here)."""
-        if self._closed:
-            raise ParameterError(f"{self.name}: the file is closed")
+        self.check_open()
         if self._file is not None:
             try:
                 size = os.fstat(self._file.fileno()).st_size

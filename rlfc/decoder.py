@@ -167,7 +167,8 @@ class RlfcDecoder(Decoder):
             raise ParameterError(f"block ({by},{bx}) is outside the {self.nby}x{self.nbx} block grid "
                                  f"({self.height}x{self.width} px, B={self.block_size})")
         level = self.check_level(level)
-        self.file.container.check_unchanged()
+        c = self.file.container           # (a profile that checks each read it makes skips the stat here:
+        c.check_open() if self.core.reads_checked else c.check_unchanged()   # a block held in memory reads none)
         B = self.block_size
         lean = getattr(self.core, "block_pixels", None)      # a profile's one-request pixel path, where it has one
         out = lean(v, int(by), int(bx), level) if lean is not None else None

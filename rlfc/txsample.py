@@ -361,16 +361,16 @@ def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
 
 def block_pixel_refs(atlas: KeyAtlas, refs, tb_y: np.ndarray, tb_x: np.ndarray) -> tuple:
     """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple and
-    the (nt,) pixel origins of a block's 8×8 blocks within it: per (8×8 block, reference) pair
-    (``nt·R`` rows, block-major) the offsets per unit of disparity, the window's pixel grid
+    the (nt,) pixel origins of a block's 8×8 blocks within it: per (reference, 8×8 block) pair
+    (``R·nt`` rows, reference-major) the offsets per unit of disparity, the window's pixel grid
     (8×8 positions, flat) and the reference's first row in the atlas."""
     src, rows0, dpy, dpx, wm = refs
     R, nt = dpy.size, tb_y.size
     e = np.arange(TB * TB, dtype=np.float32)
-    gy = np.repeat(tb_y.astype(np.float32), R)[:, None] + (e // TB)[None, :]      # (nt·R, 64)
-    gx = np.repeat(tb_x.astype(np.float32), R)[:, None] + (e % TB)[None, :]
-    return (src, np.tile(rows0.reshape(R), nt)[:, None], np.tile(dpy, nt), np.tile(dpx, nt), gy, gx,
-            np.repeat(np.arange(nt), R), wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype))
+    gy = np.tile(tb_y.astype(np.float32), R)[:, None] + (e // TB)[None, :]        # (R·nt, 64)
+    gx = np.tile(tb_x.astype(np.float32), R)[:, None] + (e % TB)[None, :]
+    return (src, np.repeat(rows0.reshape(R), nt)[:, None], np.repeat(dpy, nt), np.repeat(dpx, nt), gy, gx,
+            np.tile(np.arange(nt), R), wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype))
 
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype) -> np.ndarray:
@@ -410,7 +410,12 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     mc = x[:, None] + gx
     smp = cv2.remap(src, mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     np.floor(smp, out=smp)                                                # atlas + 0.5: rounded
-    acc = np.matmul(w64[modes], smp.reshape(nt, gy.shape[0] // nt, -1)).reshape(nt * TB * TB, C)
+    R = gy.shape[0] // nt
+    ml = modes.tolist()
+    if ml.count(ml[0]) == nt:                                             # one mode (most blocks): one product
+        acc = np.dot(w64[ml[0]], smp.reshape(R, -1)).reshape(nt * TB * TB, C)
+    else:                                                                 # (nt, 1, R) @ (nt, R, 64·C)
+        acc = np.matmul(w64[modes], smp.reshape(R, nt, -1).transpose(1, 0, 2)).reshape(nt * TB * TB, C)
     acc += 0.5
     np.floor(acc, out=acc)                                                # (Σ w·p + 32) >> 6
     if P >= 3:

@@ -25,6 +25,8 @@ class ProfileDecoder(abc.ABC):
     levels: int
     block_size: int
     threads_ok: bool = False      # blocks()/views() may run on several threads at once
+    reads_checked: bool = False   # every read of the file's bytes after open checks the file
+                                  # (Container.check_unchanged): a call that reads none needs not
     nby: int
     nbx: int
 

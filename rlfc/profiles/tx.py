@@ -68,6 +68,7 @@ class TxDecoder(ProfileDecoder):
 
     levels = 1
     threads_ok = True             # shared state: read-only after open; byte reads under a lock
+    reads_checked = True          # streams, key images and rows are read through checked calls
 
     def __init__(self, container, header, cfg, limits=None):
         from formats.limits import DEFAULT
@@ -696,11 +697,9 @@ class TxDecoder(ProfileDecoder):
         prefs = self._pixel_refs(view)
         if prefs is None:
             return None
-        cell = self._one_ready(view, by)
-        dm = self._cell_map(cell)
-        B, tpb = self.block_size, self.tpb
-        loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off
-        return predict_block_pixels(self.atlas, prefs, dm[0][loc8], dm[1][loc8], by * B, bx * B, tpb,
+        disp, modes = self._cell_map(self._one_ready(view, by))
+        B, loc = self.block_size, by * self.nbx + bx
+        return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
                                     self.atlas.ftype(self._peak), self.dtype)
 
     def _pixel_refs(self, view: int):
@@ -714,10 +713,18 @@ class TxDecoder(ProfileDecoder):
         return prefs
 
     def _cell_map(self, cell: int) -> tuple:
-        """(disparities as float32, modes) of a decoded map (cached)."""
+        """(disparities as float32, modes) of a decoded map, block-major: (nby·nbx, nt), row
+        by·nbx + bx the 8×8 blocks of block (by, bx) in raster order (cached; a request reads
+        one row, a view)."""
         dm = self._cell_maps.get(cell)
         if dm is None:
-            dm = self._cell_maps[cell] = (self._map_store.disp[cell].astype(np.float32), self._map_store.modes[cell])
+            t, ny, nx = self.tpb, self.nby, self.nbx
+
+            def blocks(a):
+                return np.ascontiguousarray(a.reshape(ny, t, nx, t).swapaxes(1, 2)).reshape(ny * nx, t * t)
+
+            dm = self._cell_maps[cell] = (blocks(self._map_store.disp[cell].astype(np.float32)),
+                                          blocks(self._map_store.modes[cell].astype(np.uint8)))
         return dm
 
     def _one_rows(self, view: int, by: int) -> None:

@@ -317,6 +317,43 @@ def test_single_coded_blocks_equal_the_whole_views(kw):
     assert intra > 0 or lossless                      # (lossless files code no intra 8×8 block here)
 
 
+def test_a_file_truncated_while_open_refuses_what_it_would_read(tmp_path):
+    """A decode call checks the file where it reads its bytes: a block whose stream it must read
+    from a file truncated under its memory map is a FormatError (not a SIGBUS), a block it holds
+    decoded in memory (keys and maps read before) is still its pixels, and after close both are
+    ParameterErrors."""
+    from formats.errors import FormatError, ParameterError
+
+    lf, e, _ = _noisy_grid_encoded({}, amp8=2, seed=2, step8=8.0)     # a quarter of the blocks coded
+    d0, blob = open_encoded(lf, e)
+    full = d0.decode_all()
+    path = tmp_path / "x.lfc"
+    path.write_bytes(blob)
+    f = open_lfc(path)
+    d = RlfcDecoder(f)
+    d.decode_keys()
+    d.decode_maps()
+    core, B = d.core, d.block_size
+    others = np.flatnonzero(~core.is_key)
+    held = [(int(v), by, bx) for v in others for by in range(d.nby) for bx in range(d.nbx)
+            if not core.coded[v, by * d.nbx + bx]]
+    coded = [(int(v), by, bx) for v in others for by in range(d.nby) for bx in range(d.nbx)
+             if core.coded[v, by * d.nbx + bx]]
+    assert held and coded
+    with open(path, "r+b") as fh:
+        fh.truncate(len(blob) // 2)
+    for v, by, bx in held[:5]:
+        r, c = divmod(v, lf.cols)
+        assert (d.decode_block(r, c, by, bx) == full[r, c, by * B:(by + 1) * B, bx * B:(bx + 1) * B]).all()
+    r, c = divmod(coded[-1][0], lf.cols)
+    with pytest.raises(FormatError, match="changed size"):
+        d.decode_block(r, c, coded[-1][1], coded[-1][2])
+    f.close()
+    r, c = divmod(held[0][0], lf.cols)
+    with pytest.raises(ParameterError, match="closed"):
+        d.decode_block(r, c, held[0][1], held[0][2])
+
+
 def test_single_block_reads_at_most_one_stream():
     lf = smooth_lf(rows=5, cols=5, h=40, w=48)
     d, _ = open_encoded(lf, tx(lf, step=2.0))
