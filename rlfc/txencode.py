@@ -706,7 +706,7 @@ class TxEncoder:
             delta = np.where(use_lo, b_lo, b_ln) - zero_bits[col]
             Rb[act] += zcum[L] + lastb[L] + np.bincount(row, weights=delta * (nz & keep), minlength=Ta)
             lvs = lvs * keep
-            np.negative(lvs, out=lvs, where=xa.ravel()[nzi] < 0)        # the coefficients' signs
+            lvs *= 1 - 2 * (xa.ravel()[nzi] < 0)                  # the coefficients' signs (a where= ufunc: 4x slower)
             lp = np.zeros((Ta, 64), np.int32)
             lp.ravel()[nzi] = lvs
             levels[act, p] = lp
