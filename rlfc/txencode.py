@@ -342,12 +342,16 @@ class TxEncoder:
         self._repriced = None                     # (λ, reprice_maps_both's result) of the last repricing
         self.has_maps = bool(params.max_disparity > 0 and n_maps)
         self._kept_luma = None
+        self._est_costs = None
         if self.has_maps:
             luma = self._luma()
-            self.base, self.disp, self.modes = estimate_maps(
+            self.base, self.disp, self.modes, costs = estimate_maps(
                 luma, self.s, max_disparity=params.max_disparity, runner=runner,
-                side_lambda=side_lambda, progress=progress, ref_modes="ref_modes" not in params.ablate)
+                side_lambda=side_lambda, progress=progress, ref_modes="ref_modes" not in params.ablate,
+                with_costs=True)
             self._kept_luma = luma if keep_luma else None
+            self._est_costs = costs if keep_luma else None    # (the repricing's first evaluation)
+            del costs
             del luma
         else:
             self.base = np.zeros(nloc8, np.int64)
@@ -364,7 +368,7 @@ class TxEncoder:
     def drop_luma(self, repriced_too: bool = True) -> None:
         """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field), and what
         it last computed (unless not ``repriced_too``: both variants at that λ stay usable)."""
-        self._kept_luma = None
+        self._kept_luma = self._est_costs = None
         if repriced_too:
             self._repriced = None
 
@@ -388,7 +392,7 @@ class TxEncoder:
         if self._repriced is None or self._repriced[0] != side_lambda:
             self._repriced = (side_lambda, reprice_maps_both(
                 self._luma(), self.s, base, disp, side_lambda=lam, correction_lambda=side_lambda,
-                runner=self.runner, ref_modes="ref_modes" not in self.p.ablate))
+                runner=self.runner, ref_modes="ref_modes" not in self.p.ablate, costs=self._est_costs))
         return self._repriced[1]
 
     def use_maps(self, maps: tuple) -> None:
@@ -469,13 +473,13 @@ class TxEncoder:
         """What a worker needs to code views (:func:`_code_task`): everything but the light
         field and the runner."""
         st = dict(self.__dict__)
-        for k in ("lf", "runner", "_shared", "_view_handles", "_held", "_kept_luma", "_repriced"):
+        for k in ("lf", "runner", "_shared", "_view_handles", "_held", "_kept_luma", "_est_costs", "_repriced"):
             st.pop(k, None)
         return st
 
     def __setstate__(self, st):
         self.__dict__.update(st)
-        self.lf = self.runner = self._shared = self._kept_luma = self._repriced = None
+        self.lf = self.runner = self._shared = self._kept_luma = self._est_costs = self._repriced = None
         self._held = {}
 
     # -- steps -----------------------------------------------------------------------------

@@ -204,7 +204,8 @@ def _maps_task(est: Estimator, m: int, d16m: np.ndarray) -> np.ndarray:
 
 
 def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, start: float = 4.0,
-                  side_lambda: float = 10.0, progress=None, runner=None, ref_modes: bool = True):
+                  side_lambda: float = 10.0, progress=None, runner=None, ref_modes: bool = True,
+                  with_costs: bool = False):
     """One shared disparity map plus per-cell corrections and prediction modes.
 
     Returns:
@@ -217,6 +218,9 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     its neighbours' median where that costs less than about 2 bits. ``runner``: where the cells'
     costs are computed (:class:`formats.parallel.Runner`; the maps do not depend on it).
     ``ref_modes=False``: every block blends its references (mode 0; an ablation).
+    ``with_costs``: also return every mode's costs at the returned disparities, (n_maps,
+    1 + MAX_REFS, nloc8) float64 (what :func:`reprice_maps_both` would evaluate first; a block's
+    costs depend on its own disparity only, so those kept as the blocks moved are those).
     """
     est = Estimator(luma, struct, list(struct.keys))
     n_maps = len(est.cells)
@@ -286,7 +290,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
     base, disp, cur, full = _regularize(est, total, base, disp, cur, full, side_lambda)
     modes = (full + pen).argmin(axis=1)
     est.drop_handle()                  # (a cycle through the runner's handle kept the luma alive)
-    return base, disp, modes
+    return (base, disp, modes, full) if with_costs else (base, disp, modes)
 
 
 def _regularize(est: Estimator, total, base, disp, cur, full, side_lambda: float):
@@ -309,7 +313,8 @@ def _regularize(est: Estimator, total, base, disp, cur, full, side_lambda: float
 
 
 def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *, side_lambda: float,
-                 correction_lambda: float, runner=None, ref_modes: bool = True, modes_too: bool = False):
+                 correction_lambda: float, runner=None, ref_modes: bool = True, modes_too: bool = False,
+                 costs: np.ndarray | None = None):
     """Maps of :func:`estimate_maps` (at ``side_lambda``) with each cell's own disparity judged
     again at ``correction_lambda`` (larger): dropped for the shared one where it no longer pays
     its side cost. The shared map's regularization stays at ``side_lambda``, and so do the modes
@@ -318,17 +323,21 @@ def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *
     cost evaluations instead of an estimation's 15 or more (rate control learns the coding λ
     only after its probe pass; :func:`rlfc.txencode._maps_pay_repriced` checks the result coded).
 
+    ``costs``: every mode's costs at ``disp`` where the caller has them (``estimate_maps(...,
+    with_costs=True)``): then three evaluations.
+
     Returns:
         (base, disp, modes) as :func:`estimate_maps`.
     """
     base, disp, modes, modes_repriced = reprice_maps_both(luma, struct, base, disp, side_lambda=side_lambda,
                                                           correction_lambda=correction_lambda, runner=runner,
-                                                          ref_modes=ref_modes)
+                                                          ref_modes=ref_modes, costs=costs)
     return base, disp, modes_repriced if modes_too else modes
 
 
 def reprice_maps_both(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *, side_lambda: float,
-                      correction_lambda: float, runner=None, ref_modes: bool = True):
+                      correction_lambda: float, runner=None, ref_modes: bool = True,
+                      costs: np.ndarray | None = None):
     """:func:`reprice_maps` without and with ``modes_too`` from one computation (they differ only
     in the modes' final choice): (base, disp, modes, modes repriced)."""
     est = Estimator(luma, struct, list(struct.keys))
@@ -342,7 +351,11 @@ def reprice_maps_both(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarr
         f = est.costs_maps(dmaps, runner)
         return f, (f + pen).min(axis=1)
 
-    full, cur = total(disp)
+    if costs is None:
+        full, cur = total(disp)
+    else:                              # (the estimate's own: the same numbers, not evaluated again)
+        full = costs
+        cur = (full + pen).min(axis=1)
     shared = np.broadcast_to(base[None, :], disp.shape)
     fb, cb = total(np.ascontiguousarray(shared))
     drop = (disp != shared) & (cb <= cur + pen_delta)

@@ -89,3 +89,19 @@ def test_repriced_maps_drop_the_corrections_that_no_longer_pay():
     assert np.array_equal(d3, np.broadcast_to(b3, d3.shape)) and m3.any()     # (modes were not repriced)
     _, _, m4 = txestimate.reprice_maps(luma, s, base, disp, side_lambda=1e12, correction_lambda=1e12)
     assert not m4.any()
+
+
+def test_the_estimates_costs_are_those_the_repricing_would_evaluate():
+    """estimate_maps(with_costs=True) returns every mode's costs at the disparities it returns
+    (kept as the blocks moved): the same numbers as a fresh evaluation, so the repricing given
+    them gives the maps it computes without them."""
+    luma, s = _noisy_shifted(), build(5, 5, 2)
+    base, disp, modes, full = txestimate.estimate_maps(luma, s, max_disparity=8, side_lambda=0.5, with_costs=True)
+    assert (disp != base[None, :]).sum() > 20                    # (blocks moved off the shared map)
+    est = txestimate.Estimator(luma, s, list(s.keys))
+    assert np.array_equal(full, est.costs_maps(disp))
+    for lam in (2.0, 50.0):
+        a = txestimate.reprice_maps_both(luma, s, base, disp, side_lambda=0.5, correction_lambda=lam)
+        b = txestimate.reprice_maps_both(luma, s, base, disp, side_lambda=0.5, correction_lambda=lam, costs=full)
+        assert all(np.array_equal(x, y) for x, y in zip(a, b))
+    assert np.array_equal(txestimate.estimate_maps(luma, s, max_disparity=8, side_lambda=0.5)[1], disp)
