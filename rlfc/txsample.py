@@ -22,6 +22,8 @@ views are stacked in groups (:class:`KeyAtlas`) and calls are cut into pieces; a
 """
 from __future__ import annotations
 
+import functools
+
 import cv2
 import numpy as np
 
@@ -341,6 +343,7 @@ def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
     return _sample_blend(atlas, src, Y, X, rows0, wm[modes])
 
 
+@functools.lru_cache(maxsize=32)
 def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
     """(2C, P) matrix M with ``[planes, floor(planes / 2)] @ M`` = the YCoCg-R inverse of
     :func:`formats.pixels.inverse_int` (R, G, B; alpha and grey planes pass through): its
@@ -356,21 +359,36 @@ def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
     M[[y, co_h, cg_h], 2] = [1, -1, -1]                   # b = t - (co >> 1)
     if P == 4:
         M[3, 3] = 1
+    M.setflags(write=False)                               # (cached: one per layout)
     return M
 
 
-def block_pixel_refs(atlas: KeyAtlas, refs, tb_y: np.ndarray, tb_x: np.ndarray) -> tuple:
-    """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple and
-    the (nt,) pixel origins of a block's 8×8 blocks within it: per (reference, 8×8 block) pair
-    (``R·nt`` rows, reference-major) the offsets per unit of disparity, the window's pixel grid
-    (8×8 positions, flat) and the reference's first row in the atlas."""
-    src, rows0, dpy, dpx, wm = refs
-    R, nt = dpy.size, tb_y.size
+@functools.lru_cache(maxsize=32)
+def _window_grid(R: int, tpb: int) -> tuple:
+    """The part of :func:`block_pixel_refs` every view of R references shares (read-only): per
+    (reference, 8×8 block) pair, reference-major, the window's pixel rows and columns within the
+    block (R·tpb², 64) float32 and the pair's 8×8 block (R·tpb²,)."""
+    nt = tpb * tpb
     e = np.arange(TB * TB, dtype=np.float32)
-    gy = np.tile(tb_y.astype(np.float32), R)[:, None] + (e // TB)[None, :]        # (R·nt, 64)
-    gx = np.tile(tb_x.astype(np.float32), R)[:, None] + (e % TB)[None, :]
+    t = np.arange(nt)
+    gy = np.tile((t // tpb * TB).astype(np.float32), R)[:, None] + (e // TB)[None, :]    # (R·nt, 64)
+    gx = np.tile((t % tpb * TB).astype(np.float32), R)[:, None] + (e % TB)[None, :]
+    rep = np.tile(t, R)
+    for a in (gy, gx, rep):
+        a.setflags(write=False)
+    return gy, gx, rep
+
+
+def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int) -> tuple:
+    """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple, for
+    blocks of tpb × tpb 8×8 blocks (raster order within the block): per (reference, 8×8 block)
+    pair (``R·nt`` rows, reference-major) the offsets per unit of disparity, the window's pixel
+    grid (8×8 positions, flat) and the reference's first row in the atlas."""
+    src, rows0, dpy, dpx, wm = refs
+    R, nt = dpy.size, tpb * tpb
+    gy, gx, rep = _window_grid(R, tpb)
     return (src, np.repeat(rows0.reshape(R), nt)[:, None], np.repeat(dpy, nt), np.repeat(dpx, nt), gy, gx,
-            np.tile(np.arange(nt), R), wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype))
+            rep, wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype))
 
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype) -> np.ndarray:

@@ -709,7 +709,7 @@ class TxDecoder(ProfileDecoder):
         if prefs is False:
             refs = self._block_refs(view)
             prefs = self._pixref_cache[view] = None if refs is None else \
-                block_pixel_refs(self.atlas, refs, self._tb_y, self._tb_x)
+                block_pixel_refs(self.atlas, refs, self.tpb)
         return prefs
 
     def _cell_map(self, cell: int) -> tuple:
