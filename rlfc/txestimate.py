@@ -172,9 +172,14 @@ class Estimator:
             dpos = (s.positions[v] - s.positions[r]).astype(np.float32)                # (nr, 2)
             wb = s.weights[v, :nr] / 64.0
             blend.fill(0)
-            for j in range(nr):               # each reference alone, and their blend
-                cv2.scaleAdd(dpix, float(dpos[j, 1]), gx, dst=mx)      # gx + dpix·Δx in one pass (float32,
-                cv2.scaleAdd(dpix, float(dpos[j, 0]), gy, dst=my)      # the same values as numpy's two)
+            last = [None, None]               # the offsets mx, my were made for (references in a row or a
+            for j in range(nr):               # column share one); each reference alone, and their blend
+                ox, oy = float(dpos[j, 1]), float(dpos[j, 0])
+                if ox != last[0]:
+                    cv2.scaleAdd(dpix, ox, gx, dst=mx)                 # gx + dpix·Δx in one pass (float32,
+                if oy != last[1]:                                      # the same values as numpy's two)
+                    cv2.scaleAdd(dpix, oy, gy, dst=my)
+                last = [ox, oy]
                 cvremap.remap(self._y(r[j], yk), mx, my, cv2.INTER_LINEAR, out=p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
                 blend += np.multiply(p, np.float32(wb[j]), out=wp)
