@@ -148,6 +148,7 @@ class TxDecoder(ProfileDecoder):
         self._tby = np.repeat(np.arange(self.tpb), self.tpb)       # tbs of a block, raster order
         self._tbx = np.tile(np.arange(self.tpb), self.tpb)
         self._tb_off = self._tby * self.nbx8 + self._tbx           # their raster indices from the first
+        self._row_planes = np.tile(np.arange(self.P), self.nt)     # the plane of each (tb, plane) row of a block
         self._tb_y = (self._tby * TB).astype(np.float32)           # their pixel origins in the block
         self._tb_x = (self._tbx * TB).astype(np.float32)
         self._blockref_cache: dict = {}
@@ -519,11 +520,21 @@ class TxDecoder(ProfileDecoder):
             ub = blk[new]                                                    # blocks with coefficients
             X = np.zeros((ub.size, 64), np.float64)
             X[np.cumsum(new) - 1, raster] = deq
-            tr = ~lay.bypass[ub % P]
-            if tr.any():
-                X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
+            X = self._inverse_rows(X, ub % P)
             res[ub // P, :, ub % P] = X           # (written planes-last: the sum with the prediction
         return res.reshape(S, nt, TB, TB, P)      # then reads it contiguously, 2x faster than a strided view)
+
+    def _inverse_rows(self, X, plane):
+        """(n, 64) float64 dequantized 8×8 blocks (raster rows) of planes ``plane`` (n,) → their
+        residuals: the inverse transform of the rows of transformed planes, bypassed ones as
+        they are (in place where only some rows are transformed)."""
+        bypass = self.lay.bypass
+        if not bypass.any():
+            return inverse_float(X.reshape(-1, TB, TB)).reshape(-1, 64)
+        tr = ~bypass[plane]
+        if tr.any():
+            X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
+        return X
 
     def _dequantized(self, values, q16, plane, pos):
         """(dequantized coefficients clipped to ±COEF_MAX, each one's raster position in its 8×8
@@ -796,12 +807,7 @@ class TxDecoder(ProfileDecoder):
         deq, raster = self._dequantized(parsed.values, lay.step16[0 if self.is_key[view] else 1][plane], plane, pos)
         X = np.zeros((nt * P, 64))
         X[g, raster] = deq
-        bypass = lay.bypass
-        if not bypass.any():
-            X = inverse_float(X.reshape(-1, TB, TB))
-        elif not bypass.all():
-            tr = np.tile(~bypass, nt)
-            X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
+        X = self._inverse_rows(X, self._row_planes)
         return X.reshape(nt, P, 64).transpose(0, 2, 1).astype(np.int32).reshape(nt, TB, TB, P)
 
     def views(self, views, level):
