@@ -25,7 +25,6 @@ from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
-from .kernels import dequantize
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
@@ -271,6 +270,21 @@ class ViewCode:
         return out
 
 
+def _dequantize_float(q: np.ndarray, step16: np.ndarray) -> np.ndarray:
+    """:func:`rlfc.kernels.dequantize` of (T, p, 64) levels at steps ``step16`` (p,) (1/16),
+    clipped to ±COEF_MAX, as float64 (the inverse transform's input): sign(q)·floor((|q|·q16 +
+    8) / 16) in floats, exact (|q| < 2^22, q16 < 2^22: every value an integer below 2^53), 3x
+    faster than the int64 arithmetic and its cast."""
+    f = q.astype(np.float64)
+    a = np.abs(f)
+    a *= step16.astype(np.float64)[None, :, None]
+    a += 8.0
+    a *= 1 / 16
+    np.floor(a, out=a)
+    np.copysign(a, f, out=a)
+    return np.clip(a, -COEF_MAX, COEF_MAX, out=a)
+
+
 class TxEncoder:
     """Everything independent of the quantizer (planes, structure, maps), and the closed loop."""
 
@@ -310,6 +324,8 @@ class TxEncoder:
         # the bounds tiled over an 8×8 tb (64·P samples): clipping (T, 64·P) views runs numpy's inner
         # loop over a tb, not over P samples (7x faster than broadcasting (P,) bounds, measured)
         self.lo_tb, self.hi_tb = (np.tile(x.astype(np.float64), TB * TB) for x in (self.lo, self.hi))
+        # (64·P, P) 0/1: a tb's samples (planes last, flat) → its per-plane sums, as one product
+        self._plane_sum = np.tile(np.eye(self.P), (TB * TB, 1))
         self.lo32_tb, self.hi32_tb = self.lo_tb.astype(np.int32), self.hi_tb.astype(np.int32)
         self.w = rgb_mse_weights(ch)
         self.bypass = np.full(ch, params.lossless) | (self.pcs == 2)       # alpha is always exact
@@ -617,8 +633,10 @@ class TxEncoder:
         Rb = np.zeros(T)
         tr = np.flatnonzero(~self.bypass)
         if tr.size:                 # the analysis of every transformed plane: one GEMM, scan order out
-            rt = r.reshape(T, 64, P)[:, :, tr].transpose(0, 2, 1).reshape(-1, 64).astype(np.float32)
-            Xall = (rt @ _FWD_SCAN32).reshape(T, tr.size, 64)
+            rt = np.empty((T, tr.size, 64), np.float32)      # (one cast copy, planes-major)
+            rv = r.reshape(T, 64, P).transpose(0, 2, 1)
+            np.copyto(rt, rv if tr.size == P else rv[:, tr], casting="unsafe")
+            Xall = (rt.reshape(-1, 64) @ _FWD_SCAN32).reshape(T, tr.size, 64)
         pos = np.arange(64)
         plain = "rdoq" in self.p.ablate                          # plain rounding (ablation)
         for p in range(P):
@@ -726,9 +744,7 @@ class TxEncoder:
             if planes.size == 0:
                 continue
             lv = levels if planes.size == P else levels[:, planes]
-            deq = dequantize(NUMPY, lv[..., UNZIG] if tr else lv, step16[planes][None, :, None])
-            np.clip(deq, -COEF_MAX, COEF_MAX, out=deq)
-            blocks = deq.reshape(T, planes.size, TB, TB).astype(np.float64)
+            blocks = _dequantize_float(lv[..., UNZIG] if tr else lv, step16[planes]).reshape(T, planes.size, TB, TB)
             if tr:
                 blocks = inverse_float(blocks)
             if planes.size == P:
@@ -763,9 +779,12 @@ class TxEncoder:
             # and only where the tb's own detail (its energy about its mean, weighted as the error
             # is) is not many times the prediction residual's: intra coding pays that detail
             # (Σx² − (Σx)²/64 per plane: integers and sixty-fourths below 2^47, exact in float64)
-            oc = orig[cand].reshape(cand.size, TB * TB, self.P).astype(np.float64)
-            s1 = oc.sum(axis=1)
-            ac = (np.einsum("nkp,nkp->np", oc, oc) - s1 * s1 * (1 / 64)) @ self.w
+            # (the per-plane sums as products with a 0/1 matrix: 4x faster than strided reductions,
+            # and exact, as every partial sum is an integer below 2^53)
+            oc = orig[cand].reshape(cand.size, TB * TB * self.P).astype(np.float64)
+            s1 = oc @ self._plane_sum
+            oc *= oc
+            ac = (oc @ self._plane_sum - s1 * s1 * (1 / 64)) @ self.w
             cand = cand[ac < INTRA_ENERGY_RATIO * D0_r[cand]]
         if "intra_tbs" in self.p.ablate:
             cand = cand[:0]
@@ -789,7 +808,9 @@ class TxEncoder:
         lv = lv_r[live]
         if intra.any():
             lv[intra] = lv_c[np.searchsorted(cand, live[intra])]
-        base = np.where(intra[:, None, None, None], flat[:live.size], pt[live])
+        base = pt[live]
+        if intra.any():
+            base[intra] = flat[0]
         # predictions blend decoded key views with weights summing to 64, so they are in range
         # (the decoder relies on it too); intra predictions (thumbnails) are clipped
         rec = pt
