@@ -365,7 +365,7 @@ class TxEncoder:
                 luma, self.s, max_disparity=params.max_disparity, runner=runner,
                 side_lambda=side_lambda, progress=progress, ref_modes="ref_modes" not in params.ablate,
                 with_costs=True)
-            self._kept_luma = luma if keep_luma else None
+            self._kept_luma = luma if keep_luma and not isinstance(lf.views, np.ndarray) else None
             self._est_costs = costs if keep_luma else None    # (the repricing's first evaluation)
             del costs
             del luma
@@ -607,9 +607,15 @@ class TxEncoder:
         T = r.shape[0]
         if T <= self.QUANT_TBS:
             return self._quantize_tbs(r, step16, lam, model, key, mode_cls)
-        parts = [self._quantize_tbs(r[a:a + self.QUANT_TBS], step16, lam, model, key, mode_cls)
-                 for a in range(0, T, self.QUANT_TBS)]
-        return tuple(np.concatenate(x) for x in zip(*parts))
+        out = None                    # (each chunk's results written in place: no list of parts to join)
+        for a in range(0, T, self.QUANT_TBS):
+            part = self._quantize_tbs(r[a:a + self.QUANT_TBS], step16, lam, model, key, mode_cls)
+            if out is None:
+                out = tuple(np.empty((T,) + x.shape[1:], x.dtype) for x in part)
+            for o, x in zip(out, part):
+                o[a:a + x.shape[0]] = x
+            del part
+        return out
 
     def _quantize_tbs(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
         """RDO quantization of tbs' residuals r (T, 8, 8, P) → (levels (T, P, 64) scan order,
@@ -734,10 +740,25 @@ class TxEncoder:
             levels[act, p] = lp
         return levels, J, D0, must, Rb
 
+    #: tbs reconstructed at once (float64 temporaries of ~40 bytes per sample: 8 MiB at 3 planes;
+    #: every tb is its own, so the chunks change no result)
+    RECON_TBS = 1024
+
     def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
         """(T, 8, 8, P) clipped reconstruction of tbs from base predictions and levels (exact
         decoder integers: the clipped coefficients are below 2^40, so :func:`inverse_float`
-        carries them in float64 exactly, and so does the sum with the prediction)."""
+        carries them in float64 exactly, and so does the sum with the prediction), in chunks of
+        RECON_TBS tbs."""
+        T = levels.shape[0]
+        if T <= self.RECON_TBS:
+            return self._reconstruct_tbs(base, levels, step16)
+        out = np.empty(base.shape, np.int32)
+        for a in range(0, T, self.RECON_TBS):
+            out[a:a + self.RECON_TBS] = self._reconstruct_tbs(base[a:a + self.RECON_TBS],
+                                                              levels[a:a + self.RECON_TBS], step16)
+        return out
+
+    def _reconstruct_tbs(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
         T, P = levels.shape[0], self.P
         res = np.empty((T, TB, TB, P))
         for planes, tr in ((np.flatnonzero(~self.bypass), True), (np.flatnonzero(self.bypass), False)):
@@ -767,6 +788,7 @@ class TxEncoder:
         opx = self.view_pixels(v) if pixels is None else pixels
         orig = self._tbs(self.planes(v, opx))
         pt = self._tbs(pred)
+        del pred                      # (the caller's temporary: the tb-ordered copy is kept)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
@@ -789,9 +811,11 @@ class TxEncoder:
         if "intra_tbs" in self.p.ablate:
             cand = cand[:0]
         J_int, R_i = np.full(T, np.inf), np.zeros(T)
+        lv_c = None
         if cand.size:                 # (levels of the candidates only: lv_c[i] is tb cand[i]'s)
             lv_c, J_c, _, _, R_i[cand] = self._quantize(orig[cand] - flat[cand], step16, lam, model, key, 1)
             J_int[cand] = J_c + lam * mb[MODE_INTRA]
+        del orig                      # (what a thread holds at once: the view's codes, its prediction)
         Jm = np.stack([J_skip, J_res, J_int])
         mode = Jm.argmin(0)
         nb = self.nby * self.nbx
@@ -808,6 +832,7 @@ class TxEncoder:
         lv = lv_r[live]
         if intra.any():
             lv[intra] = lv_c[np.searchsorted(cand, live[intra])]
+        del lv_r, lv_c
         base = pt[live]
         if intra.any():
             base[intra] = flat[0]

@@ -29,6 +29,24 @@ def test_quality_report_in_chunks_equals_one_chunk(channels, dtype, monkeypatch)
     assert whole["psnr_rgb"] == pytest.approx(M.psnr_from_sq_error(np.array([sse]), np.array([cnt]), peak))
 
 
+@pytest.mark.parametrize("channels,dtype", [(1, np.uint16), (3, np.uint8), (4, np.uint16)])
+def test_one_view_measured_in_bands_of_rows(channels, dtype, monkeypatch):
+    """One view larger than BAND_ELEMENTS (what an encoder measures each view it codes with) is
+    measured in bands of rows: the same sums, exactly, as the view at once."""
+    rng = np.random.default_rng(20 + channels)
+    peak = np.iinfo(dtype).max
+    ref = rng.integers(0, peak, (37, 23, channels), endpoint=True).astype(dtype)
+    dec = rng.integers(0, peak, ref.shape, endpoint=True).astype(dtype)
+    whole = M.colour_sq_error(ref, dec)
+    e = ref[..., M.colour_channels(channels)].astype(np.float64) - dec[..., M.colour_channels(channels)]
+    assert whole == (float((e * e).sum()), float(e.size))
+    monkeypatch.setattr(M, "BAND_ELEMENTS", 2 * 23 * channels + 1)     # bands of 2 rows, the last of 1
+    assert M.colour_sq_error(ref, dec) == whole
+    monkeypatch.setattr(M, "BAND_ELEMENTS", 1)                         # a row at a time
+    assert M.colour_sq_error(ref, dec) == whole
+    assert M.colour_sq_error(ref[None, None], dec[None, None]) == whole
+
+
 @pytest.mark.parametrize("channels,dtype", [(1, np.uint8), (2, np.uint16), (3, np.uint16), (4, np.uint8)])
 def test_quality_of_views_added_one_at_a_time(channels, dtype):
     """QualityAccumulator (what ``lfcodec encode`` measures the written file with, one row of
