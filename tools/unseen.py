@@ -16,6 +16,12 @@ The grids are derived deterministically from ../shared/data:
   -0.35, 0.9 and 2.2 px per view (bicubic sub-pixel shifts), plus sensor-like noise (σ = 1.5).
 - ``antinous_5x5_wide``: every second view of hci_antinous: a 5×5 grid with twice the baseline.
 - ``dino_grey16``: lytro_dino_2067 as 16-bit greyscale (BT.601 luma × 257), 1 channel.
+- ``antinous_exposure``: hci_antinous with a gain per view drawn uniformly from [0.9, 1.1]
+  (seed 5), as a camera array whose cameras set their own exposure gives: every view is
+  brighter or darker than its neighbours by up to 20%, everywhere.
+- ``antinous_jitter``: hci_antinous with every view shifted by its own sub-pixel offset drawn
+  uniformly from ±0.7 px in each axis (bilinear, seed 5), as a rig whose cameras are not on an
+  exact grid gives: the views' parallax is no longer a multiple of their grid position.
 
 For each: per-view JPEG 2000 (imagecodecs) at several PSNRs, interpolated at the target like
 tools/bench.py; and the RLFC profile at the target (the CLI's ``--target-psnr``), with the
@@ -100,6 +106,28 @@ def vignetted(views: np.ndarray) -> np.ndarray:
     return out
 
 
+def exposed(views: np.ndarray, spread: float = 0.1, seed: int = 5) -> np.ndarray:
+    """Every view times its own gain, uniform in [1 − spread, 1 + spread]."""
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(1 - spread, 1 + spread, views.shape[:2] + (1, 1, 1))
+    return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
+
+
+def jittered(views: np.ndarray, reach: float = 0.7, seed: int = 5) -> np.ndarray:
+    """Every view shifted by its own (dy, dx), uniform in ±``reach`` px (bilinear, edges reflected)."""
+    rng = np.random.default_rng(seed)
+    r, c, h, w, _ = views.shape
+    out = np.empty_like(views)
+    for i in range(r):
+        for j in range(c):
+            dy, dx = rng.uniform(-reach, reach, 2)
+            m = np.float32([[1, 0, dx], [0, 1, dy]])
+            got = cv2.warpAffine(views[i, j].astype(np.float32), m, (w, h), flags=cv2.INTER_LINEAR,
+                                 borderMode=cv2.BORDER_REFLECT)
+            out[i, j] = np.clip(np.rint(got), 0, 255).astype(np.uint8).reshape(h, w, -1)
+    return out
+
+
 def occluded(views: np.ndarray, disparity: float = 4.0) -> np.ndarray:
     """A textured vertical bar in front of the scene, moving ``disparity`` px per view step."""
     r, c, h, w, ch = views.shape
@@ -131,7 +159,9 @@ def scenes(data: Path) -> dict[str, LightField]:
             "antinous_vignette": _grid(vignetted(ant.views), "hci_antinous, per-view vignetting"),
             "buddha_occluder": _grid(occluded(bud.views), "hci_buddha + a foreground bar at 4 px/view"),
             "layers_9x9": layers(data), "antinous_5x5_wide": _grid(ant.views[::2, ::2], "hci_antinous[::2, ::2]"),
-            "dino_grey16": _grid(grey16, "lytro_dino_2067 luma x257")}
+            "dino_grey16": _grid(grey16, "lytro_dino_2067 luma x257"),
+            "antinous_exposure": _grid(exposed(ant.views), "hci_antinous, a gain per view in [0.9, 1.1]"),
+            "antinous_jitter": _grid(jittered(ant.views), "hci_antinous, each view shifted by up to 0.7 px")}
 
 
 def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
