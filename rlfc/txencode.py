@@ -273,8 +273,8 @@ class ViewCode:
 def _dequantize_float(q: np.ndarray, step16: np.ndarray) -> np.ndarray:
     """:func:`rlfc.kernels.dequantize` of (T, p, 64) levels at steps ``step16`` (p,) (1/16),
     clipped to ±COEF_MAX, as float64 (the inverse transform's input): sign(q)·floor((|q|·q16 +
-    8) / 16) in floats, exact (|q| < 2^22, q16 < 2^22: every value an integer below 2^53), 3x
-    faster than the int64 arithmetic and its cast."""
+    8) / 16) in floats, exact (|q| < 2^22, q16 < 2^22: every value an integer below 2^53), about
+    twice as fast as the int64 arithmetic and its cast."""
     f = q.astype(np.float64)
     a = np.abs(f)
     a *= step16.astype(np.float64)[None, :, None]
@@ -299,7 +299,9 @@ class TxEncoder:
         (:class:`formats.parallel.Runner`; None = here, one after another); ``hold_all``: keep
         every view's pixels once read (:meth:`hold`; for encodes whose passes all cover every
         view); ``keep_luma``: keep the views' luma the maps were estimated from until
-        :meth:`drop_luma` (for :meth:`reprice_maps`, without reading every view again)."""
+        :meth:`drop_luma` (for :meth:`reprice_maps`, without reading every view again), where the
+        views are read from elsewhere (views in a numpy array give it again for less than holding
+        it costs: a third of an RGB light field through the probe pass)."""
         from .profiles.tx import plane_limits
 
         if lf.views.dtype not in (np.uint8, np.uint16):
@@ -639,7 +641,7 @@ class TxEncoder:
         Rb = np.zeros(T)
         tr = np.flatnonzero(~self.bypass)
         if tr.size:                 # the analysis of every transformed plane: one GEMM, scan order out
-            rt = np.empty((T, tr.size, 64), np.float32)      # (one cast copy, planes-major)
+            rt = np.empty((T, tr.size, 64), np.float32)      # (one cast copy: tb by tb, planes within)
             rv = r.reshape(T, 64, P).transpose(0, 2, 1)
             np.copyto(rt, rv if tr.size == P else rv[:, tr], casting="unsafe")
             Xall = (rt.reshape(-1, 64) @ _FWD_SCAN32).reshape(T, tr.size, 64)
