@@ -85,12 +85,16 @@ class RlfcCodec(Codec):
         g.add_argument("--key-split", type=int, default=None,
                        help="tx: streams per key-view block row; a decoder parses them in parallel (default: as "
                             "many as keep each about 256 bytes or more; 1 = one stream per row)")
+        g.add_argument("--weighted-prediction", action="store_const", const=True, default=None,
+                       help="tx: a gain and an offset per view and plane on the prediction, where they pay (camera "
+                            "arrays whose views differ in exposure; a version 4 file)")
 
     def params_from_args(self, a) -> dict:
         names = {"quant": "quant", "block_size": "block_size", "threshold": "threshold", "energy": "energy",
                  "tree_height": "tree_height", "sigma": "sigma", "top_codec": "top_codec", "top_psnr": "top_psnr",
                  "max_disparity": "max_disparity", "disparity_bits": "disp_frac_bits", "key_spacing": "key_spacing",
-                 "key_ratio": "key_ratio", "intra_codec": "intra_codec", "key_split": "key_split"}
+                 "key_ratio": "key_ratio", "intra_codec": "intra_codec", "key_split": "key_split",
+                 "weighted_prediction": "weighted"}
         return {k: getattr(a, arg) for arg, k in names.items() if getattr(a, arg, None) is not None}
 
 

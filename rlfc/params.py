@@ -9,6 +9,15 @@ from formats.errors import ParameterError
 PROFILES = ("bise", "dcp")
 
 
+#: command-line flags whose names are not their parameter's (``--`` + the name with dashes otherwise)
+FLAGS = {"weighted": "weighted-prediction", "disp_frac_bits": "disparity-bits"}
+
+
+def flags(names) -> str:
+    """``--flag, --flag`` of parameter names, as the command line spells them (error messages)."""
+    return ", ".join("--" + FLAGS.get(k, k.replace("_", "-")) for k in names)
+
+
 @dataclass(frozen=True)
 class RlfcParams:
     """Encoder parameters of the RLFC codec.

@@ -25,12 +25,13 @@ from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
+from .params import flags
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
-from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, TxLayout
+from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WP_VERSION, TxLayout
 from .ratesearch import secant_search
-from .txpredict import TB, mode_weights, planar, predict_tbs, upsample_thumb
+from .txpredict import TB, fit_weights, mode_weights, planar, predict_tbs, upsample_thumb, weigh
 from .txsample import KeyAtlas, predict_view
 from .txmaps import maps_bytes, pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
@@ -91,6 +92,11 @@ class TxParams:
         key_split: streams per key-view block row (0 = chosen from the rows' estimated bytes:
             :meth:`TxEncoder.key_split`); more streams parse faster as parallel lanes and cost
             about 4 bytes each.
+        weighted: weighted prediction (``tx`` version 4): each predicted view's prediction gets
+            a gain and an offset per plane, fitted by least squares, where a plane's fit takes
+            :data:`rlfc.txpredict.FIT_MIN_GAIN` of its prediction error away (views exposed
+            differently: hci_antinous with a gain per view in [0.9, 1.1] at 40 dB, −79% bytes).
+            Off by default until the rate control weighs the parameters' bytes (BENCHMARKS.md).
     """
 
     block_size: int = 16
@@ -104,6 +110,7 @@ class TxParams:
     search_sample: bool = True
     ablate: tuple = ()
     key_split: int = 0
+    weighted: bool = False
 
     def __post_init__(self):
         check_field_types(self)           # types first: a string or a list fails range tests untyped
@@ -132,8 +139,8 @@ class TxParams:
 
 
 def params_info(p: TxParams) -> dict:
-    """The parameters as the file's configuration records them (``ablate`` and ``key_split``
-    only when set)."""
+    """The parameters as the file's configuration records them (``ablate``, ``key_split`` and
+    ``weighted`` only when set)."""
     d = asdict(p)
     if d["ablate"]:
         d["ablate"] = list(d["ablate"])
@@ -141,6 +148,8 @@ def params_info(p: TxParams) -> dict:
         del d["ablate"]
     if not d["key_split"]:
         del d["key_split"]
+    if not d["weighted"]:
+        del d["weighted"]
     return d
 
 
@@ -259,6 +268,7 @@ class ViewCode:
     bits: float = 0.0          # the model's estimate of the view's stream bits
     sse: float = 0.0
     cnt: float = 1.0
+    wp: np.ndarray | None = None   # (P, 2) gain (1/64) and offset of its weighted prediction, if not the identity
 
     def levels(self, idx: np.ndarray) -> np.ndarray:
         """(len(idx), P, 64) levels of tbs ``idx`` (zero where skipped)."""
@@ -791,6 +801,15 @@ class TxEncoder:
         orig = self._tbs(self.planes(v, opx))
         pt = self._tbs(pred)
         del pred                      # (the caller's temporary: the tb-ordered copy is kept)
+        wp = None
+        if not kind and self.p.weighted:
+            # a weighted prediction (gain and offset per plane) where the fit is not the identity:
+            # views exposed differently, noisy predicted chroma (BENCHMARKS.md, weighted prediction)
+            wp = fit_weights(pt, orig, self.lo, self.hi)
+            if (wp[:, 0] == 64).all() and (wp[:, 1] == 0).all():
+                wp = None
+            else:
+                pt = weigh(pt, wp[:, 0], wp[:, 1], self.lo, self.hi)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
@@ -859,7 +878,7 @@ class TxEncoder:
         elif not keep_pixels:
             px = None
         return ViewCode(mode.astype(np.int8), live, lv, coded, px,
-                        planes if key else None, bits, sse, cnt)
+                        planes if key else None, bits, sse, cnt, wp)
 
     def _pixels(self, planes: np.ndarray) -> np.ndarray:
         return from_planes(planes[:self.h, :self.w_px], self.dtype)
@@ -1376,9 +1395,17 @@ class TxEncoder:
                            for k in keys if intra[k]) if imgs else ()
         thumbs = np.stack([res["thumbs"][k] for k in intra_keys]) if intra_keys else \
             np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
+        wp = np.zeros((self.n0, self.P, 2), np.int64)
+        wp[..., 0] = 64
+        for v, c in enumerate(res["codes"]):
+            if c is not None and c.wp is not None and not intra[v]:
+                wp[v] = c.wp
+        weighted = bool((wp[..., 0] != 64).any() or (wp[..., 1] != 0).any())
         lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
-                       "j2k" if imgs else "tx", key_images, SPLIT_VERSION if split > 1 else VERSION, split)
+                       "j2k" if imgs else "tx", key_images,
+                       WP_VERSION if weighted else SPLIT_VERSION if split > 1 else VERSION, split,
+                       wp if weighted else None)
         lay.check("tx encoder")
         # maps no view uses any more (every view of the cell coded alone): the shared map, no modes
         disp, modes = self.disp, self.modes
@@ -1452,7 +1479,7 @@ def _params_from(options: EncodeOptions) -> TxParams:
     known = {f for f in TxParams.__dataclass_fields__} | {"quant"}
     bad = sorted(set(p) - known)
     if bad:
-        raise ParameterError(f"option(s) {', '.join('--' + k.replace('_', '-') for k in bad)} not used by profile "
+        raise ParameterError(f"option(s) {flags(bad)} not used by profile "
                              "'tx'")
     q = p.pop("quant", None)
     if q is not None:

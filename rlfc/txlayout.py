@@ -22,6 +22,9 @@ from formats.schema import Fields
 MAX_REFS = 4
 VERSION = 2          # 2: rANS tables built in integers (1: float arithmetic)
 SPLIT_VERSION = 3    # 3: as 2, with key-view block rows coded as ``key_split`` streams each
+WP_VERSION = 4       # 4: as 3 (``key_split`` >= 1), with a weighted prediction per view and plane
+#: a weighted prediction's gain, in 1/64 (64: the identity), lies within these
+WP_GAIN = (32, 96)
 
 
 @dataclass(frozen=True)
@@ -44,7 +47,11 @@ class TxLayout:
             stream per row). Each stream codes nbx / key_split consecutive blocks of the row, so
             a decoder parses a key row as that many independent rANS lanes.
         version: 2 (1: the first files, whose rANS tables were built in float arithmetic; 3: as
-            2 with ``key_split`` > 1).
+            2 with ``key_split`` > 1; 4: weighted prediction, ``key_split`` >= 1).
+        wp: (N0, P, 2) int64 or None (before version 4): per view and plane, the gain g (1/64)
+            and offset o of its weighted prediction: a predicted view's blended prediction p
+            becomes clip(((p·g + 32) >> 6) + o) to the plane's range, before its residual
+            (intra views: the identity, g = 64, o = 0).
     """
 
     positions: np.ndarray
@@ -60,6 +67,7 @@ class TxLayout:
     key_images: tuple = ()
     version: int = VERSION
     key_split: int = 1
+    wp: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -89,8 +97,10 @@ class TxLayout:
         weights (N0×4), cell (N0), view-major."""
         from .txsections import varints
 
-        return zlib.compress(varints(np.concatenate([self.positions.reshape(-1), self.refs.reshape(-1),
-                                                     self.weights.reshape(-1), self.cell])), 9)
+        parts = [self.positions.reshape(-1), self.refs.reshape(-1), self.weights.reshape(-1), self.cell]
+        if self.wp is not None:        # (version 4: then each view's gains − 64 and offsets, plane by plane)
+            parts += [(self.wp[..., 0] - 64).reshape(-1), self.wp[..., 1].reshape(-1)]
+        return zlib.compress(varints(np.concatenate(parts)), 9)
 
     @staticmethod
     def read(f: Fields, data, n_views: int, planes: int, name: str = "") -> "TxLayout":
@@ -99,14 +109,18 @@ class TxLayout:
         from .txsections import MAX_VARINT_BYTES, inflate, unvarints
 
         where = f.where
-        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION))
-        count = n_views * (2 + 2 * MAX_REFS + 1)
+        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION, WP_VERSION))
+        count = n_views * (2 + 2 * MAX_REFS + 1) + (2 * n_views * planes if version >= WP_VERSION else 0)
         what = f"{name}: section 'tx.layout'"
         v = unvarints(inflate(data, count * MAX_VARINT_BYTES, what), count, what)
         positions = v[:2 * n_views].reshape(n_views, 2)
         refs = v[2 * n_views:(2 + MAX_REFS) * n_views].reshape(n_views, MAX_REFS)
         weights = v[(2 + MAX_REFS) * n_views:(2 + 2 * MAX_REFS) * n_views].reshape(n_views, MAX_REFS)
-        cell = v[(2 + 2 * MAX_REFS) * n_views:]
+        cell = v[(2 + 2 * MAX_REFS) * n_views:(2 + 2 * MAX_REFS + 1) * n_views]
+        wp = None
+        if version >= WP_VERSION:
+            rest = v[(2 + 2 * MAX_REFS + 1) * n_views:]
+            wp = np.stack([rest[:n_views * planes] + 64, rest[n_views * planes:]], axis=-1).reshape(n_views, planes, 2)
         for arr, lo, hi, what_ in ((positions, -(1 << 16), 1 << 16, "positions"), (refs, -1, n_views - 1, "refs"),
                                    (weights, 0, 64, "weights"), (cell, -1, n_views, "cell")):
             if arr.size and (arr.min() < lo or arr.max() > hi):
@@ -124,9 +138,9 @@ class TxLayout:
         thumb = f.int("thumb_step16", 16, 1 << 24)
         intra_codec = f.str("intra_codec", choices=("tx", "j2k"))
         key_images = f.int_list("key_images", max_len=n_views, lo=0, hi=1 << 30)
-        key_split = f.int("key_split", 2, 1 << 16) if version >= SPLIT_VERSION else 1
+        key_split = f.int("key_split", 1 if version >= WP_VERSION else 2, 1 << 16) if version >= SPLIT_VERSION else 1
         lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
-                       intra_codec, tuple(key_images), version, key_split)
+                       intra_codec, tuple(key_images), version, key_split, wp)
         lay.check(where)
         return lay
 
@@ -149,8 +163,18 @@ class TxLayout:
         (for the others); weights sum to 64 over present references; intra views are keys;
         one JPEG 2000 length per intra key when they are JPEG 2000."""
         n = self.n_views
-        if (self.version >= SPLIT_VERSION) != (self.key_split > 1):
+        if self.version < WP_VERSION and (self.version >= SPLIT_VERSION) != (self.key_split > 1):
             raise FormatError(f"{where}: key_split {self.key_split} needs version {SPLIT_VERSION} (and only it)")
+        if (self.wp is not None) != (self.version >= WP_VERSION):
+            raise FormatError(f"{where}: weighted prediction needs version {WP_VERSION} (and only it)")
+        if self.wp is not None:
+            g, o = self.wp[..., 0], self.wp[..., 1]
+            if g.min() < WP_GAIN[0] or g.max() > WP_GAIN[1]:
+                raise FormatError(f"{where}: a weighted prediction's gain is outside {WP_GAIN[0]}..{WP_GAIN[1]} (1/64)")
+            if np.abs(o).max() > 1 << 18:
+                raise FormatError(f"{where}: a weighted prediction's offset is out of range")
+            if ((g[self.intra] != 64) | (o[self.intra] != 0)).any():
+                raise FormatError(f"{where}: an intra view has a weighted prediction")
         want = int(self.intra[list(self.keys)].sum()) if self.intra_codec == "j2k" else 0
         if len(self.key_images) != want:
             raise FormatError(f"{where}: key_images lists {len(self.key_images)} images, expected {want}")

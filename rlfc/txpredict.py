@@ -109,3 +109,63 @@ def upsample_thumb(thumb: np.ndarray, hp: int, wp: int, xp=NUMPY):
     out += 1 << (2 * F - 1)
     out >>= 2 * F
     return out
+
+
+def weigh(pred: np.ndarray, gain, offset, lo, hi) -> np.ndarray:
+    """A weighted prediction (``tx`` version 4): ((pred·gain + 32) >> 6) + offset, clipped to
+    [lo, hi], returned: in place on ``pred`` where it is C-contiguous int32 (else on a copy);
+    (…, P) with a multiple of 64·P samples (8×8 blocks or whole views); ``gain`` (1/64, 32..96) and ``offset`` per plane (P,), or per row of 64·P
+    samples (M, P) (one 8×8 block each); ``lo``, ``hi`` (P,). The values are tiled over a
+    row so numpy's inner loops run 64·P samples, not P. Products stay below 2^31: planes are
+    within ±2^16, gains below 2^7."""
+    P = pred.shape[-1]
+    if not pred.flags.c_contiguous or pred.dtype != np.int32:
+        pred = np.ascontiguousarray(pred, np.int32)         # (the result is the returned array)
+    flat = pred.reshape(-1, 64 * P)
+
+    def tiled(a):
+        a = np.asarray(a, np.int32)
+        return np.tile(a, 64) if a.ndim <= 1 else np.tile(a.reshape(-1, P), (1, 64))
+
+    np.multiply(flat, tiled(gain), out=flat)
+    flat += 32
+    flat >>= 6
+    flat += tiled(offset)
+    np.minimum(np.maximum(flat, tiled(lo), out=flat), tiled(hi), out=flat)
+    return pred
+
+
+#: the samples a weighted prediction is fitted on: every FIT_STRIDE-th (coprime with a tb's 8 columns)
+FIT_STRIDE = 5
+#: the share of a plane's prediction error a fit must take away to be kept
+FIT_MIN_GAIN = 0.02
+
+
+def fit_weights(pred: np.ndarray, orig: np.ndarray, lo, hi) -> np.ndarray:
+    """(P, 2) int64 gain (1/64, within 32..96) and offset per plane that bring ``pred`` closest
+    to ``orig`` (both (…, P) int32 planes of one view) in the least-squares sense, quantized: the
+    encoder's fit for :func:`weigh` (any fit decodes; this one only has to be good)."""
+    P = pred.shape[-1]
+    # every FIT_STRIDE-th sample (a fit needs moments, not every pixel), plane by plane (P, n):
+    # raw moments, exact in float64 (integer products below 2^34, sums below 2^53)
+    x = np.ascontiguousarray(pred.reshape(-1, P)[::FIT_STRIDE].T, dtype=np.float64)
+    y = np.ascontiguousarray(orig.reshape(-1, P)[::FIT_STRIDE].T, dtype=np.float64)
+    n = x.shape[1]
+    mx, my = x.sum(1) / n, y.sum(1) / n
+    vx = np.einsum("pn,pn->p", x, x) / n - mx * mx
+    cov = np.einsum("pn,pn->p", x, y) / n - mx * my
+    g = np.where(vx > 0, cov / np.where(vx > 0, vx, 1.0), 1.0)
+    gq = np.clip(np.rint(g * 64), 32, 96).astype(np.int64)
+    o = np.rint(my - gq / 64 * mx).astype(np.int64)
+    o = np.clip(o, -(np.asarray(hi) - np.asarray(lo)), np.asarray(hi) - np.asarray(lo))
+    # a plane keeps its fit only where it takes FIT_MIN_GAIN of the prediction's squared error
+    # away (E[(y − a·x − o)²] from the moments, a = gq/64); else the identity
+    sxx, sxy, syy = vx + mx * mx, cov + mx * my, np.einsum("pn,pn->p", y, y) / n
+    a = gq / 64
+
+    def err(a, o):
+        return syy - 2 * a * sxy - 2 * o * my + a * a * sxx + 2 * a * o * mx + o * o
+
+    e0, e1 = err(1.0, 0.0), err(a, o)
+    keep = e0 - e1 > FIT_MIN_GAIN * np.maximum(e0, 1e-9)
+    return np.stack([np.where(keep, gq, 64), np.where(keep, o, 0)], axis=-1)

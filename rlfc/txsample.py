@@ -379,16 +379,25 @@ def _window_grid(R: int, tpb: int) -> tuple:
     return gy, gx, rep
 
 
-def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int) -> tuple:
+def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None) -> tuple:
     """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple, for
     blocks of tpb × tpb 8×8 blocks (raster order within the block): per (reference, 8×8 block)
     pair (``R·nt`` rows, reference-major) the offsets per unit of disparity, the window's pixel
-    grid (8×8 positions, flat) and the reference's first row in the atlas."""
+    grid (8×8 positions, flat) and the reference's first row in the atlas; and the view's
+    weighted prediction, where ``wp`` (P, 2) gives one: its gains, offsets and the planes'
+    bounds ``lo``, ``hi`` (P,) in the atlas's float type over its C channels (else None)."""
     src, rows0, dpy, dpx, wm = refs
     R, nt = dpy.size, tpb * tpb
     gy, gx, rep = _window_grid(R, tpb)
+    wpf = None
+    if wp is not None:
+        ft, P = atlas.ftype, atlas.P
+        g, o = np.full(atlas.C, 64, ft), np.zeros(atlas.C, ft)
+        lw, hg = np.full(atlas.C, -np.inf, ft), np.full(atlas.C, np.inf, ft)
+        g[:P], o[:P], lw[:P], hg[:P] = wp[:, 0], wp[:, 1], lo, hi
+        wpf = (g, o, lw, hg)
     return (src, np.repeat(rows0.reshape(R), nt)[:, None], np.repeat(dpy, nt), np.repeat(dpx, nt), gy, gx,
-            rep, wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype))
+            rep, wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype), wpf)
 
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype) -> np.ndarray:
@@ -414,7 +423,7 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     Returns:
         (8·tpb, 8·tpb, P) pixels of ``dtype``.
     """
-    src, rows0, dpy, dpx, gy, gx, rep, w64, M = prefs
+    src, rows0, dpy, dpx, gy, gx, rep, w64, M, wpf = prefs
     C, P = atlas.C, atlas.P
     nt = d.size
     dr = d[rep]                                                           # (nt·R,) per pair
@@ -436,6 +445,14 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
         acc = np.matmul(w64[modes], smp.reshape(R, nt, -1).transpose(1, 0, 2)).reshape(nt * TB * TB, C)
     acc += 0.5
     np.floor(acc, out=acc)                                                # (Σ w·p + 32) >> 6
+    if wpf is not None:                   # weighted prediction: ((p·g + 32) >> 6) + o, clipped (exact:
+        g, o, lw, hg = wpf                # products below 2^23, offsets below 2^18)
+        acc *= g
+        acc += 32
+        acc *= 1 / 64
+        np.floor(acc, out=acc)
+        acc += o
+        np.minimum(np.maximum(acc, lw, out=acc), hg, out=acc)
     if P >= 3:
         half = acc * 0.5
         np.floor(half, out=half)                                          # the planes >> 1

@@ -42,6 +42,12 @@ def variants() -> dict[str, np.ndarray]:
     return {"rgb8": rgb, "ga16": ga16, "rgba8": rgba}
 
 
+def exposed(views: np.ndarray) -> np.ndarray:
+    """``views`` with a gain per view drawn from [0.85, 1.15] (seed 7): a camera array's exposures."""
+    g = np.random.default_rng(7).uniform(0.85, 1.15, views.shape[:2] + (1, 1, 1))
+    return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
+
+
 def lf_of(views: np.ndarray) -> LightField:
     r, c = views.shape[:2]
     return LightField(views=views, positions=grid_positions(r, c), layout="grid", meta={"reader": "golden"})
@@ -97,6 +103,9 @@ def rlfc_fixtures() -> dict:
         # tx layout version 3: each key-view block row coded as key_split streams (here one per block)
         "rlfc_txsplit_lossy_rgb8": (v["rgb8"], dict(profile="tx", block_size=8, step=3.0, key_spacing=3,
                                                     intra_codec="tx", key_split=5)),
+        # tx layout version 4: weighted prediction, on the crop with a gain per view (0.85..1.15)
+        "rlfc_tx4_weighted_rgb8": (exposed(v["rgb8"]), dict(profile="tx", block_size=8, step=4.0, key_spacing=3,
+                                                            intra_codec="tx", weighted=True)),
     })
     out = {}
     for name, (views, kw) in specs.items():

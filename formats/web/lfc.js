@@ -654,10 +654,11 @@ export class TxDecoder {
     this.hi = this.pcs.map(() => this.peak);
     this.flat = this.pcs.map((c) => (c === 1 ? 0 : (this.peak + 1) / 2));
     const tx = need(cfg, "tx", "config");
-    const ver = int(tx, "version", "config.tx", 1, 3);
+    const ver = int(tx, "version", "config.tx", 1, 4);
     if (ver === 1) throw new UnsupportedError(`${name}: tx version 1 files (float rANS tables) are not read here`);
-    // version 3: each key-view block row is key_split streams of nbx / key_split blocks
-    this.keySplit = ver === 3 ? int(tx, "key_split", "config.tx", 2, 1 << 16) : 1;
+    // version 3: each key-view block row is key_split streams of nbx / key_split blocks; version 4:
+    // key_split >= 1, and a weighted prediction (gain, offset) per view and plane in tx.layout
+    this.keySplit = ver >= 3 ? int(tx, "key_split", "config.tx", ver === 4 ? 1 : 2, 1 << 16) : 1;
     if (nbx % this.keySplit) throw new FormatError(`${name}: config.tx.key_split ${this.keySplit} does not divide the ${nbx} blocks of a row`);
     this.keys = intList(tx, "keys", "config.tx", null, 0, N0 - 1);
     if (!this.keys.length || new Set(this.keys).size !== this.keys.length) throw new FormatError(`${name}: config.tx.keys is empty or repeats a view`);
@@ -674,16 +675,28 @@ export class TxDecoder {
     if (ic !== "tx" && ic !== "j2k") throw new FormatError(`${name}: config.tx.intra_codec must be tx or j2k`);
     const keyImages = intList(tx, "key_images", "config.tx", null, 0, 1 << 30);
 
-    // tx.layout: positions (N0×2), refs (N0×4), weights (N0×4), cell (N0)
-    const count = N0 * 11;
+    // tx.layout: positions (N0×2), refs (N0×4), weights (N0×4), cell (N0); version 4: then the
+    // gains − 64 (N0×P) and the offsets (N0×P) of the weighted predictions
+    const count = N0 * 11 + (ver === 4 ? 2 * N0 * P : 0);
     const v = unvarints(await inflate(await file.read("tx.layout"), count * 10, "tx.layout"), count, "tx.layout");
     this.pos = v.slice(0, 2 * N0);
     this.refs = v.slice(2 * N0, 6 * N0);
     this.weights = v.slice(6 * N0, 10 * N0);
-    this.cell = v.slice(10 * N0);
+    this.cell = v.slice(10 * N0, 11 * N0);
     this._checkLayout(name);
     this.intra = new Uint8Array(N0);
     for (let i = 0; i < N0; i++) this.intra[i] = this.refs.slice(4 * i, 4 * i + 4).every((r) => r < 0) ? 1 : 0;
+    this.wpGain = null;
+    if (ver === 4) {
+      this.wpGain = Int32Array.from(v.slice(11 * N0, 11 * N0 + N0 * P), (g) => g + 64);
+      this.wpOff = Int32Array.from(v.slice(11 * N0 + N0 * P, 11 * N0 + 2 * N0 * P));
+      for (let i = 0; i < N0 * P; i++) {
+        const g = this.wpGain[i], o = this.wpOff[i];
+        if (g < 32 || g > 96) throw new FormatError(`${name}: a weighted prediction's gain is outside 32..96 (1/64)`);
+        if (Math.abs(o) > (1 << 18)) throw new FormatError(`${name}: a weighted prediction's offset is out of range`);
+        if (this.intra[Math.floor(i / P)] && (g !== 64 || o !== 0)) throw new FormatError(`${name}: an intra view has a weighted prediction`);
+      }
+    }
     this.keySlot = new Int32Array(N0).fill(-1);
     this.keys.forEach((k, i) => { this.keySlot[k] = i; });
     const intraKeys = this.keys.filter((k) => this.intra[k]);
@@ -912,6 +925,19 @@ export class TxDecoder {
     for (let y = 0; y < 8; y++) {
       const o = ((y0 + y) * Wp + x0) * P, a = y * 8 * P;
       for (let i = 0; i < 8 * P; i++) img[o + i] = (acc[a + i] + 32) >> 6;
+    }
+    if (this.wpGain) {                           // weighted prediction: ((p·g + 32) >> 6) + o, clipped
+      for (let p = 0; p < P; p++) {
+        const g = this.wpGain[v * P + p], off = this.wpOff[v * P + p], lo = this.lo[p], hi = this.hi[p];
+        if (g === 64 && off === 0) continue;
+        for (let y = 0; y < 8; y++) {
+          const o = ((y0 + y) * Wp + x0) * P + p;
+          for (let x = 0; x < 8; x++) {
+            const q = ((img[o + x * P] * g + 32) >> 6) + off;
+            img[o + x * P] = q < lo ? lo : q > hi ? hi : q;
+          }
+        }
+      }
     }
   }
 

@@ -10,7 +10,7 @@ from formats.codec_api import EncodeOptions, Encoded, is_real
 from formats.errors import ParameterError
 
 from ..keytree import KeyTreeEncoder
-from ..params import RlfcParams
+from ..params import RlfcParams, flags
 from ..ratecontrol import default_quant, params_for_quant, search_quant
 
 #: RlfcParams fields every BISE-family profile accepts; profiles add their own.
@@ -22,7 +22,7 @@ def base_params(lf, options: EncodeOptions, profile: str, allowed: set, defaults
     extra = set(options.params) - allowed
     if extra:
         bad = sorted(extra)
-        raise ParameterError(f"option(s) {', '.join('--' + k.replace('_', '-') for k in bad)} not used by profile "
+        raise ParameterError(f"option(s) {flags(bad)} not used by profile "
                              f"{profile!r}")
     kw = {**(defaults or {}), **{k: v for k, v in options.params.items() if v is not None}}
     kw.pop("quant", None), kw.pop("threshold", None), kw.pop("energy", None)

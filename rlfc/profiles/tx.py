@@ -25,7 +25,7 @@ from formats.parallel import LOCAL_THREADS
 from ..kernels import dequantize
 from ..transform import COEF_MAX, ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout
-from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb
+from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb, weigh
 from ..txmaps import LazyMaps
 from ..txparse_torch import pair_words, parse_lanes_torch
 from ..txsections import stream_order, unpack_index, unpack_thumbs
@@ -88,6 +88,9 @@ class TxDecoder(ProfileDecoder):
         self.nby8, self.nbx8 = self.Hp // TB, self.Wp // TB
         lay = self.lay = TxLayout.read(cfg.sub("tx"), c.read("tx.layout"), N0, self.P, name)
         self.wmode = mode_weights(lay.weights)                   # (views, R + 1, R): weights per tb mode
+        # views whose prediction is weighted (version 4; the lean one-request path weighs in floats)
+        self._weighted = np.zeros(N0, bool) if lay.wp is None else \
+            ((lay.wp[..., 0] != 64) | (lay.wp[..., 1] != 0)).any(axis=1)
         keys = np.asarray(lay.keys, np.int64)
         if keys.size * self.Hp * self.Wp > limits.max_open_pixels:
             raise FormatError(f"{name}: {keys.size} key views of {self.Hp}x{self.Wp} exceed the open-time limit of "
@@ -487,11 +490,24 @@ class TxDecoder(ProfileDecoder):
         return self.lay.cell, disp, modes, self.wmode, self.ref_slots, self.ref_dpos
 
     def _pred(self, views, ty, tx):
-        """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references."""
+        """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references (weighted
+        where the file says so)."""
         args = pred_inputs(self.pred_tables(views), self.nbx8, views, ty, tx)
         if self.atlas is not None:
-            return remap_predict(self.atlas, *args)
-        return predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
+            p = remap_predict(self.atlas, *args)
+        else:
+            p = predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
+        return self._weigh(p, views)
+
+    def _weigh(self, pred, views):
+        """``pred`` (M, …, P) int32 of views ``views`` (M,) (or one view, an int) with each view's
+        weighted prediction applied (files of version 4; else as it is): in place where ``pred``
+        is C-contiguous int32, else on a copy; the result is returned."""
+        wp = self.lay.wp
+        if wp is None:
+            return pred
+        sel = wp[views]                    # (P, 2), or (M, P, 2): one row of 64·P samples per 8×8 block
+        return weigh(pred, sel[..., 0], sel[..., 1], self.lo, self.hi)
 
     def _tb_coords(self, views, locs, xp=NUMPY):
         """(views, ty, tx) of every 8×8 block of blocks ``locs`` (flat) of ``views``, block by
@@ -625,6 +641,7 @@ class TxDecoder(ProfileDecoder):
             cell = self.lay.cell[v]
             disp, modes = self._maps_of([v])
             out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x, out=out)
+            self._weigh(out, v)                   # (in place: ``out`` is C-contiguous int32)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
             by, bx = np.divmod(locs, self.nbx)
@@ -720,7 +737,8 @@ class TxDecoder(ProfileDecoder):
         if prefs is False:
             refs = self._block_refs(view)
             prefs = self._pixref_cache[view] = None if refs is None else \
-                block_pixel_refs(self.atlas, refs, self.tpb)
+                block_pixel_refs(self.atlas, refs, self.tpb, self.lay.wp[view] if self._weighted[view] else None,
+                                 self.lo, self.hi)
         return prefs
 
     def _cell_map(self, cell: int) -> tuple:
@@ -777,6 +795,8 @@ class TxDecoder(ProfileDecoder):
                     dd[..., 1], ty * TB, tx * TB)
             out = remap_predict(self.atlas, *args) if self.atlas is not None else \
                 predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
+        if self.lay.wp is not None:
+            out = self._weigh(out, view)
         loc = by * self.nbx + bx
         if level == 0 and self.coded[view, loc]:
             parsed = self._parse_one(view, loc)
@@ -894,6 +914,9 @@ class TorchTx:
         self.keyplanes = self.xp.asarray(dec.keyplanes)
         self.flat = self.xp.asarray(dec.flat)
         self.lo, self.hi = self.xp.asarray(dec.lo), self.xp.asarray(dec.hi)
+        # weighted prediction (version 4): (N0, P) gains and offsets, int32
+        self.wp = None if dec.lay.wp is None else tuple(self.xp.asarray(dec.lay.wp[..., i].astype(np.int32))
+                                                        for i in (0, 1))
         # the request bookkeeping of a call runs on the device, from these tables (the host's
         # numpy indexing over every 8×8 block of a call was most of a batched GPU decode)
         self.tables = tuple(self.xp.asarray(a) for a in dec.pred_tables())
@@ -988,7 +1011,15 @@ class TorchTx:
         device tensors of requests → (n·nt, 8, 8, P) int32, the same integers."""
         d = self.d
         args = pred_inputs(self.tables, d.nbx8, *d._tb_coords(v, locs, self.xp))
-        return predict_tbs(self.xp, self.kp, (d.Hp, d.Wp), *args)
+        p = predict_tbs(self.xp, self.kp, (d.Hp, d.Wp), *args)
+        if self.wp is None:
+            return p
+        import torch
+
+        vv = torch.repeat_interleave(v, d.nt)                # each 8×8 block's view (as _tb_coords)
+        g, o = (a[vv][:, None, None, :] for a in self.wp)
+        p = ((p * g + 32) >> 6) + o                          # (int32: planes within ±2^16, gains < 2^7)
+        return torch.minimum(torch.maximum(p, self.lo.to(p.dtype)), self.hi.to(p.dtype))
 
     def blocks(self, views, by, bx, level):
         """(M,) validated numpy requests → (M, B·B, P) int32 tensor. Everything the device needs
