@@ -29,7 +29,7 @@ from .params import flags
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
-from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WP_VERSION, TxLayout
+from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WP_VERSION, TxLayout, weighted_views
 from .ratesearch import secant_search
 from .txpredict import TB, fit_weights, mode_weights, planar, predict_tbs, upsample_thumb, weigh
 from .txsample import KeyAtlas, predict_view
@@ -806,10 +806,10 @@ class TxEncoder:
             # a weighted prediction (gain and offset per plane) where the fit is not the identity:
             # views exposed differently, noisy predicted chroma (BENCHMARKS.md, weighted prediction)
             wp = fit_weights(pt, orig, self.lo, self.hi)
-            if (wp[:, 0] == 64).all() and (wp[:, 1] == 0).all():
-                wp = None
-            else:
+            if weighted_views(wp[None])[0]:
                 pt = weigh(pt, wp[:, 0], wp[:, 1], self.lo, self.hi)
+            else:
+                wp = None
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
@@ -1400,7 +1400,7 @@ class TxEncoder:
         for v, c in enumerate(res["codes"]):
             if c is not None and c.wp is not None and not intra[v]:
                 wp[v] = c.wp
-        weighted = bool((wp[..., 0] != 64).any() or (wp[..., 1] != 0).any())
+        weighted = bool(weighted_views(wp).any())
         lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
                        "j2k" if imgs else "tx", key_images,

@@ -27,6 +27,12 @@ WP_VERSION = 4       # 4: as 3 (``key_split`` >= 1), with a weighted prediction 
 WP_GAIN = (32, 96)
 
 
+def weighted_views(wp: np.ndarray) -> np.ndarray:
+    """(N,) bool: the views whose weighted prediction (``wp`` (N, P, 2) gains and offsets) is
+    not the identity (gain 64, offset 0) on some plane."""
+    return ((wp[..., 0] != 64) | (wp[..., 1] != 0)).any(axis=-1)
+
+
 @dataclass(frozen=True)
 class TxLayout:
     """Attributes:
@@ -173,7 +179,7 @@ class TxLayout:
                 raise FormatError(f"{where}: a weighted prediction's gain is outside {WP_GAIN[0]}..{WP_GAIN[1]} (1/64)")
             if np.abs(o).max() > 1 << 18:
                 raise FormatError(f"{where}: a weighted prediction's offset is out of range")
-            if ((g[self.intra] != 64) | (o[self.intra] != 0)).any():
+            if weighted_views(self.wp)[self.intra].any():
                 raise FormatError(f"{where}: an intra view has a weighted prediction")
         want = int(self.intra[list(self.keys)].sum()) if self.intra_codec == "j2k" else 0
         if len(self.key_images) != want:

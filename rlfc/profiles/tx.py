@@ -24,7 +24,7 @@ from formats.parallel import LOCAL_THREADS
 
 from ..kernels import dequantize
 from ..transform import COEF_MAX, ZIGZAG, inverse_float
-from ..txlayout import MAX_REFS, TxLayout
+from ..txlayout import MAX_REFS, TxLayout, weighted_views
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb, weigh
 from ..txmaps import LazyMaps
 from ..txparse_torch import pair_words, parse_lanes_torch
@@ -89,8 +89,7 @@ class TxDecoder(ProfileDecoder):
         lay = self.lay = TxLayout.read(cfg.sub("tx"), c.read("tx.layout"), N0, self.P, name)
         self.wmode = mode_weights(lay.weights)                   # (views, R + 1, R): weights per tb mode
         # views whose prediction is weighted (version 4; the lean one-request path weighs in floats)
-        self._weighted = np.zeros(N0, bool) if lay.wp is None else \
-            ((lay.wp[..., 0] != 64) | (lay.wp[..., 1] != 0)).any(axis=1)
+        self._weighted = np.zeros(N0, bool) if lay.wp is None else weighted_views(lay.wp)
         keys = np.asarray(lay.keys, np.int64)
         if keys.size * self.Hp * self.Wp > limits.max_open_pixels:
             raise FormatError(f"{name}: {keys.size} key views of {self.Hp}x{self.Wp} exceed the open-time limit of "
@@ -795,8 +794,7 @@ class TxDecoder(ProfileDecoder):
                     dd[..., 1], ty * TB, tx * TB)
             out = remap_predict(self.atlas, *args) if self.atlas is not None else \
                 predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
-        if self.lay.wp is not None:
-            out = self._weigh(out, view)
+        out = self._weigh(out, view)
         loc = by * self.nbx + bx
         if level == 0 and self.coded[view, loc]:
             parsed = self._parse_one(view, loc)
