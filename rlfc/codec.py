@@ -1,6 +1,7 @@
 """RLFC as an lfcodec codec plug-in (entry point ``rlfc`` in the ``lfcodec.codecs`` group)."""
 from __future__ import annotations
 
+import argparse
 import dataclasses
 
 import numpy as np
@@ -85,9 +86,10 @@ class RlfcCodec(Codec):
         g.add_argument("--key-split", type=int, default=None,
                        help="tx: streams per key-view block row; a decoder parses them in parallel (default: as "
                             "many as keep each about 256 bytes or more; 1 = one stream per row)")
-        g.add_argument("--weighted-prediction", action="store_const", const=True, default=None,
+        g.add_argument("--weighted-prediction", action=argparse.BooleanOptionalAction, default=None,
                        help="tx: a gain and an offset per view and plane on the prediction, where they pay (camera "
-                            "arrays whose views differ in exposure; a version 4 file)")
+                            "arrays whose views differ in exposure, vignetting; a version 4 file where one is kept; "
+                            "default: on)")
 
     def params_from_args(self, a) -> dict:
         names = {"quant": "quant", "block_size": "block_size", "threshold": "threshold", "energy": "energy",

@@ -31,7 +31,7 @@ from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
 from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WP_VERSION, TxLayout, weighted_views
 from .ratesearch import secant_search
-from .txpredict import TB, fit_weights, mode_weights, planar, predict_tbs, upsample_thumb, weigh
+from .txpredict import TB, fit_price, fit_weights, mode_weights, planar, predict_tbs, upsample_thumb, weigh
 from .txsample import KeyAtlas, predict_view
 from .txmaps import maps_bytes, pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
@@ -94,9 +94,11 @@ class TxParams:
             about 4 bytes each.
         weighted: weighted prediction (``tx`` version 4): each predicted view's prediction gets
             a gain and an offset per plane, fitted by least squares, where a plane's fit takes
-            :data:`rlfc.txpredict.FIT_MIN_GAIN` of its prediction error away (views exposed
-            differently: hci_antinous with a gain per view in [0.9, 1.1] at 40 dB, −79% bytes).
-            Off by default until the rate control weighs the parameters' bytes (BENCHMARKS.md).
+            :data:`rlfc.txpredict.FIT_MIN_GAIN` of its prediction error away and error worth
+            :data:`rlfc.txpredict.FIT_PRICE_BITS` bits at the view's λ (what its parameters
+            cost): views exposed differently (hci_antinous with a gain per view in [0.9, 1.1] at
+            40 dB, −79% bytes), vignetting, noisy predicted chroma. On by default; a file
+            without a kept fit stays version 2/3 (BENCHMARKS.md, weighted prediction).
     """
 
     block_size: int = 16
@@ -110,7 +112,7 @@ class TxParams:
     search_sample: bool = True
     ablate: tuple = ()
     key_split: int = 0
-    weighted: bool = False
+    weighted: bool = True
 
     def __post_init__(self):
         check_field_types(self)           # types first: a string or a list fails range tests untyped
@@ -139,8 +141,8 @@ class TxParams:
 
 
 def params_info(p: TxParams) -> dict:
-    """The parameters as the file's configuration records them (``ablate``, ``key_split`` and
-    ``weighted`` only when set)."""
+    """The parameters as the file's configuration records them (``ablate`` and ``key_split``
+    only when set, ``weighted`` only when turned off)."""
     d = asdict(p)
     if d["ablate"]:
         d["ablate"] = list(d["ablate"])
@@ -148,7 +150,7 @@ def params_info(p: TxParams) -> dict:
         del d["ablate"]
     if not d["key_split"]:
         del d["key_split"]
-    if not d["weighted"]:
+    if d["weighted"]:
         del d["weighted"]
     return d
 
@@ -805,7 +807,8 @@ class TxEncoder:
         if not kind and self.p.weighted:
             # a weighted prediction (gain and offset per plane) where the fit is not the identity:
             # views exposed differently, noisy predicted chroma (BENCHMARKS.md, weighted prediction)
-            wp = fit_weights(pt, orig, self.lo, self.hi)
+            # (priced: a plane's fit must take away error worth FIT_PRICE_BITS at this λ)
+            wp = fit_weights(pt, orig, self.lo, self.hi, fit_price(lam, self.w, pt.shape[0] * TB * TB))
             if weighted_views(wp[None])[0]:
                 pt = weigh(pt, wp[:, 0], wp[:, 1], self.lo, self.hi)
             else:

@@ -139,12 +139,30 @@ def weigh(pred: np.ndarray, gain, offset, lo, hi) -> np.ndarray:
 FIT_STRIDE = 5
 #: the share of a plane's prediction error a fit must take away to be kept
 FIT_MIN_GAIN = 0.02
+#: and error worth this many bits at the view's λ (weight · mean squared error taken away ·
+#: samples / λ): a kept plane's gain and offset cost about 30 bits in ``tx.layout``, and part of
+#: the error a fit takes away is in 8×8 blocks coded either way (BENCHMARKS.md, weighted
+#: prediction: hci_antinous at 40 dB kept 11 chroma planes worth 14–119 bits each, which saved
+#: 136 bits together and cost 328; stanford_chess's kept planes are worth 131–14 160 bits,
+#: lytro_dino_2067's 565–27 256)
+FIT_PRICE_BITS = 128
 
 
-def fit_weights(pred: np.ndarray, orig: np.ndarray, lo, hi) -> np.ndarray:
+def fit_price(lam: float, w, samples: int) -> np.ndarray:
+    """(P,) the mean squared error per sample a plane's fit must take away to pay for itself
+    (:data:`FIT_PRICE_BITS` at ``lam``, error per bit) in a view of ``samples`` samples per plane
+    whose planes weigh ``w`` (P,) in the error (``inf`` where a plane does not count)."""
+    w = np.asarray(w, np.float64)
+    with np.errstate(divide="ignore"):
+        return np.where(w > 0, lam * FIT_PRICE_BITS / (np.where(w > 0, w, 1.0) * samples), np.inf)
+
+
+def fit_weights(pred: np.ndarray, orig: np.ndarray, lo, hi, price=None) -> np.ndarray:
     """(P, 2) int64 gain (1/64, within 32..96) and offset per plane that bring ``pred`` closest
     to ``orig`` (both (…, P) int32 planes of one view) in the least-squares sense, quantized: the
-    encoder's fit for :func:`weigh` (any fit decodes; this one only has to be good)."""
+    encoder's fit for :func:`weigh` (any fit decodes; this one only has to be good). ``price``
+    (P,): the mean squared error per sample a plane's fit must take away, besides
+    :data:`FIT_MIN_GAIN` of it, to be kept (``inf``: never; :func:`fit_price`)."""
     P = pred.shape[-1]
     # every FIT_STRIDE-th sample (a fit needs moments, not every pixel), plane by plane (P, n):
     # raw moments, exact in float64 (integer products below 2^34, sums below 2^53)
@@ -168,4 +186,6 @@ def fit_weights(pred: np.ndarray, orig: np.ndarray, lo, hi) -> np.ndarray:
 
     e0, e1 = err(1.0, 0.0), err(a, o)
     keep = e0 - e1 > FIT_MIN_GAIN * np.maximum(e0, 1e-9)
+    if price is not None:
+        keep &= e0 - e1 > np.asarray(price, np.float64)
     return np.stack([np.where(keep, gq, 64), np.where(keep, o, 0)], axis=-1)
