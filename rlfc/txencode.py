@@ -31,7 +31,7 @@ from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
 from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WP_VERSION, TxLayout, weighted_views
 from .ratesearch import secant_search
-from .txpredict import TB, fit_price, fit_weights, mode_weights, planar, predict_tbs, upsample_thumb, weigh
+from .txpredict import TB, fit_price, fit_weights, priced_weights, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
 from .txmaps import maps_bytes, pack_maps
 from .txsections import pack_index, pack_thumbs, stream_order
@@ -94,11 +94,14 @@ class TxParams:
             about 4 bytes each.
         weighted: weighted prediction (``tx`` version 4): each predicted view's prediction gets
             a gain and an offset per plane, fitted by least squares, where a plane's fit takes
-            :data:`rlfc.txpredict.FIT_MIN_GAIN` of its prediction error away and error worth
-            :data:`rlfc.txpredict.FIT_PRICE_BITS` bits at the view's λ (what its parameters
-            cost): views exposed differently (hci_antinous with a gain per view in [0.9, 1.1] at
-            40 dB, −79% bytes), vignetting, noisy predicted chroma. On by default; a file
-            without a kept fit stays version 2/3 (BENCHMARKS.md, weighted prediction).
+            :data:`rlfc.txpredict.FIT_MIN_GAIN` of its prediction error away, error worth
+            :data:`rlfc.txpredict.FIT_PRICE_BITS` bits at the view's λ, and lowers the view's
+            estimated rate-distortion cost by more than its parameters' bits
+            (:func:`rlfc.txpredict.priced_weights`: an occluder's blocks, coded either way, do not
+            buy a fit that adds error to skipped blocks): views exposed differently
+            (hci_antinous with a gain per view in [0.9, 1.1] at 40 dB, −79% bytes), vignetting,
+            noisy predicted chroma. On by default; a file without a kept fit stays version 2/3
+            (BENCHMARKS.md, weighted prediction).
     """
 
     block_size: int = 16
@@ -809,10 +812,10 @@ class TxEncoder:
             # views exposed differently, noisy predicted chroma (BENCHMARKS.md, weighted prediction)
             # (priced: a plane's fit must take away error worth FIT_PRICE_BITS at this λ)
             wp = fit_weights(pt, orig, self.lo, self.hi, fit_price(lam, self.w, pt.shape[0] * TB * TB))
-            if weighted_views(wp[None])[0]:
-                pt = weigh(pt, wp[:, 0], wp[:, 1], self.lo, self.hi)
-            else:
+            if not weighted_views(wp[None])[0]:
                 wp = None
+            else:           # (and only the planes that lower the view's estimated RD cost)
+                wp, pt = priced_weights(pt, orig, wp, self.w, lam, self.lo, self.hi)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)

@@ -189,3 +189,48 @@ def fit_weights(pred: np.ndarray, orig: np.ndarray, lo, hi, price=None) -> np.nd
     if price is not None:
         keep &= e0 - e1 > np.asarray(price, np.float64)
     return np.stack([np.where(keep, gq, 64), np.where(keep, o, 0)], axis=-1)
+
+
+#: what a kept plane's gain and offset cost in ``tx.layout``, in bits
+FIT_PLANE_BITS = 30
+#: the error (weighted, per 8×8 block and plane) worth this many bits at the view's λ is where a
+#: block stops being skipped: below it, error taken away is distortion saved; above it, the block
+#: is coded and its error costs bits, about FIT_CAP_BITS per e-fold of it
+FIT_CAP_BITS = 8
+
+
+def _rd_cost(e: np.ndarray, cap: float) -> np.ndarray:
+    """The estimated rate-distortion cost (error units) of 8×8 blocks' prediction errors ``e``:
+    e where e ≤ cap, else cap·(1 + ln(e / cap)) (continuous, with its slope)."""
+    return np.where(e <= cap, e, cap * (1 + np.log(np.maximum(e, cap) / cap)))
+
+
+def priced_weights(pt: np.ndarray, orig: np.ndarray, wp: np.ndarray, w, lam: float, lo, hi):
+    """The planes of the fit ``wp`` (P, 2) (from :func:`fit_weights`) that pay for their
+    parameters, and the prediction they give: (wp, or None where no plane pays; the prediction
+    (T, 8, 8, P) int32). ``pt``, ``orig`` (T, 8, 8, P) int32 tbs of one view (``pt`` is weighed
+    in place where a fit is kept); ``w`` (P,) the planes' error weights; ``lam`` the view's λ
+    (error per bit). A plane's saving is Σ over its 8×8 blocks of :func:`_rd_cost` of its
+    weighted squared error without the fit minus with it, against λ·FIT_PLANE_BITS: a fit that
+    takes error away from blocks coded either way (an occluder, a misprediction) while adding
+    a little to blocks that would be skipped is refused."""
+    P = pt.shape[-1]
+    cap = lam * FIT_CAP_BITS
+    # (T, 64·P) squared errors in float32 → per-plane sums (T, P) as one product with a 0/1
+    # matrix, weighted (a decision: float32 is enough, and 10× faster than float64 reductions)
+    sel = np.tile(np.eye(P, dtype=np.float32), (TB * TB, 1)) * np.asarray(w, np.float32)
+
+    def cost(p, o):
+        d = (o - p).reshape(p.shape[0], TB * TB * P).astype(np.float32)
+        d *= d
+        return _rd_cost((d @ sel).astype(np.float64), cap).sum(0)
+
+    # on every FIT_STRIDE-th 8×8 block (a sum over blocks: a sample of them estimates it)
+    ps, os_ = pt[::FIT_STRIDE], orig[::FIT_STRIDE]
+    fitted = (wp[:, 0] != 64) | (wp[:, 1] != 0)
+    saved = (cost(ps, os_) - cost(weigh(ps.copy(), wp[:, 0], wp[:, 1], lo, hi), os_)) * FIT_STRIDE
+    keep = fitted & (saved > lam * FIT_PLANE_BITS)
+    if not keep.any():
+        return None, pt
+    wp = np.where(keep[:, None], wp, np.array([64, 0]))
+    return wp, weigh(pt, wp[:, 0], wp[:, 1], lo, hi)

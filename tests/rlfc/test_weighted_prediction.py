@@ -16,7 +16,7 @@ from formats.errors import FormatError
 from formats.scenes import read_scene
 from rlfc import encode
 from rlfc.txlayout import WP_VERSION
-from rlfc.txpredict import fit_weights, weigh
+from rlfc.txpredict import fit_price, fit_weights, priced_weights, weigh
 
 from .helpers import check_agreement, make_lf, open_encoded
 
@@ -96,6 +96,38 @@ def test_weigh_is_the_integer_rule():
     assert gq == 80 and abs(oq - 9) <= 1
 
 
+def _tbs(rng, T=400, P=3):
+    """T smooth-ish 8×8 blocks of P planes (int32 (T, 8, 8, P)), values in 40..215."""
+    base = rng.integers(40, 216, (T, 1, 1, P))
+    return (base + rng.integers(-8, 9, (T, 8, 8, P))).astype(np.int32)
+
+
+def test_fits_are_priced_by_what_they_save():
+    """A fit is kept where it lowers the view's estimated rate-distortion cost by more than its
+    parameters' bits: a view exposed 10% darker keeps it; a view predicted exactly except in a few
+    blocks coded either way (an occluder) refuses the least-squares shrink that would take error
+    from those blocks and add it to every skipped one; a tiny gain is not worth its bytes."""
+    rng = np.random.default_rng(3)
+    lo, hi, w, lam = np.zeros(3, np.int64), np.full(3, 255), np.array([0.6, 0.2, 0.2]), 40.0
+    orig = _tbs(rng)
+    price = fit_price(lam, w, orig.shape[0] * 64)
+    dark = np.rint(orig * 0.9).astype(np.int32)                         # exposure
+    wp = fit_weights(dark, orig, lo, hi, price)
+    assert (wp[:, 0] != 64).all()
+    kept, pred = priced_weights(dark.copy(), orig, wp, w, lam, lo, hi)
+    assert kept is not None and (kept == wp).all()
+    assert ((pred - orig) ** 2).sum() < 0.1 * ((dark - orig) ** 2).sum()
+    occluded = orig.copy()                                               # exact but for 40 blocks
+    occluded[:40] = rng.integers(0, 256, (40, 8, 8, 3))
+    wp = fit_weights(occluded, orig, lo, hi, price)
+    assert (wp[:, 0] != 64).any()                                       # least squares shrinks the gain
+    kept, pred = priced_weights(occluded.copy(), orig, wp, w, lam, lo, hi)
+    assert kept is None and (pred == occluded).all()                    # and the price refuses it
+    slight = np.clip(orig + 1, 0, 255).astype(np.int32)                  # one level: not worth 30 bits at a high λ
+    assert (fit_weights(slight, orig, lo, hi, fit_price(1e4, w, orig.shape[0] * 64)) == [64, 0]).all()
+    assert (fit_weights(slight, orig, lo, hi, fit_price(10.0, w, orig.shape[0] * 64))[:, 1] == -1).all()  # (at λ 10: worth it)
+
+
 def test_layout_refuses_bad_weights(exposed):
     lf, e, _ = exposed
     d, _ = open_encoded(lf, e)
@@ -135,11 +167,14 @@ def test_command_line_flag(tmp_path, capsys):
 
 
 def test_weighted_files_split_key_rows_alike():
-    """Version 4 keeps version 3's split key rows: a smooth grid (whose fits are kept) coded with
-    three streams per key row decodes to the pixels of one stream per row on every path."""
+    """Version 4 keeps version 3's split key rows: a smooth grid exposed differently per view
+    coded with three streams per key row decodes to the pixels of one stream per row on every
+    path."""
     from .helpers import smooth_lf
 
-    lf = smooth_lf(rows=3, cols=4, h=40, w=70)
+    v = smooth_lf(rows=3, cols=4, h=40, w=70).views
+    g = np.random.default_rng(2).uniform(0.85, 1.15, v.shape[:2] + (1, 1, 1))
+    lf = make_lf(np.clip(np.rint(v * g), 0, 255).astype(np.uint8))
     one = encode(lf, EncodeOptions(profile="tx", params={"step": 4.0, "block_size": 8, "key_split": 1}))
     three = encode(lf, EncodeOptions(profile="tx", params={"step": 4.0, "block_size": 8, "key_split": 3}))
     assert one.config["tx"]["version"] == three.config["tx"]["version"] == WP_VERSION
