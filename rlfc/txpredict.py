@@ -128,9 +128,10 @@ def weigh(pred: np.ndarray, gain, offset, lo, hi) -> np.ndarray:
         return np.tile(a, 64) if a.ndim <= 1 else np.tile(a.reshape(-1, P), (1, 64))
 
     np.multiply(flat, tiled(gain), out=flat)
-    flat += 32
+    # ((x + 32) >> 6) + o = (x + 32 + 64·o) >> 6 (an arithmetic shift floors: adding a multiple of
+    # 64 before it adds its 64th after): one pass less (|x| < 2^23, |64·o| < 2^24)
+    flat += tiled(32 + 64 * np.asarray(offset, np.int32))
     flat >>= 6
-    flat += tiled(offset)
     np.minimum(np.maximum(flat, tiled(lo), out=flat), tiled(hi), out=flat)
     return pred
 

@@ -505,8 +505,24 @@ class TxDecoder(ProfileDecoder):
         wp = self.lay.wp
         if wp is None:
             return pred
-        sel = wp[views]                    # (P, 2), or (M, P, 2): one row of 64·P samples per 8×8 block
-        return weigh(pred, sel[..., 0], sel[..., 1], self.lo, self.hi)
+        if np.ndim(views) == 0:
+            if not self._weighted[views]:
+                return pred
+            return weigh(pred, wp[views, :, 0], wp[views, :, 1], self.lo, self.hi)
+        # only the rows of weighted views (a file weighs some views: the others' rows are left
+        # alone rather than weighed by the identity, five passes over every predicted sample)
+        w = self._weighted[views]
+        if not w.any():
+            return pred
+        if w.all():
+            sel = wp[views]                # (M, P, 2): one row of 64·P samples per 8×8 block
+            return weigh(pred, sel[..., 0], sel[..., 1], self.lo, self.hi)
+        rows = np.flatnonzero(w)
+        sel = wp[np.asarray(views)[rows]]
+        if not pred.flags.c_contiguous or pred.dtype != np.int32:
+            pred = np.ascontiguousarray(pred, np.int32)
+        pred[rows] = weigh(pred[rows], sel[..., 0], sel[..., 1], self.lo, self.hi)
+        return pred
 
     def _tb_coords(self, views, locs, xp=NUMPY):
         """(views, ty, tx) of every 8×8 block of blocks ``locs`` (flat) of ``views``, block by
