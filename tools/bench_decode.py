@@ -14,7 +14,8 @@ fresh process per file (and per code version with ``--against``: the same measur
 - open: seconds to open the file and decode every key view (since 2026-11-24 key views are
   decoded by block rows on demand; ``first block``: a fresh open plus one random block);
 - batched: one ``decode_blocks`` call of ``--batch`` random (view, block) requests over every
-  view, µs per block and Mpix/s, with each thread count of ``--threads`` (``threads=`` of
+  view ("cold": the maps it touches are decoded in it), then the same call again ("warm": a
+  renderer's steady state), µs per block and Mpix/s, with each thread count of ``--threads`` (``threads=`` of
   :meth:`rlfc.RlfcDecoder.decode_blocks` where the code has it); beside it the *gather limit*:
   numpy gathering the same blocks' pixels from the decoded light field in memory;
 - single: ``--single`` random ``decode_block`` calls, each timed (p50/p90/p99 µs); then as many
@@ -94,6 +95,9 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
         d.decode_blocks(v, by, bx, **kw)
         dt = time.perf_counter() - t
         r[f"batch_us_t{th}"] = dt / n_batch * 1e6
+        t = time.perf_counter()                         # warm: the same requests again, with the
+        d.decode_blocks(v, by, bx, **kw)                # maps and key rows they touch decoded (a
+        r[f"batch_warm_us_t{th}"] = (time.perf_counter() - t) / n_batch * 1e6   # renderer's steady state)
     all_threads = "threads" in inspect.signature(d.decode_all).parameters
     for th in threads:                                  # whole light field, ours and JPEG 2000 on
         if th > 1 and not all_threads:                  # the same number of threads
@@ -209,6 +213,10 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
         if all(k in x for x in rounds):
             s[k] = med(k)
             s[f"batch_mpix_t{th}"] = B * B / med(k)
+        k = f"batch_warm_us_t{th}"
+        if all(k in x for x in rounds):
+            s[k] = med(k)
+            s[f"batch_warm_mpix_t{th}"] = B * B / med(k)
         k = f"all_s_t{th}"
         if all(k in x for x in rounds):
             s[k], s[f"j2k_all_s_t{th}"] = med(k), med(f"j2k_all_s_t{th}")
@@ -220,13 +228,15 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
 def _table(res: dict, label: str, threads: list[int]) -> list[str]:
     th = [t for t in threads if any(f"batch_mpix_t{t}" in r[label] for r in res.values())]
     ta = [t for t in threads if any(f"all_s_t{t}" in r[label] for r in res.values())]
-    head = ["grid", "open s", "first block ms"] + [f"batched Mpix/s ({t} thr)" for t in th] + [
+    head = ["grid", "open s", "first block ms"] + [f"batched Mpix/s ({t} thr) cold / warm" for t in th] + [
         "gather limit Mpix/s", "single p50/p90/p99 µs", "single warm p50/p99 µs", "view ms (J2K ms, ×)"] + [
         f"all s, {t} thr (J2K s, ×)" for t in ta]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, r in res.items():
         s = r[label]
-        row = [name, f"{s['open_s']:.2f}", f"{s['first_block_ms']:.0f}"] + [f"{s.get(f'batch_mpix_t{t}', float('nan')):.1f}" for t in th] + [
+        row = [name, f"{s['open_s']:.2f}", f"{s['first_block_ms']:.0f}"] + [
+            f"{s.get(f'batch_mpix_t{t}', float('nan')):.1f} / {s.get(f'batch_warm_mpix_t{t}', float('nan')):.1f}"
+            for t in th] + [
             f"{s['gather_mpix']:.0f}", f"{s['single_p50_us']:.0f} / {s['single_p90_us']:.0f} / {s['single_p99_us']:.0f}",
             f"{s['single_warm_p50_us']:.0f} / {s['single_warm_p99_us']:.0f}" if "single_warm_p50_us" in s else "–",
             f"{s['view_ms']:.1f} ({s['j2k_view_ms']:.1f}, {s['view_vs_j2k']:.2f}×)"] + [
@@ -238,6 +248,7 @@ def _table(res: dict, label: str, threads: list[int]) -> list[str]:
 
 def _ratio_table(res: dict, threads: list[int]) -> list[str]:
     keys = [("open_s", "open"), *[(f"batch_us_t{t}", f"batched µs/block ({t} thr)") for t in threads],
+            *[(f"batch_warm_us_t{t}", f"warm batched ({t} thr)") for t in threads],
             ("single_p50_us", "single p50"), ("single_p99_us", "single p99"), ("single_warm_p99_us", "warm single p99"),
             ("view_ms", "whole view"),
             *[(f"all_s_t{t}", f"whole light field ({t} thr)") for t in threads]]
