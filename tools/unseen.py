@@ -19,6 +19,10 @@ The grids are derived deterministically from ../shared/data:
 - ``antinous_exposure``: hci_antinous with a gain per view drawn uniformly from [0.9, 1.1]
   (seed 5), as a camera array whose cameras set their own exposure gives: every view is
   brighter or darker than its neighbours by up to 20%, everywhere.
+- ``antinous_whitebalance``: hci_antinous with a gain per view and colour channel drawn
+  uniformly from [0.94, 1.06] (seed 6), as a camera array whose cameras set their own white
+  balance gives: every view's colours are tinted its own way (a per-RGB gain is not a gain per
+  YCoCg plane: the codec's weighted prediction fits it only approximately).
 - ``antinous_jitter``: hci_antinous with every view shifted by its own sub-pixel offset drawn
   uniformly from ±0.7 px in each axis (bilinear, seed 5), as a rig whose cameras are not on an
   exact grid gives: the views' parallax is no longer a multiple of their grid position.
@@ -113,6 +117,13 @@ def exposed(views: np.ndarray, spread: float = 0.1, seed: int = 5) -> np.ndarray
     return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
 
 
+def white_balanced(views: np.ndarray, spread: float = 0.06, seed: int = 6) -> np.ndarray:
+    """Every view's channels times their own gains, uniform in [1 − spread, 1 + spread]."""
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(1 - spread, 1 + spread, views.shape[:2] + (1, 1, views.shape[-1]))
+    return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
+
+
 def jittered(views: np.ndarray, reach: float = 0.7, seed: int = 5) -> np.ndarray:
     """Every view shifted by its own (dy, dx), uniform in ±``reach`` px (bilinear, edges reflected)."""
     rng = np.random.default_rng(seed)
@@ -161,7 +172,9 @@ def scenes(data: Path) -> dict[str, LightField]:
             "layers_9x9": layers(data), "antinous_5x5_wide": _grid(ant.views[::2, ::2], "hci_antinous[::2, ::2]"),
             "dino_grey16": _grid(grey16, "lytro_dino_2067 luma x257"),
             "antinous_exposure": _grid(exposed(ant.views), "hci_antinous, a gain per view in [0.9, 1.1]"),
-            "antinous_jitter": _grid(jittered(ant.views), "hci_antinous, each view shifted by up to 0.7 px")}
+            "antinous_jitter": _grid(jittered(ant.views), "hci_antinous, each view shifted by up to 0.7 px"),
+            "antinous_whitebalance": _grid(white_balanced(ant.views),
+                                           "hci_antinous, a gain per view and channel in [0.94, 1.06]")}
 
 
 def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
