@@ -894,7 +894,8 @@ class TxDecoder(ProfileDecoder):
     def info(self) -> dict:
         lay = self.lay
         return {"key_views": len(lay.keys), "maps": lay.n_maps, "coded_blocks": int(self.coded.sum()),
-                "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split}
+                "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split,
+                "layout_version": int(lay.version), "weighted_views": int(self._weighted.sum())}
 
 
 def pred_inputs(tables, nbx8: int, views, ty, tx):

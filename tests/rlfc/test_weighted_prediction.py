@@ -155,6 +155,12 @@ def test_command_line_flag(tmp_path, capsys):
     d = open_decoder(open_lfc(out))
     assert d.core.lay.version == WP_VERSION and d.core._weighted.any()
     assert main(["info", str(out), "--verify"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(out), "--json"]) == 0
+    import json
+
+    dec = json.loads(capsys.readouterr().out)["decoder"]
+    assert dec["layout_version"] == WP_VERSION and dec["weighted_views"] == int(d.core._weighted.sum()) > 0
     off = tmp_path / "n.lfc"
     assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(off), "--target-psnr", "40",
                  "--no-weighted-prediction", "--quiet"]) == 0
