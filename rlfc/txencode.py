@@ -795,11 +795,14 @@ class TxEncoder:
         return res.astype(np.int32)
 
     def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
-                  pixels: np.ndarray | None = None, keep_pixels: bool | np.ndarray = True) -> ViewCode:
+                  pixels: np.ndarray | None = None, keep_pixels: bool | np.ndarray = True,
+                  lam_fit: float | None = None) -> ViewCode:
         """Rate-distortion coding of one view against its prediction (Hp, Wp, P); ``pixels``
         its (H, W, C) pixels where the caller has them (a worker's copy); ``keep_pixels``: keep
         the decoded pixels (else only their error); an (H, W, C) array: write them there and
-        keep that (the pass's one buffer of decoded views)."""
+        keep that (the pass's one buffer of decoded views); ``lam_fit``: the λ its weighted
+        prediction is priced at (default ``lam``; the pass's λ before a trim, so that a trim
+        spends its margin on the residuals without turning fits on and off)."""
         key = int(self.is_key[v])
         kind = int(self.intra[v])
         opx = self.view_pixels(v) if pixels is None else pixels
@@ -811,11 +814,12 @@ class TxEncoder:
             # a weighted prediction (gain and offset per plane) where the fit is not the identity:
             # views exposed differently, noisy predicted chroma (BENCHMARKS.md, weighted prediction)
             # (priced: a plane's fit must take away error worth FIT_PRICE_BITS at this λ)
-            wp = fit_weights(pt, orig, self.lo, self.hi, fit_price(lam, self.w, pt.shape[0] * TB * TB))
+            lf_ = lam if lam_fit is None else lam_fit
+            wp = fit_weights(pt, orig, self.lo, self.hi, fit_price(lf_, self.w, pt.shape[0] * TB * TB))
             if not weighted_views(wp[None])[0]:
                 wp = None
             else:           # (and only the planes that lower the view's estimated RD cost)
-                wp, pt = priced_weights(pt, orig, wp, self.w, lam, self.lo, self.hi)
+                wp, pt = priced_weights(pt, orig, wp, self.w, lf_, self.lo, self.hi)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
@@ -980,7 +984,8 @@ class TxEncoder:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
             else:
-                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=px_slot(k))
+                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=px_slot(k),
+                                          lam_fit=lam_k / lam_scale)
             if not ahead and self.intra[k] and self.intra_codec == "j2k":
                 trial = codes[k]
                 img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
@@ -1023,8 +1028,8 @@ class TxEncoder:
         # the other views are independent given the decoded key views: in this process on a few
         # threads (the same integers), else on the runner's workers
         if runner.kind == "serial" or runner.workers == 1 or len(others) < 2:
-            out = Runner().map_threaded(_code_task, [(self, kp, model, v, None, s16[1], lam_n, px_slot(v))
-                                                   for v in others], tick)
+            out = Runner().map_threaded(_code_task, [(self, kp, model, v, None, s16[1], lam_n, px_slot(v),
+                                                    lam_n / lam_scale) for v in others], tick)
         else:
             if self._shared is None:
                 self._shared = runner.share(self)
@@ -1038,7 +1043,7 @@ class TxEncoder:
                 return c
 
             out = runner.map(_code_task, [(self._shared, keys_h, model_h, v, self._view_handles[v], s16[1], lam_n,
-                                           keep) for v in others], tick, take)
+                                           keep, lam_n / lam_scale) for v in others], tick, take)
         for v, c in zip(others, out):
             codes[v] = c
         res = {"steps16": s16, "thumb16": thumb16 or 16, "thumbs": thumbs, "codes": codes, "step": step,
@@ -1455,14 +1460,14 @@ def _j2k_task(enc: TxEncoder, v: int, level: float, keep: bool) -> tuple[bytes, 
 
 
 def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.ndarray,
-               step16: np.ndarray, lam: float, keep_pixels) -> ViewCode:
+               step16: np.ndarray, lam: float, keep_pixels, lam_fit: float | None = None) -> ViewCode:
     """One view that is not a key view, coded on a worker (the same integers as in the parent);
     ``kp`` the pass's decoded key views (:meth:`TxEncoder.key_atlas`, or planar planes);
-    ``keep_pixels`` as :meth:`TxEncoder.code_view`; ``pixels`` the view's (H, W, C) pixels or
-    its image file (read here)."""
+    ``keep_pixels``, ``lam_fit`` as :meth:`TxEncoder.code_view`; ``pixels`` the view's (H, W, C)
+    pixels or its image file (read here)."""
     if isinstance(pixels, ImageFile):
         pixels = pixels.read()
-    return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels)
+    return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels, lam_fit)
 
 
 def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
