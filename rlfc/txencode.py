@@ -2094,6 +2094,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                                                         "maps_repriced_modes": maps_kind == "modes"},
                             "key_views": len(enc.structure_of(res)[0]),
                             "views_coded_alone": len(res.get("promoted", ())),
+                            "views_weighted": sum(c is not None and c.wp is not None for c in res["codes"]),
                             "psnr_rgb": finite(enc.psnr(res)), "psnr_view_min": finite(float(enc.view_psnrs(res).min())),
                             **runner.describe()})
 

@@ -43,7 +43,8 @@ def test_exposed_views_decode_on_every_path_and_cost_less(exposed):
     assert e.config["tx"]["version"] == WP_VERSION and plain.config["tx"]["version"] < WP_VERSION
     assert "weighted" not in e.config["params"] and plain.config["params"]["weighted"] is False
     d, blob = open_encoded(lf, e)
-    assert d.core._weighted.sum() >= 0.7 * (~d.core.lay.intra).sum()     # most predicted views weighted (60 of 80)
+    assert d.core._weighted.sum() >= 0.7 * (~d.core.lay.intra).sum()
+    assert e.summary["views_weighted"] == int(d.core._weighted.sum()) and plain.summary["views_weighted"] == 0     # most predicted views weighted (60 of 80)
     assert (d.decode_all() == e.decoded).all()                           # the encoder's closed loop
     check_agreement(d, lf.views.shape)          # whole light field, views, single and batched blocks, levels
     _, plain_blob = open_encoded(lf, plain)
