@@ -682,9 +682,7 @@ def test_an_encode_that_keeps_no_decoded_views_writes_the_same_file(case):
     lf = {"trim": _noisy_grid, "promote": _unrelated_grid,
           "grey16": lambda: smooth_lf(rows=3, cols=3, h=24, w=32, c=1, dtype=np.uint16)}.get(
         case, lambda: smooth_lf(rows=3, cols=3, h=24, w=32))()
-    # (the trim case without weighted prediction, with which this grid meets its target at a step
-    # and needs no trim)
-    kw = {"trim": {"target_psnr": 40, "params": {"weighted": False}}, "promote": {"target_psnr": 48}, "bpp": {"target_bpp": 0.8},
+    kw = {"trim": {"target_psnr": 40}, "promote": {"target_psnr": 48}, "bpp": {"target_bpp": 0.8},
           "lossless": {"lossless": True}, "grey16": {"target_psnr": 50}}[case]
     a = encode(lf, EncodeOptions(profile="tx", **kw))
     b = encode(lf, EncodeOptions(profile="tx", keep_decoded=False, **kw))
