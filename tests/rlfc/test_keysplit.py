@@ -17,8 +17,8 @@ from tests.rlfc.helpers import check_agreement, open_encoded, smooth_lf
 
 
 def tx(lf, **kw):
-    # (versions 2 and 3: without weighted prediction, which makes version 4 files of these
-    # smooth grids; test_weighted_prediction splits version 4 files' key rows)
+    # (versions 2 and 3: weighted prediction pinned off, so that these files stay what the tests
+    # are about whatever its fits decide; test_weighted_prediction splits version 4 files' key rows)
     return encode(lf, EncodeOptions(profile="tx", params={"weighted": False, **kw}))
 
 
