@@ -814,12 +814,10 @@ class TxEncoder:
             # a weighted prediction (gain and offset per plane) where the fit is not the identity:
             # views exposed differently, noisy predicted chroma (BENCHMARKS.md, weighted prediction)
             # (priced: a plane's fit must take away error worth FIT_PRICE_BITS at this λ)
+            # (and only the planes that lower the view's estimated RD cost)
             lf_ = lam if lam_fit is None else lam_fit
             wp = fit_weights(pt, orig, self.lo, self.hi, fit_price(lf_, self.w, pt.shape[0] * TB * TB))
-            if not weighted_views(wp[None])[0]:
-                wp = None
-            else:           # (and only the planes that lower the view's estimated RD cost)
-                wp, pt = priced_weights(pt, orig, wp, self.w, lf_, self.lo, self.hi)
+            wp, pt = priced_weights(pt, orig, wp, self.w, lf_, self.lo, self.hi)
         T = orig.shape[0]
         lv_r, J_r, D0_r, must_r, R_r = self._quantize(orig - pt, step16, lam, model, key, 0)
         flat = np.broadcast_to(self.flat.astype(np.int32), orig.shape)
@@ -1366,6 +1364,17 @@ class TxEncoder:
             c = c + res["trial_counts"]
         return Model(c + default_counts() * 1e-3)
 
+    def weights_of(self, res: dict) -> np.ndarray:
+        """(N0, P, 2) the gains and offsets of a run's weighted predictions, as its file records
+        them (the identity, gain 64 and offset 0, for views without one and for intra views)."""
+        intra = self.structure_of(res)[4]
+        wp = np.zeros((self.n0, self.P, 2), np.int64)
+        wp[..., 0] = 64
+        for v, c in enumerate(res["codes"]):
+            if c is not None and c.wp is not None and not intra[v]:
+                wp[v] = c.wp
+        return wp
+
     def pack(self, res: dict) -> tuple[dict, list]:
         """(config, sections) of a run: the tables from every part's counts, then each part's
         streams (a lane's bytes depend on its own symbols and the tables only)."""
@@ -1406,11 +1415,7 @@ class TxEncoder:
                            for k in keys if intra[k]) if imgs else ()
         thumbs = np.stack([res["thumbs"][k] for k in intra_keys]) if intra_keys else \
             np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
-        wp = np.zeros((self.n0, self.P, 2), np.int64)
-        wp[..., 0] = 64
-        for v, c in enumerate(res["codes"]):
-            if c is not None and c.wp is not None and not intra[v]:
-                wp[v] = c.wp
+        wp = self.weights_of(res)
         weighted = bool(weighted_views(wp).any())
         lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
@@ -2094,7 +2099,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                                                         "maps_repriced_modes": maps_kind == "modes"},
                             "key_views": len(enc.structure_of(res)[0]),
                             "views_coded_alone": len(res.get("promoted", ())),
-                            "views_weighted": sum(c is not None and c.wp is not None for c in res["codes"]),
+                            "views_weighted": int(weighted_views(enc.weights_of(res)).sum()),
                             "psnr_rgb": finite(enc.psnr(res)), "psnr_view_min": finite(float(enc.view_psnrs(res).min())),
                             **runner.describe()})
 

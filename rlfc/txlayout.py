@@ -27,10 +27,16 @@ WP_VERSION = 4       # 4: as 3 (``key_split`` >= 1), with a weighted prediction 
 WP_GAIN = (32, 96)
 
 
+def weighted_planes(wp: np.ndarray) -> np.ndarray:
+    """(…, P) bool: the planes whose weighted prediction (``wp`` (…, P, 2) gains and offsets) is
+    not the identity (gain 64, offset 0)."""
+    return (wp[..., 0] != 64) | (wp[..., 1] != 0)
+
+
 def weighted_views(wp: np.ndarray) -> np.ndarray:
-    """(N,) bool: the views whose weighted prediction (``wp`` (N, P, 2) gains and offsets) is
-    not the identity (gain 64, offset 0) on some plane."""
-    return ((wp[..., 0] != 64) | (wp[..., 1] != 0)).any(axis=-1)
+    """(N,) bool: the views whose weighted prediction (``wp`` (N, P, 2)) is not the identity on
+    some plane."""
+    return weighted_planes(wp).any(axis=-1)
 
 
 @dataclass(frozen=True)

@@ -16,6 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .kernels import bilinear
+from .txlayout import weighted_planes
 from .xp import NUMPY
 
 TB = 8            # transform / prediction block edge
@@ -154,8 +155,7 @@ def fit_price(lam: float, w, samples: int) -> np.ndarray:
     (:data:`FIT_PRICE_BITS` at ``lam``, error per bit) in a view of ``samples`` samples per plane
     whose planes weigh ``w`` (P,) in the error (``inf`` where a plane does not count)."""
     w = np.asarray(w, np.float64)
-    with np.errstate(divide="ignore"):
-        return np.where(w > 0, lam * FIT_PRICE_BITS / (np.where(w > 0, w, 1.0) * samples), np.inf)
+    return np.where(w > 0, lam * FIT_PRICE_BITS / (np.where(w > 0, w, 1.0) * samples), np.inf)
 
 
 def fit_weights(pred: np.ndarray, orig: np.ndarray, lo, hi, price=None) -> np.ndarray:
@@ -208,13 +208,16 @@ def _rd_cost(e: np.ndarray, cap: float) -> np.ndarray:
 
 def priced_weights(pt: np.ndarray, orig: np.ndarray, wp: np.ndarray, w, lam: float, lo, hi):
     """The planes of the fit ``wp`` (P, 2) (from :func:`fit_weights`) that pay for their
-    parameters, and the prediction they give: (wp, or None where no plane pays; the prediction
-    (T, 8, 8, P) int32). ``pt``, ``orig`` (T, 8, 8, P) int32 tbs of one view (``pt`` is weighed
+    parameters, and the prediction they give: (wp, or None where no plane pays or the fit is the
+    identity; the prediction (T, 8, 8, P) int32). ``pt``, ``orig`` (T, 8, 8, P) int32 tbs of one view (``pt`` is weighed
     in place where a fit is kept); ``w`` (P,) the planes' error weights; ``lam`` the view's λ
     (error per bit). A plane's saving is Σ over its 8×8 blocks of :func:`_rd_cost` of its
     weighted squared error without the fit minus with it, against λ·FIT_PLANE_BITS: a fit that
     takes error away from blocks coded either way (an occluder, a misprediction) while adding
     a little to blocks that would be skipped is refused."""
+    fitted = weighted_planes(wp)
+    if not fitted.any():
+        return None, pt
     P = pt.shape[-1]
     cap = lam * FIT_CAP_BITS
     # (T, 64·P) squared errors in float32 → per-plane sums (T, P) as one product with a 0/1
@@ -228,7 +231,6 @@ def priced_weights(pt: np.ndarray, orig: np.ndarray, wp: np.ndarray, w, lam: flo
 
     # on every FIT_STRIDE-th 8×8 block (a sum over blocks: a sample of them estimates it)
     ps, os_ = pt[::FIT_STRIDE], orig[::FIT_STRIDE]
-    fitted = (wp[:, 0] != 64) | (wp[:, 1] != 0)
     saved = (cost(ps, os_) - cost(weigh(ps.copy(), wp[:, 0], wp[:, 1], lo, hi), os_)) * FIT_STRIDE
     keep = fitted & (saved > lam * FIT_PLANE_BITS)
     if not keep.any():
