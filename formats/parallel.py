@@ -105,6 +105,60 @@ class Runner:
                         done(1)
             return out
 
+    def map_dag(self, fn: Callable, arglists: Sequence[tuple], deps: Sequence[Sequence[int]],
+                finish: Callable[[int, Any], Any] | None = None, threads: int | None = None) -> list:
+        """``[fn(*args) for args in arglists]`` where task i may start only once the tasks
+        ``deps[i]`` (indices below i) have finished, on ``threads`` threads of this process
+        (default LOCAL_THREADS; one OpenCV thread each), always the lowest-indexed ready task
+        first (put the tasks others wait on first). ``finish(i, result)``, where given, runs in
+        the calling thread as each task finishes and before any task that waits on it starts
+        (it may write what those tasks read); its value is kept. With one thread: in index order.
+        Tasks must not depend on what runs beside them: the results are then the same whatever
+        the threads."""
+        n = len(arglists)
+        t = LOCAL_THREADS if threads is None else threads
+        if any(j >= i or j < 0 for i, d in enumerate(deps) for j in d):
+            raise ValueError("map_dag: a task may wait only on tasks before it")
+        if t <= 1 or n < 2:
+            out = []
+            with one_cv2_thread():
+                for i, args in enumerate(arglists):
+                    r = fn(*args)
+                    out.append(finish(i, r) if finish else r)
+            return out
+        import heapq
+        from concurrent.futures import FIRST_COMPLETED, ThreadPoolExecutor, wait
+
+        waiting = [len(set(d)) for d in deps]
+        children: list = [[] for _ in range(n)]
+        for i, d in enumerate(deps):
+            for j in set(d):
+                children[j].append(i)
+        ready = [i for i in range(n) if waiting[i] == 0]
+        heapq.heapify(ready)
+        out: list = [None] * n
+        with one_cv2_thread(), ThreadPoolExecutor(t) as ex:
+            running: dict = {}
+            try:
+                while ready or running:
+                    while ready and len(running) < t:
+                        i = heapq.heappop(ready)
+                        running[ex.submit(fn, *arglists[i])] = i
+                    fin, _ = wait(running, return_when=FIRST_COMPLETED)
+                    for f in sorted(fin, key=running.get):
+                        i = running.pop(f)
+                        r = f.result()
+                        out[i] = finish(i, r) if finish else r
+                        for c in children[i]:
+                            waiting[c] -= 1
+                            if waiting[c] == 0:
+                                heapq.heappush(ready, c)
+            except BaseException:
+                for f in running:
+                    f.cancel()
+                raise
+        return out
+
     def close(self) -> None:
         pass
 

@@ -954,7 +954,14 @@ class TxEncoder:
         if views is not None and self.all_intra:       # (every view an intra key: a sample of them, and the first)
             wanted = set(np.asarray(views).tolist())
             keys = [k for k in keys if k == keys[0] or k in wanted]
+        # a grid (one intra key, the first; the others predicted, sampled from the atlas): the
+        # keys after the first, and the other views, as tasks that wait on their references
+        # (:meth:`_dag_pass`; on a few threads), the same integers as one after another
+        dag = (isinstance(kp, KeyAtlas) and len(keys) > 1 and bool(self.intra[keys[0]])
+               and not self.intra[list(keys[1:])].any())
         for i, k in enumerate(keys):
+            if dag and i >= 1:
+                break
             if i == 1 and self.all_intra and len(keys) > 2 and (self.intra_codec != "j2k" or j2k_ref):
                 pre = self._code_intra_keys(keys[1:], thumb16, s16[0], lam_k, model,
                                              pix if pix is not None else own_px)
@@ -1016,6 +1023,20 @@ class TxEncoder:
             keep = set(int(v) for v in views)
             others = [v for v in others if v in keep]
         runner = self.runner or Runner()
+        here = runner.kind == "serial" or runner.workers == 1 or len(others) < 2
+        if dag:
+            got = self._dag_pass(keys, others if here else [], kp, model, s16, lam_k, lam_n, lam_scale, j2k_ref,
+                                 px_slot, progress)
+            for k, (code, img, tc) in zip(keys[1:], got):
+                codes[k] = code
+                if img is not None:
+                    keyimg[k] = img
+                    promoted.append(k)
+                    add_trial(tc)
+            for v, c in zip(others if here else [], got[len(keys) - 1:]):
+                codes[v] = c
+            if here:
+                others = []
         done = [len(self.s.keys)]
 
         def tick(n):
@@ -1025,7 +1046,9 @@ class TxEncoder:
 
         # the other views are independent given the decoded key views: in this process on a few
         # threads (the same integers), else on the runner's workers
-        if runner.kind == "serial" or runner.workers == 1 or len(others) < 2:
+        if not others:
+            out = []
+        elif here:
             out = Runner().map_threaded(_code_task, [(self, kp, model, v, None, s16[1], lam_n, px_slot(v),
                                                     lam_n / lam_scale) for v in others], tick)
         else:
@@ -1051,6 +1074,51 @@ class TxEncoder:
             res["pixels"] = pix
             self._gather_pixels(res)
         return res
+
+    def _dag_pass(self, keys: list, others: list, kp: KeyAtlas, model: Model, s16: np.ndarray, lam_k: float,
+                  lam_n: float, lam_scale: float, j2k_ref, px_slot, progress) -> list:
+        """The predicted keys ``keys[1:]`` (the first, the intra key, is in the atlas) and the views
+        ``others``, each a task that starts once the key views it predicts from are decoded
+        (:meth:`formats.parallel.Runner.map_dag`: keys first, a few threads; a key's decoded planes
+        go into ``kp`` before any view that reads them starts). A key that has never been tried
+        as JPEG 2000 starts its search where the intra key's ended (one after another, from the
+        previous key's: the order threads finish in must not matter).
+
+        Returns:
+            [(code, JPEG 2000 codestream or None, its trial's symbol counts or None) per key after
+            the first] + [code per view of ``others``].
+        """
+        rest = list(keys[1:])
+        slot = {int(k): i for i, k in enumerate(self.s.keys)}
+        at = {int(k): i for i, k in enumerate(rest)}
+        start = dict(self._j2k_hints.get("last", {}))
+        if self.intra_codec == "j2k":
+            self._map_bytes(int(rest[0]))          # (made once here, not by two threads at once)
+        lam_fit_k, lam_fit_n = lam_k / lam_scale, lam_n / lam_scale
+        args, deps = [], []
+        for k in rest:
+            args.append((self, "key", int(k), kp, model, s16[0], lam_k, lam_fit_k, px_slot(k), j2k_ref, start))
+            deps.append([at[int(r)] for r in self.s.refs[k] if r >= 0 and int(r) in at])
+        for v in others:
+            args.append((self, "view", int(v), kp, model, s16[1], lam_n, lam_fit_n, px_slot(v), None, None))
+            deps.append([at[int(r)] for r in self.s.refs[v] if r >= 0 and int(r) in at])
+        count = [len(keys) - len(rest)]
+
+        def finish(i, r):
+            if i < len(rest):
+                k = rest[i]
+                kp.set(slot[int(k)], r[0].planes)
+                r[0].planes = None                # (kept once, in the atlas, for this pass only)
+            count[0] += 1
+            if progress:
+                progress("code views", count[0], self.n0)
+            return r
+
+        out = Runner().map_dag(_pass_task, args, deps, finish)
+        searched = [k for k, r in zip(rest, out) if r[3]]
+        if searched:
+            self._j2k_hints["last"] = self._j2k_hints[searched[-1]]
+        return [r[:3] for r in out[:len(rest)]] + out[len(rest):]
 
     def run_j2k(self, levels: np.ndarray, step: float, progress=None) -> dict:
         """Every view (a posed capture's: each an intra key) as JPEG 2000 at its own OpenJPEG
@@ -1113,7 +1181,7 @@ class TxEncoder:
     J2K_TRY_SHARE = 0.85
 
     def _j2k_view(self, v: int, tx_code: ViewCode, extra_bytes: float, slack_db: float,
-                  give_up: bool = True) -> tuple[bytes | None, ViewCode, float | None]:
+                  give_up: bool = True, start: dict | None = None) -> tuple[bytes | None, ViewCode, float | None]:
         """View v as JPEG 2000 (its padded Hp×Wp image) with colour error at most its transform
         coding's (less ``slack_db``), where that is smaller than the transform path (the model's
         estimate of its streams + ``extra_bytes``); else (None, the transform coding).
@@ -1121,7 +1189,9 @@ class TxEncoder:
         Returns:
             (codestream or None, the view's code, bytes of the smallest JPEG 2000 that met the
             budget where the search found one, else None; with ``give_up=False`` the search
-            does not stop at the transform path's size, so the size is there for reference).
+            does not stop at the transform path's size, so the size is there for reference;
+            ``start``: where a view not searched before starts, instead of the last view
+            searched, which is then left as it is).
         """
         orig = self.view_pixels(v)
         budget = tx_code.sse * 10 ** (slack_db / 10)
@@ -1133,9 +1203,10 @@ class TxEncoder:
 
         # where OpenJPEG lands for this view, kept across the passes of rate control (a view not
         # searched before starts from the last view's)
-        hint = self._j2k_hints.setdefault(v, dict(self._j2k_hints.get("last", {})))
+        hint = self._j2k_hints.setdefault(v, dict(self._j2k_hints.get("last", {}) if start is None else start))
         found = smallest_j2k(self.padded(orig), budget, err, target, tx_bytes if give_up else math.inf, hint)
-        self._j2k_hints["last"] = hint
+        if start is None:
+            self._j2k_hints["last"] = hint
         if found is None or len(found[0]) >= tx_bytes:
             return None, tx_code, (len(found[0]) if found is not None else None)
         data, dec = found
@@ -1473,6 +1544,27 @@ def _code_task(enc: TxEncoder, kp: np.ndarray, model: Model, v: int, pixels: np.
     if isinstance(pixels, ImageFile):
         pixels = pixels.read()
     return enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, pixels, keep_pixels, lam_fit)
+
+
+def _pass_task(enc: TxEncoder, what: str, v: int, kp: KeyAtlas, model: Model, step16: np.ndarray, lam: float,
+               lam_fit: float, keep_pixels, j2k_ref, start) -> tuple | ViewCode:
+    """One task of :meth:`TxEncoder._dag_pass`: a view that is not a key view (its code), or a
+    predicted key view: (its code, kept with its decoded planes; the JPEG 2000 codestream where
+    coding it alone as JPEG 2000 is smaller (``j2k_ref``: the pass's intra key as JPEG 2000),
+    else None; that case's transform trial's symbol counts; whether JPEG 2000 was tried)."""
+    code = enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, keep_pixels=keep_pixels, lam_fit=lam_fit)
+    if what == "view":
+        return code
+    img = tc = None
+    tried = enc.intra_codec == "j2k" and enc._j2k_worth_trying(code, j2k_ref, enc._map_bytes(v))
+    if tried:
+        # a predicted key that costs more than coding it alone (its streams and the map that
+        # only it uses) becomes an intra key
+        trial = code
+        img, code, _ = enc._j2k_view(v, code, enc._map_bytes(v), enc.J2K_KEY_SLACK_DB, start=start)
+        if img is not None:
+            tc = enc._key_symbols(v, trial, True)
+    return code, img, tc, tried
 
 
 def _intra_key_task(enc: TxEncoder, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,

@@ -63,6 +63,43 @@ def test_take_sees_each_result_as_it_arrives_and_its_value_is_kept():
     assert sorted(seen) == sorted(list(range(5)) * 3)
 
 
+def _dag_task(i, log, lock, fail=None):
+    with lock:
+        log.append(("start", i))
+    if i == fail:
+        raise ParameterError(f"task {i} refuses")
+    return i * 10
+
+
+@pytest.mark.parametrize("threads", [1, 2, 3])
+def test_map_dag_waits_on_dependencies_and_keeps_order(threads):
+    """``map_dag``: results in index order, equal to the loop; no task starts before every
+    task it waits on has finished and been through ``finish``; the lowest-indexed ready task
+    goes first; a task's error comes back as it was raised; a dependency on a later task is
+    refused."""
+    import threading
+
+    deps = [[], [0], [0, 1], [0, 1], [2, 3], [1, 2], [3], [5, 6], [0]]
+    log, lock = [], threading.Lock()
+
+    def finish(i, r):
+        with lock:
+            log.append(("finish", i))
+        return (i, r)
+
+    out = Runner().map_dag(_dag_task, [(i, log, lock) for i in range(len(deps))], deps, finish, threads=threads)
+    assert out == [(i, i * 10) for i in range(len(deps))]
+    at = {e: n for n, e in enumerate(log)}
+    for i, d in enumerate(deps):
+        assert all(at[("finish", j)] < at[("start", i)] for j in d)
+    if threads == 1:
+        assert [e for e in log if e[0] == "start"] == [("start", i) for i in range(len(deps))]
+    with pytest.raises(ParameterError, match="task 4 refuses"):
+        Runner().map_dag(_dag_task, [(i, [], lock, 4) for i in range(len(deps))], deps, threads=threads)
+    with pytest.raises(ValueError, match="before it"):
+        Runner().map_dag(_dag_task, [(i, [], lock) for i in range(3)], [[], [2], []], threads=threads)
+
+
 @pytest.fixture(scope="module")
 def small_lf():
     lf = read_scene(SAMPLE)
@@ -88,6 +125,23 @@ def test_pool_encode_is_the_same_file(small_lf, serial_file):
     assert enc.summary["runner"] == "pool" and enc.summary["workers"] == 2
     assert blob == serial_file[0]
     assert np.array_equal(enc.decoded, serial_file[1].decoded)
+
+
+@pytest.mark.parametrize("threads", [1, 3])
+def test_threads_of_a_pass_give_the_same_file(small_lf, serial_file, monkeypatch, threads):
+    """A pass's predicted keys and other views run as tasks that wait on the keys they predict
+    from, on LOCAL_THREADS threads: the same file whatever their number, also where every
+    predicted key is tried as JPEG 2000 (each search starts from the intra key's, not from
+    whichever key finished last)."""
+    import formats.parallel as par
+    from rlfc.txencode import TxEncoder
+
+    monkeypatch.setattr(par, "LOCAL_THREADS", threads)
+    assert _encode(small_lf)[0] == serial_file[0]
+    monkeypatch.setattr(TxEncoder, "J2K_TRY_SHARE", 0.0)
+    blob = _encode(small_lf)[0]
+    monkeypatch.setattr(par, "LOCAL_THREADS", 2)
+    assert blob == _encode(small_lf)[0]
 
 
 def test_dask_local_cluster_encode_is_the_same_file(small_lf, serial_file):
