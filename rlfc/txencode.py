@@ -988,9 +988,13 @@ class TxEncoder:
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
-            else:
-                codes[k] = self.code_view(k, self.predict_view(k, kp), s16[0], lam_k, model, keep_pixels=px_slot(k),
-                                          lam_fit=lam_k / lam_scale)
+            else:                               # (as :meth:`_dag_pass` codes them, one after another)
+                codes[k], img, tc, _ = _pass_task(self, "key", k, kp, model, s16[0], lam_k, lam_k / lam_scale,
+                                                  px_slot(k), j2k_ref, None)
+                if img is not None:
+                    keyimg[k] = img
+                    promoted.append(k)
+                    add_trial(tc)
             if not ahead and self.intra[k] and self.intra_codec == "j2k":
                 trial = codes[k]
                 img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
@@ -1000,16 +1004,6 @@ class TxEncoder:
                     add_trial(self._key_symbols(k, trial, True))
                 if j2k_ref is None and size is not None:
                     j2k_ref = (size, self._code_psnr(codes[k]))
-            elif (not self.intra[k] and self.intra_codec == "j2k"
-                  and self._j2k_worth_trying(codes[k], j2k_ref, self._map_bytes(k))):
-                # a predicted key that costs more than coding it alone (its streams and the map
-                # that only it uses) becomes an intra key
-                trial = codes[k]
-                img, codes[k], _ = self._j2k_view(k, codes[k], self._map_bytes(k), self.J2K_KEY_SLACK_DB)
-                if img is not None:
-                    keyimg[k] = img
-                    promoted.append(k)
-                    add_trial(self._key_symbols(k, trial, True))
             if isinstance(kp, KeyAtlas):
                 kp.set(i, codes[k].planes)
             elif keyplanes is not None:
@@ -1551,7 +1545,8 @@ def _pass_task(enc: TxEncoder, what: str, v: int, kp: KeyAtlas, model: Model, st
     """One task of :meth:`TxEncoder._dag_pass`: a view that is not a key view (its code), or a
     predicted key view: (its code, kept with its decoded planes; the JPEG 2000 codestream where
     coding it alone as JPEG 2000 is smaller (``j2k_ref``: the pass's intra key as JPEG 2000),
-    else None; that case's transform trial's symbol counts; whether JPEG 2000 was tried)."""
+    else None; that case's transform trial's symbol counts; whether JPEG 2000 was tried;
+    ``start``: where a first JPEG 2000 search starts, None: where the last one ended)."""
     code = enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, keep_pixels=keep_pixels, lam_fit=lam_fit)
     if what == "view":
         return code

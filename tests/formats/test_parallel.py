@@ -144,6 +144,15 @@ def test_threads_of_a_pass_give_the_same_file(small_lf, serial_file, monkeypatch
     assert blob == _encode(small_lf)[0]
 
 
+def test_keys_one_after_another_where_there_is_no_atlas(small_lf, serial_file, monkeypatch):
+    """Views OpenCV cannot sample (no key atlas: a planar copy of the key views, rebuilt key by
+    key) code the keys one after another: the same integers, the same file."""
+    from rlfc.txencode import TxEncoder
+
+    monkeypatch.setattr(TxEncoder, "key_atlas", lambda self, n: None)
+    assert _encode(small_lf)[0] == serial_file[0]
+
+
 def test_dask_local_cluster_encode_is_the_same_file(small_lf, serial_file):
     distributed = pytest.importorskip("distributed")
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl:
