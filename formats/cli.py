@@ -1107,11 +1107,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from .heap import limit_arenas
+    from .heap import keep_freed, limit_arenas
 
     limit_arenas(1)                  # one malloc arena for the coding threads (formats.heap)
     parser = build_parser()
     a = parser.parse_args(argv)
+    if getattr(a, "func", None) is cmd_render:
+        keep_freed()                 # frame after frame: freed blocks reused, not faulted in again
     try:
         return a.func(a)
     except LfcError as e:

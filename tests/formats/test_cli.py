@@ -208,6 +208,18 @@ def test_render_refuses_to_write_over_its_input(encoded, tmp_path):
     assert f.read_bytes() == before
 
 
+def test_render_alone_asks_malloc_to_keep_freed_blocks(encoded, tmp_path, monkeypatch):
+    """``lfcodec render`` (frame after frame) asks for formats.heap.keep_freed; decode and encode
+    do not (a one-pass decode gains nothing and peaks higher; the encoder has a memory line)."""
+    import formats.heap as heap
+
+    calls = []
+    monkeypatch.setattr(heap, "keep_freed", lambda *a: calls.append(a) or True)
+    assert main(["render", str(encoded), str(tmp_path / "r.png"), "--quiet"]) == 0 and len(calls) == 1
+    assert main(["decode", str(encoded), "--view", "0,0", "--out", str(tmp_path / "v.png"), "--quiet"]) == 0
+    assert len(calls) == 1
+
+
 @pytest.mark.parametrize("profile,top,view", [("auto", 1, "1,1"), ("bise", 3, "0,0"), ("dcp", 1, "0,0")])
 def test_progressive_decode_levels(profile, top, view, tmp_path):
     enc = tmp_path / "p.lfc"

@@ -61,3 +61,14 @@ def test_zeroed_is_np_zeros(shape, dtype):
     assert a.sum() == 5 * int(np.prod(shape[1:-1]))
     b = pickle.loads(pickle.dumps(a))
     assert np.array_equal(a, b) and b.flags.writeable
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc")
+def test_keep_freed_sets_both_thresholds_and_the_environment_wins():
+    """In a child (the thresholds are the process's): set on glibc; an environment setting of
+    either threshold leaves both alone."""
+    code = "import sys; from formats import heap; sys.exit(0 if heap.keep_freed() else 3)"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    assert subprocess.run([sys.executable, "-c", code], env=env).returncode == 0
+    env["MALLOC_TRIM_THRESHOLD_"] = str(1 << 20)
+    assert subprocess.run([sys.executable, "-c", code], env=env).returncode == 3
