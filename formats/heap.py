@@ -79,31 +79,4 @@ def trim() -> None:
         pass
 
 
-#: arrays of at least this many bytes get pages of their own (:func:`zeroed`)
-ZEROED_MMAP_BYTES = 1 << 22
-
-
-def zeroed(shape, dtype):
-    """``np.zeros(shape, dtype)`` for large arrays written piece by piece: anonymous pages of its
-    own (zero, and only resident once written, as ``np.zeros``'s), asked for as huge pages
-    (``MADV_HUGEPAGE``). A large ``np.zeros`` comes from ``calloc``, whose pages were mapped one
-    4 KiB page at a time as they were first written: on the 2-core box a 37 MiB key atlas took
-    66 ms of page faults as its nine keys were stored, 9 ms with huge pages (BENCHMARKS.md).
-    Elsewhere than Linux, or below ``ZEROED_MMAP_BYTES``: ``np.zeros``. Returns the array."""
-    import mmap
-
-    import numpy as np
-
-    dt = np.dtype(dtype)
-    n = int(np.prod(shape, dtype=np.int64)) * dt.itemsize
-    if n < ZEROED_MMAP_BYTES or not sys.platform.startswith("linux") or not hasattr(mmap, "MADV_HUGEPAGE"):
-        return np.zeros(shape, dt)
-    m = mmap.mmap(-1, n, flags=mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS)
-    try:
-        m.madvise(mmap.MADV_HUGEPAGE)
-    except OSError:                          # (a kernel without transparent huge pages)
-        pass
-    return np.frombuffer(m, dt).reshape(shape)
-
-
-__all__ = ["keep_freed", "limit_arenas", "trim", "zeroed"]
+__all__ = ["keep_freed", "limit_arenas", "trim"]

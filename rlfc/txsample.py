@@ -45,11 +45,9 @@ class KeyAtlas:
     Args:
         n_keys, hp, wp, planes: key views, padded size and planes.
         bits: bits of the samples' magnitude (Co/Cg included): ≤ 10 → float32, else float64.
-        alloc: makes the zeroed groups, (shape, dtype) → array (the decoder's, which fills them
-            once, asks for :func:`formats.heap.zeroed`).
     """
 
-    def __init__(self, n_keys: int, hp: int, wp: int, planes: int, bits: int, alloc=np.zeros):
+    def __init__(self, n_keys: int, hp: int, wp: int, planes: int, bits: int):
         self.hp, self.wp, self.P = hp, wp, planes
         self.ftype = np.float32 if bits <= 10 else np.float64
         # channels stored: three float32 planes get a fourth, unused one (OpenCV's remap has a
@@ -57,7 +55,7 @@ class KeyAtlas:
         self.C = 4 if planes == 3 and self.ftype is np.float32 else planes
         self.per_group = max(1, CV_MAX // hp)
         ng = -(-n_keys // self.per_group) if n_keys else 0
-        self.groups = [alloc((min(self.per_group, n_keys - g * self.per_group) * hp, wp, self.C), self.ftype)
+        self.groups = [np.zeros((min(self.per_group, n_keys - g * self.per_group) * hp, wp, self.C), self.ftype)
                        for g in range(ng)]
 
     @staticmethod

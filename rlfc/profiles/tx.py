@@ -20,7 +20,6 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
-from formats.heap import zeroed
 from formats.parallel import LOCAL_THREADS
 
 from ..kernels import dequantize
@@ -169,11 +168,11 @@ class TxDecoder(ProfileDecoder):
         r0 = lay.refs.clip(0)                                  # per view: its references' key slots
         self.ref_slots = self.key_slot[r0].clip(0)              # (views, R) (any valid slot at weight 0)
         self.ref_dpos = lay.positions[:, None, :] - lay.positions[r0]     # (views, R, 2) position offsets
-        self.keyplanes = zeroed((keys.size, self.Hp, self.Wp, self.P), np.int32)
+        self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
         self._kp = None
         fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
-        self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P),
-                              alloc=zeroed) if fits else None
+        self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P)) \
+            if fits else None
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)

@@ -1,10 +1,8 @@
 """The C heap settings lfcodec asks for (formats.heap): one malloc arena for the coding threads."""
 import os
-import pickle
 import subprocess
 import sys
 
-import numpy as np
 import pytest
 
 from formats import heap
@@ -47,20 +45,6 @@ def test_lfcodec_asks_for_one_arena(monkeypatch, capsys):
     monkeypatch.setattr(heap, "limit_arenas", lambda n=1: asked.append(n) or True)
     assert main(["info", "/nonexistent.lfc"]) == 2
     assert asked == [1]
-
-
-@pytest.mark.parametrize("shape,dtype", [((3, 4), np.int32), ((3, 1024, 512, 4), np.float32),
-                                         ((2, 600, 700, 3), np.int32)])
-def test_zeroed_is_np_zeros(shape, dtype):
-    """``zeroed`` gives what ``np.zeros`` gives (small arrays are ``np.zeros``; large ones pages
-    of their own): zero, writable, C-contiguous, of the shape and dtype; it pickles as an array."""
-    a = heap.zeroed(shape, dtype)
-    assert a.shape == shape and a.dtype == np.dtype(dtype) and a.flags.c_contiguous and a.flags.writeable
-    assert not a.any()
-    a[-1, ..., -1] = 5
-    assert a.sum() == 5 * int(np.prod(shape[1:-1]))
-    b = pickle.loads(pickle.dumps(a))
-    assert np.array_equal(a, b) and b.flags.writeable
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc")
