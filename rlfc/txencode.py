@@ -980,10 +980,13 @@ class TxEncoder:
                 # against 50 900 at 36.1.)
                 lam_rgb = lam_k * (3.0 if self.P >= 3 else 1.0)   # a luma error e is e in each of R, G, B
                 best = None
-                for t16 in ([thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})):
-                    # (several candidates: each keeps its own pixels, gathered at the end)
-                    lv, c = self.code_intra(k, t16, s16[0], lam_k, model,
-                                            px_slot(k) if thumb16 is not None else keep or own_px)
+                cands = [thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})
+                # (several candidates: each keeps its own pixels, gathered at the end; coded side
+                # by side on threads, the same integers)
+                got = Runner().map_threaded(self.code_intra, [(k, t16, s16[0], lam_k, model,
+                                                               px_slot(k) if thumb16 is not None else keep or own_px)
+                                                              for t16 in cands])
+                for t16, (lv, c) in zip(cands, got):
                     cost = c.sse + lam_rgb * (c.bits + 8 * len(pack_thumbs(lv[None])))
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
