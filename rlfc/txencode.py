@@ -588,24 +588,26 @@ class TxEncoder:
                         d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
         return p.reshape(self.nby8, self.nbx8, TB, TB, self.P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, self.P)
 
-    def thumb_levels(self, v: int, thumb16: int) -> np.ndarray:
+    def thumb_levels(self, v: int, thumb16: int, pixels: np.ndarray | None = None) -> np.ndarray:
         """(nby8, nbx8, P) thumbnail levels of an intra view: block means / step, rounded (the
-        block means of each view are computed once: every pass asks for them again)."""
+        block means of each view are computed once: every pass asks for them again; from
+        ``pixels``, the view's, where given)."""
         o = self._block_means.get(v)
         if o is None:
-            o = self._block_means[v] = self.planes(v).astype(np.float64).reshape(self.nby8, TB, self.nbx8, TB,
-                                                                       self.P).mean(axis=(1, 3))
+            o = self._block_means[v] = self.planes(v, pixels).astype(np.float64).reshape(
+                self.nby8, TB, self.nbx8, TB, self.P).mean(axis=(1, 3))
         return np.rint(o * 16 / thumb16).astype(np.int64)
 
     def thumb_pred(self, levels: np.ndarray, thumb16: int) -> np.ndarray:
         return upsample_thumb((levels * thumb16 + 8) >> 4, self.Hp, self.Wp)
 
     def code_intra(self, k: int, thumb16: int, s16k: np.ndarray, lam_k: float, model: Model,
-                   keep_pixels: bool | np.ndarray) -> tuple[np.ndarray, ViewCode]:
+                   keep_pixels: bool | np.ndarray, pixels: np.ndarray | None = None) -> tuple[np.ndarray, ViewCode]:
         """(thumbnail levels, transform coding) of intra key view k against its thumbnail
-        (``keep_pixels``: as :meth:`code_view`)."""
-        lv = self.thumb_levels(k, thumb16)
-        return lv, self.code_view(k, self.thumb_pred(lv, thumb16), s16k, lam_k, model, keep_pixels=keep_pixels)
+        (``keep_pixels``, ``pixels``: as :meth:`code_view`)."""
+        lv = self.thumb_levels(k, thumb16, pixels)
+        return lv, self.code_view(k, self.thumb_pred(lv, thumb16), s16k, lam_k, model, pixels=pixels,
+                                  keep_pixels=keep_pixels)
 
     # -- coding one view ---------------------------------------------------------------------
     def _tbs(self, img: np.ndarray) -> np.ndarray:
@@ -982,10 +984,11 @@ class TxEncoder:
                 best = None
                 cands = [thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})
                 # (several candidates: each keeps its own pixels, gathered at the end; coded side
-                # by side on threads, the same integers)
+                # by side on threads, the same integers, from the view read once here)
+                opx = self.view_pixels(k) if len(cands) > 1 else None
                 got = Runner().map_threaded(self.code_intra, [(k, t16, s16[0], lam_k, model,
-                                                               px_slot(k) if thumb16 is not None else keep or own_px)
-                                                              for t16 in cands])
+                                                               px_slot(k) if thumb16 is not None else keep or own_px,
+                                                               opx) for t16 in cands])
                 for t16, (lv, c) in zip(cands, got):
                     cost = c.sse + lam_rgb * (c.bits + 8 * len(pack_thumbs(lv[None])))
                     if best is None or cost < best[0]:
