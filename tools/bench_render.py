@@ -12,7 +12,7 @@ geometric interpolation of its neighbours at all (see :func:`midview_check`).
 Usage:
     python -m tools.bench_render SCENE [SCENE ...] [--target-psnr 40] [--device numpy cuda] [--out DIR]
     python -m tools.bench_render SCENE [SCENE ...] --midview
-    python -m tools.bench_render FILE.lfc [...] [--device numpy cuda]   (frame times only)
+    python -m tools.bench_render FILE.lfc [...] [--device numpy cuda] [--keep-freed]   (frame times only)
 """
 from __future__ import annotations
 
@@ -159,7 +159,14 @@ def main(argv=None) -> int:
                          "of their neighbours (original views, no codec)")
     ap.add_argument("--view-step", type=int, nargs="+", default=[1],
                     help="--midview: use every k-th view (2 = the baseline of a leave-views-out file)")
+    ap.add_argument("--keep-freed", action="store_true",
+                    help="ask malloc to keep freed blocks first (formats.heap.keep_freed), as `lfcodec render` "
+                         "does; call it in a fresh process (it sets the process's malloc)")
     a = ap.parse_args(argv)
+    if a.keep_freed:
+        from formats.heap import keep_freed
+
+        keep_freed()
     if a.midview:
         res = {"machine": machine(), "midview": [midview_check(s, st) for st in a.view_step for s in a.scenes]}
     else:
