@@ -20,6 +20,7 @@ from formats.codec_api import EncodeOptions, Encoded, check_field_types, is_real
 from formats.errors import ParameterError
 from formats.metrics import colour_sq_error, finite, psnr_from_sq_error
 from formats.parallel import Runner, make_runner
+from formats import parallel as _parallel
 from formats.scenes.common import ImageFile, ImageFiles
 from formats.viewstack import view_of
 from formats.pixels import from_planes, rgb_mse_weights, to_planes
@@ -1003,8 +1004,10 @@ class TxEncoder:
                     add_trial(tc)
             if not ahead and self.intra[k] and self.intra_codec == "j2k":
                 trial = codes[k]
+                # (the pass's first key: every other view waits on it, so OpenJPEG gets the threads)
                 img, codes[k], size = self._j2k_view(k, codes[k], len(pack_thumbs(thumbs[k][None])),
-                                                     self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None)
+                                                     self.J2K_KEY_SLACK_DB, give_up=j2k_ref is not None,
+                                                     threads=_parallel.LOCAL_THREADS if i == 0 else 1)
                 if img is not None:
                     keyimg[k] = img
                     add_trial(self._key_symbols(k, trial, True))
@@ -1181,7 +1184,8 @@ class TxEncoder:
     J2K_TRY_SHARE = 0.85
 
     def _j2k_view(self, v: int, tx_code: ViewCode, extra_bytes: float, slack_db: float,
-                  give_up: bool = True, start: dict | None = None) -> tuple[bytes | None, ViewCode, float | None]:
+                  give_up: bool = True, start: dict | None = None,
+                  threads: int = 1) -> tuple[bytes | None, ViewCode, float | None]:
         """View v as JPEG 2000 (its padded Hp×Wp image) with colour error at most its transform
         coding's (less ``slack_db``), where that is smaller than the transform path (the model's
         estimate of its streams + ``extra_bytes``); else (None, the transform coding).
@@ -1191,7 +1195,8 @@ class TxEncoder:
             budget where the search found one, else None; with ``give_up=False`` the search
             does not stop at the transform path's size, so the size is there for reference;
             ``start``: where a view not searched before starts, instead of the last view
-            searched, which is then left as it is).
+            searched, which is then left as it is; ``threads``: OpenJPEG's, for a search
+            that runs alone).
         """
         orig = self.view_pixels(v)
         budget = tx_code.sse * 10 ** (slack_db / 10)
@@ -1204,7 +1209,8 @@ class TxEncoder:
         # where OpenJPEG lands for this view, kept across the passes of rate control (a view not
         # searched before starts from the last view's)
         hint = self._j2k_hints.setdefault(v, dict(self._j2k_hints.get("last", {}) if start is None else start))
-        found = smallest_j2k(self.padded(orig), budget, err, target, tx_bytes if give_up else math.inf, hint)
+        found = smallest_j2k(self.padded(orig), budget, err, target, tx_bytes if give_up else math.inf, hint,
+                             threads=threads)
         if start is None:
             self._j2k_hints["last"] = hint
         if found is None or len(found[0]) >= tx_bytes:

@@ -641,6 +641,8 @@ def test_smallest_jpeg2000_within_a_budget():
         assert got is not None and colour_sq_error(img, got[1])[0] <= budget
         assert psnr_rgb(img, got[1]) < db + 0.5              # not far better than asked (not wasteful)
         assert smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db, len(got[0]) // 2) is None
+        two = smallest_j2k(img, budget, lambda x: colour_sq_error(img, x)[0], db, threads=2)
+        assert two[0] == got[0] and np.array_equal(two[1], got[1])     # OpenJPEG's threads: the same search
 
 
 def test_jpeg2000_search_learns_where_openjpeg_lands(monkeypatch):
