@@ -1092,7 +1092,6 @@ class TxEncoder:
             the first] + [code per view of ``others``].
         """
         rest = list(keys[1:])
-        slot = {int(k): i for i, k in enumerate(self.s.keys)}
         at = {int(k): i for i, k in enumerate(rest)}
         start = dict(self._j2k_hints.get("last", {}))
         if self.intra_codec == "j2k":
@@ -1110,7 +1109,7 @@ class TxEncoder:
         def finish(i, r):
             if i < len(rest):
                 k = rest[i]
-                kp.set(slot[int(k)], r[0].planes)
+                kp.set(int(self.key_slot[k]), r[0].planes)
                 r[0].planes = None                # (kept once, in the atlas, for this pass only)
             count[0] += 1
             if progress:
@@ -1559,7 +1558,7 @@ def _pass_task(enc: TxEncoder, what: str, v: int, kp: KeyAtlas, model: Model, st
     coding it alone as JPEG 2000 is smaller (``j2k_ref``: the pass's intra key as JPEG 2000),
     else None; that case's transform trial's symbol counts; whether JPEG 2000 was tried;
     ``start``: where a first JPEG 2000 search starts, None: where the last one ended)."""
-    code = enc.code_view(v, enc.predict_view(v, kp), step16, lam, model, keep_pixels=keep_pixels, lam_fit=lam_fit)
+    code = _code_task(enc, kp, model, v, None, step16, lam, keep_pixels, lam_fit)
     if what == "view":
         return code
     img = tc = None

@@ -110,18 +110,22 @@ def vignetted(views: np.ndarray) -> np.ndarray:
     return out
 
 
+def _gained(views: np.ndarray, channels: int, spread: float, seed: int) -> np.ndarray:
+    """Every view times its own gains (one, or one per channel: ``channels`` 1 or C), uniform in
+    [1 − spread, 1 + spread], rounded to uint8."""
+    rng = np.random.default_rng(seed)
+    g = rng.uniform(1 - spread, 1 + spread, views.shape[:2] + (1, 1, channels))
+    return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
+
+
 def exposed(views: np.ndarray, spread: float = 0.1, seed: int = 5) -> np.ndarray:
     """Every view times its own gain, uniform in [1 − spread, 1 + spread]."""
-    rng = np.random.default_rng(seed)
-    g = rng.uniform(1 - spread, 1 + spread, views.shape[:2] + (1, 1, 1))
-    return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
+    return _gained(views, 1, spread, seed)
 
 
 def white_balanced(views: np.ndarray, spread: float = 0.06, seed: int = 6) -> np.ndarray:
     """Every view's channels times their own gains, uniform in [1 − spread, 1 + spread]."""
-    rng = np.random.default_rng(seed)
-    g = rng.uniform(1 - spread, 1 + spread, views.shape[:2] + (1, 1, views.shape[-1]))
-    return np.clip(np.rint(views * g), 0, 255).astype(np.uint8)
+    return _gained(views, views.shape[-1], spread, seed)
 
 
 def jittered(views: np.ndarray, reach: float = 0.7, seed: int = 5) -> np.ndarray:
