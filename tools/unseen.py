@@ -26,6 +26,14 @@ The grids are derived deterministically from ../shared/data:
 - ``antinous_jitter``: hci_antinous with every view shifted by its own sub-pixel offset drawn
   uniformly from ±0.7 px in each axis (bilinear, seed 5), as a rig whose cameras are not on an
   exact grid gives: the views' parallax is no longer a multiple of their grid position.
+- ``antinous_rotate``: hci_antinous with every view rotated about its centre by its own angle,
+  uniform in ±0.5° (bilinear, seed 7), as a rig whose cameras are not rectified gives: the
+  corners move by up to 3 px, a different way in every view, and no disparity is a shift.
+- ``antinous_zoom``: hci_antinous with every view scaled about its centre by its own factor,
+  uniform in 1 ± 0.6% (bilinear, seed 8): focal lengths that differ from camera to camera, or
+  focus breathing (up to 1.5 px at the edges).
+- ``antinous_jpeg85``: hci_antinous with every view JPEG-coded at quality 85 (OpenCV, 4:2:0), as
+  rigs that store JPEG deliver them: each view carries 8×8 block artefacts no other view predicts.
 
 For each: per-view JPEG 2000 (imagecodecs) at several PSNRs, interpolated at the target like
 tools/bench.py; and the RLFC profile at the target (the CLI's ``--target-psnr``), with the
@@ -131,15 +139,48 @@ def white_balanced(views: np.ndarray, spread: float = 0.06, seed: int = 6) -> np
 def jittered(views: np.ndarray, reach: float = 0.7, seed: int = 5) -> np.ndarray:
     """Every view shifted by its own (dy, dx), uniform in ±``reach`` px (bilinear, edges reflected)."""
     rng = np.random.default_rng(seed)
+    r, c = views.shape[:2]
+    shifts = [rng.uniform(-reach, reach, 2) for _ in range(r * c)]
+    return _warped(views, [[[1, 0, dx], [0, 1, dy]] for dy, dx in shifts])
+
+
+def _warped(views: np.ndarray, matrices) -> np.ndarray:
+    """Every view warped by its own 2×3 affine matrix (bilinear, edges reflected), rounded to its dtype."""
     r, c, h, w, _ = views.shape
     out = np.empty_like(views)
-    for i in range(r):
-        for j in range(c):
-            dy, dx = rng.uniform(-reach, reach, 2)
-            m = np.float32([[1, 0, dx], [0, 1, dy]])
-            got = cv2.warpAffine(views[i, j].astype(np.float32), m, (w, h), flags=cv2.INTER_LINEAR,
-                                 borderMode=cv2.BORDER_REFLECT)
-            out[i, j] = np.clip(np.rint(got), 0, 255).astype(np.uint8).reshape(h, w, -1)
+    hi = np.iinfo(views.dtype).max
+    for (i, j), m in zip(np.ndindex(r, c), matrices):
+        got = cv2.warpAffine(views[i, j].astype(np.float32), np.float32(m), (w, h), flags=cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_REFLECT)
+        out[i, j] = np.clip(np.rint(got), 0, hi).astype(views.dtype).reshape(h, w, -1)
+    return out
+
+
+def rotated(views: np.ndarray, degrees: float = 0.5, seed: int = 7) -> np.ndarray:
+    """Every view rotated about its centre by its own angle, uniform in ±``degrees`` (a rig whose
+    cameras are not rectified: 0.5° moves a 512² view's corners by up to 3 px)."""
+    rng = np.random.default_rng(seed)
+    r, c, h, w, _ = views.shape
+    return _warped(views, [cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), a, 1.0)
+                           for a in rng.uniform(-degrees, degrees, r * c)])
+
+
+def zoomed(views: np.ndarray, spread: float = 0.006, seed: int = 8) -> np.ndarray:
+    """Every view scaled about its centre by its own factor, uniform in 1 ± ``spread`` (focal
+    lengths that differ from camera to camera, or focus breathing: ±1.5 px at a 512² view's edges)."""
+    rng = np.random.default_rng(seed)
+    r, c, h, w, _ = views.shape
+    return _warped(views, [cv2.getRotationMatrix2D((w / 2 - 0.5, h / 2 - 0.5), 0.0, z)
+                           for z in rng.uniform(1 - spread, 1 + spread, r * c)])
+
+
+def jpeg_sourced(views: np.ndarray, quality: int = 85) -> np.ndarray:
+    """Every view JPEG-coded and decoded at ``quality`` (OpenCV, 4:2:0), as rigs that store JPEG
+    deliver them: each view carries its own 8×8 block artefacts, which no other view predicts."""
+    out = np.empty_like(views)
+    for i, j in np.ndindex(views.shape[:2]):
+        ok, enc = cv2.imencode(".jpg", np.ascontiguousarray(views[i, j, ..., ::-1]), [cv2.IMWRITE_JPEG_QUALITY, quality])
+        out[i, j] = cv2.imdecode(enc, cv2.IMREAD_COLOR)[..., ::-1]
     return out
 
 
@@ -178,7 +219,10 @@ def scenes(data: Path) -> dict[str, LightField]:
             "antinous_exposure": _grid(exposed(ant.views), "hci_antinous, a gain per view in [0.9, 1.1]"),
             "antinous_jitter": _grid(jittered(ant.views), "hci_antinous, each view shifted by up to 0.7 px"),
             "antinous_whitebalance": _grid(white_balanced(ant.views),
-                                           "hci_antinous, a gain per view and channel in [0.94, 1.06]")}
+                                           "hci_antinous, a gain per view and channel in [0.94, 1.06]"),
+            "antinous_rotate": _grid(rotated(ant.views), "hci_antinous, each view rotated by up to 0.5 deg"),
+            "antinous_zoom": _grid(zoomed(ant.views), "hci_antinous, each view scaled by 1 +- 0.6%"),
+            "antinous_jpeg85": _grid(jpeg_sourced(ant.views), "hci_antinous, each view JPEG quality 85")}
 
 
 def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
