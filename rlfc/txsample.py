@@ -400,7 +400,8 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
             rep, wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype), wpf)
 
 
-def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype) -> np.ndarray:
+def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
+                         res=None, bounds=None) -> np.ndarray:
     """The pixels of one random-access block whose 8×8 blocks carry no residual: the same
     values as :func:`predict_block` followed by :func:`formats.pixels.from_planes`, in fewer
     numpy calls (a single request costs calls, not pixels).
@@ -414,11 +415,20 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     bits), so ``floor(x + 0.5)`` is its rounded shift; the YCoCg-R inverse is one product with
     :func:`pixel_matrix` of the planes and their floor halves.
 
+    A coded block (``res``) adds its residual to the prediction and clips the sum to the planes'
+    bounds before the YCoCg-R inverse, as :meth:`rlfc.profiles.tx.TxDecoder.block` does in
+    integers. Exact: the prediction lies within the bounds (|bound| < 2^18), so a residual
+    within ±(hi − lo) sums exactly, and a larger one (rounded or not: float rounding is
+    monotone, the bounds are exact) puts the sum past the same bound.
+
     Args:
         prefs: :func:`block_pixel_refs` of the view; d: (nt,) float32 disparities of the
             block's 8×8 blocks (raster order) and ``modes`` (nt,) their modes; by_px, bx_px:
             the block's pixel origin; tpb: 8×8 blocks per block side; peak (a number of the
             atlas's float type), dtype: the pixels'.
+        res: None (predicted only), or (nt·64, C) residual samples in the atlas's float type
+            (0 past the P planes), 8×8 blocks and their samples in raster order; bounds: then
+            the planes' (lo, hi), each (C,) in that type (±inf past the P planes).
 
     Returns:
         (8·tpb, 8·tpb, P) pixels of ``dtype``.
@@ -453,6 +463,9 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
         np.floor(acc, out=acc)
         acc += o
         np.minimum(np.maximum(acc, lw, out=acc), hg, out=acc)
+    if res is not None:                   # a coded block: + its residual, clipped to the planes' bounds
+        acc += res
+        np.minimum(np.maximum(acc, bounds[0], out=acc), bounds[1], out=acc)
     if P >= 3:
         half = acc * 0.5
         np.floor(half, out=half)                                          # the planes >> 1

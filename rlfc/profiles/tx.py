@@ -21,6 +21,7 @@ import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
 from formats.parallel import LOCAL_THREADS
+from formats.pixels import from_planes
 
 from ..kernels import dequantize
 from ..transform import COEF_MAX, ZIGZAG, inverse_float
@@ -151,6 +152,7 @@ class TxDecoder(ProfileDecoder):
         self._tbx = np.tile(np.arange(self.tpb), self.tpb)
         self._tb_off = self._tby * self.nbx8 + self._tbx           # their raster indices from the first
         self._row_planes = np.tile(np.arange(self.P), self.nt)     # the plane of each (tb, plane) row of a block
+        self._q16_rows = np.asarray(lay.step16[1], np.int64)[self._row_planes]    # ... its step (non-key views)
         self._tb_y = (self._tby * TB).astype(np.float32)           # their pixel origins in the block
         self._tb_x = (self._tbx * TB).astype(np.float32)
         self._blockref_cache: dict = {}
@@ -731,19 +733,55 @@ class TxDecoder(ProfileDecoder):
         return got
 
     def block_pixels(self, view: int, by: int, bx: int, level: int) -> np.ndarray | None:
-        """One request's pixels (B, B, P) when its 8×8 blocks are predicted only (no residual at
-        this level) from references in one atlas group: :func:`rlfc.txsample.predict_block_pixels`,
-        the same pixels as :meth:`block` + ``from_planes`` in about half the numpy calls. None
-        otherwise (the caller takes :meth:`block`)."""
-        if self.is_key[view] or self.atlas is None or (level == 0 and self.coded[view, by * self.nbx + bx]):
+        """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
+        one atlas group: :func:`rlfc.txsample.predict_block_pixels`, the same pixels as
+        :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
+        (its stream parsed by :func:`rlfc.txsyntax.parse_one`) is added there too, unless a tb
+        of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
+        (the caller takes :meth:`block`)."""
+        if self.is_key[view] or self.atlas is None:
             return None
         prefs = self._pixel_refs(view)
         if prefs is None:
             return None
-        disp, modes = self._cell_map(self._one_ready(view, by))
         B, loc = self.block_size, by * self.nbx + bx
+        res = bounds = None
+        if level == 0 and self.coded[view, loc]:
+            parsed = self._parse_one(view, loc)
+            if (parsed.modes == MODE_INTRA).any():
+                return from_planes(self.block(view, by, bx, level, parsed).reshape(B, B, self.P), self.dtype)
+            if parsed.index.size:
+                res, bounds = self._residual_rows(parsed), self._pixel_bounds
+        disp, modes = self._cell_map(self._one_ready(view, by))
         return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
-                                    self.atlas.ftype(self._peak), self.dtype)
+                                    self.atlas.ftype(self._peak), self.dtype, res, bounds)
+
+    def _residual_rows(self, parsed) -> np.ndarray:
+        """:meth:`_residual_one` of a stream of a view with references laid out as
+        :func:`rlfc.txsample.predict_block_pixels` adds it: (nt·64, C) in the atlas's float type
+        (C its channels; 0 past the P planes), 8×8 blocks and their samples in raster order.
+        Values past 2^24 may round in float32; the sum with the prediction is then past the
+        planes' bounds either way and clips alike."""
+        nt, P = self.nt, self.P
+        idx = parsed.index
+        g = idx >> 6                                                          # tb·P + plane
+        deq, raster = self._dequantized(parsed.values, self._q16_rows[g], self._row_planes[g], idx & 63)
+        X = np.zeros((nt * P, 64))
+        X[g, raster] = deq
+        res = np.zeros((nt, 64, self.atlas.C), self.atlas.ftype)
+        res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
+        return res.reshape(nt * 64, self.atlas.C)
+
+    @property
+    def _pixel_bounds(self) -> tuple:
+        """The planes' (lo, hi) over the atlas's C channels in its float type (±inf past P)."""
+        got = self.__dict__.get("_pb")
+        if got is None:
+            ft, C, P = self.atlas.ftype, self.atlas.C, self.P
+            lw, hg = np.full(C, -np.inf, ft), np.full(C, np.inf, ft)
+            lw[:P], hg[:P] = self.lo, self.hi
+            got = self._pb = (lw, hg)
+        return got
 
     def _pixel_refs(self, view: int):
         """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references
@@ -786,9 +824,10 @@ class TxDecoder(ProfileDecoder):
             self._have_maps(np.array([cell]))
         return cell
 
-    def block(self, view: int, by: int, bx: int, level: int) -> np.ndarray:
+    def block(self, view: int, by: int, bx: int, level: int, parsed=None) -> np.ndarray:
         """One request, lean: the prediction of the block's nt tbs from every reference at once
-        (one remap call), plus at most one parsed stream; the same integers as :meth:`blocks`."""
+        (one remap call), plus at most one parsed stream (``parsed``: the caller parsed it); the
+        same integers as :meth:`blocks`."""
         B, P, tpb = self.block_size, self.P, self.tpb
         if self.is_key[view]:
             self._one_rows(view, by)
@@ -813,7 +852,8 @@ class TxDecoder(ProfileDecoder):
         out = self._weigh(out, view)
         loc = by * self.nbx + bx
         if level == 0 and self.coded[view, loc]:
-            parsed = self._parse_one(view, loc)
+            if parsed is None:
+                parsed = self._parse_one(view, loc)
             out = self._add_residual(out[None], self._residual_one(view, parsed)[None], parsed.modes)[0]
         return out.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(B * B, P)
 

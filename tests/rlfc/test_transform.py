@@ -24,3 +24,18 @@ def test_inverse_float_gives_the_integer_definition(bound):
     assert np.array_equal(inverse_float(X.astype(np.float64)).astype(np.int64), ref)
     got = inverse_float(torch.from_numpy(X.astype(np.float64)))
     assert got.dtype == torch.float64 and np.array_equal(got.numpy().astype(np.int64), ref)
+
+
+@pytest.mark.parametrize("bound", [COEF_MAX, (1 << 40) - 1])
+def test_inverse_float_is_exact_where_every_sum_is_largest(bound):
+    """Each output sample driven to its largest magnitude (every coefficient at the bound with the
+    sign of its basis product there): the float64 products stay exact integers (the numpy path
+    folds the shifts into its matrices)."""
+    T = T8.astype(np.int64)
+    X = np.array([bound * np.sign(np.outer(T[:, i], T[:, j])) for i in range(8) for j in range(8)], np.int64)
+    X = np.concatenate([X, -X])
+    ref = _definition(X)
+    assert np.abs(ref).max() > bound // 2
+    assert np.array_equal(inverse_float(X.astype(np.float64)).astype(np.int64), ref)
+    got = inverse_float(torch.from_numpy(X.astype(np.float64)))
+    assert np.array_equal(got.numpy().astype(np.int64), ref)

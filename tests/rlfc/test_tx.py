@@ -317,6 +317,54 @@ def test_single_coded_blocks_equal_the_whole_views(kw):
     assert intra > 0 or lossless                      # (lossless files code no intra 8×8 block here)
 
 
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(lossless=True, c=4)])
+def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
+    """decode_block's lean path on coded blocks (the residual added and clipped in the remap's
+    floats, :meth:`TxDecoder._residual_rows`) gives the pixels of ``block`` + ``from_planes``:
+    the file's own streams (noisy views, saturated corners; 16-bit, grey, RGBA whose alpha
+    bypasses the transform, lossless where every plane does), and crafted ones whose
+    coefficients reach the decoder's bound (sums far past the planes' bounds; float32 rounds
+    them), with intra 8×8 blocks (``block`` then takes the stream parsed once)."""
+    from formats.pixels import from_planes
+    from rlfc.profiles.tx import TxDecoder
+    from rlfc.txsyntax import MODE_INTRA, MODE_RES, Parsed
+
+    lf, e, _ = _noisy_grid_encoded(kw, amp8=9, seed=4, step8=2.0, saturate=True)
+    d, _ = open_encoded(lf, e)
+    core, B = d.core, d.block_size
+    lean = {"rows": 0}
+    real_rows = TxDecoder._residual_rows
+
+    def counted(self, parsed):
+        lean["rows"] += 1
+        return real_rows(self, parsed)
+
+    monkeypatch.setattr(TxDecoder, "_residual_rows", counted)
+    v, loc = np.nonzero(core.coded & ~core.is_key[:, None])
+    for i in range(min(v.size, 60)):
+        by, bx = divmod(int(loc[i]), core.nbx)
+        got = core.block_pixels(int(v[i]), by, bx, 0)
+        ref = from_planes(core.block(int(v[i]), by, bx, 0).reshape(B, B, core.P), core.dtype)
+        assert got.dtype == ref.dtype and (got == ref).all()
+    assert lean["rows"] > 20
+    rng = np.random.default_rng(7)
+    nt, P = core.nt, core.P
+    for trial in range(40):
+        i = trial % v.size
+        by, bx = divmod(int(loc[i]), core.nbx)
+        k = int(rng.integers(1, 3 * nt * P))
+        idx = np.sort(rng.choice(nt * P * 64, k, replace=False)).astype(np.int64)
+        vals = rng.choice([-1, 1], k) * rng.choice([1, 3, 40, 700, 1 << 14, 1 << 21, 1 << 30], k)
+        modes = np.full((1, nt), MODE_RES, np.int64)
+        if trial % 4 == 3:
+            modes[0, rng.integers(nt)] = MODE_INTRA
+        parsed = Parsed(modes, idx, vals.astype(np.int64), P)
+        monkeypatch.setattr(core, "_parse_one", lambda view, at, p=parsed: p)
+        got = core.block_pixels(int(v[i]), by, bx, 0)
+        ref = from_planes(core.block(int(v[i]), by, bx, 0, parsed).reshape(B, B, P), core.dtype)
+        assert (got == ref).all(), trial
+
+
 def test_a_file_truncated_while_open_refuses_what_it_would_read(tmp_path):
     """A decode call checks the file where it reads its bytes: a block whose stream it must read
     from a file truncated under its memory map is a FormatError (not a SIGBUS), a block it holds
