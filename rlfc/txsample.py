@@ -402,9 +402,10 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
                          res=None, bounds=None) -> np.ndarray:
-    """The pixels of one random-access block whose 8×8 blocks carry no residual: the same
-    values as :func:`predict_block` followed by :func:`formats.pixels.from_planes`, in fewer
-    numpy calls (a single request costs calls, not pixels).
+    """The pixels of one random-access block predicted from its references (and a coded one's
+    residual added, ``res``): the same values as :func:`predict_block` (and the residual added
+    and clipped) followed by :func:`formats.pixels.from_planes`, in fewer numpy calls (a single
+    request costs calls, not pixels).
 
     The sampling positions are the same exact values as :func:`predict_block`'s, summed in
     another order (disparity × offset + block origin, + the window's pixel grid; integers and
