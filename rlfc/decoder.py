@@ -130,10 +130,13 @@ class RlfcDecoder(Decoder):
         self.core.prepare(views, by)
         order = np.lexsort((bx, by, views))           # requests of one view together: shared references
         step = max(1, DECODE_CHUNK // (B * B))
+        pre = getattr(self.core, "preparse", None)    # (a profile that parses the chunks' streams ahead)
+        ahead = pre(views[order], by[order], bx[order], level) if pre is not None and M > step else None
 
         def run(a: int) -> None:
             i = order[a:a + step]
-            acc = self.core.blocks(views[i], by[i], bx[i], level).reshape(i.size, B, B, self.P)
+            kw = {} if ahead is None else {"ahead": ahead, "first": a}
+            acc = self.core.blocks(views[i], by[i], bx[i], level, **kw).reshape(i.size, B, B, self.P)
             out[i] = acc if planes else from_planes(acc, self.dtype)
 
         self._run(run, range(0, M, step), threads)

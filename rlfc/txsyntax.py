@@ -384,6 +384,24 @@ class Parsed:
         return [Parsed(self.modes[a:b], self.index[cut[i]:cut[i + 1]] - a * per, self.values[cut[i]:cut[i + 1]], self.P)
                 for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))]
 
+    def lane_bounds(self) -> np.ndarray:
+        """(S + 1,) int64: lane i's coefficients are ``index[b[i]:b[i + 1]]`` (they are grouped by
+        lane in ascending order)."""
+        per = self.modes.shape[1] * self.P * 64
+        return np.searchsorted(self.index, np.arange(self.modes.shape[0] + 1, dtype=np.int64) * per)
+
+    def take(self, lanes: np.ndarray, bounds: np.ndarray | None = None) -> "Parsed":
+        """Parsed of lanes ``lanes`` (int array, in its order; ``bounds``: :meth:`lane_bounds`,
+        where the caller keeps it for several takes)."""
+        per = self.modes.shape[1] * self.P * 64
+        b = self.lane_bounds() if bounds is None else bounds
+        lanes = np.asarray(lanes, np.int64)
+        cnt = b[lanes + 1] - b[lanes]
+        first = np.cumsum(cnt) - cnt
+        src = np.repeat(b[lanes] - first, cnt) + np.arange(int(cnt.sum()), dtype=np.int64)
+        index = self.index[src] - np.repeat((lanes - np.arange(lanes.size)) * per, cnt)
+        return Parsed(self.modes[lanes], index, self.values[src], self.P)
+
     def reshape(self, lanes: int, nt: int) -> "Parsed":
         """The same coefficients seen as ``lanes`` lanes of ``nt`` tbs (a stream of several
         blocks in raster order = consecutive blocks)."""

@@ -39,6 +39,12 @@ from .base import Profile, ProfileDecoder
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
 PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their streams step together)
+#: a batched call's coded requests are parsed ahead of its chunks (:meth:`TxDecoder.preparse`)
+#: in parses of this many streams, where it has at least PREPARSE_MIN: on epfl_iso_chart_1's
+#: 10 862 streams of 20 000 random requests, 1 024 / 2 048 / 4 096 streams a parse took 178 /
+#: 141 / 124 ms (a parse's temporaries: 16 / 29 / 62 MB)
+PREPARSE_LANES = 4096
+PREPARSE_MIN = 1024
 #: streams are parsed one by one (plain Python, ~1.5 µs per byte) rather than as numpy lanes
 #: stepping together (~85 µs per byte of the longest stream, whatever the number of lanes) while
 #: their bytes sum to less than this many times the longest one's (measured on the dense grids'
@@ -596,10 +602,11 @@ class TxDecoder(ProfileDecoder):
             return got[0] if len(got) == 1 else concat_parsed(got)
         return parse_lanes(buf, s2, e2, self.tables, nt, self.pcs, kind, key, self.container.name)
 
-    def _reconstruct(self, views, locs, level, pred=None, parsed=None):
+    def _reconstruct(self, views, locs, level, pred=None, parsed=None, have=None):
         """(M, B, B, P) int32 planes of block requests (views with references, or ``pred`` given
-        as (M, nt, 8, 8, P)); ``parsed``: the syntax of every request (key rows), else the
-        requests' own streams are parsed (all at once: the rANS lanes step together)."""
+        as (M, nt, 8, 8, P)); ``parsed``: the syntax of the requests ``have`` (default: of every
+        request, key rows), else the coded requests' own streams are parsed (all at once: the
+        rANS lanes step together)."""
         M, B, nt, P = views.size, self.block_size, self.nt, self.P
         if pred is None:
             pred = np.empty((M, nt, TB, TB, P), np.int32)
@@ -609,7 +616,8 @@ class TxDecoder(ProfileDecoder):
                 pred[a:a + step] = self._pred(*self._tb_coords(v, lc)).reshape(v.size, nt, TB, TB, P)
         out = pred if pred.dtype == np.int32 else pred.astype(np.int32)
         if level == 0:
-            have = np.arange(M) if parsed is not None else np.flatnonzero(self.coded[views, locs])
+            if have is None:
+                have = np.arange(M) if parsed is not None else np.flatnonzero(self.coded[views, locs])
             if have.size:
                 if parsed is None:
                     parsed = self._parse(views[have], locs[have])
@@ -700,7 +708,24 @@ class TxDecoder(ProfileDecoder):
         idx = (first[:, None] + np.arange(B) * self.Wp)[:, :, None] + np.arange(B)     # (M, B, B)
         return self.keyplanes.reshape(-1, self.P).take(idx.reshape(-1), axis=0).reshape(views.size, B, B, self.P)
 
-    def blocks(self, views, by, bx, level):
+    def preparse(self, views, by, bx, level):
+        """For a batched call (``views``, ``by``, ``bx`` in the order its chunks take them): its
+        coded requests of views with references, to be parsed :data:`PREPARSE_LANES` streams at
+        a time as its chunks first need them (:class:`ParseAhead`). The rANS lanes of a parse
+        step together, one step per symbol of its longest stream, so fewer and fuller parses
+        cost less than one per chunk (BENCHMARKS.md). None where there are too few to gain (or
+        at a level without residuals)."""
+        if level != 0:
+            return None
+        loc = by * self.nbx + bx
+        have = np.flatnonzero(~self.is_key[views] & self.coded[views, loc])
+        if have.size < PREPARSE_MIN:
+            return None
+        return ParseAhead(self, views[have], loc[have], have, views.size)
+
+    def blocks(self, views, by, bx, level, ahead=None, first: int = 0):
+        """(M, B·B, P) int32 planes of requests; ``ahead``: :meth:`preparse` of the call whose
+        requests ``first``, ``first`` + 1, … these are."""
         out = np.empty((views.size, self.block_size, self.block_size, self.P), np.int32)
         if not self._keys_all:                       # every key-view row the call reads, in one pass
             self._have_rows(views, by)
@@ -713,7 +738,10 @@ class TxDecoder(ProfileDecoder):
             step = max(1, PARSE_TBS // self.nt)                         # references stay in cache
             for a in range(0, order.size, step):
                 c = order[a:a + step]
-                out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level)
+                parsed = have = None
+                if ahead is not None:               # the chunk's streams, parsed with others'
+                    have, parsed = ahead.chunk(first + c)
+                out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level, parsed=parsed, have=have)
         B = self.block_size
         return out.reshape(views.size, B * B, self.P)
 
@@ -936,6 +964,51 @@ class TxDecoder(ProfileDecoder):
         return {"key_views": len(lay.keys), "maps": lay.n_maps, "coded_blocks": int(self.coded.sum()),
                 "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split,
                 "layout_version": int(lay.version), "weighted_views": int(self._weighted.sum())}
+
+
+class ParseAhead:
+    """The coded requests of one batched call (streams of views with references), parsed in
+    groups of :data:`PREPARSE_LANES` streams, each group once, by the first chunk that needs it
+    (others that need it wait; chunks on other threads predict meanwhile).
+
+    Args:
+        core: the :class:`TxDecoder`; views, locs: (S,) the coded requests' views and block
+            locations, in the call's order; at: (S,) their places among the call's M requests.
+    """
+
+    def __init__(self, core, views, locs, at, M: int):
+        self.core, self.views, self.locs = core, views, locs
+        self.lane = np.full(M, -1, np.int64)
+        self.lane[at] = np.arange(at.size)
+        n = -(-at.size // PREPARSE_LANES)
+        self.parsed: list = [None] * n                 # per group: (Parsed, its lane bounds)
+        self.locks = [threading.Lock() for _ in range(n)]
+
+    def _group(self, g: int) -> tuple:
+        with self.locks[g]:
+            if self.parsed[g] is None:
+                a, b = g * PREPARSE_LANES, (g + 1) * PREPARSE_LANES
+                p = self.core._parse(self.views[a:b], self.locs[a:b])
+                self.parsed[g] = (p, p.lane_bounds())
+            return self.parsed[g]
+
+    def chunk(self, idx: np.ndarray) -> tuple:
+        """(places within ``idx`` of its coded requests, their Parsed) for the call's requests
+        ``idx`` (ascending, as the decoder's chunks take them; else those streams are parsed
+        on their own)."""
+        lane = self.lane[idx]
+        have = np.flatnonzero(lane >= 0)
+        lane = lane[have]
+        if not lane.size:
+            return have, None
+        if lane.size > 1 and (np.diff(lane) <= 0).any():      # (not in the call's order: parsed as they are)
+            return have, self.core._parse(self.views[lane], self.locs[lane])
+        parts = []
+        for g in range(int(lane[0]) // PREPARSE_LANES, int(lane[-1]) // PREPARSE_LANES + 1):
+            p, bounds = self._group(g)
+            sel = lane[(lane >= g * PREPARSE_LANES) & (lane < (g + 1) * PREPARSE_LANES)]
+            parts.append(p.take(sel - g * PREPARSE_LANES, bounds))
+        return have, parts[0] if len(parts) == 1 else concat_parsed(parts)
 
 
 def pred_inputs(tables, nbx8: int, views, ty, tx):

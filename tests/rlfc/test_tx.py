@@ -365,6 +365,47 @@ def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
         assert (got == ref).all(), trial
 
 
+@pytest.mark.parametrize("threads", [1, 2])
+def test_batched_calls_parse_their_streams_ahead_in_groups(threads, monkeypatch):
+    """A batched call's coded streams are parsed in groups larger than its chunks
+    (:class:`rlfc.profiles.tx.ParseAhead`, each group once, by the first chunk that needs it,
+    on any thread): the same pixels as the whole views, with groups that straddle chunks, on
+    one and two threads; requests out of the call's order are parsed on their own."""
+    import rlfc.decoder as rd
+    import rlfc.profiles.tx as ptx
+
+    lf, e, _ = _noisy_grid_encoded({}, amp8=9, seed=3, step8=2.0)
+    d, _ = open_encoded(lf, e)
+    core, B = d.core, d.block_size
+    full = d.decode_all()
+    rng = np.random.default_rng(11)
+    M = 900
+    views = rng.integers(0, lf.rows * lf.cols, M)
+    by, bx = rng.integers(0, d.nby, M), rng.integers(0, d.nbx, M)
+    coded = (~core.is_key[views] & core.coded[views, by * d.nbx + bx]).sum()
+    assert coded > 200
+    monkeypatch.setattr(rd, "DECODE_CHUNK", 37 * B * B)               # chunks of 37 requests
+    monkeypatch.setattr(ptx, "PREPARSE_LANES", 50)                    # groups of 50 streams: several per
+    monkeypatch.setattr(ptx, "PREPARSE_MIN", 10)                      # chunk, and chunks across groups
+    parses = []
+    real = ptx.TxDecoder._parse
+    monkeypatch.setattr(ptx.TxDecoder, "_parse", lambda self, v, l: parses.append(v.size) or real(self, v, l))
+    got = d.decode_blocks(views, by, bx, threads=threads)
+    for i in range(M):
+        r, c = divmod(int(views[i]), lf.cols)
+        ref = full[r, c, by[i] * B:(by[i] + 1) * B, bx[i] * B:(bx[i] + 1) * B]
+        assert (got[i][:ref.shape[0], :ref.shape[1]] == ref).all()
+    assert sorted(parses) == sorted([50] * (coded // 50) + ([coded % 50] if coded % 50 else []))   # each group once
+    order = np.lexsort((bx, by, views))
+    ahead = core.preparse(views[order], by[order], bx[order], 0)
+    idx = np.arange(100, 160)
+    have, parsed = ahead.chunk(idx)
+    have2, parsed2 = ahead.chunk(idx[::-1])                           # (out of order: parsed as they are)
+    assert have.size > 5 and (have2 == idx.size - 1 - have[::-1]).all()
+    assert (parsed2.levels[::-1] == parsed.levels).all() and (parsed2.modes[::-1] == parsed.modes).all()
+    assert core.preparse(views[order], by[order], bx[order], 1) is None             # no residual at level 1
+
+
 def test_a_file_truncated_while_open_refuses_what_it_would_read(tmp_path):
     """A decode call checks the file where it reads its bytes: a block whose stream it must read
     from a file truncated under its memory map is a FormatError (not a SIGBUS), a block it holds

@@ -302,3 +302,23 @@ def test_streams_that_claim_many_symbols_parse_in_bounded_runs(device, monkeypat
         got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     assert (got.modes == modes).all() and (got.levels == levels).all()
     assert len(sizes) >= 5 and max(sizes) <= budget and sum(sizes) >= (levels != 0).sum()
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(0, 2**31 - 1), st.integers(1, 12), st.integers(1, 4), st.integers(1, 4), st.integers(0, 20))
+def test_taking_lanes_gives_their_coefficients(seed, S, nt, P, n):
+    """``Parsed.take`` (lanes in any order, repeats too; with the bounds kept or not) holds the
+    dense levels of those lanes, and ``lane_bounds`` delimits each lane's coefficients."""
+    rng = np.random.default_rng(seed)
+    levels = rng.integers(-3, 4, (S, nt, P, 64)) * (rng.random((S, nt, P, 64)) < rng.random())
+    levels[rng.random(S) < 0.3] = 0                                    # lanes without coefficients
+    p = tx.Parsed.from_levels(rng.integers(0, 3, (S, nt)), levels)
+    per = nt * P * 64
+    b = p.lane_bounds()
+    assert b[0] == 0 and b[-1] == p.index.size and (np.diff(b) >= 0).all()
+    for i in range(S):
+        assert ((p.index[b[i]:b[i + 1]] // per) == i).all()
+    lanes = rng.integers(0, S, n)
+    for got in (p.take(lanes), p.take(lanes, b)):
+        assert got.P == P and (got.modes == p.modes[lanes]).all()
+        assert (got.levels == levels[lanes]).all()
