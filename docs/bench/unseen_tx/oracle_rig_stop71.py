@@ -12,7 +12,8 @@ from formats.codec_api import EncodeOptions
 from rlfc import txencode as te, txsample as ts, txestimate as tse
 from rlfc.txsample import TB
 
-variant, target, oracle = sys.argv[1], float(sys.argv[2]), sys.argv[3] == "oracle"
+variant, target, how = sys.argv[1], float(sys.argv[2]), sys.argv[3]
+oracle = how in ("oracle", "estimated")
 ant = read_scene("/work/shared/data/hci_antinous")
 r, c, h, w, _ = ant.views.shape
 cen = (w / 2 - 0.5, h / 2 - 0.5)
@@ -31,6 +32,10 @@ else:
     mats = [np.float64([[1, 0, 0], [0, 1, 0]])] * (r * c)
     views = ant.views
 lf = unseen._grid(views, variant)
+if how == "estimated":                      # the warps estimated from the views alone (est_warp.py)
+    sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+    import est_warp_stop71 as est_warp
+    mats = est_warp.estimate(views)[0]
 full = [np.vstack([m, [0, 0, 1]]) for m in mats]
 inv = [np.linalg.inv(m) for m in full]
 
@@ -114,5 +119,5 @@ if oracle:
 
 e = te.encode_tx(lf, EncodeOptions(profile="tx", target_psnr=target))
 b = sum(len(x) for _, x in e.sections) + (2 * 4 * r * c if oracle else 0)
-print(json.dumps({"variant": variant, "target": target, "oracle": oracle, "bytes": b, "bpp": 8 * b / (r * c * h * w),
+print(json.dumps({"variant": variant, "target": target, "warps": how, "bytes": b, "bpp": 8 * b / (r * c * h * w),
                   "psnr": round(e.summary["psnr_rgb"], 3), "coded_blocks": e.config.get("n_blocks")}))
