@@ -763,20 +763,47 @@ def test_jpeg2000_search_learns_where_openjpeg_lands(monkeypatch):
     assert warm < cold
 
 
-@pytest.mark.parametrize("case", ["trim", "promote", "bpp", "lossless", "grey16"])
-def test_an_encode_that_keeps_no_decoded_views_writes_the_same_file(case):
+def _plane_grid(rows: int = 3, cols: int = 3, h: int = 120, w: int = 160):
+    """A textured plane seen by a small grid, 1.5 px of parallax per view step (bicubic)."""
+    import cv2
+
+    from formats.lightfield import LightField, grid_positions
+
+    rng = np.random.default_rng(0)
+    t = cv2.GaussianBlur(rng.random((h + 40, w + 60, 3)).astype(np.float32), (0, 0), 1.6)
+    t = (t - t.min()) / np.ptp(t) * 200 + 25
+    views = np.stack([np.stack([np.clip(np.rint(cv2.warpAffine(t, np.float32([[1, 0, 1.5 * j + 20], [0, 1, 1.5 * i + 20]]),
+                                                               (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP)),
+                                        0, 255).astype(np.uint8) for j in range(cols)]) for i in range(rows)])
+    return LightField(views=views, positions=grid_positions(rows, cols), layout="grid")
+
+
+@pytest.mark.parametrize("case", ["trim", "promote", "bpp", "lossless", "grey16", "restored"])
+def test_an_encode_that_keeps_no_decoded_views_writes_the_same_file(case, monkeypatch):
     """``EncodeOptions(keep_decoded=False)``: the passes keep each view's error, not its pixels
     (one copy of the light field less at the peak), and ``decoded`` is None; the sections, the
     rate search's trace and the summary are those of the default encode. The cases take the
     paths that looked at the kept pixels before: the λ trim (noisy grid at 40 dB), views
-    promoted to JPEG 2000 keys (unrelated views at 48 dB), a bpp target, lossless, 16-bit grey."""
-    lf = {"trim": _noisy_grid, "promote": _unrelated_grid,
+    promoted to JPEG 2000 keys (unrelated views at 48 dB), a bpp target, lossless, 16-bit grey,
+    and maps repriced for the search then restored on a grid too small for a sampled search
+    (the search's pass coded with the repriced maps: without keeping pixels that pass used to
+    be written with the restored ones, a file 0.03 dB below the target it claimed)."""
+    import rlfc.txencode as T
+
+    lf = {"trim": _noisy_grid, "promote": _unrelated_grid, "restored": lambda: _plane_grid(3, 3, 96, 128),
           "grey16": lambda: smooth_lf(rows=3, cols=3, h=24, w=32, c=1, dtype=np.uint16)}.get(
         case, lambda: smooth_lf(rows=3, cols=3, h=24, w=32))()
     kw = {"trim": {"target_psnr": 40}, "promote": {"target_psnr": 48}, "bpp": {"target_bpp": 0.8},
-          "lossless": {"lossless": True}, "grey16": {"target_psnr": 50}}[case]
+          "lossless": {"lossless": True}, "grey16": {"target_psnr": 50}, "restored": {"target_psnr": 37}}[case]
+    restores = []
+    real = T.TxEncoder.restore_maps
+    monkeypatch.setattr(T.TxEncoder, "restore_maps", lambda self: restores.append(self._maps_before is not None)
+                        or real(self))
     a = encode(lf, EncodeOptions(profile="tx", **kw))
     b = encode(lf, EncodeOptions(profile="tx", keep_decoded=False, **kw))
+    if case == "restored":
+        assert restores == [True, True]
+        assert b.summary["psnr_rgb"] >= 37 and psnr_rgb(lf.views, a.decoded) == pytest.approx(b.summary["psnr_rgb"])
     assert a.decoded is not None and b.decoded is None
     assert a.sections == b.sections and a.trace == b.trace and a.summary == b.summary and a.notes == b.notes
     if case == "trim":
