@@ -220,6 +220,11 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
         prog.close()
     if str(out.resolve()) in set(lf.meta.get("input_paths", ())):
         raise ParameterError(f"{out}: refusing to write over one of the input files of the scene")
+    rectified = None
+    if getattr(a, "rectify", False):
+        from .rectify import rectify_grid
+
+        lf, rectified = rectify_grid(lf)
     opts = EncodeOptions(target_psnr=a.target_psnr, target_bpp=a.target_bpp, min_view_psnr=a.min_view_psnr,
                          lossless=bool(a.lossless), profile=getattr(a, "profile", None) or "auto",
                          params=codec.params_from_args(a), workers=getattr(a, "workers", 1),
@@ -240,7 +245,7 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
         prog.close()
     nbytes = write_lfc(out, codec.codec_id, codec.version, enc.config, lf.geometry(), enc.sections, more=enc.more,
                        extra={"source": {k: v for k, v in lf.meta.items()
-                                         if k in ("reader", "assumed", "source", "license")}})
+                                         if k in ("reader", "assumed", "source", "license", "rectified")}})
     enc_s = time.perf_counter() - t0
     nv = lf.rows * lf.cols
     report = {"file": str(out), "bytes": nbytes, "bpp": bpp(nbytes, nv, lf.height, lf.width),
@@ -258,6 +263,14 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
         notes.append(f"{scene}: split '{sp}' (transforms_{sp}.json) was not encoded; encode it with --split {sp}, "
                      f"or every split as one capture with --split all")
     notes += _unused_read_options(a, lf)
+    if rectified is not None:
+        report["rectify"] = rectified
+        px = rectified["largest_correction_px"]
+        notes.append(f"--rectify: the views were resampled onto the rectified grid (the largest correction moved a "
+                     f"corner by {px:g} px); the file holds them, and its PSNRs are against them"
+                     if rectified["applied"] else
+                     f"--rectify: the views are rectified already (no pixel would move by {px:g} px or more); "
+                     f"they were coded as they are")
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
         notes.append(f"{enc.summary.get('profile', codec.codec_id)} codes in this process only; "
                       "--workers/--scheduler had no effect")
@@ -933,6 +946,11 @@ def _add_scene_options(e) -> None:
                    help="read a plain folder of images as this grid (natural name order, row-major)")
     e.add_argument("--allow-outside-paths", action="store_true",
                    help="read view files that lie outside the scene folder (refused by default)")
+    e.add_argument("--rectify", action="store_true",
+                   help="grids: estimate each view's rotation, scale and shift from the views (a rig that is not "
+                        "rectified) and resample the views onto the rectified grid before coding; the file holds "
+                        "the rectified views and PSNRs are against them (nothing is changed where no pixel would "
+                        "move by 0.25 px)")
     e.add_argument("--json", action="store_true", help="print one JSON object (bytes, bpp, PSNRs, SSIM, times)")
     e.add_argument("--quiet", action="store_true", help="no progress bars or messages")
 
