@@ -950,7 +950,7 @@ def _add_scene_options(e) -> None:
                    help="grids: estimate each view's rotation, scale and shift from the views (a rig that is not "
                         "rectified) and resample the views onto the rectified grid before coding; the file holds "
                         "the rectified views and PSNRs are against them (nothing is changed where no pixel would "
-                        "move by 0.25 px)")
+                        "move by 0.5 px)")
     e.add_argument("--json", action="store_true", help="print one JSON object (bytes, bpp, PSNRs, SSIM, times)")
     e.add_argument("--quiet", action="store_true", help="no progress bars or messages")
 

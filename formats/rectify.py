@@ -23,11 +23,13 @@ import numpy as np
 from .errors import ParameterError
 
 #: views whose estimated warps move no pixel by more than this (px) are left as they are
-MIN_CORRECTION_PX = 0.25
+MIN_CORRECTION_PX = 0.5
 #: the flow is computed on views downscaled to at most this many pixels on their long side
 FLOW_SIDE = 640
 #: border (px, at flow scale) left out of each pair's fit
 FLOW_BORDER = 12
+#: each pair's fit reads the flow at every FIT_STRIDE-th pixel of each row and column
+FIT_STRIDE = 2
 
 
 def _grey8(view: np.ndarray) -> np.ndarray:
@@ -46,7 +48,7 @@ def _pair_fit(a: np.ndarray, b: np.ndarray, horizontal: bool, X: np.ndarray, Y: 
     as θ·X + s·Y + ty, or s·X − θ·Y + tx, then refitted on the pixels within 3 median
     deviations of the first fit."""
     m = FLOW_BORDER
-    f = dis.calc(a, b, None)[m:-m, m:-m]
+    f = dis.calc(a, b, None)[m:-m:FIT_STRIDE, m:-m:FIT_STRIDE]
     y = (f[..., 1] if horizontal else f[..., 0]).reshape(-1).astype(np.float64)
     ones = np.ones_like(X)
     A = np.stack([X, Y, ones], 1) if horizontal else np.stack([-Y, X, ones], 1)     # columns: θ, s, shift
@@ -78,26 +80,27 @@ def estimate_warps(views: np.ndarray) -> np.ndarray:
     ky, kx = hs / h, ws / w
     grey = [cv2.resize(_grey8(views[i, j]), (ws, hs), interpolation=cv2.INTER_AREA) if k < 1 else _grey8(views[i, j])
             for i in range(r) for j in range(c)]
-    yy, xx = np.mgrid[FLOW_BORDER:hs - FLOW_BORDER, FLOW_BORDER:ws - FLOW_BORDER].astype(np.float64)
+    yy, xx = np.mgrid[FLOW_BORDER:hs - FLOW_BORDER:FIT_STRIDE, FLOW_BORDER:ws - FLOW_BORDER:FIT_STRIDE].astype(np.float64)
     Y, X = (yy.reshape(-1) + 0.5) / ky - h / 2, (xx.reshape(-1) + 0.5) / kx - w / 2    # full-size, centred
-    dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+    from .parallel import Runner
+
     n = r * c
+    pairs = [(i * c + j, (i + di) * c + j + dj, di == 0) for i in range(r) for j in range(c)
+             for di, dj in ((0, 1), (1, 0)) if i + di < r and j + dj < c]
+
+    def fit(u: int, v: int, horizontal: bool) -> np.ndarray:
+        dis = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)     # (one per task: not shared)
+        # (the flow is in downscaled pixels, the fit's coordinates full-size ones)
+        return _pair_fit(grey[u], grey[v], horizontal, X, Y, dis) / (ky if horizontal else kx)
+
+    fits = Runner().map_threaded(fit, pairs)              # (OpenCV's flow releases the GIL)
     rows, rhs = [], []
-    for i in range(r):
-        for j in range(c):
-            u = i * c + j
-            for di, dj in ((0, 1), (1, 0)):
-                if i + di >= r or j + dj >= c:
-                    continue
-                v = (i + di) * c + j + dj
-                horizontal = di == 0
-                # (the flow is in downscaled pixels, the fit's coordinates full-size ones)
-                th, s, sh = _pair_fit(grey[u], grey[v], horizontal, X, Y, dis) / (ky if horizontal else kx)
-                for col, val in ((0, th), (1, s), (3 if horizontal else 2, sh)):
-                    row = np.zeros(4 * n)
-                    row[4 * v + col], row[4 * u + col] = 1.0, -1.0
-                    rows.append(row)
-                    rhs.append(val)
+    for (u, v, horizontal), (th, s, sh) in zip(pairs, fits):
+        for col, val in ((0, th), (1, s), (3 if horizontal else 2, sh)):
+            row = np.zeros(4 * n)
+            row[4 * v + col], row[4 * u + col] = 1.0, -1.0
+            rows.append(row)
+            rhs.append(val)
     for col in range(4):                                   # the gauge: each parameter's mean is 0
         row = np.zeros(4 * n)
         row[col::4] = 1.0
