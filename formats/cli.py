@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__
+from .codec_api import is_real
 from .errors import LfcError, ParameterError, TruncatedError
 from .imageio import check_parent_folder
 
@@ -127,6 +128,10 @@ def cmd_info(a) -> int:
         }
         if all(isinstance(scene.get(k), int) and scene[k] > 0 for k in ("rows", "cols", "height", "width")):
             out["bpp"] = 8.0 * c.size / (scene["rows"] * scene["cols"] * scene["height"] * scene["width"])
+        rect = meta.get("source", {}).get("rectified") if isinstance(meta.get("source"), dict) else None
+        px = rect.get("largest_correction_px") if isinstance(rect, dict) else None
+        if is_real(px) and math.isfinite(px) and px >= 0:     # (encode --rectify; informative, checked)
+            out["rectified"] = {"largest_correction_px": float(px)}
         try:
             out["decoder"] = describe(f)
         except TruncatedError as e:
@@ -144,6 +149,9 @@ def cmd_info(a) -> int:
     print(f"scene: {s['rows']}x{s['cols']} views of {s['height']}x{s['width']} (HxW) x{s['channels']} {s['dtype']} "
           f"({s['layout']})" + (f", {out['bpp']:.4f} bpp" if "bpp" in out else ""))
     print(out["decoder"].get("summary", ""))
+    if "rectified" in out:
+        print(f"rectified when encoded (--rectify): the views are the rectified ones (the largest correction moved "
+              f"a corner by {out['rectified']['largest_correction_px']:g} px)")
     print("sections:")
     for sec in out["sections"]:
         have = "" if sec["available"] == sec["bytes"] else f"  ({sec['available']} in this prefix)"

@@ -103,6 +103,11 @@ def test_encode_rectify_from_the_command_line(tmp_path, capsys):
     assert rep["psnr_rgb"] >= 36 and rep["target_met"] is True
     with open_lfc(out) as f:                                          # the file says what was done
         assert f.meta["source"]["rectified"]["largest_correction_px"] == rep["rectify"]["largest_correction_px"]
+    assert main(["info", str(out), "--json"]) == 0                    # ... and info says it
+    assert json.loads(capsys.readouterr().out)["rectified"]["largest_correction_px"] == \
+        rep["rectify"]["largest_correction_px"]
+    assert main(["info", str(out)]) == 0
+    assert "rectified when encoded (--rectify)" in capsys.readouterr().out
     np.save(tmp_path / "flat.npy", _grid(3, 3).reshape(9, H, W, 3))
     assert main(["encode", str(tmp_path / "flat.npy"), str(tmp_path / "flat.lfc"), "--grid", "3x3", "--rectify",
                  "--quant", "8", "--json", "--quiet"]) == 0
@@ -110,3 +115,5 @@ def test_encode_rectify_from_the_command_line(tmp_path, capsys):
     assert rep["rectify"]["applied"] is False and any("rectified already" in n for n in rep["notes"])
     with open_lfc(tmp_path / "flat.lfc") as f:
         assert "rectified" not in f.meta["source"]
+    assert main(["info", str(tmp_path / "flat.lfc"), "--json"]) == 0
+    assert "rectified" not in json.loads(capsys.readouterr().out)
