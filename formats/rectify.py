@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ParameterError
+from .parallel import Runner
 
 #: views whose estimated warps move no pixel by more than this (px) are left as they are
 MIN_CORRECTION_PX = 0.5
@@ -82,8 +83,6 @@ def estimate_warps(views: np.ndarray) -> np.ndarray:
             for i in range(r) for j in range(c)]
     yy, xx = np.mgrid[FLOW_BORDER:hs - FLOW_BORDER:FIT_STRIDE, FLOW_BORDER:ws - FLOW_BORDER:FIT_STRIDE].astype(np.float64)
     Y, X = (yy.reshape(-1) + 0.5) / ky - h / 2, (xx.reshape(-1) + 0.5) / kx - w / 2    # full-size, centred
-    from .parallel import Runner
-
     n = r * c
     pairs = [(i * c + j, (i + di) * c + j + dj, di == 0) for i in range(r) for j in range(c)
              for di, dj in ((0, 1), (1, 0)) if i + di < r and j + dj < c]
