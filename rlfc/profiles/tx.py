@@ -181,6 +181,12 @@ class TxDecoder(ProfileDecoder):
         fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
         self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P)) \
             if fits else None
+        self._pixel_bounds = None          # the planes' (lo, hi) over the atlas's C channels, its float type (±inf
+        if self.atlas is not None:         # past P): where block_pixels clips a coded block's sum
+            ft, C = self.atlas.ftype, self.atlas.C
+            lw, hg = np.full(C, -np.inf, ft), np.full(C, np.inf, ft)
+            lw[:self.P], hg[:self.P] = self.lo, self.hi
+            self._pixel_bounds = (lw, hg)
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)
@@ -799,17 +805,6 @@ class TxDecoder(ProfileDecoder):
         res = np.zeros((nt, 64, self.atlas.C), self.atlas.ftype)
         res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
         return res.reshape(nt * 64, self.atlas.C)
-
-    @property
-    def _pixel_bounds(self) -> tuple:
-        """The planes' (lo, hi) over the atlas's C channels in its float type (±inf past P)."""
-        got = self.__dict__.get("_pb")
-        if got is None:
-            ft, C, P = self.atlas.ftype, self.atlas.C, self.P
-            lw, hg = np.full(C, -np.inf, ft), np.full(C, np.inf, ft)
-            lw[:P], hg[:P] = self.lo, self.hi
-            got = self._pb = (lw, hg)
-        return got
 
     def _pixel_refs(self, view: int):
         """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references
