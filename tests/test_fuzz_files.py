@@ -54,14 +54,17 @@ def test_lfn_reference_tolerance_follows_float32s_own_spread(tmp_path):
     """tools.fuzz seed 55001339 moves bytes into a hidden layer (a weight of 17 328): float32 then
     cannot evaluate the network to a grey level (the library's own pixel moves by 3 levels between
     one ray per batch and all rays together), and the float64 reference differs there by up to 4:
-    counted ``illcond``, not a defect. On a network of trained weights the same check still calls a
-    wrong pixel a mismatch: float32 moves by nothing there."""
+    counted ``illcond``, not a defect. Whether float32 moves there depends on the CPU's vector
+    width (the batch's summation order): where it does not, the mutant decodes within the
+    reference's tolerance (``referenced``); either way it is no defect. On a network of trained
+    weights the same check still calls a wrong pixel a mismatch: float32 moves by nothing there."""
     from tools.fuzz import check_reference, make_mutant, run_one
 
     blob = (GOLDEN / "lfn_tiny_rgba8.lfc").read_bytes()
     mutant, what = make_mutant(blob, 55001339)
     outcome, detail, _ = run_one(mutant, 55001339, str(tmp_path))
-    assert outcome == "illcond" and "1 pixel" in detail, (outcome, detail, what)
+    assert outcome in ("illcond", "referenced"), (outcome, detail, what)
+    assert outcome == "referenced" or "1 pixel" in detail, (outcome, detail, what)
     with open_lfc(blob) as f:
         got = open_decoder(f).decode_all(0)
     assert check_reference(blob, {"levels": {0: got}})
