@@ -279,6 +279,17 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
                      if rectified["applied"] else
                      f"--rectify: the views are rectified already (no pixel would move by {px:g} px or more); "
                      f"they were coded as they are")
+    wr = enc.summary.get("warps")
+    if isinstance(wr, dict):                  # (tx --warps: stored, or why not)
+        px = wr.get("largest_correction_px")
+        drop = wr.get("error_drop")
+        notes.append(f"--warps: each view's warp is stored ({wr.get('warp_bytes')} bytes; the largest correction moves a "
+                     f"corner by {px:g} px) and the predictions sample through them"
+                     if wr.get("applied") else
+                     f"--warps: the warps would take only {100 * drop:.0f}% of the prediction error away (a corner "
+                     f"moves by {px:g} px); no warps were stored" if drop is not None else
+                     f"--warps: the views are rectified already (no pixel would move by 0.5 px or more: {px:g} px); "
+                     f"no warps were stored")
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
         notes.append(f"{enc.summary.get('profile', codec.codec_id)} codes in this process only; "
                       "--workers/--scheduler had no effect")

@@ -90,13 +90,17 @@ class RlfcCodec(Codec):
                        help="tx: a gain and an offset per view and plane on the prediction, where they pay (camera "
                             "arrays whose views differ in exposure, vignetting; a version 4 file where one is kept; "
                             "default: on)")
+        g.add_argument("--warps", action="store_true", default=None,
+                       help="tx, grids: estimate each view's rotation, scale and shift against the grid (a rig that "
+                            "is not rectified) and predict through them; the file (version 5) holds the captured "
+                            "pixels and the warps (unlike --rectify, which resamples the views); 2-8 CPU-s more")
 
     def params_from_args(self, a) -> dict:
         names = {"quant": "quant", "block_size": "block_size", "threshold": "threshold", "energy": "energy",
                  "tree_height": "tree_height", "sigma": "sigma", "top_codec": "top_codec", "top_psnr": "top_psnr",
                  "max_disparity": "max_disparity", "disparity_bits": "disp_frac_bits", "key_spacing": "key_spacing",
                  "key_ratio": "key_ratio", "intra_codec": "intra_codec", "key_split": "key_split",
-                 "weighted_prediction": "weighted"}
+                 "weighted_prediction": "weighted", "warps": "warps"}
         return {k: getattr(a, arg) for arg, k in names.items() if getattr(a, arg, None) is not None}
 
 

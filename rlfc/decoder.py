@@ -237,6 +237,10 @@ class RlfcDecoder(Decoder):
         return Renderer(self, **kw)
 
     def info(self) -> dict:
+        core = self.core.info()
+        summary = (f"RLFC profile {self.profile}, {self.block_size}x{self.block_size}-px blocks, levels "
+                   f"0..{self.levels} (0 = full quality)")
+        if core.get("warped_views"):
+            summary += f"; {core['warped_views']} views predicted through per-view warps (--warps)"
         return {"codec": CODEC_ID, "profile": self.profile, "levels": self.levels, "block_size": self.block_size,
-                "summary": f"RLFC profile {self.profile}, {self.block_size}x{self.block_size}-px blocks, levels "
-                           f"0..{self.levels} (0 = full quality)", **self.core.info()}
+                "summary": summary, **core}

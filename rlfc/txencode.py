@@ -12,6 +12,7 @@ Key views use a finer step (Δ / key_ratio): every other view is predicted from 
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import asdict, dataclass, replace
 
 import numpy as np
@@ -30,12 +31,13 @@ from .params import flags
 from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
-from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WP_VERSION, TxLayout, weighted_views
+from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WARP_VERSION, WP_VERSION, TxLayout, weighted_views
+from .txwarp import pair_params, view_offsets, warp_params
 from .ratesearch import secant_search
 from .txpredict import TB, fit_price, fit_weights, priced_weights, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
 from .txmaps import maps_bytes, pack_maps
-from .txsections import pack_index, pack_thumbs, stream_order
+from .txsections import pack_index, pack_thumbs, stream_order, varints
 from .txstructure import build, build_intra
 from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
                        PACK_CELLS, ctx_esc, ctx_last, ctx_mag, ctx_mode, pack_streams, plane_classes,
@@ -103,6 +105,14 @@ class TxParams:
             (hci_antinous with a gain per view in [0.9, 1.1] at 40 dB, −79% bytes), vignetting,
             noisy predicted chroma. On by default; a file without a kept fit stays version 2/3
             (BENCHMARKS.md, weighted prediction).
+        warps: per-view warps (``tx`` version 5, :mod:`rlfc.txwarp`) for rigs that are not
+            rectified: each view's rotation, scale and shift against the grid is estimated from
+            the views (:func:`formats.rectify.estimate_warps`, 2-8 CPU-s on the shared grids) and,
+            where some pixel moves by at least :data:`formats.rectify.MIN_CORRECTION_PX` and the
+            warps take :data:`WARP_MIN_ERROR_DROP` of the maps' prediction error away, stored,
+            and every prediction samples its references through them: the pixels coded are the
+            captured ones (``--rectify`` resamples them instead). Off by default (its estimate's
+            cost); grids only.
     """
 
     block_size: int = 16
@@ -117,6 +127,7 @@ class TxParams:
     ablate: tuple = ()
     key_split: int = 0
     weighted: bool = True
+    warps: bool = False
 
     def __post_init__(self):
         check_field_types(self)           # types first: a string or a list fails range tests untyped
@@ -156,6 +167,8 @@ def params_info(p: TxParams) -> dict:
         del d["key_split"]
     if d["weighted"]:
         del d["weighted"]
+    if not d["warps"]:
+        del d["warps"]
     return d
 
 
@@ -351,6 +364,10 @@ class TxEncoder:
         # posed captures: no grid to predict along, so every view is coded on its own (the
         # transform path or JPEG 2000, whichever is smaller per view)
         self.s = build(r, c, spacing) if lf.layout == "grid" else build_intra(r * c)
+        self.warp_report = None                   # what became of asked-for warps (the report's "warps")
+        if params.warps and lf.layout == "grid" and r * c >= 2:
+            self._estimate_warps(lf)
+        self.warp_dw = None if self.s.warp is None else pair_params(self.s.warp, self.s.refs)
         self.is_key = np.zeros(r * c, bool)
         self.is_key[self.s.keys] = True
         self.intra = (self.s.refs < 0).all(axis=1)
@@ -379,10 +396,18 @@ class TxEncoder:
         self._est_costs = None
         if self.has_maps:
             luma = self._luma()
-            self.base, self.disp, self.modes, costs = estimate_maps(
-                luma, self.s, max_disparity=params.max_disparity, runner=runner,
-                side_lambda=side_lambda, progress=progress, ref_modes="ref_modes" not in params.ablate,
-                with_costs=True)
+
+            def estimate():
+                return estimate_maps(luma, self.s, max_disparity=params.max_disparity, runner=runner,
+                                     side_lambda=side_lambda, progress=progress,
+                                     ref_modes="ref_modes" not in params.ablate, with_costs=True)
+
+            self.base, self.disp, self.modes, costs = estimate()
+            if self.s.warp is not None and self._warp_error_drop(luma, costs) < WARP_MIN_ERROR_DROP:
+                self.s.warp = self.warp_dw = None           # (the maps again, for the views as they are)
+                self.warp_report.pop("warp_bytes", None)
+                self.warp_report["applied"] = False
+                self.base, self.disp, self.modes, costs = estimate()
             self._kept_luma = luma if keep_luma and not isinstance(lf.views, np.ndarray) else None
             self._est_costs = costs if keep_luma else None    # (the repricing's first evaluation)
             del costs
@@ -391,6 +416,39 @@ class TxEncoder:
             self.base = np.zeros(nloc8, np.int64)
             self.disp = np.zeros((n_maps, nloc8), np.int64)
             self.modes = np.zeros((n_maps, nloc8), np.int64)
+
+    def _estimate_warps(self, lf) -> None:
+        """Each view's warp estimated from the views (``warps``): kept in ``s.warp`` where the
+        largest correction reaches :data:`formats.rectify.MIN_CORRECTION_PX`."""
+        from formats.rectify import MIN_CORRECTION_PX, estimate_warps, largest_correction
+
+        est = estimate_warps(lf.views)
+        h, w = lf.views.shape[2:4]
+        big = largest_correction(est, h, w)
+        applied = bool(big >= MIN_CORRECTION_PX)
+        if applied:
+            self.s.warp = warp_params(est, h, w)
+            applied = bool(self.s.warp.any())
+            if not applied:
+                self.s.warp = None
+        self.warp_report = {"applied": applied, "largest_correction_px": round(float(big), 3)}
+        if applied:
+            self.warp_report["warp_bytes"] = len(zlib.compress(varints(self.s.warp.reshape(-1)), 9))
+
+    def _warp_error_drop(self, luma: np.ndarray, costs: np.ndarray) -> float:
+        """The share of the maps' luma prediction error (their chosen modes, open loop) that the
+        estimated warps take away: ``costs`` (the estimate's, with the warps, (n_maps, modes,
+        nloc8)) against the same maps and modes sampled without them. Recorded in
+        ``warp_report`` as ``error_drop``."""
+        from .txestimate import Estimator
+
+        plain = Estimator(luma, replace(self.s, warp=None), list(self.s.keys)).costs_maps(self.disp, self.runner)
+        pick = self.modes[:, None, :]
+        sse_w = float(np.take_along_axis(costs, pick, 1).sum())
+        sse_p = float(np.take_along_axis(plain, pick, 1).sum())
+        drop = 1.0 - sse_w / sse_p if sse_p > 0 else 0.0
+        self.warp_report["error_drop"] = round(drop, 4)
+        return drop
 
     def _luma(self) -> np.ndarray:
         """(n0, Hp, Wp) luma (Y) of every view, in [0, peak], in the views' dtype (the copy kept
@@ -579,14 +637,17 @@ class TxEncoder:
         d, mode = self.disp[m], self.modes[m]
         r0 = s.refs[v].clip(0)
         dpos = s.positions[v] - s.positions[r0]
+        warp = None if self.warp_dw is None else view_offsets(self.warp_dw[v], self.nby8, self.nbx8)
         if isinstance(kp, KeyAtlas):                 # raster bands (the decoder's whole-view path)
-            return predict_view(kp, self.key_slot[r0], s.weights[v], d, mode, dpos, self.nby8, self.nbx8)
+            return predict_view(kp, self.key_slot[r0], s.weights[v], d, mode, dpos, self.nby8, self.nbx8, warp=warp)
         nloc8 = self.nby8 * self.nbx8
         ty, tx = np.divmod(np.arange(nloc8), self.nbx8)
         w = mode_weights(s.weights[v])[mode]
         slots = np.broadcast_to(self.key_slot[r0], (nloc8, MAX_REFS))
-        p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, d[:, None] * dpos[None, :, 0],
-                        d[:, None] * dpos[None, :, 1], ty * TB, tx * TB)
+        dy, dx = d[:, None] * dpos[None, :, 0], d[:, None] * dpos[None, :, 1]
+        if warp is not None:
+            dy, dx = dy + warp[0].reshape(MAX_REFS, -1).T, dx + warp[1].reshape(MAX_REFS, -1).T
+        p = predict_tbs(NUMPY, kp, (self.Hp, self.Wp), slots, w, dy, dx, ty * TB, tx * TB)
         return p.reshape(self.nby8, self.nbx8, TB, TB, self.P).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, self.P)
 
     def thumb_levels(self, v: int, thumb16: int, pixels: np.ndarray | None = None) -> np.ndarray:
@@ -1493,11 +1554,12 @@ class TxEncoder:
             np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
         wp = self.weights_of(res)
         weighted = bool(weighted_views(wp).any())
+        warped = self.s.warp is not None                # (version 5: version 4's tables, then the warps)
         lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
                        "j2k" if imgs else "tx", key_images,
-                       WP_VERSION if weighted else SPLIT_VERSION if split > 1 else VERSION, split,
-                       wp if weighted else None)
+                       WARP_VERSION if warped else WP_VERSION if weighted else SPLIT_VERSION if split > 1 else VERSION,
+                       split, wp if weighted or warped else None, self.s.warp)
         lay.check("tx encoder")
         # maps no view uses any more (every view of the cell coded alone): the shared map, no modes
         disp, modes = self.disp, self.modes
@@ -1700,6 +1762,10 @@ def _search_j2k_levels(enc: TxEncoder, target_psnr: float | None, target_bpp: fl
     return sr.result, sr.found
 
 
+#: estimated per-view warps (``warps``) are kept only where they take at least this share of
+#: the maps' open-loop luma prediction error away (stanford_chess 32%: −10% bytes at 40 dB;
+#: stanford_lytro_general_11 7%, a noisy Lytro grid whose error is mostly noise: +1.3%)
+WARP_MIN_ERROR_DROP = 0.15
 SIDE_SCALE = 6.0   # side information is judged open loop on the original key views, which flatters it:
                    # measured best at 6..10 × the coding λ on the dense grids (BENCHMARKS.md)
 
@@ -2203,6 +2269,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                             "key_views": len(enc.structure_of(res)[0]),
                             "views_coded_alone": len(res.get("promoted", ())),
                             "views_weighted": int(weighted_views(enc.weights_of(res)).sum()),
+                            **({"warps": enc.warp_report} if enc.warp_report is not None else {}),
                             "psnr_rgb": finite(enc.psnr(res)), "psnr_view_min": finite(float(enc.view_psnrs(res).min())),
                             **runner.describe()})
 

@@ -10,6 +10,10 @@ the decoder's 1/16-px positions (OpenCV remap in float; the decoder's integer ro
 out of an estimate that only ranks candidates: 3.3× faster than the integer predictor, files
 0.1–0.5% smaller or +0.07% on the six dense grids, BENCHMARKS.md); then the map is regularized
 (its 3×3 median where that costs little more).
+
+With per-view warps (``struct.warp``, :mod:`rlfc.txwarp`) the refinement samples each reference
+through them (each 8×8 block's offset, as the decoder's predictor); the whole-pixel sweep does
+not (its candidates are a pixel apart, the warps' offsets a pixel or two at most).
 """
 from __future__ import annotations
 
@@ -20,6 +24,7 @@ from formats.parallel import Runner
 
 from . import cvremap
 from .txpredict import TB
+from .txwarp import pair_params, view_offsets
 
 
 def _shift(img: np.ndarray, dy: float, dx: float, out: np.ndarray | None = None) -> np.ndarray:
@@ -40,6 +45,12 @@ def _shift(img: np.ndarray, dy: float, dx: float, out: np.ndarray | None = None)
     mat = np.float32([[1, 0, dx], [0, 1, dy]])
     return cv2.warpAffine(img, mat, (w, h), dst=out, flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP,
                           borderMode=cv2.BORDER_REPLICATE)
+
+
+def _pixels_of(o: np.ndarray) -> np.ndarray:
+    """(n8y, n8x) offsets in 1/16 px of 8×8 blocks → (Hp, Wp) float32 pixels, each block's value
+    on its pixels."""
+    return np.repeat(np.repeat(o.astype(np.float32) / 16, TB, 0), TB, 1)
 
 
 def _block_sums(e: np.ndarray, nby8: int, nbx8: int) -> np.ndarray:
@@ -67,6 +78,8 @@ class Estimator:
         self.cells = [np.asarray(v) for v in struct.cell_views]
         self.key_slot = np.full(self.n0, -1, np.int64)
         self.key_slot[keys_order] = np.arange(len(keys_order))
+        warp = getattr(struct, "warp", None)          # per-view warps (rlfc.txwarp): the refinement
+        self.warp_dw = None if warp is None else pair_params(warp, struct.refs)   # samples through them
 
     def _y(self, v: int, out: np.ndarray) -> np.ndarray:
         """(Hp, Wp) float32 luma of view v, written to ``out``."""
@@ -172,13 +185,17 @@ class Estimator:
             dpos = (s.positions[v] - s.positions[r]).astype(np.float32)                # (nr, 2)
             wb = s.weights[v, :nr] / 64.0
             blend.fill(0)
+            warp = None if self.warp_dw is None else view_offsets(self.warp_dw[v], self.nby8, self.nbx8)
             last = [None, None]               # the offsets mx, my were made for (references in a row or a
             for j in range(nr):               # column share one); each reference alone, and their blend
                 ox, oy = float(dpos[j, 1]), float(dpos[j, 0])
-                if ox != last[0]:
+                if ox != last[0] or warp is not None:
                     cv2.scaleAdd(dpix, ox, gx, dst=mx)                 # gx + dpix·Δx in one pass (float32,
-                if oy != last[1]:                                      # the same values as numpy's two)
+                if oy != last[1] or warp is not None:                  # the same values as numpy's two)
                     cv2.scaleAdd(dpix, oy, gy, dst=my)
+                if warp is not None:          # (each 8×8 block's warp offset, as the decoder's predictor)
+                    mx += _pixels_of(warp[1][j])
+                    my += _pixels_of(warp[0][j])
                 last = [ox, oy]
                 cvremap.remap(self._y(r[j], yk), mx, my, cv2.INTER_LINEAR, out=p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)

@@ -19,10 +19,13 @@ import numpy as np
 from formats.errors import FormatError
 from formats.schema import Fields
 
+from .txwarp import check_params
+
 MAX_REFS = 4
 VERSION = 2          # 2: rANS tables built in integers (1: float arithmetic)
 SPLIT_VERSION = 3    # 3: as 2, with key-view block rows coded as ``key_split`` streams each
 WP_VERSION = 4       # 4: as 3 (``key_split`` >= 1), with a weighted prediction per view and plane
+WARP_VERSION = 5     # 5: as 4, with a warp per view (rlfc.txwarp: rigs that are not rectified)
 #: a weighted prediction's gain, in 1/64 (64: the identity), lies within these
 WP_GAIN = (32, 96)
 
@@ -59,11 +62,14 @@ class TxLayout:
             stream per row). Each stream codes nbx / key_split consecutive blocks of the row, so
             a decoder parses a key row as that many independent rANS lanes.
         version: 2 (1: the first files, whose rANS tables were built in float arithmetic; 3: as
-            2 with ``key_split`` > 1; 4: weighted prediction, ``key_split`` >= 1).
+            2 with ``key_split`` > 1; 4: weighted prediction, ``key_split`` >= 1; 5: as 4, with
+            a warp per view).
         wp: (N0, P, 2) int64 or None (before version 4): per view and plane, the gain g (1/64)
             and offset o of its weighted prediction: a predicted view's blended prediction p
             becomes clip(((p·g + 32) >> 6) + o) to the plane's range, before its residual
             (intra views: the identity, g = 64, o = 0).
+        warp: (N0, 4) int64 or None (before version 5): per view, the warp (a, b, cx, cy) of
+            :mod:`rlfc.txwarp` its predictions sample their references with.
     """
 
     positions: np.ndarray
@@ -80,6 +86,7 @@ class TxLayout:
     version: int = VERSION
     key_split: int = 1
     wp: np.ndarray | None = None
+    warp: np.ndarray | None = None
 
     @property
     def n_views(self) -> int:
@@ -106,12 +113,15 @@ class TxLayout:
 
     def to_bytes(self) -> bytes:
         """Section ``tx.layout``: zlib of zig-zag varints: positions (N0×2), refs (N0×4),
-        weights (N0×4), cell (N0), view-major."""
+        weights (N0×4), cell (N0), view-major; version 4: then the weighted predictions' gains
+        less 64 (N0×P) and offsets (N0×P); version 5: then each view's warp (N0×4)."""
         from .txsections import varints
 
         parts = [self.positions.reshape(-1), self.refs.reshape(-1), self.weights.reshape(-1), self.cell]
         if self.wp is not None:        # (version 4: then each view's gains − 64 and offsets, plane by plane)
             parts += [(self.wp[..., 0] - 64).reshape(-1), self.wp[..., 1].reshape(-1)]
+        if self.warp is not None:      # (version 5: then each view's warp a, b, cx, cy)
+            parts += [self.warp.reshape(-1)]
         return zlib.compress(varints(np.concatenate(parts)), 9)
 
     @staticmethod
@@ -121,8 +131,9 @@ class TxLayout:
         from .txsections import MAX_VARINT_BYTES, inflate, unvarints
 
         where = f.where
-        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION, WP_VERSION))
-        count = n_views * (2 + 2 * MAX_REFS + 1) + (2 * n_views * planes if version >= WP_VERSION else 0)
+        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION, WP_VERSION, WARP_VERSION))
+        count = n_views * (2 + 2 * MAX_REFS + 1) + (2 * n_views * planes if version >= WP_VERSION else 0) + \
+            (4 * n_views if version >= WARP_VERSION else 0)
         what = f"{name}: section 'tx.layout'"
         v = unvarints(inflate(data, count * MAX_VARINT_BYTES, what), count, what)
         positions = v[:2 * n_views].reshape(n_views, 2)
@@ -132,7 +143,9 @@ class TxLayout:
         wp = None
         if version >= WP_VERSION:
             rest = v[(2 + 2 * MAX_REFS + 1) * n_views:]
-            wp = np.stack([rest[:n_views * planes] + 64, rest[n_views * planes:]], axis=-1).reshape(n_views, planes, 2)
+            wp = np.stack([rest[:n_views * planes] + 64, rest[n_views * planes:2 * n_views * planes]],
+                          axis=-1).reshape(n_views, planes, 2)
+        warp = v[count - 4 * n_views:].reshape(n_views, 4) if version >= WARP_VERSION else None
         for arr, lo, hi, what_ in ((positions, -(1 << 16), 1 << 16, "positions"), (refs, -1, n_views - 1, "refs"),
                                    (weights, 0, 64, "weights"), (cell, -1, n_views, "cell")):
             if arr.size and (arr.min() < lo or arr.max() > hi):
@@ -152,7 +165,7 @@ class TxLayout:
         key_images = f.int_list("key_images", max_len=n_views, lo=0, hi=1 << 30)
         key_split = f.int("key_split", 1 if version >= WP_VERSION else 2, 1 << 16) if version >= SPLIT_VERSION else 1
         lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
-                       intra_codec, tuple(key_images), version, key_split, wp)
+                       intra_codec, tuple(key_images), version, key_split, wp, warp)
         lay.check(where)
         return lay
 
@@ -178,7 +191,11 @@ class TxLayout:
         if self.version < WP_VERSION and (self.version >= SPLIT_VERSION) != (self.key_split > 1):
             raise FormatError(f"{where}: key_split {self.key_split} needs version {SPLIT_VERSION} (and only it)")
         if (self.wp is not None) != (self.version >= WP_VERSION):
-            raise FormatError(f"{where}: weighted prediction needs version {WP_VERSION} (and only it)")
+            raise FormatError(f"{where}: weighted prediction needs version {WP_VERSION} or later (and only they)")
+        if (self.warp is not None) != (self.version >= WARP_VERSION):
+            raise FormatError(f"{where}: per-view warps need version {WARP_VERSION} (and only it)")
+        if self.warp is not None:
+            check_params(self.warp, where)
         if self.wp is not None:
             g, o = self.wp[..., 0], self.wp[..., 1]
             if g.min() < WP_GAIN[0] or g.max() > WP_GAIN[1]:

@@ -231,7 +231,7 @@ BAND_TBS = 1024
 
 
 def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n8x: int,
-                 out: np.ndarray | None = None) -> np.ndarray:
+                 out: np.ndarray | None = None, warp=None) -> np.ndarray:
     """The prediction of a whole view with references: the blend-mode blocks by
     :func:`predict_rows` in bands, the single-reference blocks by :func:`predict`.
 
@@ -239,7 +239,8 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
         slots: (R,) key slots of the references; weights: (R,) blend weights (sum 64);
             disp: (T,) disparity of each 8×8 block (raster order, T = n8y·n8x); modes: (T,)
             0 = blend, k = reference k − 1 alone; dpos: (R, 2) position offsets (displacement
-            = disparity × offset, in 1/16 pixel).
+            = disparity × offset, in 1/16 pixel); warp: None, or (oy, ox) (R, n8y, n8x) ints
+            added to each reference's displacements (1/16 px: :func:`rlfc.txwarp.view_offsets`).
 
     Returns:
         (8·n8y, 8·n8x, P) int32, the integers of :func:`predict` for every block (written to
@@ -248,6 +249,8 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
     R, P = slots.size, atlas.P
     d = np.asarray(disp).reshape(1, n8y, n8x)
     dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]                  # (R, n8y, n8x)
+    if warp is not None:
+        dy, dx = dy + warp[0], dx + warp[1]
     if out is None:
         out = np.empty((n8y * TB, n8x * TB, P), np.int32)
     band = max(1, BAND_TBS // n8x)
@@ -401,7 +404,7 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
 
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
-                         res=None, bounds=None) -> np.ndarray:
+                         res=None, bounds=None, warp=None) -> np.ndarray:
     """The pixels of one random-access block predicted from its references (and a coded one's
     residual added, ``res``): the same values as :func:`predict_block` (and the residual added
     and clipped) followed by :func:`formats.pixels.from_planes`, in fewer numpy calls (a single
@@ -430,6 +433,8 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
         res: None (predicted only), or (nt·64, C) residual samples in the atlas's float type
             (0 past the P planes), 8×8 blocks and their samples in raster order; bounds: then
             the planes' (lo, hi), each (C,) in that type (±inf past the P planes).
+        warp: None, or the (y, x) offsets in pixels (each (R·nt,) float32 sixteenths,
+            reference-major as the pairs) of a view with per-view warps (:mod:`rlfc.txwarp`).
 
     Returns:
         (8·tpb, 8·tpb, P) pixels of ``dtype``.
@@ -440,11 +445,15 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     dr = d[rep]                                                           # (nt·R,) per pair
     y = dr * dpy
     y += by_px
+    if warp is not None:
+        y += warp[0]
     mr = y[:, None] + gy                                                  # (nt·R, 64) rows in the key view
     mr.clip(_ZERO, np.float32(atlas.hp - 1), out=mr)
     mr += rows0                                                           # … in the atlas
     x = dr * dpx
     x += bx_px
+    if warp is not None:
+        x += warp[1]
     mc = x[:, None] + gx
     smp = cv2.remap(src, mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     np.floor(smp, out=smp)                                                # atlas + 0.5: rounded

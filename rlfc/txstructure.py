@@ -47,6 +47,8 @@ class Structure:
     weights: np.ndarray
     cell: np.ndarray
     cell_views: list
+    #: (N0, 4) int64 per-view warps (rlfc.txwarp), or None: the views are taken as rectified
+    warp: np.ndarray | None = None
 
 
 def build(rows: int, cols: int, spacing: int) -> Structure:

@@ -106,10 +106,15 @@ def rlfc_fixtures() -> dict:
         # tx layout version 4: weighted prediction, on the crop with a gain per view (0.85..1.15)
         "rlfc_tx4_weighted_rgb8": (exposed(v["rgb8"]), dict(profile="tx", block_size=8, step=4.0, key_spacing=3,
                                                             intra_codec="tx", weighted=True)),
+        # tx layout version 5: per-view warps, on the crop with each view shifted by its own
+        # sub-pixel offset (up to 0.7 px), coded with fixed warps (see fixed_warps)
+        "rlfc_tx5_warped_rgb8": (shifted(v["rgb8"]), dict(profile="tx", block_size=8, step=4.0, key_spacing=3,
+                                                          intra_codec="tx", warps=True)),
     })
     out = {}
     for name, (views, kw) in specs.items():
-        with far_maps() if name == "rlfc_tx3_lossy_rgb8" else contextlib.nullcontext():
+        with far_maps() if name == "rlfc_tx3_lossy_rgb8" else fixed_warps() if name == "rlfc_tx5_warped_rgb8" \
+                else contextlib.nullcontext():
             out[name] = (encode(lf_of(views), **kw), lf_of(views))
     return out
 
@@ -140,6 +145,44 @@ def far_maps():
         yield made
     finally:
         te.estimate_maps = real
+
+
+def shifted(views: np.ndarray) -> np.ndarray:
+    """``views`` each shifted by its own offset within ±0.7 px (seed 5, bilinear, edges
+    replicated): a rig that is not rectified."""
+    import cv2
+
+    r, c = views.shape[:2]
+    rng = np.random.default_rng(5)
+    out = np.empty_like(views)
+    for i in range(r):
+        for j in range(c):
+            dx, dy = rng.uniform(-0.7, 0.7, 2)
+            out[i, j] = cv2.warpAffine(views[i, j], np.float64([[1, 0, dx], [0, 1, dy]]), views.shape[3:1:-1],
+                                       flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    return out
+
+
+@contextlib.contextmanager
+def fixed_warps():
+    """The tx encoder's per-view warps set, not estimated (views this small give the estimate too
+    little to fit): a, b within ±2^8 (±0.4% scale, ±0.22°), cx, cy within ±2^8 (±1 px), seed 11,
+    so that every term of the offsets is exercised."""
+    import rlfc.txencode as te
+
+    real = te.TxEncoder._estimate_warps
+
+    def fixed(self, lf):
+        rng = np.random.default_rng(11)
+        n = self.n0
+        self.s.warp = rng.integers(-(1 << 8), 1 << 8, (n, 4)).astype(np.int64)
+        self.warp_report = {"applied": True, "largest_correction_px": None}
+
+    te.TxEncoder._estimate_warps = fixed
+    try:
+        yield
+    finally:
+        te.TxEncoder._estimate_warps = real
 
 
 #: LFN fixtures this tool writes (name: codec version). ``lfn_tiny_rgba8`` (codec version 1: one

@@ -614,6 +614,7 @@ function residual(levels, off, step16, bypass, out) {
 
 // -- the tx profile --------------------------------------------------------------------------------
 const TB = 8, MAX_REFS = 4;
+const WARP_AB_MAX = 1 << 12, WARP_C_MAX = 1 << 15;      // a view warp's ranges (rlfc/txwarp.py)
 
 /** Decoder of an RLFC file of profile "tx" (FORMAT.md "Profile tx"); open with openDecoder(). */
 export class TxDecoder {
@@ -654,11 +655,12 @@ export class TxDecoder {
     this.hi = this.pcs.map(() => this.peak);
     this.flat = this.pcs.map((c) => (c === 1 ? 0 : (this.peak + 1) / 2));
     const tx = need(cfg, "tx", "config");
-    const ver = int(tx, "version", "config.tx", 1, 4);
+    const ver = int(tx, "version", "config.tx", 1, 5);
     if (ver === 1) throw new UnsupportedError(`${name}: tx version 1 files (float rANS tables) are not read here`);
     // version 3: each key-view block row is key_split streams of nbx / key_split blocks; version 4:
-    // key_split >= 1, and a weighted prediction (gain, offset) per view and plane in tx.layout
-    this.keySplit = ver >= 3 ? int(tx, "key_split", "config.tx", ver === 4 ? 1 : 2, 1 << 16) : 1;
+    // key_split >= 1, and a weighted prediction (gain, offset) per view and plane in tx.layout;
+    // version 5: as 4, with a warp per view (rlfc/txwarp.py)
+    this.keySplit = ver >= 3 ? int(tx, "key_split", "config.tx", ver >= 4 ? 1 : 2, 1 << 16) : 1;
     if (nbx % this.keySplit) throw new FormatError(`${name}: config.tx.key_split ${this.keySplit} does not divide the ${nbx} blocks of a row`);
     this.keys = intList(tx, "keys", "config.tx", null, 0, N0 - 1);
     if (!this.keys.length || new Set(this.keys).size !== this.keys.length) throw new FormatError(`${name}: config.tx.keys is empty or repeats a view`);
@@ -676,8 +678,9 @@ export class TxDecoder {
     const keyImages = intList(tx, "key_images", "config.tx", null, 0, 1 << 30);
 
     // tx.layout: positions (N0×2), refs (N0×4), weights (N0×4), cell (N0); version 4: then the
-    // gains − 64 (N0×P) and the offsets (N0×P) of the weighted predictions
-    const count = N0 * 11 + (ver === 4 ? 2 * N0 * P : 0);
+    // gains − 64 (N0×P) and the offsets (N0×P) of the weighted predictions; version 5: then each
+    // view's warp (a, b, cx, cy)
+    const count = N0 * 11 + (ver >= 4 ? 2 * N0 * P : 0) + (ver >= 5 ? 4 * N0 : 0);
     const v = unvarints(await inflate(await file.read("tx.layout"), count * 10, "tx.layout"), count, "tx.layout");
     this.pos = v.slice(0, 2 * N0);
     this.refs = v.slice(2 * N0, 6 * N0);
@@ -687,7 +690,15 @@ export class TxDecoder {
     this.intra = new Uint8Array(N0);
     for (let i = 0; i < N0; i++) this.intra[i] = this.refs.slice(4 * i, 4 * i + 4).every((r) => r < 0) ? 1 : 0;
     this.wpGain = null;
-    if (ver === 4) {
+    this.warp = null;
+    if (ver >= 5) {
+      const w = v.slice(11 * N0 + 2 * N0 * P, 11 * N0 + 2 * N0 * P + 4 * N0);
+      for (let i = 0; i < 4 * N0; i++) {
+        if (Math.abs(w[i]) > (i % 4 < 2 ? WARP_AB_MAX : WARP_C_MAX)) throw new FormatError(`${name}: a view's warp is out of range`);
+      }
+      if (w.some((x) => x !== 0)) this.warp = Float64Array.from(w);
+    }
+    if (ver >= 4) {
       this.wpGain = Int32Array.from(v.slice(11 * N0, 11 * N0 + N0 * P), (g) => g + 64);
       this.wpOff = Int32Array.from(v.slice(11 * N0 + N0 * P, 11 * N0 + 2 * N0 * P));
       for (let i = 0; i < N0 * P; i++) {
@@ -904,8 +915,15 @@ export class TxDecoder {
       const w = mode === 0 ? this.weights[4 * v + j] : (mode - 1 === j ? 64 : 0);
       if (!w) continue;
       const kp = this.keyPlanes[this.keySlot[k]];
-      const Y = 16 * y0 + d * (this.pos[2 * v] - this.pos[2 * k]);
-      const X = 16 * x0 + d * (this.pos[2 * v + 1] - this.pos[2 * k + 1]);
+      let Y = 16 * y0 + d * (this.pos[2 * v] - this.pos[2 * k]);
+      let X = 16 * x0 + d * (this.pos[2 * v + 1] - this.pos[2 * k + 1]);
+      if (this.warp) {                            // per-view warps: the pair's offset at the tb's centre
+        const W = this.warp, X2 = 2 * x0 + 7, Y2 = 2 * y0 + 7;
+        const da = W[4 * k] - W[4 * v], db = W[4 * k + 1] - W[4 * v + 1];
+        const dcx = W[4 * k + 2] - W[4 * v + 2], dcy = W[4 * k + 3] - W[4 * v + 3];
+        X += Math.floor((da * X2 - db * Y2 + 512 * dcx + 4096) / 8192);     // (exact: below 2^31)
+        Y += Math.floor((db * X2 + da * Y2 + 512 * dcy + 4096) / 8192);
+      }
       const ry = Y >> 4, rx = X >> 4, fy = Y & 15, fx = X & 15;
       const w00 = (16 - fx) * (16 - fy), w01 = fx * (16 - fy), w10 = (16 - fx) * fy, w11 = fx * fy;
       const inside = ry >= 0 && ry + 8 <= Hp - 1 && rx >= 0 && rx + 8 <= Wp - 1;

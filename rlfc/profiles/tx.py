@@ -26,6 +26,7 @@ from formats.pixels import from_planes
 from ..kernels import dequantize
 from ..transform import COEF_MAX, ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout, weighted_views
+from ..txwarp import max_row_offset, offsets, pair_params, view_offsets
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb, weigh
 from ..txmaps import LazyMaps
 from ..txparse_torch import pair_words, parse_lanes_torch
@@ -163,6 +164,7 @@ class TxDecoder(ProfileDecoder):
         self._tb_x = (self._tbx * TB).astype(np.float32)
         self._blockref_cache: dict = {}
         self._pixref_cache: dict = {}                           # view → block_pixel_refs (block_pixels)
+        self._warp_px_cache: dict = {}                          # view → _warp_pixels (warped files)
         self._cell_maps: dict = {}                              # map → (disparities as float32, modes)
         self._peak = int(np.iinfo(self.dtype).max)
         if c.info("tx.blocks").length != off[-1] + PAD:
@@ -176,6 +178,9 @@ class TxDecoder(ProfileDecoder):
         r0 = lay.refs.clip(0)                                  # per view: its references' key slots
         self.ref_slots = self.key_slot[r0].clip(0)              # (views, R) (any valid slot at weight 0)
         self.ref_dpos = lay.positions[:, None, :] - lay.positions[r0]     # (views, R, 2) position offsets
+        # version 5: (views, R, 4) each (view, reference)'s warp difference (rlfc.txwarp), else None;
+        # a warped view's blocks are predicted through the general paths (pred_inputs, predict_view)
+        self.warp_dw = None if lay.warp is None or not lay.warp.any() else pair_params(lay.warp, lay.refs)
         self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
         self._kp = None
         fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
@@ -252,6 +257,8 @@ class TxDecoder(ProfileDecoder):
         dy = np.abs(lay.positions[users][:, None, 0] - lay.positions[refs.clip(0), 0])
         dy = np.where(refs >= 0, dy, 0).max(axis=1)                                            # (U,)
         self._reach[users] = -(-(dmax[lay.cell[users]] * dy[:, None]) // (1 << DISP_BITS)) + 1
+        if self.warp_dw is not None:          # (plus the warps' largest vertical offset: one more pixel
+            self._reach[users] += max_row_offset(self.warp_dw[users], self.Hp, self.Wp)[:, None] + 1   # for its rounding)
 
     # -- key views, by block rows, on demand ------------------------------------------------------
     def _row_span(self, views: np.ndarray, by: np.ndarray):
@@ -497,10 +504,12 @@ class TxDecoder(ProfileDecoder):
 
     def pred_tables(self, views=None):
         """The tables :func:`pred_inputs` reads: (cell (views,), disp and modes (maps, 8×8 blocks),
-        wmode (views, R + 1, R), ref_slots (views, R), ref_dpos (views, R, 2)), numpy; with
-        ``views``, only their maps are sure to be decoded."""
+        wmode (views, R + 1, R), ref_slots (views, R), ref_dpos (views, R, 2)), plus the warp
+        differences (views, R, 4) of a warped file (version 5), numpy; with ``views``, only their
+        maps are sure to be decoded."""
         disp, modes = self._maps_of(views)
-        return self.lay.cell, disp, modes, self.wmode, self.ref_slots, self.ref_dpos
+        t = (self.lay.cell, disp, modes, self.wmode, self.ref_slots, self.ref_dpos)
+        return t if self.warp_dw is None else t + (self.warp_dw,)
 
     def _pred(self, views, ty, tx):
         """(M, 8, 8, P) prediction of 8×8 blocks (ty, tx) of views with references (weighted
@@ -671,7 +680,9 @@ class TxDecoder(ProfileDecoder):
             slots, wmode, dpos = self._view_refs(v)
             cell = self.lay.cell[v]
             disp, modes = self._maps_of([v])
-            out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x, out=out)
+            warp = None if self.warp_dw is None else view_offsets(self.warp_dw[v], n8y, n8x)
+            out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x, out=out,
+                               warp=warp)
             self._weigh(out, v)                   # (in place: ``out`` is C-contiguous int32)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
@@ -787,8 +798,29 @@ class TxDecoder(ProfileDecoder):
             if parsed.index.size:
                 res, bounds = self._residual_rows(parsed), self._pixel_bounds
         disp, modes = self._cell_map(self._one_ready(view, by))
+        warp = None
+        if self.warp_dw is not None:
+            wy, wx = self._warp_pixels(view)
+            warp = (wy[loc], wx[loc])
         return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
-                                    self.atlas.ftype(self._peak), self.dtype, res, bounds)
+                                    self.atlas.ftype(self._peak), self.dtype, res, bounds, warp)
+
+    def _warp_pixels(self, view: int) -> tuple:
+        """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
+        by block: each (nby·nbx, R·nt) float32 (sixteenths: exact), row by·nbx + bx the pairs of
+        that block, reference-major, 8×8 blocks in raster order (cached per view)."""
+        got = self._warp_px_cache.get(view)
+        if got is None:
+            t, ny, nx = self.tpb, self.nby, self.nbx
+            R = self.warp_dw.shape[1]
+
+            def blocks(o):
+                o = o.reshape(R, ny, t, nx, t).transpose(1, 3, 0, 2, 4).reshape(ny * nx, R * t * t)
+                return (o * 0.0625).astype(np.float32)
+
+            oy, ox = view_offsets(self.warp_dw[view], self.nby8, self.nbx8)
+            got = self._warp_px_cache[view] = (blocks(oy), blocks(ox))
+        return got
 
     def _residual_rows(self, parsed) -> np.ndarray:
         """:meth:`_residual_one` of a stream of a view with references laid out as
@@ -859,7 +891,7 @@ class TxDecoder(ProfileDecoder):
         cell = self._one_ready(view, by)
         disp, modes = self._map_store.disp, self._map_store.modes
         loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
-        refs = self._block_refs(view) if self.atlas is not None else None
+        refs = self._block_refs(view) if self.atlas is not None and self.warp_dw is None else None
         if refs is not None:                                # the remap kernel, every reference at once
             out = predict_block(self.atlas, refs, disp[cell, loc8], modes[cell, loc8],
                                 self._tb_y + np.float32(by * B), self._tb_x + np.float32(bx * B))
@@ -868,8 +900,11 @@ class TxDecoder(ProfileDecoder):
             ty = by * tpb + self._tby
             tx = bx * tpb + self._tbx
             dd = disp[cell, loc8][:, None, None] * dpos[None]          # (nt, R, 2)
-            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[modes[cell, loc8]], dd[..., 0],
-                    dd[..., 1], ty * TB, tx * TB)
+            dy, dx = dd[..., 0], dd[..., 1]
+            if self.warp_dw is not None:               # (a warped view: each reference's offset, per 8×8 block)
+                oy, ox = offsets(np.broadcast_to(self.warp_dw[view], (ty.size,) + self.warp_dw.shape[1:]), ty, tx)
+                dy, dx = dy + oy, dx + ox
+            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[modes[cell, loc8]], dy, dx, ty * TB, tx * TB)
             out = remap_predict(self.atlas, *args) if self.atlas is not None else \
                 predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
         out = self._weigh(out, view)
@@ -958,7 +993,8 @@ class TxDecoder(ProfileDecoder):
         lay = self.lay
         return {"key_views": len(lay.keys), "maps": lay.n_maps, "coded_blocks": int(self.coded.sum()),
                 "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split,
-                "layout_version": int(lay.version), "weighted_views": int(self._weighted.sum())}
+                "layout_version": int(lay.version), "weighted_views": int(self._weighted.sum()),
+                "warped_views": 0 if lay.warp is None else int(lay.warp.any(axis=1).sum())}
 
 
 class ParseAhead:
@@ -1011,14 +1047,18 @@ def pred_inputs(tables, nbx8: int, views, ty, tx):
     :func:`rlfc.txpredict.predict_tbs` for 8×8 blocks (ty, tx) of ``views`` (M,), from
     :meth:`TxDecoder.pred_tables` (numpy arrays, or their copies on a torch device with torch
     requests): each block's map cell, disparity and mode, its view's reference slots, the mode's
-    weights, and the displacements (disparity × position offset, 1/16 pixel)."""
-    cell_of, disp, modes, wmode, ref_slots, ref_dpos = tables
+    weights, and the displacements (disparity × position offset, plus the warps' offsets in a
+    version 5 file; 1/16 pixel)."""
+    cell_of, disp, modes, wmode, ref_slots, ref_dpos = tables[:6]
     cell = cell_of[views]
     loc8 = ty * nbx8 + tx
     d = disp[cell, loc8][:, None]
     dpos = ref_dpos[views]                                                          # (M, R, 2)
-    return (ref_slots[views], wmode[views, modes[cell, loc8]], d * dpos[..., 0], d * dpos[..., 1],
-            ty * TB, tx * TB)
+    dy, dx = d * dpos[..., 0], d * dpos[..., 1]
+    if len(tables) > 6:                                  # per-view warps: each (block, reference)'s offset
+        oy, ox = offsets(tables[6][views], ty, tx)
+        dy, dx = dy + oy, dx + ox
+    return ref_slots[views], wmode[views, modes[cell, loc8]], dy, dx, ty * TB, tx * TB
 
 
 class TorchTx:
