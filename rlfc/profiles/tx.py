@@ -71,6 +71,11 @@ def plane_limits(planes: int, peak: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return lo.astype(np.int64), hi.astype(np.int64), flat.astype(np.int64)
 
 
+#: views whose warp offsets the lean single-block path keeps (:meth:`TxDecoder._warp_pixels`;
+#: 128 KiB a view of 512² pixels)
+WARP_PX_VIEWS = 64
+
+
 class TxDecoder(ProfileDecoder):
     """Planes decoder of a ``tx`` file (see :class:`rlfc.profiles.base.ProfileDecoder`)."""
 
@@ -178,8 +183,8 @@ class TxDecoder(ProfileDecoder):
         r0 = lay.refs.clip(0)                                  # per view: its references' key slots
         self.ref_slots = self.key_slot[r0].clip(0)              # (views, R) (any valid slot at weight 0)
         self.ref_dpos = lay.positions[:, None, :] - lay.positions[r0]     # (views, R, 2) position offsets
-        # version 5: (views, R, 4) each (view, reference)'s warp difference (rlfc.txwarp), else None;
-        # a warped view's blocks are predicted through the general paths (pred_inputs, predict_view)
+        # version 5: (views, R, 4) each (view, reference)'s warp difference (rlfc.txwarp), else None
+        # (every prediction path adds their offsets; the lean single-block path from _warp_pixels)
         self.warp_dw = None if lay.warp is None or not lay.warp.any() else pair_params(lay.warp, lay.refs)
         self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
         self._kp = None
@@ -808,9 +813,12 @@ class TxDecoder(ProfileDecoder):
     def _warp_pixels(self, view: int) -> tuple:
         """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
         by block: each (nby·nbx, R·nt) float32 (sixteenths: exact), row by·nbx + bx the pairs of
-        that block, reference-major, 8×8 blocks in raster order (cached per view)."""
+        that block, reference-major, 8×8 blocks in raster order (cached per view, for at most
+        :data:`WARP_PX_VIEWS` views at once: 8·R bytes per 8×8 block each)."""
         got = self._warp_px_cache.get(view)
         if got is None:
+            if len(self._warp_px_cache) >= WARP_PX_VIEWS:
+                self._warp_px_cache.clear()
             t, ny, nx = self.tpb, self.nby, self.nbx
             R = self.warp_dw.shape[1]
 
