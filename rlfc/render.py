@@ -10,7 +10,10 @@ distance to (s, t) (bilinear between the 4 around it; a disc of radius ``apertur
 for synthetic-aperture refocusing, where d is the ``focus`` disparity everywhere).
 
 Geometry: the ``tx`` profile's disparity maps (one per 8×8 block and cell of views, the ones its
-prediction uses); other files, or ``focus=`` given, use one disparity for the whole frame.
+prediction uses); other files, or ``focus=`` given, use one disparity for the whole frame. A file
+with per-view warps (``tx`` version 5, :mod:`rlfc.txwarp`) moves each source's samples by its
+warp less the camera's, the camera's being the sources' blend of theirs (so a captured view is
+its own pixels, and a camera between views has their interpolated warp).
 Blocks come from the batched random-access decoder through an LRU cache of decoded blocks.
 The pixel work runs on numpy + OpenCV, or on torch (a GPU when present) with ``device=``;
 :mod:`rlfc.render_ops` holds both.
@@ -116,6 +119,28 @@ class Renderer:
             lay = core.lay
             self._maps = (lambda v: core.view_map(v) / 16.0, lay.positions.astype(np.float64),
                           np.flatnonzero(lay.cell >= 0))
+        # per-view warps of a tx version 5 file (rlfc.txwarp): (N0, 4) a, b, cx, cy, else None
+        warp = getattr(getattr(core, "lay", None), "warp", None)
+        self._warp = None if warp is None or not np.any(warp) else np.asarray(warp, np.float64)
+
+    def _warp_coefs(self, src):
+        """Per source (row, column, weight) of a warped file, where its pixel lies from where the
+        camera's does (the camera's warp: the sources' blend of theirs, so that a captured view
+        is its own pixels): (y coefficients, x coefficients), each (n, 3) (of y, of x, constant;
+        px), and (n, 2) pads (y, x): the offsets' largest size over the frame, whole pixels plus
+        one. None for files without warps."""
+        if self._warp is None:
+            return None
+        d = self.d
+        p = self._warp[[r * d.cols + c for r, c, _ in src]]                     # (n, 4)
+        dp = p - np.asarray([w for _, _, w in src]) @ p
+        a, b, cx, cy = (dp[:, i] for i in range(4))
+        k = 1.0 / 65536
+        cy_ = np.stack([a * k, b * k, cy / 256], 1)            # off_y = (b·x + a·y) / 2^16 + cy / 256
+        cx_ = np.stack([-b * k, a * k, cx / 256], 1)           # off_x = (a·x − b·y) / 2^16 + cx / 256
+        cor = np.array([[0, 0, 1], [0, d.width - 1, 1], [d.height - 1, 0, 1], [d.height - 1, d.width - 1, 1]], np.float64)
+        pad = np.stack([np.abs(cy_ @ cor.T).max(1), np.abs(cx_ @ cor.T).max(1)], 1)
+        return cy_, cx_, np.ceil(pad) + 1
 
     # -- geometry --------------------------------------------------------------------------
     def _block_map(self, s: float, t: float) -> np.ndarray | None:
@@ -180,7 +205,7 @@ class Renderer:
         diff -= np.bincount((y1 + x0).ravel(), minlength=n * cell)
         return (diff.reshape(n, d.nby + 1, n1).cumsum(1).cumsum(2) > 0)[:, :d.nby, :d.nbx]
 
-    def _tile_extents(self, offs, dlo, dhi):
+    def _tile_extents(self, offs, dlo, dhi, pad=None):
         """(ylo, yhi, xlo, xhi), each (n, ty, tx) float32: per 8×8 tile, the extent of the positions
         (y + d·a, x + d·b) over its pixels (y, x), every disparity d within [``dlo``, ``dhi``]
         and each of the n ``offs`` (a, b) = the camera minus a source view, in view steps.
@@ -192,7 +217,8 @@ class Renderer:
         (``yy + d · float(a)``: a float32 product, then a float32 sum; positions are monotone
         in y and in d·a), at each tile's first and last pixel row / column, then clamped to the
         image: the same extents as :meth:`rlfc.render_ops.NumpyOps.tile_ranges` of those
-        planes, the union over the range (tested)."""
+        planes, the union over the range (tested). ``pad`` (n, 2): pixels to widen each offset's
+        extents by, rows and columns (per-view warps' offsets), before the clamp."""
         d = self.d
         H, W = d.height, d.width
         ny, nx = -(-H // 8), -(-W // 8)
@@ -208,13 +234,16 @@ class Renderer:
             cb = (dlo * f32(b), dhi * f32(b))
             ext.append((np.minimum(y0 + ca[0], y0 + ca[1]), np.maximum(y1 + ca[0], y1 + ca[1]),
                         np.minimum(x0 + cb[0], x0 + cb[1]), np.maximum(x1 + cb[0], x1 + cb[1])))
-        ylo, yhi, xlo, xhi = (np.clip(np.stack([e[i] for e in ext]), 0, hi)
-                              for i, hi in ((0, H - 1), (1, H - 1), (2, W - 1), (3, W - 1)))
+        st = [np.stack([e[i] for e in ext]) for i in range(4)]
+        if pad is not None:
+            py, px = (np.asarray(pad, f32)[:, j, None, None] for j in (0, 1))
+            st = [st[0] - py, st[1] + py, st[2] - px, st[3] + px]
+        ylo, yhi, xlo, xhi = (np.clip(x, 0, hi) for x, hi in zip(st, (H - 1, H - 1, W - 1, W - 1)))
         return ylo, yhi, xlo, xhi
 
-    def _needs_from_maps(self, offs, dlo, dhi, cubic: bool) -> np.ndarray:
+    def _needs_from_maps(self, offs, dlo, dhi, cubic: bool, pad=None) -> np.ndarray:
         """(n, nby, nbx) bool: the blocks that the positions of :meth:`_tile_extents` touch."""
-        return self._need_many(*self._tile_extents(offs, dlo, dhi), cubic)
+        return self._need_many(*self._tile_extents(offs, dlo, dhi, pad), cubic)
 
     def _sample(self, view: int, Y, X, cubic: bool = False):
         """Samples (H, W, P) float32 of one view's planes at pixel positions Y, X (float32,
@@ -349,32 +378,38 @@ class Renderer:
             dlo, dhi = np.min(cands, axis=0), np.max(cands, axis=0)
         # the blocks of every candidate disparity, from the host's maps: one decode call per
         # frame and no device round trip before the frame's last copy
-        needs = self._needs_from_maps([(s - r, t - c) for r, c, _ in src], dlo, dhi, cubic=True)
+        warp = self._warp_coefs(src)
+        needs = self._needs_from_maps([(s - r, t - c) for r, c, _ in src], dlo, dhi, cubic=True,
+                                      pad=None if warp is None else warp[2])
         self.blocks_requested += int(needs.sum())
         if self._grid is None:
             self._grid = ops.grid(d.height, d.width)
         if robust:
-            disp = self._consistent(s, t, src, blk, disp, maps[1], needs)
-        return self._blend(s, t, src, disp, needs)
+            disp = self._consistent(s, t, src, blk, disp, maps[1], needs, warp)
+        return self._blend(s, t, src, disp, needs, warp)
 
-    def _blend(self, s, t, src, disp, needs=None):
+    def _blend(self, s, t, src, disp, needs=None, warp=None):
         """(H, W, P) float32: the sources (view row, column, weight) warped to camera (s, t)
         by ``disp`` (H, W) pixels per view step (bicubic: bilinear sampling blurs what it shifts,
-        0.05 to 1.4 dB lower in the leave-views-out benchmark), weighted and summed."""
+        0.05 to 1.4 dB lower in the leave-views-out benchmark), weighted and summed; ``warp``:
+        :meth:`_warp_coefs` of the sources (their positions moved by their warps)."""
         d = self.d
         yy, xx = self._grid
         acc = None
         n = max(1, min(8, (1 << 21) // (d.height * d.width)))   # sources sampled together (bounds memory)
         for i in range(0, len(src), n):
             part = src[i:i + n]
-            smp = self._sample_many([r * d.cols + c for r, c, _ in part],
-                                    self.ops.shifted(yy, [disp], [s - r for r, c, _ in part]),
-                                    self.ops.shifted(xx, [disp], [t - c for r, c, _ in part]), cubic=True,
+            Ys = self.ops.shifted(yy, [disp], [s - r for r, c, _ in part])
+            Xs = self.ops.shifted(xx, [disp], [t - c for r, c, _ in part])
+            if warp is not None:
+                Ys = self.ops.plus_affine(Ys, yy, xx, warp[0][i:i + n])
+                Xs = self.ops.plus_affine(Xs, yy, xx, warp[1][i:i + n])
+            smp = self._sample_many([r * d.cols + c for r, c, _ in part], Ys, Xs, cubic=True,
                                     needs=None if needs is None else needs[i:i + n])
             acc = self.ops.wsum(smp, [w for _, _, w in part], acc)
         return acc
 
-    def _consistent(self, s, t, src, blk, disp, med, needs=None):
+    def _consistent(self, s, t, src, blk, disp, med, needs=None, warp=None):
         """(H, W) disparities: per pixel the most photo-consistent of three candidates,
         smoothest first: the frame's median disparity, the map's median over 5×5 blocks (``med``
         per pixel), the file's map (``blk`` per 8×8 block, ``disp`` per pixel). The choice is made on a grid of
@@ -384,7 +419,7 @@ class Renderer:
         chosen for prediction bits, so on noisy captures some blocks carry disparities that fit
         the noise). The caller renders the frame once with them. ``needs`` (len(src), nby, nbx):
         the blocks the sources' samples touch (every candidate), measured on the positions when
-        None."""
+        None; ``warp``: as :meth:`_blend`."""
         d, ops = self.d, self.ops
         yy, xx = self._grid
         H, W = d.height, d.width
@@ -392,9 +427,12 @@ class Renderer:
         ys, xs = ops.sub(yy, S), ops.sub(xx, S)
         # the candidates on the choice's grid (only there are they sampled and chosen)
         subs = [ops.const(*ys.shape, float(np.median(blk))), ops.sub(med, S), ops.sub(disp, S)]
-        allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in subs for r, c, _ in src],
-                                             ops.shifted(ys, subs, [s - r for r, _, _ in src]),
-                                             ops.shifted(xs, subs, [t - c for _, c, _ in src]),
+        Ys = ops.shifted(ys, subs, [s - r for r, _, _ in src])
+        Xs = ops.shifted(xs, subs, [t - c for _, c, _ in src])
+        if warp is not None:
+            Ys = ops.plus_affine(Ys, ys, xs, warp[0], len(subs))
+            Xs = ops.plus_affine(Xs, ys, xs, warp[1], len(subs))
+        allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in subs for r, c, _ in src], Ys, Xs,
                                              needs=None if needs is None else np.concatenate([needs] * len(subs))), 0)
         costs = ops.disagreement(allsmp, [w for _, _, w in src], max(1, ROBUST_WINDOW // S))
         return ops.choose(robust_choice(ops, costs), S, H, W, subs)      # (candidates constant per cell)

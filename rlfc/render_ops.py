@@ -61,6 +61,14 @@ class NumpyOps:
         of len(planes)·len(offs) planes here, one stacked tensor on torch."""
         return [base + D * float(o) for D in planes for o in offs]
 
+    def plus_affine(self, pos, yy, xx, coefs, reps: int = 1):
+        """``pos`` (a list of planes here) each plus its affine plane c0·yy + c1·xx + c2 (float32;
+        per-view warps, :mod:`rlfc.txwarp`): ``coefs`` (n, 3), the list ``reps`` times over
+        (candidate-major positions of n sources)."""
+        n = len(coefs)
+        return [p + (yy * np.float32(c[0]) + xx * np.float32(c[1]) + np.float32(c[2]))
+                for p, c in zip(pos, [coefs[i % n] for i in range(n * reps)])]
+
     def disagreement(self, lum, ws, k: int):
         """Per candidate, the box mean over k×k (:meth:`blur`) of the weighted variance of its n
         sources' luma around their weighted mean: ``lum`` K·n planes (candidate-major), ``ws`` the n
@@ -210,6 +218,12 @@ class TorchOps:
         D = self.torch.stack(list(planes)) if len(planes) > 1 else planes[0][None]
         o = self.vector(offs)
         return (D[:, None] * o[None, :, None, None] + base[None, None]).reshape(-1, *base.shape)
+
+    def plus_affine(self, pos, yy, xx, coefs, reps: int = 1):
+        """As :meth:`NumpyOps.plus_affine`: ``pos`` (reps·n, H, W)."""
+        c = self.vector(np.tile(np.asarray(coefs, np.float64), (reps, 1)).reshape(-1))
+        c = c.view(-1, 3)[:, :, None, None]
+        return pos + (yy[None] * c[:, 0] + xx[None] * c[:, 1] + c[:, 2])
 
     def disagreement(self, lum, ws, k: int):
         """As :meth:`NumpyOps.disagreement`, every candidate at once: ``lum`` (K·n, h, w)."""

@@ -116,9 +116,10 @@ export class Renderer {
     const keep = new Set(src.map(([r, c]) => `${r * d.cols + c}:${level}`));
     const imgs = [];
     for (const [r, c] of src) imgs.push(await this.view(r * d.cols + c, level));
-    if (robust && maps && src.length > 1) disp = this._consistent(s, t, src, imgs, disp);
+    const warp = this._warpCoefs(src);
+    if (robust && maps && src.length > 1) disp = this._consistent(s, t, src, imgs, disp, warp);
     const acc = new Float32Array(H * W * P);
-    src.forEach(([r, c, w], j) => this._blendFrame(imgs[j], disp, s - r, t - c, Math.fround(w), acc));
+    src.forEach(([r, c, w], j) => this._blendFrame(imgs[j], disp, s - r, t - c, Math.fround(w), acc, warp && warp[j]));
     this._trim(keep);
     const planes = new Int32Array(H * W * P);
     for (let i = 0; i < planes.length; i++) {
@@ -129,16 +130,35 @@ export class Renderer {
     return { pixels, ms: performance.now() - t0, sources: src.length };
   }
 
+  /** Per source [r, c, w] of a file with per-view warps (tx version 5), where its pixel lies
+   *  from where the camera's does (the camera's warp: the sources' blend of theirs, so that a
+   *  captured view is its own pixels): [yy, yx, y0, xy, xx, x0] coefficients of y and x and
+   *  constants (px) of the y and x offsets; null without warps (rlfc.render.Renderer._warpCoefs). */
+  _warpCoefs(src) {
+    const d = this.d, W = d.warp;
+    if (!W) return null;
+    const cam = [0, 0, 0, 0];
+    for (const [r, c, w] of src) for (let i = 0; i < 4; i++) cam[i] += w * W[4 * (r * d.cols + c) + i];
+    const k = 1 / 65536;
+    return src.map(([r, c]) => {
+      const v = r * d.cols + c, a = W[4 * v] - cam[0], b = W[4 * v + 1] - cam[1];
+      const cx = W[4 * v + 2] - cam[2], cy = W[4 * v + 3] - cam[3];
+      return [a * k, b * k, cy / 256, -b * k, a * k, cx / 256];
+    });
+  }
+
   /** acc += wf · (every plane of `img` sampled at every pixel of the frame, displaced by
-   *  disp·(ds, dt)): the values of _sample over all pixels (each sample rounded to float32, as
-   *  stored there) blended in the same float order, in one pass without index or sample arrays. */
-  _blendFrame(img, disp, ds, dt, wf, acc) {
+   *  disp·(ds, dt), plus the source's warp offset `wc` (_warpCoefs) where given): the values of
+   *  _sample over all pixels (each sample rounded to float32, as stored there) blended in the
+   *  same float order, in one pass without index or sample arrays. */
+  _blendFrame(img, disp, ds, dt, wf, acc, wc = null) {
     const d = this.d, P = d.P, Wp = d.Wp, H = d.H, W = d.W, Hp1 = d.Hp - 1, Wp1 = Wp - 1;
     const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround;
     for (let y = 0, k = 0; y < H; y++) {
       for (let x = 0; x < W; x++, k++) {
         const dd = disp[k];
         let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
+        if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
         Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
         X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
         const qy = Math.round(Y * 32), qx = Math.round(X * 32);
@@ -156,8 +176,8 @@ export class Renderer {
   /** Bilinear samples of the first `np` planes of view planes `img` at the pixels `idx` (flat
    *  indices y·W + x of a W-wide raster; grid positions (y, x)·1 here, or a subsampled grid via
    *  `step`), displaced by disp[k]·(ds, dt): out[k·np + p]. Positions clamped to the image and
-   *  rounded to 1/32 pixel, as OpenCV's remap. */
-  _sample(img, idx, W, disp, ds, dt, np, out, step = 1, dispW = W) {
+   *  rounded to 1/32 pixel, as OpenCV's remap; plus the source's warp offset `wc` where given. */
+  _sample(img, idx, W, disp, ds, dt, np, out, step = 1, dispW = W, wc = null) {
     const d = this.d, P = d.P, Wp = d.Wp, H = d.H, Wi = d.W;
     const dsf = Math.fround(ds), dtf = Math.fround(dt);
     for (let k = 0; k < idx.length; k++) {
@@ -165,6 +185,7 @@ export class Renderer {
       const y = gy * step, x = gx * step;
       const dd = disp[gy * dispW + gx];
       let Y = Math.fround(y + Math.fround(dd * dsf)), X = Math.fround(x + Math.fround(dd * dtf));
+      if (wc) { Y = Math.fround(Y + Math.fround(wc[0] * y + wc[1] * x + wc[2])); X = Math.fround(X + Math.fround(wc[3] * y + wc[4] * x + wc[5])); }
       Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
       X = X < 0 ? 0 : X > Wi - 1 ? Wi - 1 : X;
       const qy = Math.round(Y * 32), qx = Math.round(X * 32);
@@ -183,7 +204,7 @@ export class Renderer {
    *  over 4×4 grid points; a later candidate wins where its cost is below half the best so far
    *  (by more than 1e-4 relative; costs below 1e-6 count as 0).
    *  The method and constants of rlfc.render.Renderer._consistent. */
-  _consistent(s, t, src, imgs, disp) {
+  _consistent(s, t, src, imgs, disp, warp = null) {
     const d = this.d, H = d.H, W = d.W, S = 4, f32 = Math.fround;
     const by = Math.ceil(H / 8), bx = Math.ceil(W / 8);
     const blk = new Float32Array(by * bx);
@@ -225,7 +246,7 @@ export class Renderer {
     const cols = Int32Array.from({ length: gw + 3 }, (_, j) => refl(j - 2, gw));
     cand.forEach((fn, k) => {
       for (let i = 0; i < gh; i++) for (let j = 0; j < gw; j++) D[i * gw + j] = fn(i * S, j * S);
-      src.forEach(([r, c], q) => this._sample(imgs[q], idx, gw, D, s - r, t - c, 1, smp[q], S, gw));
+      src.forEach(([r, c], q) => this._sample(imgs[q], idx, gw, D, s - r, t - c, 1, smp[q], S, gw, warp && warp[q]));
       acc.fill(0);
       src.forEach(([, , w], q) => { const wf = f32(w); for (let i = 0; i < G; i++) acc[i] = f32(acc[i] + f32(wf * smp[q][i])); });
       cost.fill(0);

@@ -123,6 +123,32 @@ def test_renderer_matches_python(sample_files, tmp_path):
         assert psnr_rgb(py, js) >= 45.0, c
 
 
+def test_renderer_applies_per_view_warps_like_python(tmp_path):
+    """tx version 5 (the golden file's warps): both renderers move each source's samples by its
+    warp less the camera's (the sources' blend of theirs): a captured view is its own pixels, and
+    in between the JavaScript frame is the Python one within rounding, not the frame without warps."""
+    f = GOLDEN / "rlfc_tx5_warped_rgb8.lfc"
+    cams = ["1,2,nan,0", "1.5,2.25,nan,0", "0.4,0.7,nan,0", "2.5,1.5,0.5,1.5", "1.7,2.8,nan,0"]
+    info = run_js(f, tmp_path, cams)
+    assert info["ok"], info
+    d = open_decoder(open_lfc(f))
+    r = d.renderer()
+    plain = d.renderer()
+    plain._warp = None                                # (the same file, its warps ignored)
+    apart = 0.0
+    for i, c in enumerate(cams):
+        s, t, focus, ap = (float(x) for x in c.split(","))
+        focus = None if np.isnan(focus) else focus
+        py = r.render(s, t, focus, ap)
+        js = np.fromfile(tmp_path / f"render_{i}.bin", py.dtype).reshape(py.shape)
+        if c == "1,2,nan,0":
+            np.testing.assert_array_equal(js, d.decode_view(1, 2))
+            continue
+        assert psnr_rgb(py, js) >= 45.0, c
+        apart = max(apart, psnr_rgb(py, js) - psnr_rgb(plain.render(s, t, focus, ap), js))
+    assert apart > 3.0                               # the warps change the frames
+
+
 def test_bad_files_get_typed_errors(tmp_path):
     good = (GOLDEN / "rlfc_tx2_lossy_rgba8.lfc").read_bytes()
     cases = {
