@@ -47,10 +47,12 @@ def _shift(img: np.ndarray, dy: float, dx: float, out: np.ndarray | None = None)
                           borderMode=cv2.BORDER_REPLICATE)
 
 
-def _pixels_of(o: np.ndarray) -> np.ndarray:
-    """(n8y, n8x) offsets in 1/16 px of 8×8 blocks → (Hp, Wp) float32 pixels, each block's value
-    on its pixels."""
-    return np.repeat(np.repeat(o.astype(np.float32) / 16, TB, 0), TB, 1)
+def _pixels_of(b: np.ndarray, hp: int, wp: int) -> np.ndarray:
+    """(n8y, n8x) float32 values of 8×8 blocks → (Hp, Wp), each block's value on its pixels
+    (OpenCV's nearest-neighbour resize by exactly 8: the same values as two np.repeat, 3x faster)."""
+    import cv2
+
+    return cv2.resize(b, (wp, hp), interpolation=cv2.INTER_NEAREST)
 
 
 def _block_sums(e: np.ndarray, nby8: int, nbx8: int) -> np.ndarray:
@@ -85,6 +87,17 @@ class Estimator:
         """(Hp, Wp) float32 luma of view v, written to ``out``."""
         np.copyto(out, self.luma[v], casting="unsafe")
         return out
+
+    def _warp_blocks(self, v: int) -> tuple:
+        """(oy, ox) (R, n8y, n8x) float32 pixels: view v's warp offsets to each reference per 8×8
+        block (:func:`rlfc.txwarp.view_offsets` / 16; cached)."""
+        got = self._woff.get(v) if getattr(self, "_woff", None) is not None else None
+        if got is None:
+            if getattr(self, "_woff", None) is None:
+                self._woff = {}
+            oy, ox = view_offsets(self.warp_dw[v], self.nby8, self.nbx8)
+            got = self._woff[v] = ((oy / 16).astype(np.float32), (ox / 16).astype(np.float32))
+        return got
 
     def _grid(self) -> tuple[np.ndarray, np.ndarray]:
         """(Hp, Wp) float32 rows and columns of every pixel (cached; 2 × 4 bytes a pixel)."""
@@ -129,6 +142,7 @@ class Estimator:
         st = dict(self.__dict__)
         st.pop("_shared", None)
         st.pop("_gyx", None)          # (rebuilt where needed)
+        st.pop("_woff", None)
         return st
 
     def _global_cell(self, m: int, d: float) -> np.ndarray:
@@ -176,7 +190,8 @@ class Estimator:
         views = self.cells[m]
         nr = self._nrefs(m)
         acc = np.zeros((1 + nr, self.nby8 * self.nbx8))
-        dpix = np.repeat(np.repeat(d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16, TB, 0), TB, 1)
+        dblk = d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16
+        dpix = np.repeat(np.repeat(dblk, TB, 0), TB, 1)
         gy, gx = self._grid()
         y, yk, p, e, wp, blend, mx, my = (np.empty((self.hp, self.wp), np.float32) for _ in range(8))
         for v in views.tolist():
@@ -185,17 +200,19 @@ class Estimator:
             dpos = (s.positions[v] - s.positions[r]).astype(np.float32)                # (nr, 2)
             wb = s.weights[v, :nr] / 64.0
             blend.fill(0)
-            warp = None if self.warp_dw is None else view_offsets(self.warp_dw[v], self.nby8, self.nbx8)
+            warp = None if self.warp_dw is None else self._warp_blocks(v)
             last = [None, None]               # the offsets mx, my were made for (references in a row or a
             for j in range(nr):               # column share one); each reference alone, and their blend
                 ox, oy = float(dpos[j, 1]), float(dpos[j, 0])
-                if ox != last[0] or warp is not None:
-                    cv2.scaleAdd(dpix, ox, gx, dst=mx)                 # gx + dpix·Δx in one pass (float32,
-                if oy != last[1] or warp is not None:                  # the same values as numpy's two)
-                    cv2.scaleAdd(dpix, oy, gy, dst=my)
-                if warp is not None:          # (each 8×8 block's warp offset, as the decoder's predictor)
-                    mx += _pixels_of(warp[1][j])
-                    my += _pixels_of(warp[0][j])
+                if warp is not None:          # each 8×8 block's displacement plus its warp offset (the
+                    np.add(gx, _pixels_of(dblk * np.float32(ox) + warp[1][j], self.hp, self.wp), out=mx)
+                    np.add(gy, _pixels_of(dblk * np.float32(oy) + warp[0][j], self.hp, self.wp), out=my)
+                    #   decoder's predictor's; sixteenths: the sums are exact in float32)
+                else:
+                    if ox != last[0]:
+                        cv2.scaleAdd(dpix, ox, gx, dst=mx)             # gx + dpix·Δx in one pass (float32,
+                    if oy != last[1]:                                  # the same values as numpy's two)
+                        cv2.scaleAdd(dpix, oy, gy, dst=my)
                 last = [ox, oy]
                 cvremap.remap(self._y(r[j], yk), mx, my, cv2.INTER_LINEAR, out=p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
