@@ -283,7 +283,8 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     if isinstance(wr, dict):                  # (tx --warps: stored, or why not)
         px = wr.get("largest_correction_px")
         drop = wr.get("error_drop")
-        notes.append(f"--warps: each view's warp is stored ({wr.get('warp_bytes')} bytes; the largest correction moves a "
+        notes.append(f"--warps: {wr['reason']}; no warps were stored" if "reason" in wr else
+                     f"--warps: each view's warp is stored ({wr.get('warp_bytes')} bytes; the largest correction moves a "
                      f"corner by {px:g} px) and the predictions sample through them"
                      if wr.get("applied") else
                      f"--warps: the warps would take only {100 * drop:.0f}% of the prediction error away (a corner "

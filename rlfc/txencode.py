@@ -367,6 +367,10 @@ class TxEncoder:
         self.warp_report = None                   # what became of asked-for warps (the report's "warps")
         if params.warps and lf.layout == "grid" and r * c >= 2:
             self._estimate_warps(lf)
+        elif params.warps:
+            self.warp_report = {"applied": False, "reason": "warps are for grids of two or more views; this capture "
+                                                            "is coded view by view" if lf.layout != "grid" else
+                                "a single view has no warp against a grid"}
         self.warp_dw = None if self.s.warp is None else pair_params(self.s.warp, self.s.refs)
         self.is_key = np.zeros(r * c, bool)
         self.is_key[self.s.keys] = True
