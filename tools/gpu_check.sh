@@ -4,7 +4,8 @@
 # repository root on the device, with .gpu/ and .whl/ carried (both ignored by git):
 #   .gpu/*.npz   scenes exported here: python -m tools.bench_lfn SCENE --export .gpu/NAME.npz
 #                (mitsuba128.npz with --test-scene SCENE for mitsuba128_test.npz; statue128.npz)
-#   .gpu/*.lfc   the six dense grids encoded here at --target-psnr 40
+#   .gpu/*.lfc   the six dense grids encoded here at --target-psnr 40, and stanford_chess with
+#                --warps (tx version 5: the per-view warps' offsets on the device path too)
 #   .whl/        the imagecodecs wheel for the device's Python (the device has no OpenImageIO and
 #                no imagecodecs; pip download ... --python-version 3.12 imagecodecs)
 # Results land in $OUT/results.tgz. LFN_SECONDS (default 150) sets each training's time limit.
