@@ -281,16 +281,7 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
                      f"they were coded as they are")
     wr = enc.summary.get("warps")
     if isinstance(wr, dict):                  # (tx --warps: stored, or why not)
-        px = wr.get("largest_correction_px")
-        drop = wr.get("error_drop")
-        notes.append(f"--warps: {wr['reason']}; no warps were stored" if "reason" in wr else
-                     f"--warps: each view's warp is stored ({wr.get('warp_bytes')} bytes; the largest correction moves a "
-                     f"corner by {px:g} px) and the predictions sample through them"
-                     if wr.get("applied") else
-                     f"--warps: the warps would take only {100 * drop:.0f}% of the prediction error away (a corner "
-                     f"moves by {px:g} px); no warps were stored" if drop is not None else
-                     f"--warps: the views are rectified already (no pixel would move by 0.5 px or more: {px:g} px); "
-                     f"no warps were stored")
+        notes.append(_warps_note(wr))
     if (opts.workers > 1 or opts.scheduler is not None) and "runner" not in enc.summary:
         notes.append(f"{enc.summary.get('profile', codec.codec_id)} codes in this process only; "
                       "--workers/--scheduler had no effect")
@@ -955,6 +946,23 @@ def _add_codec_groups(parser, only: str | None = None) -> dict:
         codec.add_arguments(g)
         groups[cid] = {x.dest for x in parser._actions} - before
     return groups
+
+
+def _warps_note(wr: dict) -> str:
+    """The encode report's note on ``--warps`` (its ``warps`` entry: stored, or why not)."""
+    px = wr.get("largest_correction_px")
+    if "reason" in wr:
+        return f"--warps: {wr['reason']}; no warps were stored"
+    if wr.get("applied"):
+        return (f"--warps: each view's warp is stored ({wr.get('warp_bytes')} bytes; the largest correction moves a "
+                f"corner by {px:g} px) and the predictions sample through them")
+    if wr.get("error_drop") is not None:
+        return (f"--warps: the warps would take only {100 * wr['error_drop']:.0f}% of the prediction error away (a "
+                f"corner moves by {px:g} px); no warps were stored")
+    from .rectify import MIN_CORRECTION_PX
+
+    return (f"--warps: the views are rectified already (no pixel would move by {MIN_CORRECTION_PX:g} px or more: "
+            f"{px:g} px); no warps were stored")
 
 
 def _add_scene_options(e) -> None:

@@ -131,6 +131,15 @@ def largest_correction(warps: np.ndarray, h: int, w: int) -> float:
     return out
 
 
+def estimate_correction(views: np.ndarray) -> tuple[np.ndarray, float, bool]:
+    """(warps of :func:`estimate_warps`, their :func:`largest_correction` in px, whether that
+    reaches :data:`MIN_CORRECTION_PX`) of grid views (rows, cols, H, W, C): what ``--rectify``
+    and ``--warps`` decide on."""
+    warps = estimate_warps(views)
+    big = largest_correction(warps, *views.shape[2:4])
+    return warps, big, bool(big >= MIN_CORRECTION_PX)
+
+
 def rectify_views(views: np.ndarray, warps: np.ndarray) -> np.ndarray:
     """The views resampled onto the rectified grid (bicubic, edges replicated, rounded and
     clipped to the dtype): rectified view v at q = captured view v at its warp's x(q).
@@ -168,10 +177,8 @@ def rectify_grid(lf):
         raise ParameterError("--rectify works on a grid of two or more views (a posed capture's cameras are its "
                              "own poses)")
     views = np.asarray(lf.views)
-    warps = estimate_warps(views)
-    big = largest_correction(warps, lf.height, lf.width)
-    report = {"applied": bool(big >= MIN_CORRECTION_PX), "largest_correction_px": round(big, 3),
-              "warps": np.round(warps, 7).tolist()}
+    warps, big, applied = estimate_correction(views)
+    report = {"applied": applied, "largest_correction_px": round(big, 3), "warps": np.round(warps, 7).tolist()}
     if not report["applied"]:
         return lf, report
     meta = {**lf.meta, "rectified": {"largest_correction_px": round(big, 3),

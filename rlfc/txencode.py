@@ -424,12 +424,10 @@ class TxEncoder:
     def _estimate_warps(self, lf) -> None:
         """Each view's warp estimated from the views (``warps``): kept in ``s.warp`` where the
         largest correction reaches :data:`formats.rectify.MIN_CORRECTION_PX`."""
-        from formats.rectify import MIN_CORRECTION_PX, estimate_warps, largest_correction
+        from formats.rectify import estimate_correction
 
-        est = estimate_warps(lf.views)
+        est, big, applied = estimate_correction(lf.views)
         h, w = lf.views.shape[2:4]
-        big = largest_correction(est, h, w)
-        applied = bool(big >= MIN_CORRECTION_PX)
         if applied:
             self.s.warp = warp_params(est, h, w)
             applied = bool(self.s.warp.any())

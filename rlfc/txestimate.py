@@ -82,6 +82,7 @@ class Estimator:
         self.key_slot[keys_order] = np.arange(len(keys_order))
         warp = getattr(struct, "warp", None)          # per-view warps (rlfc.txwarp): the refinement
         self.warp_dw = None if warp is None else pair_params(warp, struct.refs)   # samples through them
+        self._woff: dict = {}                         # view → _warp_blocks (cached)
 
     def _y(self, v: int, out: np.ndarray) -> np.ndarray:
         """(Hp, Wp) float32 luma of view v, written to ``out``."""
@@ -91,10 +92,8 @@ class Estimator:
     def _warp_blocks(self, v: int) -> tuple:
         """(oy, ox) (R, n8y, n8x) float32 pixels: view v's warp offsets to each reference per 8×8
         block (:func:`rlfc.txwarp.view_offsets` / 16; cached)."""
-        got = self._woff.get(v) if getattr(self, "_woff", None) is not None else None
+        got = self._woff.get(v)
         if got is None:
-            if getattr(self, "_woff", None) is None:
-                self._woff = {}
             oy, ox = view_offsets(self.warp_dw[v], self.nby8, self.nbx8)
             got = self._woff[v] = ((oy / 16).astype(np.float32), (ox / 16).astype(np.float32))
         return got
@@ -142,7 +141,7 @@ class Estimator:
         st = dict(self.__dict__)
         st.pop("_shared", None)
         st.pop("_gyx", None)          # (rebuilt where needed)
-        st.pop("_woff", None)
+        st["_woff"] = {}              # (rebuilt where needed)
         return st
 
     def _global_cell(self, m: int, d: float) -> np.ndarray:
