@@ -79,6 +79,28 @@ def _to_planes_split(x: np.ndarray) -> np.ndarray:
     return cv2.merge([b, co, cg] + planes[3:]).reshape(x.shape)
 
 
+def luma_of(x: np.ndarray) -> np.ndarray:
+    """(…, C) uint8/uint16 → (…) the Y plane of :func:`to_planes`, in ``x``'s dtype (Y keeps the
+    input's range): the grey channel for 1-2 channels; for RGB(A) the lifting steps of Y only, on
+    channels split by OpenCV, in int16 for 8-bit samples (Co, Cg need 9 bits) and int32 for
+    16-bit ones (a 512² RGB view: 0.4 ms against 1.1 ms for every plane, then Y taken)."""
+    if x.shape[-1] < 3:
+        return np.ascontiguousarray(x[..., 0])
+    if x.dtype not in (np.uint8, np.uint16) or not x.flags.c_contiguous or x.ndim < 3:
+        return to_planes(x)[..., 0].astype(x.dtype)
+    import cv2
+
+    work = np.int16 if x.dtype == np.uint8 else np.int32
+    r, g, b = (q.astype(work) for q in cv2.split(x.reshape(-1, x.shape[-2], x.shape[-1]))[:3])
+    co = np.subtract(r, b, out=r)
+    co >>= 1
+    b += co                                       # t = b + (co >> 1)
+    cg = np.subtract(g, b, out=g)
+    cg >>= 1
+    b += cg                                       # y = t + (cg >> 1), in [0, peak]
+    return b.astype(x.dtype).reshape(x.shape[:-1])
+
+
 #: samples from which :func:`from_planes` works on planes split by OpenCV (below: fewer calls win),
 #: and the samples of one chunk of that path (its temporaries stay in the caches)
 SPLIT_MIN = 1 << 16

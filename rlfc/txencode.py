@@ -24,7 +24,7 @@ from formats.parallel import Runner, make_runner
 from formats import parallel as _parallel
 from formats.scenes.common import ImageFile, ImageFiles
 from formats.viewstack import view_of
-from formats.pixels import from_planes, rgb_mse_weights, to_planes
+from formats.pixels import from_planes, luma_of, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
 from .params import flags
@@ -457,7 +457,7 @@ class TxEncoder:
         since the maps were estimated, where there is one)."""
         if self._kept_luma is not None:
             return self._kept_luma
-        return np.stack([self.planes(v)[..., 0].astype(self.dtype) for v in range(self.n0)])
+        return np.stack([luma_of(self.padded(self.view_pixels(v))) for v in range(self.n0)])
 
     def drop_luma(self, repriced_too: bool = True) -> None:
         """Let the luma kept for :meth:`reprice_maps` go (a third of an RGB light field), and what
@@ -755,7 +755,9 @@ class TxEncoder:
             lastb = model.last[pc, mode_cls, key]
             # tbs whose every coefficient rounds to 0 code nothing: J = their error + the bits of
             # "last = 0" (exactly what the search below finds for them), so only the rest search
-            act = np.flatnonzero(X2.max(1) >= 0.25 * d * d)
+            # (a comparison then any(): 3.6x faster than a row max on this box, the same tbs: X2 >= 0,
+            # and the bound is compared in float32 either way)
+            act = np.flatnonzero((X2 >= 0.25 * d * d).any(1))
             idle = np.ones(T, bool)
             idle[act] = False
             J[idle] += wgt * e[idle] + lam * lastb[0]

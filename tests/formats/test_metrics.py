@@ -1,6 +1,8 @@
 """Metrics measure a light field a few views at a time; the chunking changes no figure."""
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import formats.metrics as M
 
@@ -121,3 +123,41 @@ def test_ssim_is_scikit_images(channels, dtype, shape):
         d64 = dec[0].astype(np.float64)
         want64 = structural_similarity(ref[0][..., cs], d64[..., cs], channel_axis=-1, data_range=peak)
         assert M.ssim_image(ref[0][..., cs], d64[..., cs], peak) == pytest.approx(want64, abs=1e-12)
+
+
+@settings(max_examples=60, deadline=None, derandomize=True)
+@given(st.integers(1, 3), st.integers(1, 40), st.integers(1, 40), st.integers(1, 4), st.sampled_from([np.uint8, np.uint16]),
+       st.integers(0, 2 ** 32 - 1), st.sampled_from(["random", "extreme", "equal"]))
+def test_squared_errors_are_the_exact_integer_sums(n, h, w, c, dtype, seed, kind):
+    """The per-view squared errors (OpenCV's integer L2² norm for contiguous 8-bit views, numpy
+    in float64 otherwise) are the exact sums of integer squares, on every path: 8-bit and
+    16-bit, grey to RGBA (the colour slice of RGBA or grey+alpha takes numpy's path), several
+    views at once or a band at a time."""
+    rng = np.random.default_rng(seed)
+    peak = int(np.iinfo(dtype).max)
+    ref = rng.integers(0, peak, (n, h, w, c), endpoint=True).astype(dtype)
+    if kind == "random":
+        dec = rng.integers(0, peak, ref.shape, endpoint=True).astype(dtype)
+    elif kind == "extreme":
+        ref[:] = 0
+        dec = np.full(ref.shape, peak, dtype)
+    else:
+        dec = ref.copy()
+    cs = M.colour_channels(c)
+    want = float(((ref[..., cs].astype(np.int64) - dec[..., cs].astype(np.int64)) ** 2).sum())
+    assert M.colour_sq_error(ref, dec) == (want, float(n * h * w * (cs.stop - cs.start)))
+    every = ((ref.astype(np.int64) - dec.astype(np.int64)) ** 2).reshape(n, -1).sum(1)
+    sse, cnt = M._sq_err_per_view(ref, dec)
+    assert sse.tolist() == every.astype(float).tolist() and cnt.tolist() == [float(h * w * c)] * n
+    assert M.mse(ref, dec) == float(every.sum()) / (n * h * w * c)
+
+
+def test_eight_bit_norm_is_exact_where_a_float_sum_would_round():
+    """A 2048×2048 RGB view at the largest error everywhere: 3.2·10^11, beyond float32's integers
+    (a float accumulation would round); the fast path gives it exactly."""
+    ref = np.zeros((2048, 2048, 3), np.uint8)
+    dec = np.full_like(ref, 255)
+    assert M._exact_norm(ref[None], dec[None])
+    assert M.colour_sq_error(ref, dec) == (2048.0 * 2048 * 3 * 255 ** 2, 2048.0 * 2048 * 3)
+    dec[7, 9, 1] = 254
+    assert M.colour_sq_error(ref, dec)[0] == 2048.0 * 2048 * 3 * 255 ** 2 - 255 ** 2 + 254 ** 2

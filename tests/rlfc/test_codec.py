@@ -56,6 +56,35 @@ def test_to_planes_split_path_is_the_same_integers(shape, dtype, rng):
     assert np.array_equal(to_planes(crop), forward_int(crop.astype(np.int32)))
 
 
+def test_luma_is_to_planes_y_on_every_8_bit_colour():
+    """formats.pixels.luma_of (the map estimation's luma: Y's lifting steps alone, in int16) is
+    to_planes' Y on all 2^24 8-bit RGB colours, as an RGB and an RGBA image."""
+    from formats.pixels import luma_of
+
+    v = np.arange(256, dtype=np.uint8)
+    x = np.stack(np.meshgrid(v, v, v, indexing="ij"), -1).reshape(4096, 4096, 3)
+    y = luma_of(x)
+    assert y.dtype == np.uint8 and y.shape == (4096, 4096) and np.array_equal(y, to_planes(x)[..., 0])
+    xa = np.concatenate([x[:64], np.full((64, 4096, 1), 7, np.uint8)], -1)
+    assert np.array_equal(luma_of(xa), to_planes(xa)[..., 0])
+
+
+@pytest.mark.parametrize("c", [1, 2, 3, 4])
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
+def test_luma_is_to_planes_y(c, dtype, rng):
+    """luma_of on grey, grey + alpha, RGB and RGBA at both depths (extremes included), on a
+    contiguous view and on a strided crop (the general path): to_planes' Y in the input's dtype."""
+    from formats.pixels import luma_of
+
+    peak = int(np.iinfo(dtype).max)
+    x = rng.integers(0, peak, (37, 41, c), endpoint=True).astype(dtype)
+    x[0, :3] = [[peak] * c, [0] * c, ([peak, 0, peak, 0] if c >= 3 else [peak, 0])[:c]]
+    for img in (x, x[3:, 5:]):
+        y = luma_of(img)
+        assert y.dtype == dtype and y.shape == img.shape[:-1]
+        assert np.array_equal(y, to_planes(img)[..., 0].astype(dtype))
+
+
 @pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(c=2),
                                 dict(h=13, w=19), dict(rows=1, cols=5), dict(rows=5, cols=1)])
 def test_lossless_exact_and_decoders_agree(kw):
