@@ -52,6 +52,7 @@ PREPARSE_MIN = 1024
 #: key rows: one key's 19-27 rows parse 3-9× faster one by one)
 ONE_BY_ONE_RATIO = 48
 GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
+SCRATCH_BYTES = 64 << 20   # the largest int32 planes a thread keeps for views() (GROUP_PIXELS' at 4 planes: 32 MiB)
 #: streams in a torch call from which a CUDA device parses them itself (measured on an H100,
 #: µs per block parsed on the host / on the device: lytro_dino_2067's 53 streams in 20 000
 #: requests 0.48 / 0.91; stanford_chess's 5 800 in 200 000, two runs, 0.42 / 0.41 and 0.33 /
@@ -204,6 +205,7 @@ class TxDecoder(ProfileDecoder):
         self._keys_all = keys.size == 0
         self._key_lock = threading.RLock()
         self._in_keys = threading.local()              # .active: this thread is decoding key rows
+        self._scratch = threading.local()              # .planes: this thread's buffer for views()
         self._thumb_up: dict = {}
         self._reach = np.zeros((N0, self.nby), np.int64)       # rows filled as their maps are decoded
 
@@ -953,7 +955,7 @@ class TxDecoder(ProfileDecoder):
     def views(self, views, level):
         """Whole views; the coded blocks of all of them parsed together (the rANS lanes step
         together: one parse costs about the longest stream, so many views share it)."""
-        out = np.empty((views.size, self.Hp, self.Wp, self.P), np.int32)
+        out = self._planes_scratch((views.size, self.Hp, self.Wp, self.P))
         if not self._keys_all:
             self._have_keys(self._need_views(views))
         pv = [int(v) for v in views.tolist() if not self.is_key[v]]
@@ -970,6 +972,19 @@ class TxDecoder(ProfileDecoder):
                 continue
             self._view_planes(v, level, parsed.get(v), out=out[i])
         return out
+
+    def _planes_scratch(self, shape: tuple) -> np.ndarray:
+        """An int32 array of ``shape`` for :meth:`views`' planes: this thread's buffer, kept from
+        call to call (up to SCRATCH_BYTES), so that decoding view after view writes to pages
+        already mapped (a fresh 512×512 view's planes are 768 pages, each faulted in on its first
+        write: ~5-10 µs a page on the 2-core box). Valid until this thread's next call."""
+        n = int(np.prod(shape))
+        if 4 * n > SCRATCH_BYTES:
+            return np.empty(shape, np.int32)
+        buf = getattr(self._scratch, "planes", None)
+        if buf is None or buf.size < n:
+            buf = self._scratch.planes = np.empty(n, np.int32)
+        return buf[:n].reshape(shape)
 
     def prepare(self, views, by):
         if not self._keys_all:

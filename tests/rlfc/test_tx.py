@@ -1682,3 +1682,38 @@ def test_the_coded_check_keeps_the_cheapest_of_three_maps(monkeypatch, pick):
     single = [int((dec.core._maps_of(None)[1] != 0).sum()) for dec in (d, open_encoded(lf, est)[0])]
     if pick == "modes":                     # a mode priced at the coding λ: fewer single-reference blocks
         assert single[0] < single[1]
+
+
+def test_whole_views_reuse_a_scratch_without_aliasing_what_they_return(monkeypatch):
+    """Whole views are decoded into a per-thread int32 buffer kept from call to call (no fresh
+    pages for every view): what decode_view returns never aliases it (a second call leaves the
+    first result as it was), two threads and one agree, and views too large for the buffer get
+    fresh memory with the same pixels."""
+    import rlfc.profiles.tx as txp
+
+    lf, e, _ = _noisy_grid_encoded({}, 6, 3, 4.0)
+    d, _ = open_encoded(lf, e)
+    want = d.decode_all().reshape(-1, *lf.views.shape[2:])
+    first = d.decode_view(1, 2)
+    kept = first.copy()
+    second = d.decode_view(3, 1)
+    assert np.array_equal(first, kept) and np.array_equal(first, want[1 * 5 + 2]) and np.array_equal(second, want[16])
+    p1 = d.core.views(np.array([7]), 0)
+    view7 = p1.copy()
+    p2 = d.core.views(np.array([8]), 0)
+    assert np.shares_memory(p1, p2)                     # the same thread's buffer, reused
+    planes = d.decode_views(np.array([7, 8]), planes=True)
+    assert not np.shares_memory(planes, p2)             # the caller's planes are its own copy
+    assert np.array_equal(d.decode_views(None, threads=2), want)
+    got = {}
+
+    def other():
+        got["p"] = d.core.views(np.array([7]), 0)
+    t = threading.Thread(target=other)
+    t.start()
+    t.join()
+    assert not np.shares_memory(got["p"], p2) and np.array_equal(got["p"], view7)   # a buffer per thread
+    monkeypatch.setattr(txp, "SCRATCH_BYTES", 16)
+    a, b = d.core.views(np.array([7]), 0), d.core.views(np.array([7]), 0)
+    assert not np.shares_memory(a, b) and np.array_equal(a, b)
+    assert np.array_equal(d.decode_all().reshape(want.shape), want)
