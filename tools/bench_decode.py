@@ -20,6 +20,9 @@ fresh process per file (and per code version with ``--against``: the same measur
   numpy gathering the same blocks' pixels from the decoded light field in memory;
 - single: ``--single`` random ``decode_block`` calls, each timed (p50/p90/p99 µs); then as many
   others after ``decode_keys()`` and ``decode_maps()`` ("warm": no first touches);
+- views in sequence: right after the open, SEQ_VIEWS random views decoded one after another (a
+  viewer stepping through the light field: every view's memory fresh, as glibc's defaults give
+  it), median ms, then ``jpeg2k_decode`` of the same views in sequence;
 - view: six non-key views decoded whole (median of 3 each) against ``jpeg2k_decode`` of the
   same views, interleaved;
 - all: ``decode_all`` against decoding every view's JPEG 2000 codestream, on each thread count
@@ -47,6 +50,10 @@ import numpy as np
 from tools.common import log, machine
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+#: views decoded one after another for the "views in sequence" figure (random, keys included)
+SEQ_VIEWS = 24
 
 
 # -- the worker (one process per file, round and code version) ----------------------------------
@@ -82,6 +89,22 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
     d = RlfcDecoder(open_lfc(path))
     getattr(d.core, "decode_keys", lambda: None)()       # key views decoded on demand: all of them now
     r["open_s"] = time.perf_counter() - t
+    # views in sequence (a viewer stepping through the light field), measured first, before the
+    # batched calls' large arrays have moved malloc's thresholds: each view's time, then JPEG 2000
+    # decoding the same views in sequence
+    seq = np.random.default_rng(seed + 2).integers(0, d.rows * d.cols, SEQ_VIEWS + 4)
+    for i in seq[:4].tolist():                                             # warm-up
+        d.decode_view(*divmod(i, d.cols))
+    tv, tj = [], []
+    for i in seq[4:].tolist():
+        t = time.perf_counter()
+        d.decode_view(*divmod(i, d.cols))
+        tv.append(time.perf_counter() - t)
+    for i in seq[4:].tolist():
+        t = time.perf_counter()
+        imagecodecs.jpeg2k_decode(p["blobs"][i])
+        tj.append(time.perf_counter() - t)
+    r["view_seq_s"], r["j2k_view_seq_s"] = statistics.median(tv), statistics.median(tj)
     rng = np.random.default_rng(seed)
     B, n = d.block_size, d.rows * d.cols
     v, by, bx = rng.integers(0, n, n_batch), rng.integers(0, d.nby, n_batch), rng.integers(0, d.nbx, n_batch)
@@ -222,6 +245,9 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
             s[k], s[f"j2k_all_s_t{th}"] = med(k), med(f"j2k_all_s_t{th}")
             s[f"all_vs_j2k_t{th}"] = s[k] / s[f"j2k_all_s_t{th}"]
     s["view_vs_j2k"] = s["view_ms"] / s["j2k_view_ms"]
+    if all("view_seq_s" in x for x in rounds):
+        s["view_seq_ms"], s["j2k_view_seq_ms"] = med("view_seq_s") * 1e3, med("j2k_view_seq_s") * 1e3
+        s["view_seq_vs_j2k"] = s["view_seq_ms"] / s["j2k_view_seq_ms"]
     return s
 
 
@@ -229,7 +255,8 @@ def _table(res: dict, label: str, threads: list[int]) -> list[str]:
     th = [t for t in threads if any(f"batch_mpix_t{t}" in r[label] for r in res.values())]
     ta = [t for t in threads if any(f"all_s_t{t}" in r[label] for r in res.values())]
     head = ["grid", "open s", "first block ms"] + [f"batched Mpix/s ({t} thr) cold / warm" for t in th] + [
-        "gather limit Mpix/s", "single p50/p90/p99 µs", "single warm p50/p99 µs", "view ms (J2K ms, ×)"] + [
+        "gather limit Mpix/s", "single p50/p90/p99 µs", "single warm p50/p99 µs", "view ms (J2K ms, ×)",
+        "views in sequence ms (J2K ms, ×)"] + [
         f"all s, {t} thr (J2K s, ×)" for t in ta]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, r in res.items():
@@ -239,7 +266,9 @@ def _table(res: dict, label: str, threads: list[int]) -> list[str]:
             for t in th] + [
             f"{s['gather_mpix']:.0f}", f"{s['single_p50_us']:.0f} / {s['single_p90_us']:.0f} / {s['single_p99_us']:.0f}",
             f"{s['single_warm_p50_us']:.0f} / {s['single_warm_p99_us']:.0f}" if "single_warm_p50_us" in s else "–",
-            f"{s['view_ms']:.1f} ({s['j2k_view_ms']:.1f}, {s['view_vs_j2k']:.2f}×)"] + [
+            f"{s['view_ms']:.1f} ({s['j2k_view_ms']:.1f}, {s['view_vs_j2k']:.2f}×)",
+            f"{s['view_seq_ms']:.1f} ({s['j2k_view_seq_ms']:.1f}, {s['view_seq_vs_j2k']:.2f}×)" if "view_seq_ms" in s
+            else "–"] + [
             f"{s[f'all_s_t{t}']:.2f} ({s[f'j2k_all_s_t{t}']:.2f}, {s[f'all_vs_j2k_t{t}']:.2f}×)"
             if f"all_s_t{t}" in s else "–" for t in ta]
         lines.append("| " + " | ".join(row) + " |")
@@ -250,7 +279,7 @@ def _ratio_table(res: dict, threads: list[int]) -> list[str]:
     keys = [("open_s", "open"), *[(f"batch_us_t{t}", f"batched µs/block ({t} thr)") for t in threads],
             *[(f"batch_warm_us_t{t}", f"warm batched ({t} thr)") for t in threads],
             ("single_p50_us", "single p50"), ("single_p99_us", "single p99"), ("single_warm_p99_us", "warm single p99"),
-            ("view_ms", "whole view"),
+            ("view_ms", "whole view"), ("view_seq_ms", "views in sequence"),
             *[(f"all_s_t{t}", f"whole light field ({t} thr)") for t in threads]]
     keys = [(k, n) for k, n in keys if all(k in r["new"] and k in r["old"] for r in res.values())]
     lines = ["| grid | " + " | ".join(n for _, n in keys) + " |", "|---|" + "---|" * len(keys)]
