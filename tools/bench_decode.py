@@ -21,8 +21,8 @@ fresh process per file (and per code version with ``--against``: the same measur
 - single: ``--single`` random ``decode_block`` calls, each timed (p50/p90/p99 µs); then as many
   others after ``decode_keys()`` and ``decode_maps()`` ("warm": no first touches);
 - views in sequence: right after the open, SEQ_VIEWS random views decoded one after another (a
-  viewer stepping through the light field: every view's memory fresh, as glibc's defaults give
-  it), median ms, then ``jpeg2k_decode`` of the same views in sequence;
+  viewer stepping through the light field; before the batched calls, whose large frees change
+  what malloc hands out next), median ms, then ``jpeg2k_decode`` of the same views in sequence;
 - view: six non-key views decoded whole (median of 3 each) against ``jpeg2k_decode`` of the
   same views, interleaved;
 - all: ``decode_all`` against decoding every view's JPEG 2000 codestream, on each thread count

@@ -977,7 +977,8 @@ class TxDecoder(ProfileDecoder):
         """An int32 array of ``shape`` for :meth:`views`' planes: this thread's buffer, kept from
         call to call (up to SCRATCH_BYTES), so that decoding view after view writes to pages
         already mapped (a fresh 512×512 view's planes are 768 pages, each faulted in on its first
-        write: ~5-10 µs a page on the 2-core box). Valid until this thread's next call."""
+        write where malloc has given the memory back: BENCHMARKS.md). Valid until this thread's
+        next call."""
         n = int(np.prod(shape))
         if 4 * n > SCRATCH_BYTES:
             return np.empty(shape, np.int32)
