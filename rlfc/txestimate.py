@@ -193,7 +193,8 @@ class Estimator:
         nr = self._nrefs(m)
         acc = np.zeros((1 + nr, self.nby8 * self.nbx8))
         dblk = d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16
-        dpix = np.repeat(np.repeat(dblk, TB, 0), TB, 1)
+        # (each block's disparity on its pixels; with warps each reference's sum is spread instead)
+        dpix = _pixels_of(dblk, self.hp, self.wp) if self.warp_dw is None else None
         gy, gx = self._grid()
         y, yk, p, e, wp, blend, mx, my = (np.empty((self.hp, self.wp), np.float32) for _ in range(8))
         for v in views.tolist():
@@ -206,10 +207,11 @@ class Estimator:
             last = [None, None]               # the offsets mx, my were made for (references in a row or a
             for j in range(nr):               # column share one); each reference alone, and their blend
                 ox, oy = float(dpos[j, 1]), float(dpos[j, 0])
-                if warp is not None:          # each 8×8 block's displacement plus its warp offset (the
+                if warp is not None:
+                    # each 8×8 block's displacement plus its warp offset, as the decoder's predictor
+                    # (sixteenths: the sums are exact in float32)
                     np.add(gx, _pixels_of(dblk * np.float32(ox) + warp[1][j], self.hp, self.wp), out=mx)
                     np.add(gy, _pixels_of(dblk * np.float32(oy) + warp[0][j], self.hp, self.wp), out=my)
-                    #   decoder's predictor's; sixteenths: the sums are exact in float32)
                 else:
                     if ox != last[0]:
                         cv2.scaleAdd(dpix, ox, gx, dst=mx)             # gx + dpix·Δx in one pass (float32,
