@@ -31,7 +31,8 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, LaneDecoder, ScalarDecoder, Tables, encode_lanes
+from .rans import (BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, STATE_BYTES, LaneDecoder, Tables, encode_lanes,
+                   slot_bytes)
 
 N_MODES = 3
 MODE_SKIP, MODE_RES, MODE_INTRA = 0, 1, 2
@@ -694,40 +695,60 @@ def _raw_bits(buf, start, back, kb, off):
     return np.where(off < kb, (back >> off.clip(0, 62)) & 1, (byte >> (np.maximum(stored, 0) & 7)) & 1)
 
 
-def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, key: int) -> Parsed:
+def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) -> Parsed:
     """One stream in plain Python (the same results as :func:`parse_lanes`; faster than lanes
     for a few streams).
 
-    The magnitudes' rANS steps are inlined on locals; each nonzero coefficient is one Python
-    int, ``(g·64 + position) << 8 | magnitude`` (g = tb·P + plane; an escape's magnitude
-    symbol, the rest of it added afterwards), and the signs are bits 0..K−1 of the raw bits,
-    unpacked at once."""
-    P = len(pcs)
-    pcl = [int(x) for x in pcs]
-    d = ScalarDecoder(data, tables)
-    get = d.get
-    modes, prev = [], 3
-    for _ in range(nt):
-        s = get(CTX_MODE + kind * 4 + prev)
-        if s >= N_MODES:
-            raise FormatError("tx block has an undefined tb mode")
-        modes.append(s)
-        prev = s
-    lasts = []                       # (g, last) of each coded (tb, plane), in order
-    for t in range(nt):
-        if modes[t] != MODE_SKIP:
-            ci = modes[t] == MODE_INTRA
-            for p in range(P):
-                v = get(CTX_LAST + (pcl[p] * 2 + ci) * 2 + key)
-                if v > 64:
-                    raise FormatError("tx block has a last position past 64")
-                if v:
-                    lasts.append((t * P + p, v))
-    slot_t, freq_t, cum_t = d.slot, d.freq, d.cum
-    x, ptr = d.x, d.ptr
-    words, esc = [], []              # esc: the places in words of escape symbols (and bad ones)
+    Every rANS step is inlined on locals (the tables' per-context slot → symbol bytes and
+    frequency and cum lists: Python ints below 2^30, CPython's one-digit ints); each nonzero
+    coefficient is one Python int, ``(g·64 + position) << 8 | magnitude`` (g = tb·P + plane;
+    an escape's magnitude symbol, the rest of it added afterwards), and the signs are bits
+    0..K−1 of the raw bits. ``pcs``: the planes' classes (a list of ints is used as it is)."""
+    pcl = pcs if type(pcs) is list else [int(v) for v in pcs]
+    P = len(pcl)
+    if len(data) < STATE_BYTES:
+        raise FormatError(f"rANS stream shorter than its {STATE_BYTES}-byte state")
+    slot_t = slot_bytes(tables)
+    got = getattr(tables, "_lists", None)
+    if got is None:                                  # (Python lists once per table set)
+        got = tables._lists = (tables.freq.tolist(), tables.cum.tolist())
+    freq_t, cum_t = got
+    x = int.from_bytes(data[:STATE_BYTES], "little")
+    ptr = STATE_BYTES
+    modes, lasts = [], []            # lasts: (g, last) of each coded (tb, plane), in order
+    esc = []                         # the places in words of escape symbols (and bad ones)
+    words = []
     put = words.append
     try:
+        ctx = CTX_MODE + kind * 4 + 3
+        for _ in range(nt):
+            sl = x & _MASK
+            s = slot_t[ctx][sl]
+            x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+            while x < RANS_L:
+                x = (x << 8) | data[ptr]
+                ptr += 1
+            if s >= N_MODES:
+                raise FormatError("tx block has an undefined tb mode")
+            modes.append(s)
+            ctx = CTX_MODE + kind * 4 + s
+        lrows = _LAST_CTX[key]
+        for t in range(nt):
+            mt = modes[t]
+            if mt != MODE_SKIP:
+                row = lrows[mt == MODE_INTRA]
+                for p in range(P):
+                    ctx = row[pcl[p]]
+                    sl = x & _MASK
+                    v = slot_t[ctx][sl]
+                    x = freq_t[ctx][v] * (x >> PROB_BITS) + sl - cum_t[ctx][v]
+                    while x < RANS_L:
+                        x = (x << 8) | data[ptr]
+                        ptr += 1
+                    if v > 64:
+                        raise FormatError("tx block has a last position past 64")
+                    if v:
+                        lasts.append((t * P + p, v))
         for g, n in lasts:
             bb = _MAG_ROWS[pcl[g % P], key]          # per position: context of the first symbol
             g8 = g << 14                             # (g·64) << 8
@@ -742,56 +763,76 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs: np.ndarray, kind: int, 
             if s >= ESC:
                 esc.append((len(words), s))
             put(g8 | (pos << 8) | (s + 1))           # the first is nonzero: its magnitude is s + 1
-            n1, n2 = 1, 0
+            nb, n1 = 2, 1                            # 1 + nonzero among the two previous; the previous
             for pos in range(n - 2, -1, -1):
-                ctx = bb[pos] + 1 + n1 + n2
+                ctx = bb[pos] + nb
                 sl = x & _MASK
                 s = slot_t[ctx][sl]
                 x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
                 while x < RANS_L:
                     x = (x << 8) | data[ptr]
                     ptr += 1
-                n2 = n1
                 if s:                                # zeros carry no sign, escape or level
                     if s >= ESC:
                         esc.append((len(words), s))
                     put(g8 | (pos << 8) | s)
-                    n1 = 1
+                    nb, n1 = 2 + n1, 1
                 else:
-                    n1 = 0
+                    nb, n1 = 1 + n1, 0
+        buckets = []
+        for i, s in esc:
+            if s > ESC:
+                raise FormatError("tx block has an undefined magnitude symbol")
+            ctx = CTX_ESC + pcl[(words[i] >> 14) % P]
+            sl = x & _MASK
+            k = slot_t[ctx][sl]
+            x = freq_t[ctx][k] * (x >> PROB_BITS) + sl - cum_t[ctx][k]
+            while x < RANS_L:
+                x = (x << 8) | data[ptr]
+                ptr += 1
+            if k >= N_BUCKETS:
+                raise FormatError("tx block has an undefined escape bucket")
+            buckets.append(k)
     except IndexError:
         raise FormatError("rANS stream reads past its end") from None
-    d.x, d.ptr = x, ptr
-    buckets = []
-    for i, s in esc:
-        if s > ESC:
-            raise FormatError("tx block has an undefined magnitude symbol")
-        k = get(CTX_ESC + pcl[(words[i] >> 14) % P])
-        if k >= N_BUCKETS:
-            raise FormatError("tx block has an undefined escape bucket")
-        buckets.append(k)
     nsign = len(words)                               # every coefficient kept is nonzero
     nbits = nsign + sum(buckets)
     kb = min(nbits, BACK_BITS)
     raw_start = len(data) - (nbits - kb + 7) // 8
-    if not d.done(raw_start, kb):
+    if not (0 <= x - RANS_L < (1 << kb) and ptr == raw_start):
         raise FormatError("tx block stream is malformed (its symbols do not end where its raw bits start)")
-    raw = (d.x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
+    raw = (x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
+    if nsign <= SMALL_SIGNS:                         # few coefficients: Python ints, then two arrays
+        mag = [wd & 255 for wd in words]
+        bit = nsign
+        for (i, _), k in zip(esc, buckets):          # |c| = ESC + first + 2^k − 1 + k raw bits
+            mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
+            bit += k
+        for i in range(nsign):
+            if (raw >> i) & 1:
+                mag[i] = -mag[i]
+        return Parsed(np.array([modes], np.int64), np.array([wd >> 8 for wd in words], np.int64),
+                      np.array(mag, np.int64), P)
     w = np.array(words, np.int64)
     index, mag = w >> 8, w & 255
     bit = nsign
-    for (i, _), k in zip(esc, buckets):          # |c| = ESC + first + 2^k − 1 + k raw bits
+    for (i, _), k in zip(esc, buckets):
         mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
         bit += k
-    if nsign:
-        nb = (nsign + 7) >> 3
-        signs = np.unpackbits(np.frombuffer((raw & ((1 << (8 * nb)) - 1)).to_bytes(nb, "little"), np.uint8),
-                              count=nsign, bitorder="little")
-        np.negative(mag, out=mag, where=signs.view(bool))
+    nb = (nsign + 7) >> 3
+    signs = np.unpackbits(np.frombuffer((raw & ((1 << (8 * nb)) - 1)).to_bytes(nb, "little"), np.uint8),
+                          count=nsign, bitorder="little")
+    np.negative(mag, out=mag, where=signs.view(bool))
     return Parsed(np.array([modes], np.int64), index, mag, P)
+
+
+#: coefficients up to which :func:`parse_one` signs them in Python ints (above: numpy)
+SMALL_SIGNS = 48
 
 
 #: per (plane class, key), per scan position: the context of a (tb, plane)'s first magnitude
 #: symbol; the symbols after it add 1 + their count of nonzero neighbours
 _MAG_ROWS = {(pc, key): [CTX_MAG + pc * N_BANDS * 8 + key * 4 + b for b in _BAND8]
              for pc in range(N_PC) for key in (0, 1)}
+#: per key, mode class (intra?) and plane class: the context of a (tb, plane)'s last position
+_LAST_CTX = [[[CTX_LAST + (pc * 2 + ci) * 2 + key for pc in range(N_PC)] for ci in (0, 1)] for key in (0, 1)]

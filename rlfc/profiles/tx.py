@@ -111,6 +111,7 @@ class TxDecoder(ProfileDecoder):
         for s in SECTIONS:
             c.info(s)
         self.pcs = plane_classes(self.P)
+        self._pcl = self.pcs.tolist()                 # (the one-stream parser's form)
         peak = int(np.iinfo(self.dtype).max)
         self.lo, self.hi, self.flat = plane_limits(self.P, peak)
         self.lo_tb, self.hi_tb = (np.tile(x.astype(np.int32), TB * TB) for x in (self.lo, self.hi))   # an 8×8 tb's
@@ -619,7 +620,7 @@ class TxDecoder(ProfileDecoder):
         by one or as lanes, whichever :data:`ONE_BY_ONE_RATIO` says is faster."""
         n = e2 - s2
         if n.size and int(n.sum()) < ONE_BY_ONE_RATIO * max(int(n.max()), 1):
-            got = [parse_one(bytes(buf[a:b]), self.tables, nt, self.pcs, int(k), int(y))
+            got = [parse_one(bytes(buf[a:b]), self.tables, nt, self._pcl, int(k), int(y))
                    for a, b, k, y in zip(s2.tolist(), e2.tolist(), kind.tolist(), key.tolist())]
             return got[0] if len(got) == 1 else concat_parsed(got)
         return parse_lanes(buf, s2, e2, self.tables, nt, self.pcs, kind, key, self.container.name)
@@ -933,7 +934,7 @@ class TxDecoder(ProfileDecoder):
         with self._io:
             if e > s:
                 self.container.verify_span("tx.blocks", s, e)
-        return parse_one(bytes(self.buf[s:e]), self.tables, self.nt, self.pcs, int(self.lay.intra[view]),
+        return parse_one(bytes(self.buf[s:e]), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
                          int(self.is_key[view]))
 
     def _residual_one(self, view: int, parsed) -> np.ndarray:
