@@ -26,9 +26,9 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, encode_lanes
+from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, encode_lanes, slot_bytes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
-from .txsyntax import quantize_counts, slot_word_view, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
+from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
 VERSION = 3
 R = 31
@@ -205,9 +205,9 @@ class LazyMaps:
             raise FormatError(f"{what}: stream lengths do not add up to the section")
         pos = head + int(lens[0])
         tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
-        self.words = slot_word_view(tables)
+        self.tabs = _scalar_tables(tables)
         # the shared map: one stream, sequential (MED needs the decoded neighbours)
-        self.base = np.asarray(_shared_map(raw[pos:pos + int(lens[1])], self.words, ny, nx, ver, what), np.int64)
+        self.base = np.asarray(_shared_map(raw[pos:pos + int(lens[1])], self.tabs, ny, nx, ver, what), np.int64)
         pos += int(lens[1])
         self.starts = pos + np.concatenate([[0], np.cumsum(lens[2:])]).astype(np.int64)    # (n_maps + 1,)
         self.shape, self.n_modes, self.what = (ny, nx), n_modes, what
@@ -223,7 +223,7 @@ class LazyMaps:
         for m in new:
             # one stream per map (contexts from the same map's left and above values), plain
             # Python: a map's symbols depend on each other, and a few dozen maps make poor numpy lanes
-            corr, mo = _map_stream(self.raw, int(self.starts[m]), int(self.starts[m + 1]), self.words, ny, nx,
+            corr, mo = _map_stream(self.raw, int(self.starts[m]), int(self.starts[m + 1]), self.tabs, ny, nx,
                                    self.n_modes, self.version, self.what)
             dm = np.asarray(corr, np.int64) + self.base
             mo = np.asarray(mo, np.int64)
@@ -241,36 +241,19 @@ class LazyMaps:
         return self.disp, self.modes
 
 
-def _escape_digits(words, digits: list, x: int, p: int, data) -> tuple[int, int, int]:
-    """An escape's excess |e| − R from its three 6-bit digits (contexts ``digits``, already
-    shifted to their table rows; most significant first), the rANS state x at byte p of
-    ``data``: (excess, x, p) after them. (Reads past ``data`` raise IndexError: the callers
-    make it a FormatError.)"""
-    e = 0
-    mask = (1 << PROB_BITS) - 1
-    for dc in digits:
-        w = words[dc | (x & mask)]
-        x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
-        while x < RANS_L:
-            x = (x << 8) | data[p]
-            p += 1
-        e = (e << 6) | (w & 127)
-    return e, x, p
-
-
-def _shared_map(data: bytes, words, ny: int, nx: int, ver: int, what: str) -> list:
+def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> list:
     """The shared map's ny·nx values (a list of ints, raster order) from its stream ``data``:
     each value MED(a, b, c) + e, e's symbol in the context of the activity at that block (the
-    module's docstring); the rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined, one
-    look-up per symbol in ``words`` (:func:`rlfc.txsyntax.slot_word_view`), on Python ints
-    (numpy scalars made this 4x slower: it is paid by every open)."""
+    module's docstring); the rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined on ``tabs``
+    (:func:`_scalar_tables`), on Python ints (numpy scalars made this 4x slower: it is paid by
+    every open)."""
     if len(data) < STATE_BYTES:
         raise FormatError(f"{what}: the shared map's stream is shorter than its state")
+    slot_t, freq_t, cum_t = tabs
     x = int.from_bytes(data[:STATE_BYTES], "little")
     p = STATE_BYTES
     vals = [0] * (ny * nx)
-    digits = [_digit_ctx(ver, k) << PROB_BITS for k in range(3)]
-    act_ctx = [(CTX_BASE + k) << PROB_BITS for k in range(3)]
+    digits = [_digit_ctx(ver, k) for k in range(3)]
     mask = (1 << PROB_BITS) - 1
     i = 0
     try:
@@ -284,14 +267,23 @@ def _shared_map(data: bytes, words, ny: int, nx: int, ver: int, what: str) -> li
                     a = vals[i - nx] if y else 0
                     b = c = a
                 act = abs(a - c) + abs(b - c)
-                w = words[act_ctx[0 if act == 0 else 1 if act <= 16 else 2] | (x & mask)]
-                x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                ctx = CTX_BASE + (0 if act == 0 else 1 if act <= 16 else 2)
+                sl = x & mask
+                s = slot_t[ctx][sl]
+                x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
                 while x < RANS_L:
                     x = (x << 8) | data[p]
                     p += 1
-                s = w & 127
                 if s == 0 or s == 2 * R:                  # an escape: three 6-bit digits of |e| − R
-                    e, x, p = _escape_digits(words, digits, x, p, data)
+                    e = 0
+                    for dc in digits:
+                        sl = x & mask
+                        g = slot_t[dc][sl]
+                        x = freq_t[dc][g] * (x >> PROB_BITS) + sl - cum_t[dc][g]
+                        while x < RANS_L:
+                            x = (x << 8) | data[p]
+                            p += 1
+                        e = (e << 6) | g
                     e = R + e if s else -(R + e)
                 elif s > 2 * R:
                     raise FormatError(f"{what}: undefined map symbol {s}")
@@ -310,57 +302,69 @@ def _shared_map(data: bytes, words, ny: int, nx: int, ver: int, what: str) -> li
     return vals
 
 
-def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_modes: int, ver: int,
+def _map_stream(data: bytes, start: int, end: int, tabs, ny: int, nx: int, n_modes: int, ver: int,
                 what: str) -> tuple[list, list]:
     """(corrections, modes), lists of ny·nx ints, of one map's stream ``data[start:end]``: the
-    rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined, one table look-up per symbol in
-    ``words`` (:func:`rlfc.txsyntax.slot_word_view`)."""
+    rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined on ``tabs`` (:func:`_scalar_tables`:
+    per context the slot → symbol bytes, the frequencies and the cums; Python ints below 2^30,
+    CPython's one-digit ints, where one 32-bit word per slot took two-digit ones)."""
     if not 1 <= n_modes <= 5:
         raise ValueError("a map's modes are 0..4 (contexts 5·left + above)")
+    slot_t, freq_t, cum_t = tabs
     nloc = ny * nx
     if end - start < STATE_BYTES:
         raise FormatError(f"{what}: a map stream is shorter than its state")
     x = int.from_bytes(data[start:start + STATE_BYTES], "little")
     p = start + STATE_BYTES
     corr = [0] * nloc
-    nz = [0] * (nloc + nx)                    # (correction != 0) << PROB_BITS, after a zero row
-    digits = [_digit_ctx(ver, k) << PROB_BITS for k in range(3)]
-    cbase, mbase, mask = CTX_CORR << PROB_BITS, CTX_MODE << PROB_BITS, (1 << PROB_BITS) - 1
+    nz = [0] * (nloc + nx)                    # 2·(correction != 0), after a zero row
+    digits = [_digit_ctx(ver, k) for k in range(3)]
+    mask = (1 << PROB_BITS) - 1
     i = 0
     try:
         for _ in range(ny):
             left = 0
             for _ in range(nx):
-                w = words[(cbase + left + (nz[i] << 1)) | (x & mask)]
-                x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                ctx = CTX_CORR + left + nz[i]
+                sl = x & mask
+                s = slot_t[ctx][sl]
+                x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
                 while x < RANS_L:
                     x = (x << 8) | data[p]
                     p += 1
-                s = w & 127
                 if s == R:
                     left = 0
                 else:
                     if s == 0 or s == 2 * R:          # an escape: three 6-bit digits of |c| − R
-                        e, x, p = _escape_digits(words, digits, x, p, data)
+                        e = 0
+                        for dc in digits:
+                            sl = x & mask
+                            g = slot_t[dc][sl]
+                            x = freq_t[dc][g] * (x >> PROB_BITS) + sl - cum_t[dc][g]
+                            while x < RANS_L:
+                                x = (x << 8) | data[p]
+                                p += 1
+                            e = (e << 6) | g
                         corr[i] = R + e if s else -(R + e)
                     elif s > 2 * R:
                         raise FormatError(f"{what}: undefined map symbol {s}")
                     else:
                         corr[i] = s - R
-                    left = 1 << PROB_BITS
-                nz[i + nx] = left
+                    left = 1
+                nz[i + nx] = left + left
                 i += 1
         modes = [0] * (nloc + nx)              # after a zero row
         i = 0
         for _ in range(ny):
             ml = 0
             for _ in range(nx):
-                w = words[(mbase + ((5 * ml + modes[i]) << PROB_BITS)) | (x & mask)]
-                x = ((w >> 7) & 0x1FFF) * (x >> PROB_BITS) + (w >> 20)
+                ctx = CTX_MODE + 5 * ml + modes[i]
+                sl = x & mask
+                ml = slot_t[ctx][sl]
+                x = freq_t[ctx][ml] * (x >> PROB_BITS) + sl - cum_t[ctx][ml]
                 while x < RANS_L:
                     x = (x << 8) | data[p]
                     p += 1
-                ml = w & 127
                 if ml >= n_modes:
                     raise FormatError(f"{what}: a prediction mode is out of range")
                 modes[i + nx] = ml
@@ -370,6 +374,12 @@ def _map_stream(data: bytes, start: int, end: int, words, ny: int, nx: int, n_mo
     if p != end or x != RANS_L:
         raise FormatError(f"{what}: a map stream is malformed")
     return corr, modes[nx:]
+
+
+def _scalar_tables(tables) -> tuple:
+    """(per context: slot → symbol bytes, frequency list, cum list) of ``tables``, for the
+    plain-Python map parsers (alphabet of 64 symbols: one byte per slot)."""
+    return slot_bytes(tables), tables.freq.tolist(), tables.cum.tolist()
 
 
 __all__ = ["pack_maps", "maps_bytes", "unpack_maps", "LazyMaps", "MAX_VARINT_BYTES"]
