@@ -179,24 +179,24 @@ def _drop_pad(a: np.ndarray, C: int, P: int) -> np.ndarray:
     return a[..., :P]
 
 
-def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int, out: np.ndarray | None = None) -> np.ndarray:
-    """:func:`predict` of whole rows of 8×8 blocks that all blend the same references with the
-    same weights (tb mode 0), sampled in raster order: one remap per reference over the band
-    (its maps are the pixel grid shifted per block), no per-block bookkeeping, no transposes.
+def row_grids(atlas: KeyAtlas, slots, weights, disp_y, disp_x) -> list:
+    """The sampling rows and columns of :func:`predict_rows` for every reference of nonzero
+    weight, over all the 8×8 block rows given, in one pass per reference (their values are
+    small: one per pixel row or column of each 8×8 block).
 
     Args:
-        slots: (R,) key slots; weights: (R,) ints summing to 64 (weight-0 references are not
-            sampled); disp_y, disp_x: (R, n, n8x) displacements in 1/16 pixel of the band's
-            blocks; ty0: the band's first block row.
+        slots: (R,) key slots; weights: (R,) blend weights; disp_y, disp_x: (R, n, n8x)
+            displacements in 1/16 pixel of the blocks (from block row 0).
 
     Returns:
-        (8·n, 8·n8x, P) int32: the integers :func:`predict` gives for those blocks (written to
-        ``out`` where given: a C-contiguous int32 array of that shape).
+        per reference of nonzero weight, (weight, atlas group, rows (n, 8, n8x) float32: the
+        row of each pixel row of each block in the atlas group, clamped to its key view; cols
+        (n, n8x, 8) float32: the column of each pixel column, clamped).
     """
     R, n, n8x = disp_y.shape
-    yb = ((ty0 + np.arange(n)) * TB) << DISP_BITS
+    yb = (np.arange(n) * TB) << DISP_BITS
     xb = (np.arange(n8x) * TB) << DISP_BITS
-    acc = None
+    out = []
     for r in range(R):
         w = int(weights[r])
         if w == 0:
@@ -204,10 +204,34 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int, out:
         g, within = divmod(int(slots[r]), atlas.per_group)
         Y = (yb[:, None] + disp_y[r]).astype(np.float32) * _F16                          # (n, n8x)
         X = (xb[None, :] + disp_x[r]).astype(np.float32) * _F16
-        rows = np.minimum(np.maximum(Y[:, None, :, None] + _E[:, None, None], 0), atlas.hp - 1) + np.float32(within * atlas.hp)
-        cols = np.minimum(np.maximum(X[:, None, :, None] + _E, 0), atlas.wp - 1)
-        mr = np.repeat(rows, TB, axis=3).reshape(n * TB, n8x * TB)      # (np.repeat: 0.5x broadcast_to's copy)
-        mc = np.repeat(cols, TB, axis=1).reshape(n * TB, n8x * TB)
+        rows = Y[:, None, :] + _E[:, None]                                               # (n, 8, n8x)
+        np.minimum(np.maximum(rows, 0, out=rows), np.float32(atlas.hp - 1), out=rows)
+        rows += np.float32(within * atlas.hp)
+        cols = X[:, :, None] + _E                                                        # (n, n8x, 8)
+        np.minimum(np.maximum(cols, 0, out=cols), np.float32(atlas.wp - 1), out=cols)
+        out.append((w, g, rows, cols))
+    if not out:                                                                          # (weights sum to 64)
+        raise ValueError("predict_rows needs a reference of nonzero weight")
+    return out
+
+
+def predict_rows(atlas: KeyAtlas, grids: list, a: int, b: int, out: np.ndarray | None = None) -> np.ndarray:
+    """:func:`predict` of whole rows of 8×8 blocks that all blend the same references with the
+    same weights (tb mode 0), sampled in raster order: one remap per reference over the band
+    of block rows [a, b) (its maps are the pixel grid shifted per block: :func:`row_grids`'
+    ``grids``, spread to every pixel by OpenCV's nearest resize, the values np.repeat gives), no
+    per-block bookkeeping, no transposes.
+
+    Returns:
+        (8·(b − a), 8·n8x, P) int32: the integers :func:`predict` gives for those blocks
+        (written to ``out`` where given: a C-contiguous int32 array of that shape).
+    """
+    acc = None
+    for w, g, rows, cols in grids:
+        n, n8x = b - a, rows.shape[2]
+        size = (n8x * TB, n * TB)
+        mr = cv2.resize(rows[a:b].reshape(n * TB, n8x), size, interpolation=cv2.INTER_NEAREST)
+        mc = cv2.resize(cols[a:b].reshape(n, n8x * TB), size, interpolation=cv2.INTER_NEAREST)
         smp = cv2.remap(atlas.groups[g], mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
         np.floor(smp, out=smp)                                                           # atlas + 0.5: rounded
         if acc is None:
@@ -215,9 +239,7 @@ def predict_rows(atlas: KeyAtlas, slots, weights, disp_y, disp_x, ty0: int, out:
             acc = smp
         else:
             cv2.scaleAdd(smp, w, acc, dst=acc)                                           # integers < 2^24: exact
-    if acc is None:                                                                      # (weights sum to 64)
-        raise ValueError("predict_rows needs a reference of nonzero weight")
-    blend = _drop_pad(acc.reshape(n * TB, n8x * TB, atlas.C), atlas.C, atlas.P)
+    blend = _drop_pad(acc.reshape(acc.shape[0], acc.shape[1], atlas.C), atlas.C, atlas.P)
     if out is None:
         out = np.empty(blend.shape, np.int32)
     np.copyto(out, blend, casting="unsafe")                                             # (integers: exact)
@@ -254,9 +276,10 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
     if out is None:
         out = np.empty((n8y * TB, n8x * TB, P), np.int32)
     band = max(1, BAND_TBS // n8x)
+    grids = row_grids(atlas, slots, weights, dy, dx)             # (each reference's, for the whole view at once)
     for a in range(0, n8y, band):
         b = min(n8y, a + band)
-        predict_rows(atlas, slots, weights, dy[:, a:b], dx[:, a:b], a, out=out[a * TB:b * TB])
+        predict_rows(atlas, grids, a, b, out=out[a * TB:b * TB])
     other = np.flatnonzero(np.asarray(modes) != 0)
     if other.size:
         ty, tx = np.divmod(other, n8x)
