@@ -366,6 +366,20 @@ def slot_bytes(tables: Tables) -> list:
     return tables._slot_bytes
 
 
+def scalar_step(slot_t, freq_t, cum_t, ctx: int, x: int, p: int, data) -> tuple[int, int, int]:
+    """One rANS decode step on Python ints, for the plain-Python parsers' rare symbols (their
+    common ones inline it): context ``ctx`` of per-context tables (slot → symbol bytes,
+    frequency and cum lists), state ``x`` at byte ``p`` of ``data``: (symbol, x, p) after it.
+    A read past ``data`` raises IndexError (the callers make it a FormatError)."""
+    sl = x & (M - 1)
+    s = slot_t[ctx][sl]
+    x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+    while x < L:
+        x = (x << 8) | data[p]
+        p += 1
+    return s, x, p
+
+
 class ScalarDecoder:
     """One stream in plain Python ints (the reference; fast for short streams)."""
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, encode_lanes, slot_bytes
+from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, encode_lanes, scalar_step, slot_bytes
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
 from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
@@ -241,6 +241,18 @@ class LazyMaps:
         return self.disp, self.modes
 
 
+def _escape_digits(tabs, digits: list, x: int, p: int, data) -> tuple[int, int, int]:
+    """An escape's excess |e| − R from its three 6-bit digits (contexts ``digits``, most
+    significant first; ``tabs``: :func:`_scalar_tables`), the rANS state x at byte p of
+    ``data``: (excess, x, p) after them. (Reads past ``data`` raise IndexError: the callers
+    make it a FormatError.)"""
+    e = 0
+    for dc in digits:
+        g, x, p = scalar_step(*tabs, dc, x, p, data)
+        e = (e << 6) | g
+    return e, x, p
+
+
 def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> list:
     """The shared map's ny·nx values (a list of ints, raster order) from its stream ``data``:
     each value MED(a, b, c) + e, e's symbol in the context of the activity at that block (the
@@ -275,15 +287,7 @@ def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> lis
                     x = (x << 8) | data[p]
                     p += 1
                 if s == 0 or s == 2 * R:                  # an escape: three 6-bit digits of |e| − R
-                    e = 0
-                    for dc in digits:
-                        sl = x & mask
-                        g = slot_t[dc][sl]
-                        x = freq_t[dc][g] * (x >> PROB_BITS) + sl - cum_t[dc][g]
-                        while x < RANS_L:
-                            x = (x << 8) | data[p]
-                            p += 1
-                        e = (e << 6) | g
+                    e, x, p = _escape_digits(tabs, digits, x, p, data)
                     e = R + e if s else -(R + e)
                 elif s > 2 * R:
                     raise FormatError(f"{what}: undefined map symbol {s}")
@@ -336,15 +340,7 @@ def _map_stream(data: bytes, start: int, end: int, tabs, ny: int, nx: int, n_mod
                     left = 0
                 else:
                     if s == 0 or s == 2 * R:          # an escape: three 6-bit digits of |c| − R
-                        e = 0
-                        for dc in digits:
-                            sl = x & mask
-                            g = slot_t[dc][sl]
-                            x = freq_t[dc][g] * (x >> PROB_BITS) + sl - cum_t[dc][g]
-                            while x < RANS_L:
-                                x = (x << 8) | data[p]
-                                p += 1
-                            e = (e << 6) | g
+                        e, x, p = _escape_digits(tabs, digits, x, p, data)
                         corr[i] = R + e if s else -(R + e)
                     elif s > 2 * R:
                         raise FormatError(f"{what}: undefined map symbol {s}")

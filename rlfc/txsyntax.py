@@ -32,7 +32,7 @@ import numpy as np
 from formats.errors import FormatError
 
 from .rans import (BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, STATE_BYTES, LaneDecoder, Tables, encode_lanes,
-                   slot_bytes)
+                   scalar_step, slot_bytes)
 
 N_MODES = 3
 MODE_SKIP, MODE_RES, MODE_INTRA = 0, 1, 2
@@ -783,13 +783,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
         for i, s in esc:
             if s > ESC:
                 raise FormatError("tx block has an undefined magnitude symbol")
-            ctx = CTX_ESC + pcl[(words[i] >> 14) % P]
-            sl = x & _MASK
-            k = slot_t[ctx][sl]
-            x = freq_t[ctx][k] * (x >> PROB_BITS) + sl - cum_t[ctx][k]
-            while x < RANS_L:
-                x = (x << 8) | data[ptr]
-                ptr += 1
+            k, x, ptr = scalar_step(slot_t, freq_t, cum_t, CTX_ESC + pcl[(words[i] >> 14) % P], x, ptr, data)
             if k >= N_BUCKETS:
                 raise FormatError("tx block has an undefined escape bucket")
             buckets.append(k)
