@@ -211,7 +211,7 @@ def row_grids(atlas: KeyAtlas, slots, weights, disp_y, disp_x) -> list:
         np.minimum(np.maximum(cols, 0, out=cols), np.float32(atlas.wp - 1), out=cols)
         out.append((w, g, rows, cols))
     if not out:                                                                          # (weights sum to 64)
-        raise ValueError("predict_rows needs a reference of nonzero weight")
+        raise ValueError("a view's prediction needs a reference of nonzero weight")
     return out
 
 
@@ -227,9 +227,9 @@ def predict_rows(atlas: KeyAtlas, grids: list, a: int, b: int, out: np.ndarray |
         (written to ``out`` where given: a C-contiguous int32 array of that shape).
     """
     acc = None
+    n, n8x = b - a, grids[0][2].shape[2]
+    size = (n8x * TB, n * TB)                                                            # (OpenCV's width, height)
     for w, g, rows, cols in grids:
-        n, n8x = b - a, rows.shape[2]
-        size = (n8x * TB, n * TB)
         mr = cv2.resize(rows[a:b].reshape(n * TB, n8x), size, interpolation=cv2.INTER_NEAREST)
         mc = cv2.resize(cols[a:b].reshape(n, n8x * TB), size, interpolation=cv2.INTER_NEAREST)
         smp = cv2.remap(atlas.groups[g], mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
@@ -239,7 +239,7 @@ def predict_rows(atlas: KeyAtlas, grids: list, a: int, b: int, out: np.ndarray |
             acc = smp
         else:
             cv2.scaleAdd(smp, w, acc, dst=acc)                                           # integers < 2^24: exact
-    blend = _drop_pad(acc.reshape(acc.shape[0], acc.shape[1], atlas.C), atlas.C, atlas.P)
+    blend = _drop_pad(acc.reshape(n * TB, n8x * TB, atlas.C), atlas.C, atlas.P)
     if out is None:
         out = np.empty(blend.shape, np.int32)
     np.copyto(out, blend, casting="unsafe")                                             # (integers: exact)
