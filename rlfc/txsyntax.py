@@ -680,13 +680,6 @@ def slot_words(tables: Tables) -> np.ndarray:
     return got
 
 
-def slot_word_view(tables: Tables) -> memoryview:
-    """:func:`slot_words` as a memoryview, for plain-Python parsers: indexing gives Python ints.
-    (A list of them cost 17 ms to build for a 167-context table set, paid by every first frame,
-    and was no faster to index: measured.)"""
-    return memoryview(slot_words(tables))
-
-
 def _raw_bits(buf, start, back, kb, off):
     """Raw bit ``off`` of each lane (arrays): bits below ``kb`` from the start state's R
     (``back``), the others from the stored bits at byte ``start`` (LSB-first)."""
