@@ -366,6 +366,15 @@ def slot_bytes(tables: Tables) -> list:
     return tables._slot_bytes
 
 
+def scalar_tables(tables: Tables) -> tuple:
+    """(per context: slot → symbol bytes, frequency list, cum list) of ``tables`` for the
+    plain-Python decoders (Python ints below 2^30: CPython's one-digit ints), built once per
+    table set and cached on it."""
+    if getattr(tables, "_lists", None) is None:
+        tables._lists = (tables.freq.tolist(), tables.cum.tolist())
+    return (slot_bytes(tables),) + tables._lists
+
+
 def scalar_step(slot_t, freq_t, cum_t, ctx: int, x: int, p: int, data) -> tuple[int, int, int]:
     """One rANS decode step on Python ints, for the plain-Python parsers' rare symbols (their
     common ones inline it): context ``ctx`` of per-context tables (slot → symbol bytes,
@@ -389,10 +398,7 @@ class ScalarDecoder:
         self.data, self.t = data, tables
         self.x = int.from_bytes(data[:STATE_BYTES], "little")
         self.ptr = STATE_BYTES
-        if getattr(tables, "_lists", None) is None:         # Python lists once per table set
-            tables._lists = (tables.freq.tolist(), tables.cum.tolist())
-        self.freq, self.cum = tables._lists
-        self.slot = slot_bytes(tables)
+        self.slot, self.freq, self.cum = scalar_tables(tables)
 
     def get(self, ctx: int) -> int:
         x = self.x

@@ -26,7 +26,7 @@ import numpy as np
 
 from formats.errors import FormatError
 
-from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, encode_lanes, scalar_step, slot_bytes
+from .rans import L as RANS_L, PROB_BITS, STATE_BYTES, encode_lanes, scalar_step, scalar_tables
 from .txsections import MAX_VARINT_BYTES, unvarints, varints
 from .txsyntax import quantize_counts, tables_from_bytes_n, tables_from_quantized, tables_to_bytes
 
@@ -205,7 +205,7 @@ class LazyMaps:
             raise FormatError(f"{what}: stream lengths do not add up to the section")
         pos = head + int(lens[0])
         tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
-        self.tabs = _scalar_tables(tables)
+        self.tabs = scalar_tables(tables)
         # the shared map: one stream, sequential (MED needs the decoded neighbours)
         self.base = np.asarray(_shared_map(raw[pos:pos + int(lens[1])], self.tabs, ny, nx, ver, what), np.int64)
         pos += int(lens[1])
@@ -243,7 +243,7 @@ class LazyMaps:
 
 def _escape_digits(tabs, digits: list, x: int, p: int, data) -> tuple[int, int, int]:
     """An escape's excess |e| − R from its three 6-bit digits (contexts ``digits``, most
-    significant first; ``tabs``: :func:`_scalar_tables`), the rANS state x at byte p of
+    significant first; ``tabs``: :func:`rlfc.rans.scalar_tables`), the rANS state x at byte p of
     ``data``: (excess, x, p) after them. (Reads past ``data`` raise IndexError: the callers
     make it a FormatError.)"""
     e = 0
@@ -257,8 +257,8 @@ def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> lis
     """The shared map's ny·nx values (a list of ints, raster order) from its stream ``data``:
     each value MED(a, b, c) + e, e's symbol in the context of the activity at that block (the
     module's docstring); the rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined on ``tabs``
-    (:func:`_scalar_tables`), on Python ints (numpy scalars made this 4x slower: it is paid by
-    every open)."""
+    (:func:`rlfc.rans.scalar_tables`), on Python ints (numpy scalars made this 4x slower: it is
+    paid by every open)."""
     if len(data) < STATE_BYTES:
         raise FormatError(f"{what}: the shared map's stream is shorter than its state")
     slot_t, freq_t, cum_t = tabs
@@ -309,9 +309,10 @@ def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> lis
 def _map_stream(data: bytes, start: int, end: int, tabs, ny: int, nx: int, n_modes: int, ver: int,
                 what: str) -> tuple[list, list]:
     """(corrections, modes), lists of ny·nx ints, of one map's stream ``data[start:end]``: the
-    rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined on ``tabs`` (:func:`_scalar_tables`:
-    per context the slot → symbol bytes, the frequencies and the cums; Python ints below 2^30,
-    CPython's one-digit ints, where one 32-bit word per slot took two-digit ones)."""
+    rANS steps of :class:`rlfc.rans.ScalarDecoder` inlined on ``tabs``
+    (:func:`rlfc.rans.scalar_tables`: per context the slot → symbol bytes, the frequencies and
+    the cums; Python ints below 2^30, CPython's one-digit ints, where one 32-bit word per slot
+    took two-digit ones)."""
     if not 1 <= n_modes <= 5:
         raise ValueError("a map's modes are 0..4 (contexts 5·left + above)")
     slot_t, freq_t, cum_t = tabs
@@ -370,12 +371,6 @@ def _map_stream(data: bytes, start: int, end: int, tabs, ny: int, nx: int, n_mod
     if p != end or x != RANS_L:
         raise FormatError(f"{what}: a map stream is malformed")
     return corr, modes[nx:]
-
-
-def _scalar_tables(tables) -> tuple:
-    """(per context: slot → symbol bytes, frequency list, cum list) of ``tables``, for the
-    plain-Python map parsers (alphabet of 64 symbols: one byte per slot)."""
-    return slot_bytes(tables), tables.freq.tolist(), tables.cum.tolist()
 
 
 __all__ = ["pack_maps", "maps_bytes", "unpack_maps", "LazyMaps", "MAX_VARINT_BYTES"]

@@ -32,7 +32,7 @@ import numpy as np
 from formats.errors import FormatError
 
 from .rans import (BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, STATE_BYTES, LaneDecoder, Tables, encode_lanes,
-                   scalar_step, slot_bytes)
+                   scalar_step, scalar_tables)
 
 N_MODES = 3
 MODE_SKIP, MODE_RES, MODE_INTRA = 0, 1, 2
@@ -701,11 +701,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
     P = len(pcl)
     if len(data) < STATE_BYTES:
         raise FormatError(f"rANS stream shorter than its {STATE_BYTES}-byte state")
-    slot_t = slot_bytes(tables)
-    got = getattr(tables, "_lists", None)
-    if got is None:                                  # (Python lists once per table set)
-        got = tables._lists = (tables.freq.tolist(), tables.cum.tolist())
-    freq_t, cum_t = got
+    slot_t, freq_t, cum_t = scalar_tables(tables)
     x = int.from_bytes(data[:STATE_BYTES], "little")
     ptr = STATE_BYTES
     modes, lasts = [], []            # lasts: (g, last) of each coded (tb, plane), in order
@@ -715,12 +711,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
     try:
         ctx = CTX_MODE + kind * 4 + 3
         for _ in range(nt):
-            sl = x & _MASK
-            s = slot_t[ctx][sl]
-            x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
-            while x < RANS_L:
-                x = (x << 8) | data[ptr]
-                ptr += 1
+            s, x, ptr = scalar_step(slot_t, freq_t, cum_t, ctx, x, ptr, data)
             if s >= N_MODES:
                 raise FormatError("tx block has an undefined tb mode")
             modes.append(s)
@@ -731,13 +722,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
             if mt != MODE_SKIP:
                 row = lrows[mt == MODE_INTRA]
                 for p in range(P):
-                    ctx = row[pcl[p]]
-                    sl = x & _MASK
-                    v = slot_t[ctx][sl]
-                    x = freq_t[ctx][v] * (x >> PROB_BITS) + sl - cum_t[ctx][v]
-                    while x < RANS_L:
-                        x = (x << 8) | data[ptr]
-                        ptr += 1
+                    v, x, ptr = scalar_step(slot_t, freq_t, cum_t, row[pcl[p]], x, ptr, data)
                     if v > 64:
                         raise FormatError("tx block has a last position past 64")
                     if v:
