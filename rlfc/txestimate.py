@@ -17,6 +17,8 @@ not (its candidates are a pixel apart, the warps' offsets a pixel or two at most
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 from .txlayout import MAX_REFS
@@ -83,11 +85,42 @@ class Estimator:
         warp = getattr(struct, "warp", None)          # per-view warps (rlfc.txwarp): the refinement
         self.warp_dw = None if warp is None else pair_params(warp, struct.refs)   # samples through them
         self._woff: dict = {}                         # view → _warp_blocks (cached)
+        self._refs32 = None                           # reference → its float32 luma (see _ref_luma)
+        self._refs32_lock = threading.Lock()
+        self._local = threading.local()               # (per-thread scratch arrays: _scratch)
 
     def _y(self, v: int, out: np.ndarray) -> np.ndarray:
         """(Hp, Wp) float32 luma of view v, written to ``out``."""
         np.copyto(out, self.luma[v], casting="unsafe")
         return out
+
+    def _ref_luma(self, k: int, out: np.ndarray) -> np.ndarray:
+        """(Hp, Wp) float32 luma of reference view k: the references' (key views') float32 luma
+        made once per estimator where it fits in REF_FLOAT_BYTES (each reference is read by
+        every view it predicts, at every cost evaluation), else written to ``out``."""
+        refs = self._refs32
+        if refs is None:
+            with self._refs32_lock:
+                if self._refs32 is None:
+                    r = self.s.refs
+                    ks = np.unique(r[r >= 0]).tolist()
+                    fits = len(ks) * self.hp * self.wp * 4 <= REF_FLOAT_BYTES
+                    self._refs32 = {k: self._y(k, np.empty((self.hp, self.wp), np.float32)) for k in ks} if fits \
+                        else {}
+                refs = self._refs32
+        got = refs.get(k)
+        return got if got is not None else self._y(k, out)
+
+    def _scratch(self, i: int) -> np.ndarray:
+        """The calling thread's i-th (Hp, Wp) float32 scratch array, kept from call to call (fresh
+        megabyte arrays each cost their pages' first-touch faults)."""
+        loc = self._local
+        bufs = getattr(loc, "bufs", None)
+        if bufs is None:
+            bufs = loc.bufs = []
+        while len(bufs) <= i:
+            bufs.append(np.empty((self.hp, self.wp), np.float32))
+        return bufs[i]
 
     def _warp_blocks(self, v: int) -> tuple:
         """(oy, ox) (R, n8y, n8x) float32 pixels: view v's warp offsets to each reference per 8×8
@@ -137,10 +170,18 @@ class Estimator:
             self._shared = (runner, runner.share(self))
         return self._shared[1]
 
+    def __setstate__(self, st):
+        self.__dict__.update(st)
+        self._refs32_lock = threading.Lock()
+        self._local = threading.local()
+
     def __getstate__(self):
         st = dict(self.__dict__)
         st.pop("_shared", None)
         st.pop("_gyx", None)          # (rebuilt where needed)
+        st["_refs32"] = None          # (rebuilt where needed)
+        st.pop("_refs32_lock", None)
+        st.pop("_local", None)
         st["_woff"] = {}              # (rebuilt where needed)
         return st
 
@@ -152,14 +193,17 @@ class Estimator:
         views = self.cells[m]
         acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
         nr = self._nrefs(m)
-        y, yk, p, e, blend = (np.empty((self.hp, self.wp), np.float32) for _ in range(5))   # (reused)
-        for v in views.tolist():
+        shifts = [d * (s.positions[v] - s.positions[s.refs[v, j]]) for v in views.tolist() for j in range(nr)]
+        if self.luma.dtype in (np.uint8, np.uint16) and all(
+                float(q).is_integer() and abs(q) < n for sh in shifts for q, n in zip(sh, (self.hp, self.wp))):
+            return self._global_cell_int(m, views, nr, shifts, acc)
+        y, yk, p, e, blend = (self._scratch(i) for i in range(5))   # (reused)
+        for i, v in enumerate(views.tolist()):
             self._y(v, y)
             blend.fill(0)
             for j in range(nr):
-                k = s.refs[v, j]
-                dy, dx = d * (s.positions[v] - s.positions[k])
-                _shift(self._y(k, yk), dy, dx, p)
+                dy, dx = shifts[i * nr + j]
+                _shift(self._y(s.refs[v, j], yk), dy, dx, p)
                 acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
                 # in float32 (float64 products cost 0.5-1.5 CPU-s of an encode's map estimation):
                 # on a grid (whole view steps, whole-pixel candidates) the shifts are whole pixels
@@ -167,6 +211,31 @@ class Estimator:
                 # (one fused pass: the same exact sums, however OpenCV rounds its product)
                 cv2.scaleAdd(p, float(s.weights[v, j]) / 64.0, blend, dst=blend)
             acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
+        return acc[:1 + nr]
+
+    def _global_cell_int(self, m: int, views: np.ndarray, nr: int, shifts: list, acc: np.ndarray) -> np.ndarray:
+        """:meth:`_global_cell` where every shift is a whole number of pixels and the luma is
+        uint8/uint16: each reference shifted in its own dtype (a crop and a border copy), the
+        errors and the blend made in float32 by OpenCV from the integers. The same numbers: the
+        differences are integers, and the blend's terms (integers × k/64, at most 23 significant
+        bits) and their sums (below 2^22 sixty-fourths) are exact however OpenCV orders or fuses
+        them."""
+        import cv2
+
+        s = self.s
+        p = np.empty((self.hp, self.wp), self.luma.dtype)
+        e, blend = self._scratch(0), self._scratch(1)
+        for i, v in enumerate(views.tolist()):
+            y = self.luma[v]
+            blend.fill(0)
+            for j in range(nr):
+                dy, dx = (int(q) for q in shifts[i * nr + j])
+                _shift(self.luma[s.refs[v, j]], dy, dx, p)
+                cv2.subtract(y, p, dst=e, dtype=cv2.CV_32F)
+                acc[1 + j] += _block_sums(np.square(e, out=e), self.nby8, self.nbx8)
+                cv2.addWeighted(p, float(s.weights[v, j]) / 64.0, blend, 1.0, 0.0, dst=blend, dtype=cv2.CV_32F)
+            cv2.subtract(y, blend, dst=e, dtype=cv2.CV_32F)
+            acc[0] += _block_sums(np.square(e, out=e), self.nby8, self.nbx8)
         return acc[:1 + nr]
 
     def costs_maps(self, d16: np.ndarray, runner=None) -> np.ndarray:
@@ -196,34 +265,44 @@ class Estimator:
         # (each block's disparity on its pixels; with warps each reference's sum is spread instead)
         dpix = _pixels_of(dblk, self.hp, self.wp) if self.warp_dw is None else None
         gy, gx = self._grid()
-        y, yk, p, e, wp, blend, mx, my = (np.empty((self.hp, self.wp), np.float32) for _ in range(8))
+        y, yk, p, e, wp, blend, mx, my = (self._scratch(i) for i in range(8))
+        # the view's integer luma as it is: OpenCV subtracts float32 samples from it in float32,
+        # the same numbers as numpy's float32 difference (other dtypes: converted first)
+        as_is = self.luma.dtype in (np.uint8, np.uint16)
+        cols, rows = {}, {}                   # view offset Δx (Δy) → the sampling columns (rows) at it
         for v in views.tolist():
             r = s.refs[v, :nr]
-            self._y(v, y)
+            yv = self.luma[v] if as_is else self._y(v, y)
             dpos = (s.positions[v] - s.positions[r]).astype(np.float32)                # (nr, 2)
             wb = s.weights[v, :nr] / 64.0
             blend.fill(0)
             warp = None if self.warp_dw is None else self._warp_blocks(v)
-            last = [None, None]               # the offsets mx, my were made for (references in a row or a
-            for j in range(nr):               # column share one); each reference alone, and their blend
+            for j in range(nr):               # each reference alone, and their blend
                 ox, oy = float(dpos[j, 1]), float(dpos[j, 0])
                 if warp is not None:
                     # each 8×8 block's displacement plus its warp offset, as the decoder's predictor
                     # (sixteenths: the sums are exact in float32)
                     np.add(gx, _pixels_of(dblk * np.float32(ox) + warp[1][j], self.hp, self.wp), out=mx)
                     np.add(gy, _pixels_of(dblk * np.float32(oy) + warp[0][j], self.hp, self.wp), out=my)
-                else:
-                    if ox != last[0]:
-                        cv2.scaleAdd(dpix, ox, gx, dst=mx)             # gx + dpix·Δx in one pass (float32,
-                    if oy != last[1]:                                  # the same values as numpy's two)
-                        cv2.scaleAdd(dpix, oy, gy, dst=my)
-                last = [ox, oy]
-                cvremap.remap(self._y(r[j], yk), mx, my, cv2.INTER_LINEAR, out=p)
-                acc[1 + j] += _block_sums(np.square(np.subtract(y, p, out=e), out=e), self.nby8, self.nbx8)
+                    cx, cy = mx, my
+                else:                         # (a cell's views share a few offsets: each made once)
+                    cx, cy = cols.get(ox), rows.get(oy)
+                    if cx is None:            # gx + dpix·Δx in one pass (float32, the same values as numpy's two)
+                        cx = cols[ox] = cv2.scaleAdd(dpix, ox, gx, dst=self._scratch(8 + len(cols) + len(rows)))
+                    if cy is None:
+                        cy = rows[oy] = cv2.scaleAdd(dpix, oy, gy, dst=self._scratch(8 + len(cols) + len(rows)))
+                cvremap.remap(self._ref_luma(int(r[j]), yk), cx, cy, cv2.INTER_LINEAR, out=p)
+                cv2.subtract(yv, p, dst=e, dtype=cv2.CV_32F)
+                acc[1 + j] += _block_sums(np.square(e, out=e), self.nby8, self.nbx8)
                 blend += np.multiply(p, np.float32(wb[j]), out=wp)
-            acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
+            cv2.subtract(yv, blend, dst=e, dtype=cv2.CV_32F)
+            acc[0] += _block_sums(np.square(e, out=e), self.nby8, self.nbx8)
         return acc
 
+
+#: bytes of float32 reference luma an estimator keeps (the key views' luma, converted once: 9
+#: key views of 512² are 9 MiB); beyond it each use converts its reference again
+REF_FLOAT_BYTES = 64 << 20
 
 #: bits a cell's own disparity for a block, or a block's single-reference mode, is taken to cost
 #: (about what they cost coded: BENCHMARKS.md)

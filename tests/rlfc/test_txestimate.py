@@ -105,3 +105,40 @@ def test_the_estimates_costs_are_those_the_repricing_would_evaluate():
         b = txestimate.reprice_maps_both(luma, s, base, disp, side_lambda=0.5, correction_lambda=lam, costs=full)
         assert all(np.array_equal(x, y) for x, y in zip(a, b))
     assert np.array_equal(txestimate.estimate_maps(luma, s, max_disparity=8, side_lambda=0.5)[1], disp)
+
+
+@pytest.mark.parametrize("dtype,scale", [(np.uint8, 1), (np.uint16, 257)])
+def test_integer_luma_gives_the_costs_of_its_float32_copy(monkeypatch, dtype, scale):
+    """8/16-bit luma takes the integer paths (whole-pixel shifts in the luma's dtype, OpenCV's
+    errors and blend made in float32 from the integers; the view's samples subtracted as they
+    are; the references' float32 luma made once per estimator): every cost equals that of the
+    same luma as float32, which takes the float paths, and so do the references converted at
+    every use (REF_FLOAT_BYTES 0)."""
+    luma = (_noisy_shifted(seed=11).astype(np.int64) * scale).astype(dtype)
+    s = build(5, 5, 2)
+    as_float = luma.astype(np.float32)
+    ints, floats = txestimate.Estimator(luma, s, list(s.keys)), txestimate.Estimator(as_float, s, list(s.keys))
+    ds = [-3.0, 0.0, 2.0]
+    for a, b in zip(ints.costs_global_many(ds), floats.costs_global_many(ds)):
+        assert np.array_equal(a, b)
+    d16 = np.random.default_rng(2).integers(-40, 41, (len(s.cell_views), ints.nby8 * ints.nbx8))
+    want = floats.costs_maps(d16)
+    assert np.array_equal(ints.costs_maps(d16), want)
+    assert ints._refs32 and all(a.dtype == np.float32 for a in ints._refs32.values())   # (kept once)
+    monkeypatch.setattr(txestimate, "REF_FLOAT_BYTES", 0)
+    fresh = txestimate.Estimator(luma, s, list(s.keys))
+    assert np.array_equal(fresh.costs_maps(d16), want) and fresh._refs32 == {}
+    assert np.array_equal(txestimate.estimate_maps(luma, s, max_disparity=8)[1],
+                          txestimate.estimate_maps(as_float, s, max_disparity=8)[1])
+
+
+def test_fractional_global_shifts_take_the_float_path():
+    """A rig whose view positions are not whole view steps shifts by fractions of a pixel at a
+    whole-pixel disparity: those cells take the float path (bilinear warps), with the costs of the
+    float32 copy."""
+    luma, s = _noisy_shifted(seed=12), build(5, 5, 2)
+    from dataclasses import replace
+    s = replace(s, positions=s.positions * 1.5)
+    a = txestimate.Estimator(luma, s, list(s.keys)).costs_global_many([1.0])[0]
+    b = txestimate.Estimator(luma.astype(np.float32), s, list(s.keys)).costs_global_many([1.0])[0]
+    assert np.array_equal(a, b)
