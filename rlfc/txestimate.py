@@ -286,11 +286,18 @@ class Estimator:
                     np.add(gy, _pixels_of(dblk * np.float32(oy) + warp[0][j], self.hp, self.wp), out=my)
                     cx, cy = mx, my
                 else:                         # (a cell's views share a few offsets: each made once)
+                    # (at most OFFSET_ARRAYS kept per thread; past them, made into mx, my each time)
                     cx, cy = cols.get(ox), rows.get(oy)
                     if cx is None:            # gx + dpix·Δx in one pass (float32, the same values as numpy's two)
-                        cx = cols[ox] = cv2.scaleAdd(dpix, ox, gx, dst=self._scratch(8 + len(cols) + len(rows)))
+                        kept = len(cols) + len(rows)
+                        cx = cv2.scaleAdd(dpix, ox, gx, dst=self._scratch(8 + kept) if kept < OFFSET_ARRAYS else mx)
+                        if kept < OFFSET_ARRAYS:
+                            cols[ox] = cx
                     if cy is None:
-                        cy = rows[oy] = cv2.scaleAdd(dpix, oy, gy, dst=self._scratch(8 + len(cols) + len(rows)))
+                        kept = len(cols) + len(rows)
+                        cy = cv2.scaleAdd(dpix, oy, gy, dst=self._scratch(8 + kept) if kept < OFFSET_ARRAYS else my)
+                        if kept < OFFSET_ARRAYS:
+                            rows[oy] = cy
                 cvremap.remap(self._ref_luma(int(r[j]), yk), cx, cy, cv2.INTER_LINEAR, out=p)
                 cv2.subtract(yv, p, dst=e, dtype=cv2.CV_32F)
                 acc[1 + j] += _block_sums(np.square(e, out=e), self.nby8, self.nbx8)
@@ -303,6 +310,10 @@ class Estimator:
 #: bytes of float32 reference luma an estimator keeps (the key views' luma, converted once: 9
 #: key views of 512² are 9 MiB); beyond it each use converts its reference again
 REF_FLOAT_BYTES = 64 << 20
+
+#: sampling-column and -row arrays a cell evaluation keeps per thread, one per view offset (a
+#: cell's views share a few: hci_antinous 80 + 80 over 24 cells)
+OFFSET_ARRAYS = 8
 
 #: bits a cell's own disparity for a block, or a block's single-reference mode, is taken to cost
 #: (about what they cost coded: BENCHMARKS.md)

@@ -1,4 +1,4 @@
-import sys, os, time, types, subprocess, hashlib, resource
+import sys, os, time, types, subprocess, hashlib
 sys.path.insert(0, "/work/main")
 os.environ["OMP_NUM_THREADS"] = "1"
 import formats.parallel as fp; fp.LOCAL_THREADS = 1

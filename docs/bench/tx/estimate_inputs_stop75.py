@@ -2,7 +2,6 @@ import sys, os, time, collections, pickle
 sys.path.insert(0, sys.argv[1])
 os.environ["OMP_NUM_THREADS"] = "1"
 import formats.parallel as fp; fp.LOCAL_THREADS = 1
-import numpy as np
 from formats.scenes import read_scene
 from formats.codec_api import EncodeOptions
 import rlfc.txencode as te, rlfc.txestimate as tes
