@@ -49,12 +49,13 @@ def _shift(img: np.ndarray, dy: float, dx: float, out: np.ndarray | None = None)
                           borderMode=cv2.BORDER_REPLICATE)
 
 
-def _pixels_of(b: np.ndarray, hp: int, wp: int) -> np.ndarray:
+def _pixels_of(b: np.ndarray, hp: int, wp: int, out: np.ndarray | None = None) -> np.ndarray:
     """(n8y, n8x) float32 values of 8×8 blocks → (Hp, Wp), each block's value on its pixels
-    (OpenCV's nearest-neighbour resize by exactly 8: the same values as two np.repeat, 3x faster)."""
+    (OpenCV's nearest-neighbour resize by exactly 8: the same values as two np.repeat, 3x faster),
+    into ``out`` where given."""
     import cv2
 
-    return cv2.resize(b, (wp, hp), interpolation=cv2.INTER_NEAREST)
+    return cv2.resize(b, (wp, hp), dst=out, interpolation=cv2.INTER_NEAREST)
 
 
 def _block_sums(e: np.ndarray, nby8: int, nbx8: int) -> np.ndarray:
@@ -111,16 +112,18 @@ class Estimator:
         got = refs.get(k)
         return got if got is not None else self._y(k, out)
 
-    def _scratch(self, i: int) -> np.ndarray:
-        """The calling thread's i-th (Hp, Wp) float32 scratch array, kept from call to call (fresh
-        megabyte arrays each cost their pages' first-touch faults)."""
+    def _scratch(self, i: int, dtype=np.float32) -> np.ndarray:
+        """The calling thread's i-th (Hp, Wp) scratch array of ``dtype``, kept from call to call
+        (fresh megabyte arrays each cost their pages' first-touch faults: 240 000 of them in a
+        stanford_chess estimate, when each cell evaluation allocated its own)."""
         loc = self._local
         bufs = getattr(loc, "bufs", None)
         if bufs is None:
-            bufs = loc.bufs = []
-        while len(bufs) <= i:
-            bufs.append(np.empty((self.hp, self.wp), np.float32))
-        return bufs[i]
+            bufs = loc.bufs = {}
+        got = bufs.get((i, dtype))
+        if got is None:
+            got = bufs[i, dtype] = np.empty((self.hp, self.wp), dtype)
+        return got
 
     def _warp_blocks(self, v: int) -> tuple:
         """(oy, ox) (R, n8y, n8x) float32 pixels: view v's warp offsets to each reference per 8×8
@@ -223,8 +226,7 @@ class Estimator:
         import cv2
 
         s = self.s
-        p = np.empty((self.hp, self.wp), self.luma.dtype)
-        e, blend = self._scratch(0), self._scratch(1)
+        p, e, blend = self._scratch(0, self.luma.dtype.type), self._scratch(0), self._scratch(1)
         for i, v in enumerate(views.tolist()):
             y = self.luma[v]
             blend.fill(0)
@@ -263,13 +265,14 @@ class Estimator:
         acc = np.zeros((1 + nr, self.nby8 * self.nbx8))
         dblk = d16m.reshape(self.nby8, self.nbx8).astype(np.float32) / 16
         # (each block's disparity on its pixels; with warps each reference's sum is spread instead)
-        dpix = _pixels_of(dblk, self.hp, self.wp) if self.warp_dw is None else None
+        dpix = _pixels_of(dblk, self.hp, self.wp, self._scratch(8)) if self.warp_dw is None else None
         gy, gx = self._grid()
         y, yk, p, e, wp, blend, mx, my = (self._scratch(i) for i in range(8))
         # the view's integer luma as it is: OpenCV subtracts float32 samples from it in float32,
         # the same numbers as numpy's float32 difference (other dtypes: converted first)
         as_is = self.luma.dtype in (np.uint8, np.uint16)
         cols, rows = {}, {}                   # view offset Δx (Δy) → the sampling columns (rows) at it
+        cap = min(OFFSET_ARRAYS, OFFSET_BYTES // (4 * self.hp * self.wp))
         for v in views.tolist():
             r = s.refs[v, :nr]
             yv = self.luma[v] if as_is else self._y(v, y)
@@ -286,17 +289,18 @@ class Estimator:
                     np.add(gy, _pixels_of(dblk * np.float32(oy) + warp[0][j], self.hp, self.wp), out=my)
                     cx, cy = mx, my
                 else:                         # (a cell's views share a few offsets: each made once)
-                    # (at most OFFSET_ARRAYS kept per thread; past them, made into mx, my each time)
+                    # (at most OFFSET_ARRAYS kept per thread, within OFFSET_BYTES; past them, made into
+                    # mx, my each time)
                     cx, cy = cols.get(ox), rows.get(oy)
                     if cx is None:            # gx + dpix·Δx in one pass (float32, the same values as numpy's two)
                         kept = len(cols) + len(rows)
-                        cx = cv2.scaleAdd(dpix, ox, gx, dst=self._scratch(8 + kept) if kept < OFFSET_ARRAYS else mx)
-                        if kept < OFFSET_ARRAYS:
+                        cx = cv2.scaleAdd(dpix, ox, gx, dst=self._scratch(9 + kept) if kept < cap else mx)
+                        if kept < cap:
                             cols[ox] = cx
                     if cy is None:
                         kept = len(cols) + len(rows)
-                        cy = cv2.scaleAdd(dpix, oy, gy, dst=self._scratch(8 + kept) if kept < OFFSET_ARRAYS else my)
-                        if kept < OFFSET_ARRAYS:
+                        cy = cv2.scaleAdd(dpix, oy, gy, dst=self._scratch(9 + kept) if kept < cap else my)
+                        if kept < cap:
                             rows[oy] = cy
                 cvremap.remap(self._ref_luma(int(r[j]), yk), cx, cy, cv2.INTER_LINEAR, out=p)
                 cv2.subtract(yv, p, dst=e, dtype=cv2.CV_32F)
@@ -312,8 +316,10 @@ class Estimator:
 REF_FLOAT_BYTES = 64 << 20
 
 #: sampling-column and -row arrays a cell evaluation keeps per thread, one per view offset (a
-#: cell's views share a few: hci_antinous 80 + 80 over 24 cells)
+#: cell's views share a few: hci_antinous 80 + 80 over 24 cells), within OFFSET_BYTES per thread
+#: (8 arrays of 512² views, 4 of 1024², 1 of 2048²)
 OFFSET_ARRAYS = 8
+OFFSET_BYTES = 16 << 20
 
 #: bits a cell's own disparity for a block, or a block's single-reference mode, is taken to cost
 #: (about what they cost coded: BENCHMARKS.md)

@@ -131,6 +131,9 @@ def test_integer_luma_gives_the_costs_of_its_float32_copy(monkeypatch, dtype, sc
     for n in (0, 1, 3):               # sampling arrays kept for none, one or a few view offsets
         monkeypatch.setattr(txestimate, "OFFSET_ARRAYS", n)
         assert np.array_equal(txestimate.Estimator(luma, s, list(s.keys)).costs_maps(d16), want)
+    monkeypatch.setattr(txestimate, "OFFSET_ARRAYS", 8)
+    monkeypatch.setattr(txestimate, "OFFSET_BYTES", 2 * 4 * luma[0].size)      # (a byte budget of two)
+    assert np.array_equal(txestimate.Estimator(luma, s, list(s.keys)).costs_maps(d16), want)
     assert np.array_equal(txestimate.estimate_maps(luma, s, max_disparity=8)[1],
                           txestimate.estimate_maps(as_float, s, max_disparity=8)[1])
 
