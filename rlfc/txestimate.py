@@ -18,6 +18,7 @@ not (its candidates are a pixel apart, the warps' offsets a pixel or two at most
 from __future__ import annotations
 
 import threading
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -88,7 +89,8 @@ class Estimator:
         self._woff: dict = {}                         # view → _warp_blocks (cached)
         self._refs32 = None                           # reference → its float32 luma (see _ref_luma)
         self._refs32_lock = threading.Lock()
-        self._local = threading.local()               # (per-thread scratch arrays: _scratch)
+        self._local = threading.local()               # (the scratch set a thread's task holds: _scratch)
+        self._sets: list = []                         # (free scratch sets)
 
     def _y(self, v: int, out: np.ndarray) -> np.ndarray:
         """(Hp, Wp) float32 luma of view v, written to ``out``."""
@@ -113,17 +115,31 @@ class Estimator:
         return got if got is not None else self._y(k, out)
 
     def _scratch(self, i: int, dtype=np.float32) -> np.ndarray:
-        """The calling thread's i-th (Hp, Wp) scratch array of ``dtype``, kept from call to call
+        """The calling task's i-th (Hp, Wp) scratch array of ``dtype``, kept from call to call
         (fresh megabyte arrays each cost their pages' first-touch faults: 240 000 of them in a
-        stanford_chess estimate, when each cell evaluation allocated its own)."""
-        loc = self._local
-        bufs = getattr(loc, "bufs", None)
-        if bufs is None:
-            bufs = loc.bufs = {}
+        stanford_chess estimate, when each cell evaluation allocated its own). A task holds one
+        set of them (:meth:`_scratch_set`); the sets outlive the threads of one evaluation."""
+        bufs = getattr(self._local, "bufs", None)
+        if bufs is None:                              # (a call outside a task: a set of its own)
+            bufs = self._local.bufs = {}
         got = bufs.get((i, dtype))
         if got is None:
             got = bufs[i, dtype] = np.empty((self.hp, self.wp), dtype)
         return got
+
+    @contextmanager
+    def _scratch_set(self):
+        """Hold one set of scratch arrays (a free one, or a new one) for the calling thread while
+        a task runs; it goes back to the pool for the next task, on whatever thread that runs."""
+        with self._refs32_lock:
+            bufs = self._sets.pop() if self._sets else {}
+        self._local.bufs = bufs
+        try:
+            yield
+        finally:
+            self._local.bufs = None
+            with self._refs32_lock:
+                self._sets.append(bufs)
 
     def _warp_blocks(self, v: int) -> tuple:
         """(oy, ox) (R, n8y, n8x) float32 pixels: view v's warp offsets to each reference per 8×8
@@ -144,22 +160,27 @@ class Estimator:
     def _nrefs(self, m: int) -> int:
         return int((self.s.refs[self.cells[m][0]] >= 0).sum())
 
-    def costs_global_many(self, ds, runner=None) -> list:
+    def costs_global_many(self, ds, runner=None, reduce=None) -> list:
         """[(n_maps, 1 + MAX_REFS, nloc8) luma SSE of every mode at global disparity d (px per
         view step; inf for modes a cell does not have) for d in ds], the (d, cell) pairs on
-        ``runner``."""
+        ``runner``; with ``reduce``, [reduce(those costs) for d in ds] (each d's costs made in
+        one array, reused: not a fresh three megabytes per candidate)."""
         nm = len(self.cells)
         pairs = [(float(d), m) for d in ds for m in range(nm)]
         runner = runner or Runner()                 # (the serial runner: a loop here, no copies)
         h = self._handle(runner)
-        parts = runner.map_threaded(_global_task, [(h, m, d) for d, m in pairs])
+        parts = list(runner.map_threaded(_global_task, [(h, m, d) for d, m in pairs]))
         out = []
+        c = None
         for i in range(len(ds)):
-            c = np.full((nm, 1 + MAX_REFS, self.nby8 * self.nbx8), np.inf)
+            if c is None or reduce is None:
+                c = np.empty((nm, 1 + MAX_REFS, self.nby8 * self.nbx8))
+            c.fill(np.inf)
             for m in range(nm):
                 nr = self._nrefs(m)
                 c[m, :1 + nr] = parts[i * nm + m]
-            out.append(c)
+                parts[i * nm + m] = None            # (each part once: its memory goes as it is used)
+            out.append(c if reduce is None else reduce(c))
         return out
 
     def drop_handle(self) -> None:
@@ -177,6 +198,7 @@ class Estimator:
         self.__dict__.update(st)
         self._refs32_lock = threading.Lock()
         self._local = threading.local()
+        self._sets = []
 
     def __getstate__(self):
         st = dict(self.__dict__)
@@ -185,6 +207,7 @@ class Estimator:
         st["_refs32"] = None          # (rebuilt where needed)
         st.pop("_refs32_lock", None)
         st.pop("_local", None)
+        st["_sets"] = []
         st["_woff"] = {}              # (rebuilt where needed)
         return st
 
@@ -335,11 +358,13 @@ def _mode_penalty(side_lambda: float, ref_modes: bool) -> np.ndarray:
 
 
 def _global_task(est: Estimator, m: int, d: float) -> np.ndarray:
-    return est._global_cell(m, d)
+    with est._scratch_set():
+        return est._global_cell(m, d)
 
 
 def _maps_task(est: Estimator, m: int, d16m: np.ndarray) -> np.ndarray:
-    return est._maps_cell(m, d16m)
+    with est._scratch_set():
+        return est._maps_cell(m, d16m)
 
 
 def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, start: float = 4.0,
@@ -375,7 +400,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
 
     D = min(start, max_disparity)
     cands = list(np.arange(-D, D + 1))
-    costs = [best_mode(c) for c in est.costs_global_many(cands, runner)]
+    costs = est.costs_global_many(cands, runner, reduce=best_mode)
     if progress:
         progress("disparity", len(costs), None)
     while D < max_disparity:               # widen where blocks sit at the range's edge and it pays
@@ -386,7 +411,7 @@ def estimate_maps(luma: np.ndarray, struct, *, max_disparity: float = 64.0, star
             break
         D2 = min(2 * D, max_disparity)
         more = list(np.arange(-D2, -D)) + list(np.arange(D + 1, D2 + 1))
-        mc = [best_mode(c) for c in est.costs_global_many(more, runner)]
+        mc = est.costs_global_many(more, runner, reduce=best_mode)
         if progress:
             progress("disparity", len(costs) + len(mc), None)
         if np.minimum(np.stack(mc).sum(1).min(0), g.min(0)).sum() >= 0.995 * g.min(0).sum():
