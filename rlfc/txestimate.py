@@ -88,7 +88,7 @@ class Estimator:
         self.warp_dw = None if warp is None else pair_params(warp, struct.refs)   # samples through them
         self._woff: dict = {}                         # view → _warp_blocks (cached)
         self._refs32 = None                           # reference → its float32 luma (see _ref_luma)
-        self._refs32_lock = threading.Lock()
+        self._lock = threading.Lock()                     # (guards the making of _refs32, and _sets)
         self._local = threading.local()               # (the scratch set a thread's task holds: _scratch)
         self._sets: list = []                         # (free scratch sets)
 
@@ -103,7 +103,7 @@ class Estimator:
         every view it predicts, at every cost evaluation), else written to ``out``."""
         refs = self._refs32
         if refs is None:
-            with self._refs32_lock:
+            with self._lock:
                 if self._refs32 is None:
                     r = self.s.refs
                     ks = np.unique(r[r >= 0]).tolist()
@@ -131,14 +131,14 @@ class Estimator:
     def _scratch_set(self):
         """Hold one set of scratch arrays (a free one, or a new one) for the calling thread while
         a task runs; it goes back to the pool for the next task, on whatever thread that runs."""
-        with self._refs32_lock:
+        with self._lock:
             bufs = self._sets.pop() if self._sets else {}
         self._local.bufs = bufs
         try:
             yield
         finally:
             self._local.bufs = None
-            with self._refs32_lock:
+            with self._lock:
                 self._sets.append(bufs)
 
     def _warp_blocks(self, v: int) -> tuple:
@@ -196,7 +196,7 @@ class Estimator:
 
     def __setstate__(self, st):
         self.__dict__.update(st)
-        self._refs32_lock = threading.Lock()
+        self._lock = threading.Lock()
         self._local = threading.local()
         self._sets = []
 
@@ -205,7 +205,7 @@ class Estimator:
         st.pop("_shared", None)
         st.pop("_gyx", None)          # (rebuilt where needed)
         st["_refs32"] = None          # (rebuilt where needed)
-        st.pop("_refs32_lock", None)
+        st.pop("_lock", None)
         st.pop("_local", None)
         st["_sets"] = []
         st["_woff"] = {}              # (rebuilt where needed)
