@@ -401,16 +401,10 @@ class ScalarDecoder:
         self.slot, self.freq, self.cum = scalar_tables(tables)
 
     def get(self, ctx: int) -> int:
-        x = self.x
-        slot = x & (M - 1)
-        s = self.slot[ctx][slot]
-        x = self.freq[ctx][s] * (x >> PROB_BITS) + slot - self.cum[ctx][s]
-        while x < L:
-            if self.ptr >= len(self.data):
-                raise FormatError("rANS stream reads past its end")
-            x = (x << 8) | self.data[self.ptr]
-            self.ptr += 1
-        self.x = x
+        try:
+            s, self.x, self.ptr = scalar_step(self.slot, self.freq, self.cum, ctx, self.x, self.ptr, self.data)
+        except IndexError:
+            raise FormatError("rANS stream reads past its end") from None
         return s
 
     def done(self, end: int, back_bits: int = 0) -> bool:

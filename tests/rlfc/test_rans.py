@@ -90,6 +90,11 @@ def test_malformed_streams_are_detected():
         Tables.from_bytes(b"junk", 2, 8, "x")
     with pytest.raises(FormatError):
         ScalarDecoder(b"\x00\x01", tables)
+    longest = int(np.argmax(lengths))                               # a stream cut to its state alone:
+    d = ScalarDecoder(blobs[longest][:4], tables)                   # its decode reads past the end
+    with pytest.raises(FormatError, match="reads past its end"):
+        for c in ctx[longest, :lengths[longest]]:
+            d.get(int(c))
 
 
 @settings(max_examples=150, deadline=None, derandomize=True)
