@@ -80,6 +80,7 @@ class Estimator:
     def __init__(self, luma: np.ndarray, struct, keys_order: list):
         self.luma, self.s = luma, struct
         self.n0, self.hp, self.wp = luma.shape
+        self.int_luma = luma.dtype in (np.uint8, np.uint16)     # (OpenCV takes it as it is)
         self.nby8, self.nbx8 = self.hp // TB, self.wp // TB
         self.cells = [np.asarray(v) for v in struct.cell_views]
         self.key_slot = np.full(self.n0, -1, np.int64)
@@ -220,9 +221,9 @@ class Estimator:
         acc = np.zeros((1 + MAX_REFS, self.nby8 * self.nbx8))
         nr = self._nrefs(m)
         shifts = [d * (s.positions[v] - s.positions[s.refs[v, j]]) for v in views.tolist() for j in range(nr)]
-        if self.luma.dtype in (np.uint8, np.uint16) and all(
+        if self.int_luma and all(
                 float(q).is_integer() and abs(q) < n for sh in shifts for q, n in zip(sh, (self.hp, self.wp))):
-            return self._global_cell_int(m, views, nr, shifts, acc)
+            return self._global_cell_int(views, nr, shifts, acc)
         y, yk, p, e, blend = (self._scratch(i) for i in range(5))   # (reused)
         for i, v in enumerate(views.tolist()):
             self._y(v, y)
@@ -239,7 +240,7 @@ class Estimator:
             acc[0] += _block_sums(np.square(np.subtract(y, blend, out=e), out=e), self.nby8, self.nbx8)
         return acc[:1 + nr]
 
-    def _global_cell_int(self, m: int, views: np.ndarray, nr: int, shifts: list, acc: np.ndarray) -> np.ndarray:
+    def _global_cell_int(self, views: np.ndarray, nr: int, shifts: list, acc: np.ndarray) -> np.ndarray:
         """:meth:`_global_cell` where every shift is a whole number of pixels and the luma is
         uint8/uint16: each reference shifted in its own dtype (a crop and a border copy), the
         errors and the blend made in float32 by OpenCV from the integers. The same numbers: the
@@ -291,14 +292,13 @@ class Estimator:
         dpix = _pixels_of(dblk, self.hp, self.wp, self._scratch(8)) if self.warp_dw is None else None
         gy, gx = self._grid()
         y, yk, p, e, wp, blend, mx, my = (self._scratch(i) for i in range(8))
-        # the view's integer luma as it is: OpenCV subtracts float32 samples from it in float32,
-        # the same numbers as numpy's float32 difference (other dtypes: converted first)
-        as_is = self.luma.dtype in (np.uint8, np.uint16)
         cols, rows = {}, {}                   # view offset Δx (Δy) → the sampling columns (rows) at it
         cap = min(OFFSET_ARRAYS, OFFSET_BYTES // (4 * self.hp * self.wp))
         for v in views.tolist():
             r = s.refs[v, :nr]
-            yv = self.luma[v] if as_is else self._y(v, y)
+            # (integer luma as it is: OpenCV subtracts float32 samples from it in float32, the
+            # same numbers as numpy's float32 difference; other dtypes converted first)
+            yv = self.luma[v] if self.int_luma else self._y(v, y)
             dpos = (s.positions[v] - s.positions[r]).astype(np.float32)                # (nr, 2)
             wb = s.weights[v, :nr] / 64.0
             blend.fill(0)
