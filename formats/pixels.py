@@ -137,23 +137,27 @@ def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
     else:
         img = np.ascontiguousarray(p).reshape(-1, p.shape[-2] if p.ndim >= 3 else 1, C)
     out = np.empty(img.shape, dtype)
-    if np.dtype(dtype) == np.uint8:    # OpenCV's saturating cast to 8 bits after max(0): 0.4x numpy's clip + astype
-        def narrow(q):
-            return cv2.convertScaleAbs(np.maximum(q, 0, out=q))
-    else:
-        def narrow(q):
+    # the last sum of each colour and its clip to [0, peak] in one OpenCV call: integer sums
+    # saturated to the output depth (0.8x the time of the sums, then max(0) and a saturating
+    # cast, measured; the same integers)
+    depth = {np.dtype(np.uint8): cv2.CV_8U, np.dtype(np.uint16): cv2.CV_16U}.get(np.dtype(dtype))
+    if depth is None or peak != np.iinfo(dtype).max:
+        def sat_add(q, r):
+            q = np.add(q, r) if r is not None else q
             return np.minimum(np.maximum(q, 0, out=q), peak, out=q).astype(dtype)
+    else:
+        def sat_add(q, r):
+            return cv2.add(q, r if r is not None else 0, dtype=depth)
     step = max(1, SPLIT_CHUNK // (img.shape[1] * C))
     for a in range(0, img.shape[0], step):
         planes = list(cv2.split(img[a:a + step]))
         y, co, cg = planes[:3]
         h = cg >> 1
-        np.subtract(y, h, out=y)                     # t = Y − (Cg >> 1)
-        np.add(cg, y, out=cg)                        # G = Cg + t
+        t = np.subtract(y, h, out=y)                 # t = Y − (Cg >> 1)
+        g = sat_add(cg, t)                           # G = Cg + t
         np.right_shift(co, 1, out=h)
-        np.subtract(y, h, out=y)                     # B = t − (Co >> 1)
-        np.add(y, co, out=co)                        # R = B + Co
-        rgb = [narrow(q) for q in [co, cg, y] + planes[3:]]
+        b = np.subtract(t, h, out=t)                 # B = t − (Co >> 1)
+        rgb = [sat_add(b, co), g, sat_add(b, None)] + [sat_add(q, None) for q in planes[3:]]   # R = B + Co
         dst = out[a:a + step]
         got = cv2.merge(rgb, dst=dst)
         if not np.shares_memory(got, dst):           # (OpenCV allocated its own output)

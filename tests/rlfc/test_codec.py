@@ -37,6 +37,8 @@ def test_from_planes_split_path_is_the_same_integers(shape, dtype, rng):
     if len(shape) >= 3:                               # views cropped from padded planes (row strides)
         crop = p[..., 1:shape[-2] - 1, :] if len(shape) == 3 else p[:, 1:, 2:]
         assert np.array_equal(from_planes(crop, dtype), np.clip(inverse_int(crop.copy()), 0, peak).astype(dtype))
+    if dtype is np.uint8:                             # another output type: numpy's clip, not OpenCV's saturation
+        assert np.array_equal(from_planes(p, np.int32), np.clip(inverse_int(p.copy()), 0, 255))
 
 
 @pytest.mark.parametrize("shape", [(300, 256, 3), (4, 128, 128, 4), (2, 10, 10, 3), (512, 512, 3)])
