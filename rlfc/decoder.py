@@ -133,11 +133,15 @@ class RlfcDecoder(Decoder):
         pre = getattr(self.core, "preparse", None)    # (a profile that parses the chunks' streams ahead)
         ahead = pre(views[order], by[order], bx[order], level) if pre is not None and M > step else None
 
+        to_pixels = not planes and getattr(self.core, "blocks_to_pixels", False)
+
         def run(a: int) -> None:
             i = order[a:a + step]
             kw = {} if ahead is None else {"ahead": ahead, "first": a}
+            if to_pixels:                             # (the profile converts before assembling its blocks)
+                kw["pixels"] = self.dtype
             acc = self.core.blocks(views[i], by[i], bx[i], level, **kw).reshape(i.size, B, B, self.P)
-            out[i] = acc if planes else from_planes(acc, self.dtype)
+            out[i] = acc if planes or to_pixels else from_planes(acc, self.dtype)
 
         self._run(run, range(0, M, step), threads)
         return out

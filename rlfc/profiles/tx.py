@@ -625,11 +625,11 @@ class TxDecoder(ProfileDecoder):
             return got[0] if len(got) == 1 else concat_parsed(got)
         return parse_lanes(buf, s2, e2, self.tables, nt, self.pcs, kind, key, self.container.name)
 
-    def _reconstruct(self, views, locs, level, pred=None, parsed=None, have=None):
+    def _reconstruct(self, views, locs, level, pred=None, parsed=None, have=None, pixels=None):
         """(M, B, B, P) int32 planes of block requests (views with references, or ``pred`` given
         as (M, nt, 8, 8, P)); ``parsed``: the syntax of the requests ``have`` (default: of every
         request, key rows), else the coded requests' own streams are parsed (all at once: the
-        rANS lanes step together)."""
+        rANS lanes step together). ``pixels``: a dtype, then their pixels of that dtype."""
         M, B, nt, P = views.size, self.block_size, self.nt, self.P
         if pred is None:
             pred = np.empty((M, nt, TB, TB, P), np.int32)
@@ -649,6 +649,8 @@ class TxDecoder(ProfileDecoder):
                     out = self._add_residual(out, res, parsed.modes)
                 else:
                     out[have] = self._add_residual(out[have], res, parsed.modes)
+        if pixels is not None:                        # (per sample: the tbs' layout does not matter)
+            out = from_planes(out, pixels)
         # tbs → blocks: (M, tpb, tpb, 8, 8, P) → (M, B, B, P)
         return out.reshape(M, self.tpb, self.tpb, TB, TB, P).transpose(0, 1, 3, 2, 4, 5).reshape(M, B, B, P)
 
@@ -748,15 +750,22 @@ class TxDecoder(ProfileDecoder):
             return None
         return ParseAhead(self, views[have], loc[have], have, views.size)
 
-    def blocks(self, views, by, bx, level, ahead=None, first: int = 0):
+    #: :meth:`blocks` gives pixels where asked (``pixels=dtype``)
+    blocks_to_pixels = True
+
+    def blocks(self, views, by, bx, level, ahead=None, first: int = 0, pixels=None):
         """(M, B·B, P) int32 planes of requests; ``ahead``: :meth:`preparse` of the call whose
-        requests ``first``, ``first`` + 1, … these are."""
-        out = np.empty((views.size, self.block_size, self.block_size, self.P), np.int32)
+        requests ``first``, ``first`` + 1, … these are. ``pixels`` (uint8 or uint16): the
+        requests' pixels instead (:func:`formats.pixels.from_planes` of those planes), made
+        before the 8×8 blocks are put together into blocks, so that those copies move the
+        pixels, not the int32 planes (a quarter of the bytes for 8-bit samples)."""
+        out = np.empty((views.size, self.block_size, self.block_size, self.P), np.int32 if pixels is None else pixels)
         if not self._keys_all:                       # every key-view row the call reads, in one pass
             self._have_rows(views, by)
         key = self.is_key[views]
         if key.any():
-            out[key] = self._key_blocks(views[key], by[key], bx[key])
+            kb = self._key_blocks(views[key], by[key], bx[key])
+            out[key] = kb if pixels is None else from_planes(kb, pixels)
         nk = np.flatnonzero(~key)
         if nk.size:
             order = nk[np.lexsort((bx[nk], by[nk], views[nk]))]          # by view, then raster: shared
@@ -766,7 +775,8 @@ class TxDecoder(ProfileDecoder):
                 parsed = have = None
                 if ahead is not None:               # the chunk's streams, parsed with others'
                     have, parsed = ahead.chunk(first + c)
-                out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level, parsed=parsed, have=have)
+                out[c] = self._reconstruct(views[c], by[c] * self.nbx + bx[c], level, parsed=parsed, have=have,
+                                           pixels=pixels)
         B = self.block_size
         return out.reshape(views.size, B * B, self.P)
 
