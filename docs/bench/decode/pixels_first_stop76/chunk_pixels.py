@@ -1,7 +1,7 @@
 import sys, os, time
 os.environ["OMP_NUM_THREADS"] = "1"
 sys.path.insert(0, "/work/main")
-import numpy as np, cv2
+import numpy as np
 from formats.lfcfile import open_lfc
 from formats.pixels import from_planes
 from rlfc import RlfcDecoder
