@@ -581,6 +581,32 @@ def test_one_request_pixel_path_equals_planes_then_pixels(kw):
     assert (d.decode_block(r, c, 0, 0, 1) == full[r, c, :B, :B]).all()
 
 
+def test_small_remaps_in_one_row_or_in_rows_give_the_same_pixels(monkeypatch):
+    """A single request's remap maps go to OpenCV as one row (no thread pool woken) where the
+    width allows it, else as they are: the same pixels either way, on the lean path, the
+    scalar path and small batched calls."""
+    import rlfc.txsample as ts
+
+    assert ts._one_row(np.zeros((4, 64), np.float32)).shape == (1, 256)
+    lf = smooth_lf(rows=3, cols=3)
+    d, _ = open_encoded(lf, tx(lf, step=6.0))
+    core, B = d.core, d.block_size
+    req = [(int(v), by, bx) for v in np.flatnonzero(~core.is_key) for by in range(d.nby) for bx in range(d.nbx)]
+
+    def run():
+        return ([d.decode_block(v // 3, v % 3, by, bx) for v, by, bx in req],
+                [core.block(v, by, bx, 0) for v, by, bx in req],
+                d.decode_blocks(np.array([r[0] for r in req[:5]]), np.array([r[1] for r in req[:5]]),
+                                np.array([r[2] for r in req[:5]]), threads=1))
+
+    one = run()
+    monkeypatch.setattr(ts, "CV_MAX", 63)                # (no map fits in one row)
+    assert ts._one_row(np.zeros((4, 64), np.float32)).shape == (4, 64)
+    rows = run()
+    assert all(np.array_equal(a, b) for x, y in zip(one[:2], rows[:2]) for a, b in zip(x, y))
+    assert np.array_equal(one[2], rows[2])
+
+
 def _wide_lf(h: int, w: int, channels: int = 3):
     """A 2×2 grid of h × w views: a horizontal pattern moving 2 px per view step."""
     from formats.lightfield import LightField, grid_positions
