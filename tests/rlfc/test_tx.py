@@ -590,7 +590,7 @@ def test_small_remaps_in_one_row_or_in_rows_give_the_same_pixels(monkeypatch):
     assert ts._one_row(np.zeros((4, 64), np.float32)).shape == (1, 256)
     lf = smooth_lf(rows=3, cols=3)
     d, _ = open_encoded(lf, tx(lf, step=6.0))
-    core, B = d.core, d.block_size
+    core = d.core
     req = [(int(v), by, bx) for v in np.flatnonzero(~core.is_key) for by in range(d.nby) for bx in range(d.nbx)]
 
     def run():
