@@ -430,8 +430,9 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
         lw, hg = np.full(atlas.C, -np.inf, ft), np.full(atlas.C, np.inf, ft)
         g[:P], o[:P], lw[:P], hg[:P] = wp[:, 0], wp[:, 1], lo, hi
         wpf = (g, o, lw, hg)
+    M = pixel_matrix(atlas.P, atlas.C, atlas.ftype)
     return (src, np.repeat(rows0.reshape(R), nt)[:, None], np.repeat(dpy, nt), np.repeat(dpx, nt), gy, gx,
-            rep, wm / atlas.ftype(1 << W_BITS), pixel_matrix(atlas.P, atlas.C, atlas.ftype), wpf)
+            rep, wm / atlas.ftype(1 << W_BITS), M[:atlas.C], M[atlas.C:], np.float32(atlas.hp - 1), wpf)
 
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
@@ -470,7 +471,7 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     Returns:
         (8·tpb, 8·tpb, P) pixels of ``dtype``.
     """
-    src, rows0, dpy, dpx, gy, gx, rep, w64, M, wpf = prefs
+    src, rows0, dpy, dpx, gy, gx, rep, w64, M1, M2, top, wpf = prefs
     C, P = atlas.C, atlas.P
     nt = d.size
     dr = d[rep]                                                           # (nt·R,) per pair
@@ -479,7 +480,7 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     if warp is not None:
         y += warp[0]
     mr = y[:, None] + gy                                                  # (nt·R, 64) rows in the key view
-    mr.clip(_ZERO, np.float32(atlas.hp - 1), out=mr)
+    np.minimum(np.maximum(mr, _ZERO, out=mr), top, out=mr)             # (ufuncs: the clip method costs more)
     mr += rows0                                                           # … in the atlas
     x = dr * dpx
     x += bx_px
@@ -511,11 +512,11 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     if P >= 3:
         half = acc * 0.5
         np.floor(half, out=half)                                          # the planes >> 1
-        px = np.dot(acc, M[:C])
-        px += np.dot(half, M[C:])
+        px = np.dot(acc, M1)
+        px += np.dot(half, M2)
     else:
         px = acc[:, :P]
-    px.clip(0, peak, out=px)
+    np.minimum(np.maximum(px, 0, out=px), peak, out=px)
     out = np.empty((tpb, TB, tpb, TB, P), dtype)
     np.copyto(out, px.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4), casting="unsafe")
     return out.reshape(tpb * TB, tpb * TB, P)

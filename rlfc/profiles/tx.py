@@ -199,6 +199,7 @@ class TxDecoder(ProfileDecoder):
             lw, hg = np.full(C, -np.inf, ft), np.full(C, np.inf, ft)
             lw[:self.P], hg[:self.P] = self.lo, self.hi
             self._pixel_bounds = (lw, hg)
+            self._peak_f = ft(self._peak)  # (block_pixels' clip bound, made once)
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)
@@ -821,7 +822,7 @@ class TxDecoder(ProfileDecoder):
             wy, wx = self._warp_pixels(view)
             warp = (wy[loc], wx[loc])
         return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
-                                    self.atlas.ftype(self._peak), self.dtype, res, bounds, warp)
+                                    self._peak_f, self.dtype, res, bounds, warp)
 
     def _warp_pixels(self, view: int) -> tuple:
         """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
