@@ -417,9 +417,11 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
     """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple, for
     blocks of tpb × tpb 8×8 blocks (raster order within the block): per (reference, 8×8 block)
     pair (``R·nt`` rows, reference-major) the offsets per unit of disparity, the window's pixel
-    grid (8×8 positions, flat) and the reference's first row in the atlas; and the view's
-    weighted prediction, where ``wp`` (P, 2) gives one: its gains, offsets and the planes'
-    bounds ``lo``, ``hi`` (P,) in the atlas's float type over its C channels (else None)."""
+    grid (8×8 positions, flat) and the reference's first row in the atlas; the blend's weights
+    per mode over 64, the two halves of :func:`pixel_matrix` (planes, floor halves), the last
+    row of a key view (float32: the rows' clamp); and the view's weighted prediction, where
+    ``wp`` (P, 2) gives one: its gains, offsets and the planes' bounds ``lo``, ``hi`` (P,) in
+    the atlas's float type over its C channels (else None)."""
     src, rows0, dpy, dpx, wm = refs
     R, nt = dpy.size, tpb * tpb
     gy, gx, rep = _window_grid(R, tpb)
