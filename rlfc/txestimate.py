@@ -208,7 +208,7 @@ class Estimator:
         st["_refs32"] = None          # (rebuilt where needed)
         st.pop("_lock", None)
         st.pop("_local", None)
-        st["_sets"] = []
+        st.pop("_sets", None)         # (the scratch sets: __setstate__ starts with none)
         st["_woff"] = {}              # (rebuilt where needed)
         return st
 
@@ -294,6 +294,19 @@ class Estimator:
         y, yk, p, e, wp, blend, mx, my = (self._scratch(i) for i in range(8))
         cols, rows = {}, {}                   # view offset Δx (Δy) → the sampling columns (rows) at it
         cap = min(OFFSET_ARRAYS, OFFSET_BYTES // (4 * self.hp * self.wp))
+
+        def at(kept_maps: dict, off: float, base: np.ndarray, spare: np.ndarray) -> np.ndarray:
+            # base + dpix·off in one pass (float32, the same values as numpy's two): made once per
+            # offset (a cell's views share a few) while fewer than ``cap`` are kept per thread
+            # (OFFSET_ARRAYS, within OFFSET_BYTES), past them into ``spare`` each time
+            got = kept_maps.get(off)
+            if got is None:
+                kept = len(cols) + len(rows)
+                got = cv2.scaleAdd(dpix, off, base, dst=self._scratch(9 + kept) if kept < cap else spare)
+                if kept < cap:
+                    kept_maps[off] = got
+            return got
+
         for v in views.tolist():
             r = s.refs[v, :nr]
             # (integer luma as it is: OpenCV subtracts float32 samples from it in float32, the
@@ -311,20 +324,8 @@ class Estimator:
                     np.add(gx, _pixels_of(dblk * np.float32(ox) + warp[1][j], self.hp, self.wp), out=mx)
                     np.add(gy, _pixels_of(dblk * np.float32(oy) + warp[0][j], self.hp, self.wp), out=my)
                     cx, cy = mx, my
-                else:                         # (a cell's views share a few offsets: each made once)
-                    # (at most OFFSET_ARRAYS kept per thread, within OFFSET_BYTES; past them, made into
-                    # mx, my each time)
-                    cx, cy = cols.get(ox), rows.get(oy)
-                    if cx is None:            # gx + dpix·Δx in one pass (float32, the same values as numpy's two)
-                        kept = len(cols) + len(rows)
-                        cx = cv2.scaleAdd(dpix, ox, gx, dst=self._scratch(9 + kept) if kept < cap else mx)
-                        if kept < cap:
-                            cols[ox] = cx
-                    if cy is None:
-                        kept = len(cols) + len(rows)
-                        cy = cv2.scaleAdd(dpix, oy, gy, dst=self._scratch(9 + kept) if kept < cap else my)
-                        if kept < cap:
-                            rows[oy] = cy
+                else:
+                    cx, cy = at(cols, ox, gx, mx), at(rows, oy, gy, my)
                 cvremap.remap(self._ref_luma(int(r[j]), yk), cx, cy, cv2.INTER_LINEAR, out=p)
                 cv2.subtract(yv, p, dst=e, dtype=cv2.CV_32F)
                 acc[1 + j] += _block_sums(np.square(e, out=e), self.nby8, self.nbx8)
