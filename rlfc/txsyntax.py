@@ -109,17 +109,14 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     mag = np.abs(levels)
     nzmask = mag > 0
     last = np.where(nzmask.any(-1), 63 - np.argmax(nzmask[..., ::-1], axis=-1) + 1, 0)       # (S, nt, P)
-    parts = []                                 # (lane, order, ctx, sym)
-    # sort keys within a lane: modes, then last positions, then magnitudes, then escapes (a key
-    # row stream of a wide view holds thousands of tbs: the offsets follow nt and P)
-    o_last = nt
-    o_mag = o_last + nt * P
-    o_esc = o_mag + nt * P * 64
-    lane_t = np.repeat(np.arange(S), nt)
+    # Each lane's symbols in decode order: its tb modes, then the last positions of its coded
+    # (tb, plane) pairs, then their magnitudes (pair by pair, j = 0..last-1), then the escapes'
+    # buckets in the same order. Every part below is made lane by lane in that order already
+    # (np.nonzero and the group expansion are row-major), so each symbol's place is its lane's
+    # start plus its rank within its part: scattered there (no sort of the whole call).
     prev = np.concatenate([np.full((S, 1), 3), modes[:, :-1]], axis=1)
-    parts.append((lane_t, np.tile(np.arange(nt), S), ctx_mode(kind[:, None], prev).reshape(-1), modes.reshape(-1)))
-    s_, t_, p_ = np.nonzero(np.broadcast_to((modes != MODE_SKIP)[:, :, None], (S, nt, P)))
-    parts.append((s_, o_last + t_ * P + p_, ctx_last(pcs[p_], modes[s_, t_], key[s_]), last[s_, t_, p_]))
+    coded = np.broadcast_to((modes != MODE_SKIP)[:, :, None], (S, nt, P))
+    s_, t_, p_ = np.nonzero(coded)
     # magnitudes: group g = (s, t, p) with last > 0; j = 0..last-1 at scan position last-1-j
     gs, gt, gp = np.nonzero(last > 0)
     gl = last[gs, gt, gp]
@@ -127,42 +124,57 @@ def block_symbols(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: 
     grp = np.repeat(np.arange(gs.size), gl)
     j = np.arange(n) - np.repeat(np.cumsum(gl) - gl, gl)
     pos = gl[grp] - 1 - j
-    m = mag[gs[grp], gt[grp], gp[grp], pos]
+    ms, mt, mp = gs[grp], gt[grp], gp[grp]
+    m = mag[ms, mt, mp, pos]
     first = j == 0
     sym = np.minimum(np.where(first, m - 1, m), ESC)
     nz = m > 0
     prev1 = np.concatenate([[False], nz])[:n] & (j >= 1)
     prev2 = np.concatenate([[False, False], nz])[:n] & (j >= 2)
     nb = np.where(first, 0, 1 + prev1.astype(np.int64) + prev2)
-    pc = pcs[gp[grp]]
-    order = o_mag + ((gt[grp] * P + gp[grp]) * 64 + j)
-    parts.append((gs[grp], order, ctx_mag(pc, BAND[pos], key[gs[grp]], nb), sym))
+    pc = pcs[mp]
     esc = sym == ESC
     r = m[esc] - ESC - np.where(first[esc], 1, 0)
     k = bucket_of(r)
-    parts.append((gs[grp][esc], order[esc] + (o_esc - o_mag), ctx_esc(pc[esc]), k))
-    lane = np.concatenate([x[0] for x in parts])
-    order_all = np.concatenate([x[1] for x in parts])
-    ctx = np.concatenate([x[2] for x in parts])
-    syms = np.concatenate([x[3] for x in parts])
-    o = np.lexsort((order_all, lane))
-    # raw bits: signs in magnitude order, then escape suffixes (k bits each, LSB first)
-    sign_lane, sign_ord = gs[grp][nz], order[nz]
-    sign_bits = (levels[gs[grp], gt[grp], gp[grp], pos] < 0)[nz].astype(np.int64)
-    kk = k
-    suffix = r - ((1 << kk) - 1)
-    el = np.repeat(gs[grp][esc], kk)
-    eb = np.arange(int(kk.sum())) - np.repeat(np.cumsum(kk) - kk, kk)
-    ebits = (np.repeat(suffix, kk) >> eb) & 1
-    eord = np.repeat(order[esc] + (o_esc - o_mag), kk) * 64 + eb
-    rl = np.concatenate([sign_lane, el])
-    rord = np.concatenate([sign_ord * 64, eord])
-    rbits = np.concatenate([sign_bits, ebits])
-    ro = np.lexsort((rord, rl))
+    e_lane = ms[esc]
+    n_last = np.bincount(s_, minlength=S)
+    n_mag = np.bincount(ms, minlength=S)
+    n_esc = np.bincount(e_lane, minlength=S)
+    per = nt + n_last + n_mag + n_esc
+    at = np.cumsum(per) - per                                    # each lane's first symbol
+
+    def ranks(lanes, counts):                                    # rank within its lane (lanes ascending)
+        return np.arange(lanes.size) - (np.cumsum(counts) - counts)[lanes]
+
+    tot = int(per.sum())
+    ctx = np.empty(tot, np.int16)
+    syms = np.empty(tot, np.int16)
+    i = (at[:, None] + np.arange(nt)).reshape(-1)
+    ctx[i], syms[i] = ctx_mode(kind[:, None], prev).reshape(-1), modes.reshape(-1)
+    i = at[s_] + nt + ranks(s_, n_last)
+    ctx[i], syms[i] = ctx_last(pcs[p_], modes[s_, t_], key[s_]), last[s_, t_, p_]
+    i = at[ms] + nt + n_last[ms] + ranks(ms, n_mag)
+    ctx[i], syms[i] = ctx_mag(pc, BAND[pos], key[ms], nb), sym
+    i = at[e_lane] + nt + n_last[e_lane] + n_mag[e_lane] + ranks(e_lane, n_esc)
+    ctx[i], syms[i] = ctx_esc(pc[esc]), k
+    # raw bits per lane: the signs in magnitude order, then each escape's suffix (k bits, LSB first)
+    sign_lane = ms[nz]
+    sign_bits = (levels[ms, mt, mp, pos] < 0)[nz]
+    suffix = r - ((1 << k) - 1)
+    el = np.repeat(e_lane, k)
+    eb = np.arange(int(k.sum())) - np.repeat(np.cumsum(k) - k, k)
+    ebits = (np.repeat(suffix, k) >> eb) & 1
+    n_sign = np.bincount(sign_lane, minlength=S)
+    n_ebit = np.bincount(el, minlength=S)
+    rper = n_sign + n_ebit
+    rat = np.cumsum(rper) - rper
+    rbits = np.empty(int(rper.sum()), np.uint8)
+    rbits[rat[sign_lane] + ranks(sign_lane, n_sign)] = sign_bits
+    rbits[rat[el] + n_sign[el] + ranks(el, n_ebit)] = ebits
     # compact types (12 bytes a symbol, 5 a raw bit, not 24 and 16): the packer holds many
     # parts at once
-    return (lane[o].astype(np.int32), ctx[o].astype(np.int16), syms[o].astype(np.int16),
-            rl[ro].astype(np.int32), rbits[ro].astype(np.uint8))
+    return (np.repeat(np.arange(S, dtype=np.int32), per), ctx, syms, np.repeat(np.arange(S, dtype=np.int32), rper),
+            rbits)
 
 
 def _block_counts(modes: np.ndarray, levels: np.ndarray, kind: np.ndarray, key: np.ndarray,
