@@ -35,7 +35,6 @@ SMALL = 64              # (blocks × references) up to which every reference is 
 _E = np.arange(TB, dtype=np.float32)
 _F16 = np.float32(1.0 / (1 << DISP_BITS))
 _Z = np.zeros(TB, np.float32)
-_ZERO = np.float32(0)
 
 
 class KeyAtlas:
@@ -416,10 +415,11 @@ def _window_grid(R: int, tpb: int) -> tuple:
 def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None) -> tuple:
     """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple, for
     blocks of tpb × tpb 8×8 blocks (raster order within the block): per (reference, 8×8 block)
-    pair (``R·nt`` rows, reference-major) the offsets per unit of disparity, the window's pixel
-    grid (8×8 positions, flat) and the reference's first row in the atlas; the blend's weights
-    per mode over 64, the two halves of :func:`pixel_matrix` (planes, floor halves), the last
-    row of a key view (float32: the rows' clamp); and the view's weighted prediction, where
+    pair (``R·nt`` rows, reference-major) the window's pixel grid (8×8 positions, flat: (2, R·nt,
+    64) rows in the atlas, its key view's first row added, and columns), the offsets per unit of
+    disparity (2, R·nt) and the rows' bounds in the atlas (the key view's first and last rows,
+    each (R·nt, 1): the rows' clamp); the blend's weights per mode over 64, the two halves of
+    :func:`pixel_matrix` (planes, floor halves); and the view's weighted prediction, where
     ``wp`` (P, 2) gives one: its gains, offsets and the planes' bounds ``lo``, ``hi`` (P,) in
     the atlas's float type over its C channels (else None)."""
     src, rows0, dpy, dpx, wm = refs
@@ -433,8 +433,11 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
         g[:P], o[:P], lw[:P], hg[:P] = wp[:, 0], wp[:, 1], lo, hi
         wpf = (g, o, lw, hg)
     M = pixel_matrix(atlas.P, atlas.C, atlas.ftype)
-    return (src, np.repeat(rows0.reshape(R), nt)[:, None], np.repeat(dpy, nt), np.repeat(dpx, nt), gy, gx,
-            rep, wm / atlas.ftype(1 << W_BITS), M[:atlas.C], M[atlas.C:], np.float32(atlas.hp - 1), wpf)
+    r0 = np.repeat(rows0.reshape(R), nt)[:, None]                          # (R·nt, 1) first rows in the atlas
+    grid = np.stack([gy + r0, gx])                                         # (2, R·nt, 64) rows (in the atlas), columns
+    dp = np.stack([np.repeat(dpy, nt), np.repeat(dpx, nt)])                # (2, R·nt)
+    return (src, grid, dp, r0, r0 + np.float32(atlas.hp - 1), rep, wm / atlas.ftype(1 << W_BITS), M[:atlas.C],
+            M[atlas.C:], wpf)
 
 
 def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
@@ -473,26 +476,21 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     Returns:
         (8·tpb, 8·tpb, P) pixels of ``dtype``.
     """
-    src, rows0, dpy, dpx, gy, gx, rep, w64, M1, M2, top, wpf = prefs
+    src, grid, dp, lo, hi, rep, w64, M1, M2, wpf = prefs
     C, P = atlas.C, atlas.P
     nt = d.size
-    dr = d[rep]                                                           # (nt·R,) per pair
-    y = dr * dpy
-    y += by_px
+    t = d[rep] * dp                                                       # (2, R·nt) displacement per pair
+    t[0] += by_px
+    t[1] += bx_px
     if warp is not None:
-        y += warp[0]
-    mr = y[:, None] + gy                                                  # (nt·R, 64) rows in the key view
-    np.minimum(np.maximum(mr, _ZERO, out=mr), top, out=mr)             # (ufuncs: the clip method costs more)
-    mr += rows0                                                           # … in the atlas
-    x = dr * dpx
-    x += bx_px
-    if warp is not None:
-        x += warp[1]
-    mc = x[:, None] + gx
-    mc, mr = _one_row(mc), _one_row(mr)
-    smp = cv2.remap(src, mc, mr, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        t[0] += warp[0]
+        t[1] += warp[1]
+    pos = t[:, :, None] + grid                                            # (2, R·nt, 64) rows in the atlas, columns
+    mr = pos[0]
+    np.minimum(np.maximum(mr, lo, out=mr), hi, out=mr)                  # rows within their key view (ufuncs)
+    smp = cv2.remap(src, _one_row(pos[1]), _one_row(mr), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     np.floor(smp, out=smp)                                                # atlas + 0.5: rounded
-    R = gy.shape[0] // nt
+    R = grid.shape[1] // nt
     ml = modes.tolist()
     if ml.count(ml[0]) == nt:                                             # one mode (most blocks): one product
         acc = np.dot(w64[ml[0]], smp.reshape(R, -1)).reshape(nt * TB * TB, C)
