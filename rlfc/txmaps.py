@@ -267,6 +267,11 @@ def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> lis
     vals = [0] * (ny * nx)
     digits = [_digit_ctx(ver, k) for k in range(3)]
     mask = (1 << PROB_BITS) - 1
+    # the common symbol, e = 0 where the three neighbours are equal (the prediction is then
+    # their value): decoded from locals, without the tables or the median
+    lo0 = cum_t[CTX_BASE][R]
+    f0 = freq_t[CTX_BASE][R]
+    hi0 = lo0 + f0
     i = 0
     try:
         for y in range(ny):
@@ -278,9 +283,17 @@ def _shared_map(data: bytes, tabs, ny: int, nx: int, ver: int, what: str) -> lis
                 else:
                     a = vals[i - nx] if y else 0
                     b = c = a
+                sl = x & mask
+                if a == b == c and lo0 <= sl < hi0:
+                    x = f0 * (x >> PROB_BITS) + sl - lo0
+                    while x < RANS_L:
+                        x = (x << 8) | data[p]
+                        p += 1
+                    vals[i] = a
+                    i += 1
+                    continue
                 act = abs(a - c) + abs(b - c)
                 ctx = CTX_BASE + (0 if act == 0 else 1 if act <= 16 else 2)
-                sl = x & mask
                 s = slot_t[ctx][sl]
                 x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
                 while x < RANS_L:
@@ -325,13 +338,26 @@ def _map_stream(data: bytes, start: int, end: int, tabs, ny: int, nx: int, n_mod
     nz = [0] * (nloc + nx)                    # 2·(correction != 0), after a zero row
     digits = [_digit_ctx(ver, k) for k in range(3)]
     mask = (1 << PROB_BITS) - 1
+    # the common symbols (a zero correction, mode 0, where the left and above ones are zero too)
+    # decoded from locals, without the tables
+    lo0, f0 = cum_t[CTX_CORR][R], freq_t[CTX_CORR][R]
+    hi0 = lo0 + f0
+    mlo0, mf0 = cum_t[CTX_MODE][0], freq_t[CTX_MODE][0]
+    mhi0 = mlo0 + mf0
     i = 0
     try:
         for _ in range(ny):
             left = 0
             for _ in range(nx):
-                ctx = CTX_CORR + left + nz[i]
                 sl = x & mask
+                if not (left or nz[i]) and lo0 <= sl < hi0:
+                    x = f0 * (x >> PROB_BITS) + sl - lo0
+                    while x < RANS_L:
+                        x = (x << 8) | data[p]
+                        p += 1
+                    i += 1                            # (its nz stays 0)
+                    continue
+                ctx = CTX_CORR + left + nz[i]
                 s = slot_t[ctx][sl]
                 x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
                 while x < RANS_L:
@@ -355,8 +381,15 @@ def _map_stream(data: bytes, start: int, end: int, tabs, ny: int, nx: int, n_mod
         for _ in range(ny):
             ml = 0
             for _ in range(nx):
-                ctx = CTX_MODE + 5 * ml + modes[i]
                 sl = x & mask
+                if not (ml or modes[i]) and mlo0 <= sl < mhi0:
+                    x = mf0 * (x >> PROB_BITS) + sl - mlo0
+                    while x < RANS_L:
+                        x = (x << 8) | data[p]
+                        p += 1
+                    i += 1                            # (its mode stays 0)
+                    continue
+                ctx = CTX_MODE + 5 * ml + modes[i]
                 ml = slot_t[ctx][sl]
                 x = freq_t[ctx][ml] * (x >> PROB_BITS) + sl - cum_t[ctx][ml]
                 while x < RANS_L:
