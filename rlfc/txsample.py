@@ -421,7 +421,7 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
     each (R·nt, 1): the rows' clamp); the blend's weights per mode over 64, the two halves of
     :func:`pixel_matrix` (planes, floor halves); and the view's weighted prediction, where
     ``wp`` (P, 2) gives one: its gains, offsets and the planes' bounds ``lo``, ``hi`` (P,) in
-    the atlas's float type over its C channels (else None)."""
+    the atlas's float type over its C channels, each tiled to (nt·64, C) (else None)."""
     src, rows0, dpy, dpx, wm = refs
     R, nt = dpy.size, tpb * tpb
     gy, gx, rep = _window_grid(R, tpb)
@@ -431,7 +431,9 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
         g, o = np.full(atlas.C, 64, ft), np.zeros(atlas.C, ft)
         lw, hg = np.full(atlas.C, -np.inf, ft), np.full(atlas.C, np.inf, ft)
         g[:P], o[:P], lw[:P], hg[:P] = wp[:, 0], wp[:, 1], lo, hi
-        wpf = (g, o, lw, hg)
+        # tiled over a block's samples (nt·64, C): same-shape operands (the C values broadcast
+        # along the last axis make numpy's inner loops C elements long: 4x the time, measured)
+        wpf = tuple(np.tile(a, (nt * TB * TB, 1)) for a in (g, o, lw, hg))
     M = pixel_matrix(atlas.P, atlas.C, atlas.ftype)
     r0 = np.repeat(rows0.reshape(R), nt)[:, None]                          # (R·nt, 1) first rows in the atlas
     grid = np.stack([gy + r0, gx])                                         # (2, R·nt, 64) rows (in the atlas), columns
@@ -469,7 +471,8 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
             atlas's float type), dtype: the pixels'.
         res: None (predicted only), or (nt·64, C) residual samples in the atlas's float type
             (0 past the P planes), 8×8 blocks and their samples in raster order; bounds: then
-            the planes' (lo, hi), each (C,) in that type (±inf past the P planes).
+            the planes' (lo, hi) in that type (±inf past the P planes), each (C,) or tiled to
+            (nt·64, C) (faster: no broadcast along the last axis).
         warp: None, or the (y, x) offsets in pixels (each (R·nt,) float32 sixteenths,
             reference-major as the pairs) of a view with per-view warps (:mod:`rlfc.txwarp`).
 

@@ -24,7 +24,7 @@ from formats.parallel import LOCAL_THREADS
 from formats.pixels import from_planes
 
 from ..kernels import dequantize
-from ..transform import COEF_MAX, ZIGZAG, inverse_float
+from ..transform import _T8F, COEF_MAX, ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout, weighted_views
 from ..txwarp import max_row_offset, offsets, pair_params, view_offsets
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb, weigh
@@ -36,6 +36,12 @@ from ..txsample import (KeyAtlas, block_pixel_refs, block_refs, predict as remap
 from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY, shared
 from .base import Profile, ProfileDecoder
+
+
+#: transform.inverse_float's stages on a block's 64 samples (raster rows) as one product each:
+#: x @ _K1 = (T^T X / 128) flattened, and _K2T @ y = (Y T / 256) flattened (column vectors)
+_K1 = np.kron(_T8F / 128, np.eye(8))
+_K2T = np.ascontiguousarray(np.kron(np.eye(8), _T8F / 256).T)
 
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
@@ -171,6 +177,7 @@ class TxDecoder(ProfileDecoder):
         self._tb_x = (self._tbx * TB).astype(np.float32)
         self._blockref_cache: dict = {}
         self._pixref_cache: dict = {}                           # view → block_pixel_refs (block_pixels)
+        self._res_tab = None                                    # _residual_rows' look-ups (_res_tables)
         self._warp_px_cache: dict = {}                          # view → _warp_pixels (warped files)
         self._cell_maps: dict = {}                              # map → (disparities as float32, modes)
         self._peak = int(np.iinfo(self.dtype).max)
@@ -198,7 +205,10 @@ class TxDecoder(ProfileDecoder):
             ft, C = self.atlas.ftype, self.atlas.C
             lw, hg = np.full(C, -np.inf, ft), np.full(C, np.inf, ft)
             lw[:self.P], hg[:self.P] = self.lo, self.hi
-            self._pixel_bounds = (lw, hg)
+            # tiled over a block's samples: the clip then runs on arrays of one shape (bounds of C
+            # values broadcast along the last axis make numpy's inner loops C elements long)
+            n = self.nt * TB * TB
+            self._pixel_bounds = (np.tile(lw, (n, 1)), np.tile(hg, (n, 1)))
             self._peak_f = ft(self._peak)  # (block_pixels' clip bound, made once)
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
@@ -850,15 +860,49 @@ class TxDecoder(ProfileDecoder):
         (C its channels; 0 past the P planes), 8×8 blocks and their samples in raster order.
         Values past 2^24 may round in float32; the sum with the prediction is then past the
         planes' bounds either way and clips alike."""
-        nt, P = self.nt, self.P
+        nt, P, C = self.nt, self.P, self.atlas.C
         idx = parsed.index
-        g = idx >> 6                                                          # tb·P + plane
-        deq, raster = self._dequantized(parsed.values, self._q16_rows[g], self._row_planes[g], idx & 63)
-        X = np.zeros((nt * P, 64))
-        X[g, raster] = deq
-        res = np.zeros((nt, 64, self.atlas.C), self.atlas.ftype)
-        res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
-        return res.reshape(nt * 64, self.atlas.C)
+        if self.lay.bypass.any():             # (bypassed planes: their samples as they are)
+            g = idx >> 6                                                      # tb·P + plane
+            deq, raster = self._dequantized(parsed.values, self._q16_rows[g], self._row_planes[g], idx & 63)
+            X = np.zeros((nt * P, 64))
+            X[g, raster] = deq
+            res = np.zeros((nt, 64, C), self.atlas.ftype)
+            res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
+            return res.reshape(nt * 64, C)
+        # per coefficient, from tables of its index g·64 + scan position: its step and its place
+        # in (nt, C, 64) raster rows; dequantized as kernels.dequantize, clipped to ±COEF_MAX
+        at, q16 = self._res_tables()
+        d = np.abs(parsed.values)
+        d *= q16[idx]
+        d += 8
+        d >>= 4
+        np.minimum(d, COEF_MAX, out=d)
+        d *= np.sign(parsed.values)
+        X = np.zeros((nt, C, 64))
+        X.reshape(-1)[at[idx]] = d
+        # transform.inverse_float's two stages as products with 64×64 matrices (the same sums
+        # of exact products, with zeros added); the second writes (nt, 64, C) directly
+        Y = X.reshape(nt * C, 64) @ _K1
+        Y += 0.5
+        np.floor(Y, out=Y)
+        R = np.matmul(_K2T, Y.reshape(nt, C, 64).transpose(0, 2, 1))
+        R += 0.5
+        np.floor(R, out=R)
+        return R.reshape(nt * 64, C).astype(self.atlas.ftype, copy=False)
+
+    def _res_tables(self) -> tuple:
+        """(place in (nt, C, 64) raster rows, step (1/16) of a view with references) per index
+        g·64 + scan position of a block's coefficients (g = tb·P + plane): :meth:`_residual_rows`'
+        look-ups (cached)."""
+        got = self._res_tab
+        if got is None:
+            nt, P, C = self.nt, self.P, self.atlas.C
+            g = np.arange(nt * P)
+            t, p = np.divmod(g, P)
+            at = ((t * C + p) * 64)[:, None] + ZIGZAG[None, :]
+            got = self._res_tab = (at.reshape(-1), np.repeat(self._q16_rows, 64))
+        return got
 
     def _pixel_refs(self, view: int):
         """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references

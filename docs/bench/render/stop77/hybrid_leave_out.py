@@ -1,6 +1,6 @@
 """Leave views out (as tools.bench_render): render, blending, and hybrids
 blend + G_sigma * (render - blend) on the in-between views."""
-import sys, os, time, pickle
+import sys, os
 os.environ.setdefault("OMP_NUM_THREADS", "1")
 sys.path.insert(0, "/work/main")
 import numpy as np, cv2

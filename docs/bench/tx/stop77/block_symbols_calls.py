@@ -1,4 +1,4 @@
-import sys, os, time, types, subprocess, pickle
+import sys, os, time, types, subprocess
 os.environ["OMP_NUM_THREADS"] = "1"
 sys.path.insert(0, "/work/main")
 import numpy as np
