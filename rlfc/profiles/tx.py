@@ -24,7 +24,7 @@ from formats.parallel import LOCAL_THREADS
 from formats.pixels import from_planes
 
 from ..kernels import dequantize
-from ..transform import _T8F, COEF_MAX, ZIGZAG, inverse_float
+from ..transform import COEF_MAX, ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout, weighted_views
 from ..txwarp import max_row_offset, offsets, pair_params, view_offsets
 from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb, weigh
@@ -38,10 +38,11 @@ from ..xp import NUMPY, shared
 from .base import Profile, ProfileDecoder
 
 
-#: transform.inverse_float's stages on a block's 64 samples (raster rows) as one product each:
-#: x @ _K1 = (T^T X / 128) flattened, and _K2T @ y = (Y T / 256) flattened (column vectors)
-_K1 = np.kron(_T8F / 128, np.eye(8))
-_K2T = np.ascontiguousarray(np.kron(np.eye(8), _T8F / 256).T)
+def _dequantize_clipped(values, q16) -> np.ndarray:
+    """:func:`rlfc.kernels.dequantize` of levels ``values`` at steps ``q16`` (1/16; numpy), clipped
+    to ±COEF_MAX."""
+    deq = dequantize(NUMPY, values, q16)
+    return np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
 
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
@@ -613,8 +614,7 @@ class TxDecoder(ProfileDecoder):
         """(dequantized coefficients clipped to ±COEF_MAX, each one's raster position in its 8×8
         block: zig-zag for transformed planes, as is for bypassed ones) of nonzero levels
         ``values`` at scan positions ``pos`` of planes ``plane``, steps ``q16`` (1/16)."""
-        deq = dequantize(NUMPY, values, q16)
-        np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
+        deq = _dequantize_clipped(values, q16)
         bypass = self.lay.bypass
         return deq, (np.where(bypass[plane], pos, ZIGZAG[pos]) if bypass.any() else ZIGZAG[pos])
 
@@ -862,46 +862,22 @@ class TxDecoder(ProfileDecoder):
         planes' bounds either way and clips alike."""
         nt, P, C = self.nt, self.P, self.atlas.C
         idx = parsed.index
-        if self.lay.bypass.any():             # (bypassed planes: their samples as they are)
-            g = idx >> 6                                                      # tb·P + plane
-            deq, raster = self._dequantized(parsed.values, self._q16_rows[g], self._row_planes[g], idx & 63)
-            X = np.zeros((nt * P, 64))
-            X[g, raster] = deq
-            res = np.zeros((nt, 64, C), self.atlas.ftype)
-            res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
-            return res.reshape(nt * 64, C)
-        # per coefficient, from tables of its index g·64 + scan position: its step and its place
-        # in (nt, C, 64) raster rows; dequantized as kernels.dequantize, clipped to ±COEF_MAX
-        at, q16 = self._res_tables()
-        d = np.abs(parsed.values)
-        d *= q16[idx]
-        d += 8
-        d >>= 4
-        np.minimum(d, COEF_MAX, out=d)
-        d *= np.sign(parsed.values)
-        X = np.zeros((nt, C, 64))
-        X.reshape(-1)[at[idx]] = d
-        # transform.inverse_float's two stages as products with 64×64 matrices (the same sums
-        # of exact products, with zeros added); the second writes (nt, 64, C) directly
-        Y = X.reshape(nt * C, 64) @ _K1
-        Y += 0.5
-        np.floor(Y, out=Y)
-        R = np.matmul(_K2T, Y.reshape(nt, C, 64).transpose(0, 2, 1))
-        R += 0.5
-        np.floor(R, out=R)
-        return R.reshape(nt * 64, C).astype(self.atlas.ftype, copy=False)
+        at, q16 = self._res_tables()                  # (per index g·64 + scan position: its place, its step)
+        X = np.zeros((nt * P, 64))
+        X.reshape(-1)[at[idx]] = _dequantize_clipped(parsed.values, q16[idx])
+        res = np.zeros((nt, 64, C), self.atlas.ftype)
+        res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
+        return res.reshape(nt * 64, C)
 
     def _res_tables(self) -> tuple:
-        """(place in (nt, C, 64) raster rows, step (1/16) of a view with references) per index
-        g·64 + scan position of a block's coefficients (g = tb·P + plane): :meth:`_residual_rows`'
-        look-ups (cached)."""
+        """Per index g·64 + scan position of a block's coefficients (g = tb·P + plane): its place
+        in (nt·P, 64) raster rows (zig-zag for transformed planes, as is for bypassed ones) and
+        its step (1/16) in a view with references: :meth:`_residual_rows`' look-ups (cached)."""
         got = self._res_tab
         if got is None:
-            nt, P, C = self.nt, self.P, self.atlas.C
-            g = np.arange(nt * P)
-            t, p = np.divmod(g, P)
-            at = ((t * C + p) * 64)[:, None] + ZIGZAG[None, :]
-            got = self._res_tab = (at.reshape(-1), np.repeat(self._q16_rows, 64))
+            g = np.arange(self.nt * self.P)
+            raster = np.where(self.lay.bypass[self._row_planes][:, None], np.arange(64), ZIGZAG[None, :])
+            got = self._res_tab = (((g * 64)[:, None] + raster).reshape(-1), np.repeat(self._q16_rows, 64))
         return got
 
     def _pixel_refs(self, view: int):
