@@ -6,6 +6,8 @@ The integer transforms are written once for numpy and torch arrays (same operato
 """
 from __future__ import annotations
 
+import threading
+
 import numpy as np
 
 
@@ -117,11 +119,29 @@ def from_planes(p: np.ndarray, dtype=np.uint8) -> np.ndarray:
     return np.minimum(np.maximum(x, 0, out=x), peak, out=x).astype(dtype)     # ufuncs: np.clip costs µs
 
 
+_SCRATCH = threading.local()      # .planes: this thread's int32 planes for the split paths
+
+
+def _scratch_planes(n: int, samples: int) -> list[np.ndarray]:
+    """``n`` contiguous int32 planes of ``samples`` each, kept per thread from call to call.
+
+    The split paths' planes were fresh arrays for each row chunk: a few hundred KiB each, which
+    glibc maps and unmaps around every chunk (its defaults), so every 4 KiB was a page fault on
+    first write. OpenCV splitting a 512² RGB view's int32 planes took 1.4-4.2 ms into fresh
+    arrays and 0.3 ms into these (measured, BENCHMARKS.md)."""
+    got = getattr(_SCRATCH, "planes", None)
+    if got is None or len(got) < n or got[0].size < samples:
+        got = [np.empty(max(samples, SPLIT_CHUNK // 3 + 1), np.int32) for _ in range(max(n, 5))]
+        _SCRATCH.planes = got
+    return got
+
+
 def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
     """:func:`from_planes` of many samples: the interleaved planes split into contiguous ones
     (OpenCV), YCoCg-R inverted in place, each clipped and narrowed, then interleaved again, in
-    row chunks of about SPLIT_CHUNK samples (temporaries that stay in the caches); 0.64-0.76x the
-    time of the same integer steps on strided channel views, measured."""
+    row chunks of about SPLIT_CHUNK samples (temporaries that stay in the caches, in planes kept
+    per thread); 0.64-0.76x the time of the same integer steps on strided channel views,
+    measured."""
     import cv2
 
     C = p.shape[-1]
@@ -148,11 +168,15 @@ def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
     else:
         def sat_add(q, r):
             return cv2.add(q, r if r is not None else 0, dtype=depth)
-    step = max(1, SPLIT_CHUNK // (img.shape[1] * C))
+    W = img.shape[1]
+    step = max(1, SPLIT_CHUNK // (W * C))
+    scratch = _scratch_planes(C + 1, min(step, img.shape[0]) * W)
     for a in range(0, img.shape[0], step):
-        planes = list(cv2.split(img[a:a + step]))
+        src = img[a:a + step]
+        k = src.shape[0] * W
+        planes = cv2.split(src, [q[:k].reshape(src.shape[0], W) for q in scratch[:C]])
         y, co, cg = planes[:3]
-        h = cg >> 1
+        h = np.right_shift(cg, 1, out=scratch[C][:k].reshape(y.shape))
         t = np.subtract(y, h, out=y)                 # t = Y − (Cg >> 1)
         g = sat_add(cg, t)                           # G = Cg + t
         np.right_shift(co, 1, out=h)

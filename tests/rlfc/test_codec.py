@@ -41,6 +41,37 @@ def test_from_planes_split_path_is_the_same_integers(shape, dtype, rng):
         assert np.array_equal(from_planes(p, np.int32), np.clip(inverse_int(p.copy()), 0, 255))
 
 
+def test_from_planes_scratch_is_per_thread_and_never_returned(rng):
+    """The split path's planes are kept per thread (formats.pixels._scratch_planes): calls of
+    growing and shrinking sizes on two threads at once give inverse_int's integers, and no
+    result shares memory with a thread's planes."""
+    import threading
+
+    from formats import pixels
+    from formats.pixels import inverse_int
+
+    inputs = [rng.integers(-300, 600, s).astype(np.int32) for s in
+              [(300, 256, 3), (40, 3000, 3), (2, 128, 128, 4), (600, 700, 3), (70000, 3)]]
+    refs = [np.clip(inverse_int(p.copy()), 0, 255).astype(np.uint8) for p in inputs]
+    bad, held = [], []
+
+    def work(order):
+        for i in order * 3:
+            got = pixels.from_planes(inputs[i])
+            planes = pixels._SCRATCH.planes
+            if not np.array_equal(got, refs[i]) or any(np.shares_memory(got, q) for q in planes):
+                bad.append(i)
+        held.append(pixels._SCRATCH.planes)
+
+    threads = [threading.Thread(target=work, args=(o,)) for o in ([0, 1, 2, 3, 4], [4, 3, 2, 1, 0])]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert not bad and len(held) == 2
+    assert not any(np.shares_memory(a, b) for a in held[0] for b in held[1])     # each thread its own
+
+
 @pytest.mark.parametrize("shape", [(300, 256, 3), (4, 128, 128, 4), (2, 10, 10, 3), (512, 512, 3)])
 @pytest.mark.parametrize("dtype", [np.uint8, np.uint16])
 def test_to_planes_split_path_is_the_same_integers(shape, dtype, rng):
