@@ -43,6 +43,7 @@ BAND = np.array([0] + [1] * 2 + [2] * 3 + [3] * 4 + [4] * 11 + [5] * 43, dtype=n
 N_BANDS = 6
 _BAND8 = [8 * int(b) for b in BAND]      # band·8: the band's offset among magnitude contexts
 _BAND8_ARR = np.array(_BAND8, np.int64)
+_BAND8_U32 = _BAND8_ARR.astype(np.uint32)
 N_PC = 3          # plane classes
 _MASK = RANS_M - 1
 #: a magnitude parse finishes in plain Python once fewer lanes than this have symbols left
@@ -491,12 +492,14 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     lane_start = np.cumsum(per_lane) - per_lane
     flat_len = gl.reshape(-1)
     G = flat_len.size
-    j = np.arange(tot) - np.repeat(np.cumsum(flat_len) - flat_len, flat_len)
+    j = np.arange(tot, dtype=np.int32) - np.repeat((np.cumsum(flat_len) - flat_len).astype(np.int32), flat_len)
     index = np.repeat((np.arange(G) << 6) + flat_len - 1, flat_len) - j      # g·64 + position: ascending
     g_pc = np.tile(pcs, G // P)                                             # per group: plane class, key
     g_ctx = ctx_mag(g_pc, 0, np.repeat(key, nt * P), 0)
     g_lane = np.repeat(np.arange(S), per_lane)
-    ctx1 = np.repeat(g_ctx, flat_len) + _BAND8_ARR[index & 63] + (j >= 1)
+    ctx1 = np.repeat(g_ctx.astype(np.uint32), flat_len)                     # (uint32 in place: the
+    ctx1 += _BAND8_U32.take(index & 63)                                    # values are < 2^12)
+    ctx1 += j >= 1
     sym = _magnitudes(dec, tables, S, per_lane, lane_start, g_lane, j, ctx1)
     if tot and int(sym.max()) > ESC:
         raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
@@ -534,7 +537,8 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     back = dec.back()
     soff = np.arange(sidx.size) - (np.cumsum(nsign) - nsign)[s_lane]     # bit offset within the lane
     sbit = _raw_bits(buf, raw_start[s_lane], back[s_lane], kb[s_lane], soff)
-    vals = sym[sidx] + first[sidx]
+    vals = sym[sidx].astype(np.int64)
+    vals += first[sidx]
     if esc.size:
         eoff = nsign[e_lane] + (np.cumsum(buckets) - buckets) - (np.cumsum(nsuf) - nsuf)[e_lane]
         suffix = np.zeros(esc.size, np.int64)
@@ -546,7 +550,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
 
 
 def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, g_lane, j, ctx1) -> np.ndarray:
-    """The magnitude symbols of every lane (flat, lane-major), decoded in steps over the lanes
+    """The magnitude symbols of every lane (flat, lane-major, uint8), decoded in steps over the lanes
     that still have symbols.
 
     Step-major layout: lanes are ranked by their number of symbols (longest first), so the
@@ -568,7 +572,7 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     K = int(lens[0]) if S else 0
     cnt = np.searchsorted(-lens, -np.arange(K), side="left")          # lanes with more than k symbols
     offs = np.cumsum(cnt) - cnt
-    sm = offs[np.arange(tot) - lane_start[g_lane]] + rank[g_lane]     # lane-major → step-major
+    sm = offs[np.arange(tot) - np.repeat(lane_start, per_lane)] + np.repeat(rank, per_lane)   # lane-major → step-major
     c1 = np.empty(tot, np.uint32)
     c1[sm] = ctx1
     jm = np.empty(tot, np.int8)
@@ -614,7 +618,7 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
             p += need
         np.greater_equal(w, _MAG_NZ, out=nz[o:o + m])
     dec.x[order], dec.ptr[order] = x_all, p_all
-    return (words >> 25).astype(np.uint8)[sm].astype(np.int64)
+    return np.right_shift(words, 25, out=words).astype(np.uint8)[sm]
 
 
 def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables) -> None:
