@@ -536,7 +536,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
         raise FormatError(f"{name}: tx block stream is malformed (its symbols do not end where its raw bits start)")
     back = dec.back()
     soff = np.arange(sidx.size) - (np.cumsum(nsign) - nsign)[s_lane]     # bit offset within the lane
-    sbit = _raw_bits(buf, raw_start[s_lane], back[s_lane], kb[s_lane], soff)
+    sbit = _raw_bits(buf, raw_start, back, kb, s_lane, soff)
     vals = sym[sidx].astype(np.int64)
     vals += first[sidx]
     if esc.size:
@@ -544,7 +544,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
         suffix = np.zeros(esc.size, np.int64)
         for b in range(int(buckets.max(initial=0))):
             m = buckets > b
-            suffix[m] |= _raw_bits(buf, raw_start[e_lane[m]], back[e_lane[m]], kb[e_lane[m]], eoff[m] + b) << b
+            suffix[m] |= _raw_bits(buf, raw_start, back, kb, e_lane[m], eoff[m] + b).astype(np.int64) << b
         vals[(np.cumsum(nz) - 1)[esc]] = ESC + first[esc] + ((1 << buckets) - 1) + suffix
     return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
 
@@ -696,12 +696,25 @@ def slot_words(tables: Tables) -> np.ndarray:
     return got
 
 
-def _raw_bits(buf, start, back, kb, off):
-    """Raw bit ``off`` of each lane (arrays): bits below ``kb`` from the start state's R
-    (``back``), the others from the stored bits at byte ``start`` (LSB-first)."""
-    stored = off - kb
-    byte = buf[(start + np.maximum(stored, 0) // 8).clip(0, buf.size - 1)].astype(np.int64)
-    return np.where(off < kb, (back >> off.clip(0, 62)) & 1, (byte >> (np.maximum(stored, 0) & 7)) & 1)
+def _raw_bits(buf, start, back, kb, lane, off):
+    """Raw bit ``off`` of lane ``lane`` (arrays; ``start``, ``back``, ``kb`` per lane, the
+    callers' check having put every ``start`` inside the buffer): bits below ``kb`` from the
+    start state's R (``back``), the others from the stored bits at byte ``start`` (LSB-first).
+    Returns uint8 bits (the stored ones read for every request in uint8, then the few below
+    ``kb`` replaced)."""
+    kl = kb[lane]
+    st = off - kl
+    np.maximum(st, 0, out=st)
+    at = st >> 3
+    at += start[lane]
+    np.minimum(at, buf.size - 1, out=at)
+    bit = buf[at]
+    bit >>= (st & 7).astype(np.uint8)
+    bit &= 1
+    low = np.flatnonzero(off < kl)
+    if low.size:
+        bit[low] = (back[lane[low]] >> np.minimum(off[low], 62)) & 1
+    return bit
 
 
 def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) -> Parsed:
