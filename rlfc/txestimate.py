@@ -486,7 +486,7 @@ def reprice_maps(luma: np.ndarray, struct, base: np.ndarray, disp: np.ndarray, *
     unless ``modes_too``: a block seen by one reference only (an occlusion) needs its mode
     whatever λ is, but at a coarse enough step a mode's bits can cost more than it saves. Four
     cost evaluations instead of an estimation's 15 or more (rate control learns the coding λ
-    only after its probe pass; :func:`rlfc.txencode._maps_pay_repriced` checks the result coded).
+    only after its probe pass; :func:`rlfc.txrate._maps_pay_repriced` checks the result coded).
 
     ``costs``: every mode's costs at ``disp`` where the caller has them (``estimate_maps(...,
     with_costs=True)``): then three evaluations.

@@ -1289,7 +1289,7 @@ class TxProfile(Profile):
         why = self.accepts(lf)
         if why:
             raise UnsupportedError(f"{why}; use --profile bise")
-        from ..txencode import encode_tx
+        from ..txrate import encode_tx
 
         return encode_tx(lf, options, progress)
 

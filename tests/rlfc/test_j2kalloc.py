@@ -77,7 +77,7 @@ def test_posed_psnr_targets_search_jpeg2000_levels_and_cost_what_the_full_search
     """A posed capture of natural views at a PSNR target: every view JPEG 2000 at its share of
     the error, found in a few passes on JPEG 2000's levels; no larger than the full search, which
     codes every view with the transform path and JPEG 2000 in every pass."""
-    import rlfc.txencode as T
+    import rlfc.txrate as R
 
     lf = _posed(_dino())
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=40.0))
@@ -87,7 +87,7 @@ def test_posed_psnr_targets_search_jpeg2000_levels_and_cost_what_the_full_search
     full = d.decode_all()
     assert (full == e.decoded).all() and psnr_rgb(lf.views, full) >= 40.0
     check_agreement(d, e.decoded.shape)
-    monkeypatch.setattr(T, "J2K_SMOOTH_MARGIN_DB", math.inf)            # the full search, forced
+    monkeypatch.setattr(R, "J2K_SMOOTH_MARGIN_DB", math.inf)            # the full search, forced
     ref = encode(lf, EncodeOptions(profile="tx", target_psnr=40.0))
     assert ref.target_met and not any("j2k_shift" in t for t in ref.trace)
     size = sum(len(x) for _, x in e.sections)
@@ -145,7 +145,7 @@ def test_transform_coded_posed_views_start_their_search_near_the_target():
 def test_posed_bpp_targets_search_jpeg2000_levels_too(monkeypatch):
     """A size target on natural posed views: JPEG 2000 at the views' shares, the best quality
     within the size, in a few passes; about the quality the full search reaches in the same size."""
-    import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.metrics import bpp
 
     lf = _posed(_dino())
@@ -155,7 +155,7 @@ def test_posed_bpp_targets_search_jpeg2000_levels_too(monkeypatch):
     full = d.decode_all()
     assert (full == e.decoded).all()
     assert min(e.config["tx"]["key_images"]) > 0
-    monkeypatch.setattr(T, "J2K_SMOOTH_MARGIN_DB", math.inf)            # the full search, forced
+    monkeypatch.setattr(R, "J2K_SMOOTH_MARGIN_DB", math.inf)            # the full search, forced
     ref = encode(lf, EncodeOptions(profile="tx", target_bpp=0.6))
     assert "step" in ref.trace[-1]                  # (after the JPEG 2000 passes it set aside)
     _, ref_blob = open_encoded(lf, ref)
@@ -182,7 +182,7 @@ def test_a_posed_size_target_keeps_jpeg2000_where_it_does_better(monkeypatch):
     target is met with JPEG 2000's file, not missed with the transform path's closest."""
     import cv2
 
-    import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.metrics import bpp
     from rlfc.ratesearch import SearchResult
 
@@ -198,13 +198,13 @@ def test_a_posed_size_target_keeps_jpeg2000_where_it_does_better(monkeypatch):
     assert (d.decode_all() == e.decoded).all() and min(e.config["tx"]["key_images"]) > 0
     assert bpp(len(blob), 4, lf.height, lf.width) <= 0.1
     assert e.summary["psnr_rgb"] > max(t["psnr_rgb"] for t in full)
-    real = T.secant_search
+    real = R.secant_search
 
     def transform_misses(*a, **k):          # the full search (it alone passes `prefer`) finds nothing
         r = real(*a, **k)
         return SearchResult(False, r.q, r.result, r.points) if "prefer" in k else r
 
-    monkeypatch.setattr(T, "secant_search", transform_misses)
+    monkeypatch.setattr(R, "secant_search", transform_misses)
     e2 = encode(lf, EncodeOptions(profile="tx", target_bpp=0.1))
     assert e2.target_met and not any("coarsest" in n for n in e2.notes)
     assert any("where the transform path cannot" in n for n in e2.notes)
@@ -215,15 +215,15 @@ def test_a_per_view_floor_on_posed_views_is_searched_with_the_pooled_target(monk
     """--min-view-psnr on natural posed views: the shares below the floor are lifted to it and
     the shift stops where the worst view would miss it, in one encode. Raising the pooled target
     instead (the floor loop, with the shares spread) costs more bytes for the same floor."""
-    import rlfc.txencode as T
+    import rlfc.txrate as R
 
     lf = _posed(_dino())
     opts = EncodeOptions(profile="tx", target_psnr=40.0, min_view_psnr=40.0)
     e = encode(lf, opts)
     assert e.target_met and e.summary["psnr_view_min"] >= 40.0
     assert not any("pooled target of" in n for n in e.notes) and all("j2k_shift" in t for t in e.trace)
-    real = T._search_j2k_levels
-    monkeypatch.setattr(T, "_search_j2k_levels", lambda *a: real(*a[:7]))      # the floor left to the loop
+    real = R._search_j2k_levels
+    monkeypatch.setattr(R, "_search_j2k_levels", lambda *a: real(*a[:7]))      # the floor left to the loop
     ref = encode(lf, opts)
     assert ref.summary["psnr_view_min"] >= 40.0
     assert sum(len(x) for _, x in e.sections) <= sum(len(x) for _, x in ref.sections)

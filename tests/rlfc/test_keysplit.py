@@ -68,8 +68,9 @@ def test_auto_split_keeps_streams_of_at_least_the_segment_bytes(wide):
     """``key_split`` 0: the most streams per row (a divisor of the blocks per row) whose
     estimated bytes stay at least KEY_SEGMENT_BYTES; explicit values round down to a divisor."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
 
-    enc = T.TxEncoder(wide, T._params_from(EncodeOptions(params={"block_size": 8, "step": 4.0})), None, 10.0, None)
+    enc = T.TxEncoder(wide, R._params_from(EncodeOptions(params={"block_size": 8, "step": 4.0})), None, 10.0, None)
     res = enc.run(4.0, T.Model(T.default_counts()))
     ck = enc.coded_keys(res)
     assert ck and enc.nbx == 9
@@ -97,9 +98,10 @@ def test_auto_split_bounds_the_longest_stream_in_magnitude_symbols(wide, monkeyp
     import numpy as np
 
     import rlfc.txencode as T
+    import rlfc.txrate as R
     import rlfc.txsyntax as ts
 
-    enc = T.TxEncoder(wide, T._params_from(EncodeOptions(params={"block_size": 8, "step": 2.0})), None, 10.0, None)
+    enc = T.TxEncoder(wide, R._params_from(EncodeOptions(params={"block_size": 8, "step": 2.0})), None, 10.0, None)
     res = enc.run(2.0, T.Model(T.default_counts()))
     ck = enc.coded_keys(res)
     blocks = np.stack([enc._block_symbols(res["codes"][k]) for k in ck])          # (keys, nby, 9)

@@ -845,22 +845,23 @@ def test_lambda_trim_spends_a_psnr_margin_between_quantizer_steps():
     at the same step: still at or above the target, closer to it, fewer bytes; within TRIM_DB
     nothing changes."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
 
     lf = _noisy_grid()
     opts = EncodeOptions(profile="tx", params={"step": 3.0})
-    enc = T.TxEncoder(lf, T._params_from(opts), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(opts), None, 10.0, None)
     model = T.Model(T.default_counts())
     res = enc.run(3.0, enc.model_of(enc.run(3.0, model)), keep_pixels=True)
     ps = enc.psnr(res)
     trace = []
-    trimmed = T._trim_lambda(enc, res, ps - 0.6, None, trace)
+    trimmed = R._trim_lambda(enc, res, ps - 0.6, None, trace)
     assert trimmed["lam_scale"] > 1 and trace and all(t["lam_scale"] > 1 for t in trace)
     assert ps - 0.6 <= enc.psnr(trimmed) < ps
 
     def size(r):
         return sum(len(b) for _, b in enc.pack(r)[1])
     assert size(trimmed) < size(res)
-    assert T._trim_lambda(enc, res, ps - 0.5 * T.TRIM_DB, None, []) is res
+    assert R._trim_lambda(enc, res, ps - 0.5 * R.TRIM_DB, None, []) is res
 
 
 class _SteepEncoder:
@@ -887,17 +888,17 @@ class _SteepEncoder:
 def test_close_in_takes_the_largest_step_that_meets_the_target_between_two_full_passes():
     """The sampled search's step missed on every view (34.6 dB at step 90.6), the prior slope's
     finer step overshot (38.5 dB at 61.7): the secant between the two full passes closes in."""
-    import rlfc.txencode as T
+    import rlfc.txrate as R
 
     enc, trace = _SteepEncoder(), []
-    res = T._close_in(enc, {"step": 61.68}, (math.log2(90.625), 34.63), 36.0, None, trace)
-    assert 36.0 <= enc.psnr(res) <= 36.0 + T.TRIM_DB and res["step"] > 61.68
-    assert len(enc.runs) <= T.CLOSE_TRIES and len(trace) == len(enc.runs)
+    res = R._close_in(enc, {"step": 61.68}, (math.log2(90.625), 34.63), 36.0, None, trace)
+    assert 36.0 <= enc.psnr(res) <= 36.0 + R.TRIM_DB and res["step"] > 61.68
+    assert len(enc.runs) <= R.CLOSE_TRIES and len(trace) == len(enc.runs)
     assert all(61.68 < s < 90.625 and s == enc.grid_step(s) for s in enc.runs)
     # within TRIM_DB of the target already: nothing to do
     enc2 = _SteepEncoder()
     ok = {"step": 61.68 * 2 ** ((38.46 - 36.05) / 7.0)}
-    assert T._close_in(enc2, ok, (math.log2(90.625), 34.63), 36.0, None, []) is ok and not enc2.runs
+    assert R._close_in(enc2, ok, (math.log2(90.625), 34.63), 36.0, None, []) is ok and not enc2.runs
 
 
 class _LambdaEncoder:
@@ -922,14 +923,14 @@ def test_lambda_trim_hits_with_its_first_pass_and_gives_up_on_a_staircase():
     """The trim's first multiplier comes from the prior slope (no fixed minimum): one pass where
     the slope is near the prior. Where λ's smallest move already misses (a staircase), a miss
     within TRIM_GIVE_UP of the last multiplier that met the target ends it."""
-    import rlfc.txencode as T
+    import rlfc.txrate as R
 
     for slope in (-1.0, -1.25, -1.6):
         enc = _LambdaEncoder(36.09, slope)
         res = enc.run(12.0, None)
         enc.runs.clear()
-        got = T._trim_lambda(enc, res, 36.0, None, [])
-        assert got["lam_scale"] > 1 and 36.0 <= enc.psnr(got) <= 36.0 + T.TRIM_DB and len(enc.runs) == 1
+        got = R._trim_lambda(enc, res, 36.0, None, [])
+        assert got["lam_scale"] > 1 and 36.0 <= enc.psnr(got) <= 36.0 + R.TRIM_DB and len(enc.runs) == 1
 
     class Staircase(_LambdaEncoder):
         def psnr(self, r):
@@ -938,7 +939,7 @@ def test_lambda_trim_hits_with_its_first_pass_and_gives_up_on_a_staircase():
     enc = Staircase(36.084, -1.25)
     res = enc.run(112.6875, None)
     enc.runs.clear()
-    assert T._trim_lambda(enc, res, 36.0, None, []) is res and len(enc.runs) == 1
+    assert R._trim_lambda(enc, res, 36.0, None, []) is res and len(enc.runs) == 1
 
 
 def test_ablate_switches_decode_the_closed_loop_and_are_recorded():
@@ -1145,10 +1146,11 @@ def test_a_rerun_codes_the_same_jpeg2000_key_views():
     the passes before it; rerunning a pass to get its pixels (``with_pixels``) starts from the
     hints that pass started from and writes the same codestreams and integers."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
     model = T.Model(T.default_counts())
     first = enc.run(2.5, model)
     assert first["keyimg"] and any(c.px is None for c in first["codes"])     # (pixels not kept)
@@ -1166,11 +1168,12 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
     counts the streams it writes), so the next trial of the intra key is decided with real costs.
     The same holds for predicted keys coded alone as JPEG 2000 and for intra keys coded ahead."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
     from rlfc.txsyntax import ctx_mode
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
     res = enc.run(2.5, T.Model(T.default_counts()))
     k = enc.s.keys[0]
     assert enc.intra[k] and k in res["keyimg"] and k not in enc.coded_keys(res)
@@ -1201,11 +1204,12 @@ def test_a_predicted_key_weighs_its_own_map_against_jpeg2000():
     estimate of the key's streams kept hci_antinous's vignetted variant's 8 predicted keys and
     their maps: 0.0203 bpp against 0.0136 with the keys coded alone."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
     from rlfc.txmaps import pack_maps
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
     keys = list(enc.s.keys)
     predicted = [k for k in keys if not enc.intra[k]]
     other = int(np.flatnonzero(~enc.is_key)[0])
@@ -1228,10 +1232,11 @@ def test_the_thumbnail_step_is_chosen_by_distortion_and_bits(monkeypatch):
     the one of least colour squared error + λ·bits. By bits alone, a model measured at another
     step picked hci_antinous's coarse thumbnail at 30.4 dB over 36.1 dB at step 120.5."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "tx"})), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(params={"intra_codec": "tx"})), None, 10.0, None)
     real = enc.code_intra
 
     def coarse_is_cheap_and_bad(k, t16, *a, **kw):      # the key step's thumbnail: no bits, 100x the error
@@ -1290,10 +1295,11 @@ def test_quantizer_in_chunks_equals_one_call(rng, monkeypatch):
     same integers, and costs equal up to the order of float sums (the costs are float32 sums,
     and BLAS blocks a product of 7 rows differently from one of 50: 1.8e-7 relative seen)."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(profile="tx")), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(profile="tx")), None, 10.0, None)
     model = T.Model(T.default_counts())
     r = np.rint(rng.laplace(0, 6, (50, 8, 8, enc.P)) * (rng.random((50, 1, 1, 1)) < 0.7)).astype(np.int32)
     s16 = enc.steps16(6.0)[1]
@@ -1353,11 +1359,12 @@ def test_quantizer_finds_the_cheapest_levels_and_last_position(rng):
     float64: the same levels on every tb (the random residuals have no ties closer than float32
     rounding), costs and bits within float32 rounding."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
     from rlfc.txsyntax import ESC, MODE_INTRA, MODE_RES, ctx_last
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(profile="tx")), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(profile="tx")), None, 10.0, None)
     model = T.Model(T.default_counts())
     scale = rng.choice([1.0, 6.0, 40.0, 400.0], (24, 1, 1, 1))        # idle, sparse, dense, escapes
     r = np.rint(rng.laplace(0, 1, (24, 8, 8, enc.P)) * scale).astype(np.int32)
@@ -1379,10 +1386,11 @@ def test_a_pass_keeps_one_buffer_of_decoded_views():
     """With pixels kept, every view's decoded pixels are a view of one (N, H, W, C) buffer of the
     pass (no per-view copies to gather), and the encode's decoded views are that buffer."""
     import rlfc.txencode as T
+    import rlfc.txrate as R
     from formats.scenes import read_scene
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
-    enc = T.TxEncoder(lf, T._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
+    enc = T.TxEncoder(lf, R._params_from(EncodeOptions(params={"intra_codec": "j2k"})), None, 10.0, None)
     res = enc.run(2.5, T.Model(T.default_counts()), keep_pixels=True)
     pix = res["pixels"]
     assert res["keyimg"] and pix.shape == (lf.rows * lf.cols,) + lf.views.shape[2:]
@@ -1397,12 +1405,13 @@ def test_a_pass_that_kept_no_buffer_still_gives_its_pixels():
     # bpp target whose refined pass is not kept returns such a pass (it raised KeyError)
     from formats.parallel import Runner
     from rlfc import txencode as te
+    import rlfc.txrate as R
 
     lf = smooth_lf(rows=1, cols=4)
     lf.layout = "posed"
     opts = EncodeOptions(profile="tx", target_bpp=1.0)
-    params = te._params_from(opts)
-    enc = te.TxEncoder(lf, params, None, te.side_lambda(lf, opts, params), Runner())
+    params = R._params_from(opts)
+    enc = te.TxEncoder(lf, params, None, R.side_lambda(lf, opts, params), Runner())
     r = enc.run(4.0, te.Model(te.default_counts()))
     assert "pixels" not in r and all(c.px is not None for c in r["codes"])
     runs = []
@@ -1460,6 +1469,7 @@ def test_a_posed_search_measures_a_far_model_on_a_sample_of_views(monkeypatch):
     # a pass that only measures the entropy model (far from every model measured) codes every
     # SEARCH_STRIDE-th view of a posed capture (and the first); the passes that decide code them all
     from rlfc import txencode as T
+    import rlfc.txrate as R
 
     lf = smooth_lf(rows=2, cols=8, c=4)
     lf.layout = "posed"
@@ -1473,7 +1483,7 @@ def test_a_posed_search_measures_a_far_model_on_a_sample_of_views(monkeypatch):
 
     monkeypatch.setattr(T.TxEncoder, "run", run)
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0))
-    assert seen[0] == 16 // T.SEARCH_STRIDE and all(n == 16 for n in seen[1:])
+    assert seen[0] == 16 // R.SEARCH_STRIDE and all(n == 16 for n in seen[1:])
     assert e.target_met and e.summary["psnr_rgb"] >= 36.0
     d, _ = open_encoded(lf, e)
     assert np.array_equal(d.decode_all(), e.decoded)
@@ -1483,7 +1493,8 @@ def test_an_entropy_model_between_two_measured_ones_interpolates_their_counts():
     """A search step between two steps whose entropy models were measured (at most MODEL_SPAN
     octaves apart) gets their counts interpolated geometrically in log2 of the step; outside
     them, or farther apart, none (the search measures one)."""
-    from rlfc.txencode import MODEL_SPAN, Model, _between_models, default_counts
+    from rlfc.txencode import Model, default_counts
+    from rlfc.txrate import MODEL_SPAN, _between_models
 
     ca = default_counts().astype(np.float64) + 1.0
     cb = 4.0 * ca
@@ -1504,6 +1515,7 @@ def test_a_search_step_between_two_measured_models_is_coded_once(monkeypatch):
     model (once to measure one), but once where it lies between two measured ones (their counts
     interpolated); the file still meets its target and decodes to the encoder's pixels."""
     from rlfc import txencode as T
+    import rlfc.txrate as R
     from rlfc.ratesearch import SearchResult
 
     lf = _noisy_grid()
@@ -1524,7 +1536,7 @@ def test_a_search_step_between_two_measured_models_is_coded_once(monkeypatch):
         return SearchResult(bool(ok), q, r, [(g[0], g[1]) for g in got])
 
     monkeypatch.setattr(T.TxEncoder, "run", run)
-    monkeypatch.setattr(T, "secant_search", three_steps)
+    monkeypatch.setattr(R, "secant_search", three_steps)
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
     probe, far, between = sampled[0], sampled[1], sampled[3]
     assert sampled[:4] == [probe, far, far, between] and between not in sampled[4:]
@@ -1540,7 +1552,7 @@ def test_maps_are_repriced_where_rate_control_codes_far_coarser_than_they_assume
     search's first step says the file is smaller at equal quality: a smaller maps section and a
     smaller file at the target, decoding to the encoder's pixels; "maps_reprice" turns it off."""
     from formats.scenes import read_scene
-    from rlfc.txencode import MAPS_REPRICE_RATIO
+    from rlfc.txrate import MAPS_REPRICE_RATIO
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
@@ -1560,7 +1572,7 @@ def test_maps_are_repriced_for_a_size_target_too():
     quality at the size is higher: the bundled Lytro crop at 0.02 bpp, +1.5 dB."""
     from formats.metrics import bpp
     from formats.scenes import read_scene
-    from rlfc.txencode import MAPS_REPRICE_RATIO
+    from rlfc.txrate import MAPS_REPRICE_RATIO
 
     lf = read_scene(ROOT / "samples" / "dino_crop")
     e = encode(lf, EncodeOptions(profile="tx", target_bpp=0.02))
@@ -1597,6 +1609,7 @@ def test_repriced_maps_are_restored_where_the_search_settles_near_the_assumed_st
     MAPS_REPRICE_RATIO of the assumed one, the file is coded with the maps as estimated (here the
     coded check at the first step is made to keep the repriced maps, so the guard decides)."""
     from rlfc import txencode as T
+    import rlfc.txrate as R
 
     calls = []
     for name in ("reprice_maps", "restore_maps"):
@@ -1607,14 +1620,14 @@ def test_repriced_maps_are_restored_where_the_search_settles_near_the_assumed_st
         enc.reprice_maps(enc.side_lambda * ratio)
         return True
 
-    monkeypatch.setattr(T, "_maps_pay_repriced", keep_repriced)
-    monkeypatch.setattr(T, "MAPS_REPRICE_RATIO", 4.0)     # (this grid's search settles at λ x1.8-2.7)
+    monkeypatch.setattr(R, "_maps_pay_repriced", keep_repriced)
+    monkeypatch.setattr(R, "MAPS_REPRICE_RATIO", 4.0)     # (this grid's search settles at λ x1.8-2.7)
     lf = _sharp_rendered_grid()
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=32))
     off = encode(lf, EncodeOptions(profile="tx", target_psnr=32, params={"ablate": ["maps_reprice"]}))
     step0 = math.sqrt(12 * 255 ** 2 * 10 ** -3.2)
     assert calls == ["reprice_maps", "restore_maps"] and e.summary["params"]["maps_repriced"] is None
-    assert (e.summary["params"]["step"] / step0) ** 2 < T.MAPS_REPRICE_RATIO
+    assert (e.summary["params"]["step"] / step0) ** 2 < R.MAPS_REPRICE_RATIO
     assert dict(e.sections)["tx.maps"] == dict(off.sections)["tx.maps"]
     assert e.target_met
     d, _ = open_encoded(lf, e)
@@ -1626,16 +1639,16 @@ def test_repriced_maps_are_dropped_where_the_coded_check_finds_them_costlier(mon
     repriced and with their modes repriced too; where both repriced runs cost more at equal
     quality, the estimated maps code the file."""
     from formats.scenes import read_scene
-    from rlfc import txencode as T
+    import rlfc.txrate as R
 
-    real = T._run_cost
+    real = R._run_cost
     seen = []
 
     def cost(enc, res, share):
         seen.append(enc._maps_before is not None)          # (the second and third runs: repriced maps)
         return real(enc, res, share) + (100.0 if seen[-1] else 0.0)
 
-    monkeypatch.setattr(T, "_run_cost", cost)
+    monkeypatch.setattr(R, "_run_cost", cost)
     lf = read_scene(ROOT / "samples" / "dino_crop")
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
     off = encode(lf, EncodeOptions(profile="tx", target_psnr=36, params={"ablate": ["maps_reprice"]}))
@@ -1653,12 +1666,13 @@ def test_the_coded_check_holds_one_run_at_a_time_and_no_luma(monkeypatch):
 
     from formats.scenes import read_scene
     from rlfc import txencode as T
+    import rlfc.txrate as R
 
     class Run(dict):
         pass
 
     refs, seen, inside = [], [], [False]
-    real_run, real_check = T.TxEncoder.run, T._maps_pay_repriced
+    real_run, real_check = T.TxEncoder.run, R._maps_pay_repriced
 
     def run(self, *a, **k):
         if inside[0]:
@@ -1676,7 +1690,7 @@ def test_the_coded_check_holds_one_run_at_a_time_and_no_luma(monkeypatch):
             inside[0] = False
 
     monkeypatch.setattr(T.TxEncoder, "run", run)
-    monkeypatch.setattr(T, "_maps_pay_repriced", check)
+    monkeypatch.setattr(R, "_maps_pay_repriced", check)
     lf = read_scene(ROOT / "samples" / "dino_crop")
     assert encode(lf, EncodeOptions(profile="tx", target_psnr=36)).target_met
     assert seen == [(0, False)] * 3                   # (the check ran: three runs)
@@ -1688,15 +1702,15 @@ def test_the_coded_check_keeps_the_cheapest_of_three_maps(monkeypatch, pick):
     the check finds cheapest codes the file, which decodes to the encoder's pixels; with the
     modes repriced, fewer blocks take a single reference."""
     from formats.scenes import read_scene
-    from rlfc import txencode as T
+    import rlfc.txrate as R
 
-    real, n = T._run_cost, []
+    real, n = R._run_cost, []
 
     def cost(enc, res, share):
         n.append(1)
         return real(enc, res, share) - (100.0 if len(n) == (2 if pick == "corrections" else 3) else 0.0)
 
-    monkeypatch.setattr(T, "_run_cost", cost)
+    monkeypatch.setattr(R, "_run_cost", cost)
     lf = read_scene(ROOT / "samples" / "dino_crop")
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=36))
     p = e.summary["params"]
