@@ -54,7 +54,7 @@ def test_exposed_views_decode_on_every_path_and_cost_less(exposed):
 
 def test_lean_single_blocks_and_torch_apply_the_weights(exposed):
     torch = pytest.importorskip("torch")
-    from rlfc.profiles.tx import TorchTx
+    from rlfc.profiles.tx_torch import TorchTx
 
     lf, e, _ = exposed
     d, _ = open_encoded(lf, e)
