@@ -188,6 +188,9 @@ def cmd_encode(a, codec_id: str | None = None) -> int:
     scene, out = Path(a.scene), Path(a.out)
     refuse_input_overwrite(scene, out)
     check_out_file(out)
+    if out.suffix.lower() in FILE_SUFFIXES:          # (it wrote the container under that name, over any such file)
+        raise ParameterError(f"{out}: encode writes an .lfc container, not a {out.suffix} image; name the output "
+                             f"OUT.lfc (views as images: lfcodec decode FILE.lfc OUTDIR)")
     t0 = time.perf_counter()
     prog = _Progress(a.quiet)
     try:

@@ -200,6 +200,21 @@ def test_decode_into_a_folder_replaces_only_its_own_views(encoded, tmp_path, cap
     assert [p.name for p in own.iterdir()] == ["scene.json"]
 
 
+def test_encode_refuses_an_image_name_for_its_container(tmp_path, capsys):
+    """``lfcodec encode SCENE out.png`` wrote an .lfc container under an image's name (over an
+    image of that name too); now one line, exit 2, and nothing written."""
+    from formats.imageio import write_image
+
+    photo = tmp_path / "photo.png"
+    write_image(photo, np.zeros((4, 4, 3), np.uint8))
+    before = photo.read_bytes()
+    for name in ("photo.png", "x.JPG", "x.npy", "x.tif"):
+        assert main(["encode", str(SAMPLE), str(tmp_path / name), "--quiet"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and ".lfc container" in err and "lfcodec decode" in err
+    assert photo.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["photo.png"]
+
+
 def test_render_refuses_to_write_over_its_input(encoded, tmp_path):
     f = tmp_path / "in.png"                      # (an .lfc file however it is named)
     f.write_bytes(encoded.read_bytes())
