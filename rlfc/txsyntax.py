@@ -500,7 +500,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     ctx1 = np.repeat(g_ctx.astype(np.uint32), flat_len)                     # (uint32 in place: the
     ctx1 += _BAND8_U32.take(index & 63)                                    # values are < 2^12)
     ctx1 += j >= 1
-    sym = _magnitudes(dec, tables, S, per_lane, lane_start, g_lane, j, ctx1)
+    sym = _magnitudes(dec, tables, S, per_lane, lane_start, j, ctx1)
     if tot and int(sym.max()) > ESC:
         raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
     # escapes (symbol ESC: |c| >= ESC + first)
@@ -549,7 +549,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
 
 
-def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, g_lane, j, ctx1) -> np.ndarray:
+def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, j, ctx1) -> np.ndarray:
     """The magnitude symbols of every lane (flat, lane-major, uint8), decoded in steps over the lanes
     that still have symbols.
 
