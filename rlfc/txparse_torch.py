@@ -1,5 +1,5 @@
 """The rANS lane parser of tx block streams on a torch device: the same integers as
-:func:`rlfc.txsyntax.parse_lanes`, so that a GPU decode parses its residual blocks where it
+:func:`rlfc.txparse.parse_lanes`, so that a GPU decode parses its residual blocks where it
 reconstructs them instead of on the host.
 
 Two kernels decode the magnitude symbols, which are most of a stream:
@@ -26,8 +26,8 @@ import numpy as np
 from formats.errors import FormatError
 
 from .rans import BACK_BITS, L as RANS_L, PROB_BITS, STATE_BYTES, Tables
-from .txsyntax import (_BAND8_ARR, _MASK, ESC, MODE_SKIP, N_BUCKETS, N_MODES, ctx_esc, ctx_last, ctx_mag, ctx_mode,
-                       slot_words, symbol_parts)
+from .txparse import slot_words, symbol_parts
+from .txsyntax import _BAND8_ARR, _MASK, ESC, MODE_SKIP, N_BUCKETS, N_MODES, ctx_esc, ctx_last, ctx_mag, ctx_mode
 from .xp import shared
 
 _L2 = RANS_L >> 8          # a state under this needs two bytes in
@@ -35,7 +35,7 @@ MAX_DEVICE_SYMBOLS = 1 << 24   # magnitude symbols parsed together on a device (
 
 
 def device_words(tables: Tables, device):
-    """:func:`rlfc.txsyntax.slot_words` as an int64 tensor on ``device``, cached on the tables."""
+    """:func:`rlfc.txparse.slot_words` as an int64 tensor on ``device``, cached on the tables."""
     import torch
 
     cache = tables.__dict__.setdefault("_device_words", {})
@@ -97,7 +97,7 @@ def parse_lanes_torch(buf, w16, starts, ends, tables: Tables, nt: int, pcs: np.n
 
     Returns:
         (modes (S, nt) int64, index (K,) int64, values (K,) int64) tensors, as
-        :class:`rlfc.txsyntax.Parsed` holds them (index into the flat (S, nt, P, 64) scan-order
+        :class:`rlfc.txparse.Parsed` holds them (index into the flat (S, nt, P, 64) scan-order
         levels, ascending).
 
     Raises:
@@ -234,7 +234,7 @@ def _raw_bits(buf, top, start, back, kb, off):
 def _magnitudes_steps(words, w16, top, x, p, ctx1, jm, per_lane, lane_start, lane):
     """The magnitude symbols (lane-major) in torch steps: lanes ranked by their number of
     symbols, longest first, so that the lanes active at step k are ranks [0, m_k) and every
-    step reads and writes contiguous slices (as :func:`rlfc.txsyntax._magnitudes`)."""
+    step reads and writes contiguous slices (as :func:`rlfc.txparse._magnitudes`)."""
     import torch
 
     dev = x.device

@@ -13,7 +13,7 @@ import numpy as np
 import torch
 
 from formats.errors import FormatError
-from rlfc import txsyntax as tx
+from rlfc import txparse as tp, txsyntax as tx
 from rlfc.txparse_torch import pair_words, parse_lanes_torch
 from tests.rlfc.test_txsyntax import _encode, _packed, _random_blocks
 
@@ -22,7 +22,7 @@ def agrees(dev, streams, tables, nt, pcs, kind, key, triton) -> bool:
     """The device parse equals the numpy parse, or both refuse the streams."""
     buf, starts = _packed(streams)
     try:
-        ref = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+        ref = tp.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     except FormatError:
         ref = None
     t = [torch.as_tensor(np.asarray(a, np.int64), device=dev) for a in (starts[:-1], starts[1:], kind, key)]

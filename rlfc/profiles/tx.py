@@ -31,7 +31,8 @@ from ..txmaps import LazyMaps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import (KeyAtlas, block_pixel_refs, block_refs, predict as remap_predict, predict_block,
                         predict_block_pixels, predict_view)
-from ..txsyntax import MODE_INTRA, concat_parsed, parse_lanes, parse_one, plane_classes, tables_from_bytes, tables_from_quantized
+from ..txparse import concat_parsed, parse_lanes, parse_one
+from ..txsyntax import MODE_INTRA, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
 
@@ -803,7 +804,7 @@ class TxDecoder(ProfileDecoder):
         """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
         one atlas group: :func:`rlfc.txsample.predict_block_pixels`, the same pixels as
         :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
-        (its stream parsed by :func:`rlfc.txsyntax.parse_one`) is added there too, unless a tb
+        (its stream parsed by :func:`rlfc.txparse.parse_one`) is added there too, unless a tb
         of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
         (the caller takes :meth:`block`)."""
         if self.is_key[view] or self.atlas is None:

@@ -82,7 +82,7 @@ class TorchTx:
 
     def _parse_device(self, how, parts):
         """(modes (S, nt), index (K,), values (K,)) int64 device tensors, as
-        :class:`rlfc.txsyntax.Parsed` holds them (the nonzero levels, sparse), from
+        :class:`rlfc.txparse.Parsed` holds them (the nonzero levels, sparse), from
         :meth:`_parse_host`'s arrays uploaded (``parts``)."""
         d = self.d
         kind, S, extra = how

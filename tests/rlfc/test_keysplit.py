@@ -99,7 +99,7 @@ def test_auto_split_bounds_the_longest_stream_in_magnitude_symbols(wide, monkeyp
 
     import rlfc.txencode as T
     import rlfc.txrate as R
-    import rlfc.txsyntax as ts
+    import rlfc.txparse as ts
 
     enc = T.TxEncoder(wide, R._params_from(EncodeOptions(params={"block_size": 8, "step": 2.0})), None, 10.0, None)
     res = enc.run(2.0, T.Model(T.default_counts()))

@@ -327,7 +327,8 @@ def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
     them), with intra 8×8 blocks (``block`` then takes the stream parsed once)."""
     from formats.pixels import from_planes
     from rlfc.profiles.tx import TxDecoder
-    from rlfc.txsyntax import MODE_INTRA, MODE_RES, Parsed
+    from rlfc.txparse import Parsed
+    from rlfc.txsyntax import MODE_INTRA, MODE_RES
 
     lf, e, _ = _noisy_grid_encoded(kw, amp8=9, seed=4, step8=2.0, saturate=True)
     d, _ = open_encoded(lf, e)

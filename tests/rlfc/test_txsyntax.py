@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from formats.errors import FormatError
-from rlfc import txsyntax as tx
+from rlfc import txparse as px, txsyntax as tx
 
 
 def _random_blocks(rng, S, nt, P, density, big):
@@ -49,19 +49,19 @@ def test_streams_parse_back_exactly(seed, S, nt, P, density, big, tail):
     kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
     streams, tables = _encode(modes, levels, kind, key, pcs)
     buf, starts = _packed(streams)
-    old = tx.TAIL_LANES
+    old = px.TAIL_LANES
     try:
-        tx.TAIL_LANES = tail
-        got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+        px.TAIL_LANES = tail
+        got = px.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     finally:
-        tx.TAIL_LANES = old
+        px.TAIL_LANES = old
     assert (got.modes == modes).all() and (got.levels == levels).all()
     ones = []
     for i in range(S):
-        one = tx.parse_one(streams[i], tables, nt, pcs, int(kind[i]), int(key[i]))
+        one = px.parse_one(streams[i], tables, nt, pcs, int(kind[i]), int(key[i]))
         assert (one.modes[0] == modes[i]).all() and (one.levels[0] == levels[i]).all()
         ones.append(one)
-    cat = tx.concat_parsed(ones)                      # the scalar path of a few streams, joined
+    cat = px.concat_parsed(ones)                      # the scalar path of a few streams, joined
     assert (cat.modes == modes).all() and (cat.levels == levels).all()
 
 
@@ -84,7 +84,7 @@ def test_counts_only_are_the_packed_symbols_counts(seed, S, nt, P, density, big)
 
 @pytest.mark.parametrize("tail", [0, 32, 10 ** 6])
 def test_malformed_streams_raise(tail, monkeypatch):
-    monkeypatch.setattr(tx, "TAIL_LANES", tail)
+    monkeypatch.setattr(px, "TAIL_LANES", tail)
     rng = np.random.default_rng(1)
     modes, levels = _random_blocks(rng, 20, 4, 3, 0.5, False)
     modes[:, 0] = 1
@@ -95,10 +95,10 @@ def test_malformed_streams_raise(tail, monkeypatch):
         bad = [cut(b) for b in streams]
         buf, starts = _packed(bad)
         with pytest.raises(FormatError):
-            tx.parse_lanes(buf, starts[:-1], starts[1:], tables, 4, pcs, kind, key)
+            px.parse_lanes(buf, starts[:-1], starts[1:], tables, 4, pcs, kind, key)
         with pytest.raises(FormatError):
             for b in bad:
-                tx.parse_one(b, tables, 4, pcs, 0, 0)
+                px.parse_one(b, tables, 4, pcs, 0, 0)
     with pytest.raises(FormatError):
         tx.tables_from_bytes(b"\x78\x9c\x03\x00\x00\x00\x00\x01", "x")
 
@@ -125,12 +125,12 @@ def test_one_stream_parser_and_lanes_agree_on_damaged_streams(seed, nt, P, big, 
             b += bytes(rng.integers(0, 256, hits).astype(np.uint8))
         b = bytes(b)
         try:
-            one = tx.parse_one(b, tables, nt, pcs, int(kind[i]), int(key[i]))
+            one = px.parse_one(b, tables, nt, pcs, int(kind[i]), int(key[i]))
         except FormatError:
             one = None
         buf, starts = _packed([b])
         try:
-            lanes = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind[i:i + 1], key[i:i + 1])
+            lanes = px.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind[i:i + 1], key[i:i + 1])
         except FormatError:
             lanes = None
         assert (one is None) == (lanes is None)
@@ -166,7 +166,7 @@ def test_slot_words_are_symbol_freq_and_offset_per_slot(seed, C, A):
     rng = np.random.default_rng(seed)
     counts = np.where(rng.random((C, A)) < 0.4, rng.integers(1, 1000, (C, A)), 0)
     t = Tables.from_counts(counts)
-    w = tx.slot_words(t).reshape(C, M).astype(np.int64)
+    w = px.slot_words(t).reshape(C, M).astype(np.int64)
     ci = np.arange(C)[:, None]
     s = t.slot.astype(np.int64)
     assert (w & 127 == s).all()
@@ -198,7 +198,7 @@ def test_device_parser_equals_the_numpy_parser(seed, S, nt, P, density, big):
     kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
     streams, tables = _encode(modes, levels, kind, key, pcs)
     m, i, v = _device_parse(streams, tables, nt, pcs, kind, key)
-    ref = tx.Parsed(m, i, v, P)
+    ref = px.Parsed(m, i, v, P)
     assert (ref.modes == modes).all() and (ref.levels == levels).all()
     k = int(rng.integers(0, S))
     b = bytearray(streams[k])
@@ -206,7 +206,7 @@ def test_device_parser_equals_the_numpy_parser(seed, S, nt, P, density, big):
     bad = streams[:k] + [bytes(b)] + streams[k + 1:]
     buf, starts = _packed(bad)
     try:
-        want = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+        want = px.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     except FormatError:
         with pytest.raises(FormatError):
             _device_parse(bad, tables, nt, pcs, kind, key)
@@ -241,7 +241,7 @@ def test_triton_magnitude_kernel_equals_the_numpy_parser():
         kind, key, pcs = rng.integers(0, 2, S), rng.integers(0, 2, S), tx.plane_classes(P)
         streams, tables = _encode(modes, levels, kind, key, pcs)
         m, i, v = _device_parse(streams, tables, nt, pcs, kind, key, triton=True)
-        got = tx.Parsed(m, i, v, P)
+        got = px.Parsed(m, i, v, P)
         assert (got.modes == modes).all() and (got.levels == levels).all()
 
 
@@ -259,7 +259,7 @@ def test_a_triton_kernel_that_fails_to_build_falls_back_to_torch_steps(monkeypat
     modes, levels = _random_blocks(rng, 30, 4, 3, 0.7, False)
     kind, key, pcs = rng.integers(0, 2, 30), rng.integers(0, 2, 30), tx.plane_classes(3)
     streams, tables = _encode(modes, levels, kind, key, pcs)
-    got = tx.Parsed(*_device_parse(streams, tables, 4, pcs, kind, key, triton=True), 3)
+    got = px.Parsed(*_device_parse(streams, tables, 4, pcs, kind, key, triton=True), 3)
     assert (got.modes == modes).all() and (got.levels == levels).all()
     assert tp._TRITON_FAILED == ["RuntimeError: no compiler for this GPU"]
 
@@ -268,7 +268,7 @@ def test_a_triton_kernel_that_fails_to_build_falls_back_to_torch_steps(monkeypat
 @given(st.lists(st.integers(0, 800), min_size=1, max_size=50), st.integers(1, 3000))
 def test_symbol_parts_cover_the_lanes_in_runs_within_the_budget(per_lane, budget):
     n = np.array(per_lane, np.int64)
-    b = tx.symbol_parts(n, budget)
+    b = px.symbol_parts(n, budget)
     assert b[0] == 0 and b[-1] == n.size and all(x < y for x, y in zip(b, b[1:]))
     for a, c in zip(b, b[1:]):
         assert c - a == 1 or n[a:c].sum() <= budget
@@ -293,13 +293,13 @@ def test_streams_that_claim_many_symbols_parse_in_bounded_runs(device, monkeypat
         real = tp._magnitudes_steps
         monkeypatch.setattr(tp, "_magnitudes_steps", lambda *a: sizes.append(int(a[5].numel())) or real(*a))
         monkeypatch.setattr(tp, "MAX_DEVICE_SYMBOLS", budget)
-        got = tx.Parsed(*_device_parse(streams, tables, nt, pcs, kind, key), P)
+        got = px.Parsed(*_device_parse(streams, tables, nt, pcs, kind, key), P)
     else:
-        real = tx._magnitudes
-        monkeypatch.setattr(tx, "_magnitudes", lambda *a: sizes.append(int(a[-1].size)) or real(*a))
-        monkeypatch.setattr(tx, "MAX_PARSE_SYMBOLS", budget)
+        real = px._magnitudes
+        monkeypatch.setattr(px, "_magnitudes", lambda *a: sizes.append(int(a[-1].size)) or real(*a))
+        monkeypatch.setattr(px, "MAX_PARSE_SYMBOLS", budget)
         buf, starts = _packed(streams)
-        got = tx.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
+        got = px.parse_lanes(buf, starts[:-1], starts[1:], tables, nt, pcs, kind, key)
     assert (got.modes == modes).all() and (got.levels == levels).all()
     assert len(sizes) >= 5 and max(sizes) <= budget and sum(sizes) >= (levels != 0).sum()
 
@@ -312,7 +312,7 @@ def test_taking_lanes_gives_their_coefficients(seed, S, nt, P, n):
     rng = np.random.default_rng(seed)
     levels = rng.integers(-3, 4, (S, nt, P, 64)) * (rng.random((S, nt, P, 64)) < rng.random())
     levels[rng.random(S) < 0.3] = 0                                    # lanes without coefficients
-    p = tx.Parsed.from_levels(rng.integers(0, 3, (S, nt)), levels)
+    p = px.Parsed.from_levels(rng.integers(0, 3, (S, nt)), levels)
     per = nt * P * 64
     b = p.lane_bounds()
     assert b[0] == 0 and b[-1] == p.index.size and (np.diff(b) >= 0).all()

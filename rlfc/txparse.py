@@ -1,0 +1,492 @@
+"""Parsing the ``tx`` profile's block syntax (:mod:`rlfc.txsyntax`): many streams at once as
+numpy lanes in lockstep (:func:`parse_lanes`), or one stream in plain Python (:func:`parse_one`,
+faster for a few streams); both give a :class:`Parsed` (the tb modes and the nonzero levels,
+sparse) with the same integers. A stream that is malformed raises
+:class:`formats.errors.FormatError`.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.errors import FormatError
+
+from .rans import (BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, STATE_BYTES, LaneDecoder, Tables, scalar_step,
+                   scalar_tables)
+from .txsyntax import (_BAND8, _BAND8_ARR, _MASK, CTX_ESC, CTX_LAST, CTX_MAG, CTX_MODE, ESC, MODE_INTRA, MODE_SKIP,
+                       N_BANDS, N_BUCKETS, N_MODES, N_PC, ctx_esc, ctx_last, ctx_mag, ctx_mode)
+
+_BAND8_U32 = _BAND8_ARR.astype(np.uint32)
+#: a magnitude parse finishes in plain Python once fewer lanes than this have symbols left
+TAIL_LANES = 32
+MAX_PARSE_SYMBOLS = 1 << 21   # magnitude symbols parsed together (~134 B each of temporaries: ~280 MB)
+
+
+class Parsed:
+    """Decoded syntax of S blocks of nt tbs and P planes: ``modes`` (S, nt) int64 and the
+    nonzero quantized coefficients, sparse: ``index`` (K,) int64 into the flat (S, nt, P, 64)
+    scan-order array (grouped by lane, tb and plane in ascending order; any order within one
+    tb and plane) and ``values`` (K,) int64 signed. ``levels`` is the dense
+    array, built on request."""
+
+    def __init__(self, modes, index, values, planes: int):
+        self.modes, self.index, self.values, self.P = modes, index, values, planes
+
+    @classmethod
+    def from_levels(cls, modes: np.ndarray, levels: np.ndarray) -> "Parsed":
+        flat = levels.reshape(-1)
+        idx = np.flatnonzero(flat)
+        return cls(modes, idx, flat[idx], levels.shape[2])
+
+    @property
+    def levels(self) -> np.ndarray:
+        S, nt = self.modes.shape
+        out = np.zeros(S * nt * self.P * 64, np.int64)
+        out[self.index] = self.values
+        return out.reshape(S, nt, self.P, 64)
+
+    def split(self, bounds) -> list:
+        """Parsed of lanes [bounds[i], bounds[i+1]) each."""
+        per = self.modes.shape[1] * self.P * 64
+        cut = np.searchsorted(self.index, np.asarray(bounds, np.int64) * per)
+        return [Parsed(self.modes[a:b], self.index[cut[i]:cut[i + 1]] - a * per, self.values[cut[i]:cut[i + 1]], self.P)
+                for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))]
+
+    def lane_bounds(self) -> np.ndarray:
+        """(S + 1,) int64: lane i's coefficients are ``index[b[i]:b[i + 1]]`` (they are grouped by
+        lane in ascending order)."""
+        per = self.modes.shape[1] * self.P * 64
+        return np.searchsorted(self.index, np.arange(self.modes.shape[0] + 1, dtype=np.int64) * per)
+
+    def take(self, lanes: np.ndarray, bounds: np.ndarray | None = None) -> "Parsed":
+        """Parsed of lanes ``lanes`` (int array, in its order; ``bounds``: :meth:`lane_bounds`,
+        where the caller keeps it for several takes)."""
+        per = self.modes.shape[1] * self.P * 64
+        b = self.lane_bounds() if bounds is None else bounds
+        lanes = np.asarray(lanes, np.int64)
+        cnt = b[lanes + 1] - b[lanes]
+        first = np.cumsum(cnt) - cnt
+        src = np.repeat(b[lanes] - first, cnt) + np.arange(int(cnt.sum()), dtype=np.int64)
+        index = self.index[src] - np.repeat((lanes - np.arange(lanes.size)) * per, cnt)
+        return Parsed(self.modes[lanes], index, self.values[src], self.P)
+
+    def reshape(self, lanes: int, nt: int) -> "Parsed":
+        """The same coefficients seen as ``lanes`` lanes of ``nt`` tbs (a stream of several
+        blocks in raster order = consecutive blocks)."""
+        return Parsed(self.modes.reshape(lanes, nt), self.index, self.values, self.P)
+
+
+def concat_parsed(parts: list) -> "Parsed":
+    """One Parsed of the lanes of several, in order."""
+    per = parts[0].modes.shape[1] * parts[0].P * 64
+    off = np.cumsum([0] + [p.modes.shape[0] for p in parts[:-1]]) * per
+    return Parsed(np.concatenate([p.modes for p in parts]), np.concatenate([p.index + o for p, o in zip(parts, off)]),
+                  np.concatenate([p.values for p in parts]), parts[0].P)
+
+
+def symbol_parts(per_lane: np.ndarray, budget: int) -> list:
+    """Bounds [0, …, S] of runs of consecutive lanes whose symbol counts ``per_lane`` (S,) sum
+    to at most ``budget`` each (a lane over it alone is a run of its own)."""
+    bounds = [0]
+    cs = np.cumsum(per_lane)
+    while bounds[-1] < per_lane.size:
+        a = bounds[-1]
+        base = int(cs[a - 1]) if a else 0
+        b = int(np.searchsorted(cs, base + budget, side="right"))
+        bounds.append(max(b, a + 1))
+    return bounds
+
+
+def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: Tables, nt: int, pcs: np.ndarray,
+                kind: np.ndarray, key: np.ndarray, name: str = "", max_symbols: int | None = None) -> Parsed:
+    """Parse S streams at once (numpy lanes). ``buf`` holds the streams (8 bytes of slack after
+    the last); stream i is ``buf[starts[i]:ends[i]]``.
+
+    The streams' last positions say how many magnitude symbols follow (up to 64 per tb and
+    plane, whatever the stream's length: a few bytes can claim them all). Where they sum to more
+    than ``max_symbols`` (default :data:`MAX_PARSE_SYMBOLS`), the lanes are parsed in runs of at
+    most that many, so a call's temporaries stay bounded whatever a file claims.
+
+    Raises:
+        FormatError: a stream that is malformed (bad symbol, overrun, wrong end state).
+    """
+    from .xp import NUMPY as xp
+
+    S, P = starts.size, pcs.size
+    modes = np.zeros((S, nt), np.int64)
+    if S == 0:
+        return Parsed(modes, np.zeros(0, np.int64), np.zeros(0, np.int64), P)
+    dec = LaneDecoder(xp, buf, starts.astype(np.int64), tables)
+    lanes = np.arange(S)
+    prev = np.full(S, 3, np.int64)
+    for t in range(nt):
+        s = dec.step(lanes, ctx_mode(kind, prev))
+        modes[:, t] = s
+        prev = s
+    if (modes >= N_MODES).any():
+        raise FormatError(f"{name}: tx block has an undefined tb mode")
+    last = np.zeros((S, nt, P), np.int64)
+    for t in range(nt):
+        for p in range(P):
+            act = np.flatnonzero(modes[:, t] != MODE_SKIP)
+            if act.size:
+                last[act, t, p] = dec.step(act, ctx_last(pcs[p], modes[act, t], key[act]))
+    if (last > 64).any():
+        raise FormatError(f"{name}: tx block has a last position past 64")
+    # magnitudes: per lane, groups g = (lane, t, p) in order, each of length last; symbol j of a
+    # group is at scan position last − 1 − j
+    gl = last.reshape(S, nt * P)
+    per_lane = gl.sum(axis=1)
+    tot = int(per_lane.sum())
+    budget = MAX_PARSE_SYMBOLS if max_symbols is None else max_symbols
+    if tot > budget and S > 1:
+        bounds = symbol_parts(per_lane, budget)
+        return concat_parsed([parse_lanes(buf, starts[a:b], ends[a:b], tables, nt, pcs, kind[a:b], key[a:b], name,
+                                          budget) for a, b in zip(bounds[:-1], bounds[1:])])
+    lane_start = np.cumsum(per_lane) - per_lane
+    flat_len = gl.reshape(-1)
+    G = flat_len.size
+    j = np.arange(tot, dtype=np.int32) - np.repeat((np.cumsum(flat_len) - flat_len).astype(np.int32), flat_len)
+    index = np.repeat((np.arange(G) << 6) + flat_len - 1, flat_len) - j      # g·64 + position: ascending
+    g_pc = np.tile(pcs, G // P)                                             # per group: plane class, key
+    g_ctx = ctx_mag(g_pc, 0, np.repeat(key, nt * P), 0)
+    g_lane = np.repeat(np.arange(S), per_lane)
+    ctx1 = np.repeat(g_ctx.astype(np.uint32), flat_len)                     # (uint32 in place: the
+    ctx1 += _BAND8_U32.take(index & 63)                                    # values are < 2^12)
+    ctx1 += j >= 1
+    sym = _magnitudes(dec, tables, S, per_lane, lane_start, j, ctx1)
+    if tot and int(sym.max()) > ESC:
+        raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
+    # escapes (symbol ESC: |c| >= ESC + first)
+    esc = np.flatnonzero(sym == ESC)
+    if esc.size:
+        e_lane = g_lane[esc]
+        ec = np.bincount(e_lane, minlength=S)
+        es = np.cumsum(ec) - ec
+        col = np.arange(esc.size) - es[e_lane]
+        e_pc = g_pc[index[esc] >> 6]
+        buckets = np.zeros(esc.size, np.int64)
+        for k in range(int(ec.max())):
+            sel = np.flatnonzero(col == k)
+            buckets[sel] = dec.step(e_lane[sel], ctx_esc(e_pc[sel]))
+        if (buckets >= N_BUCKETS).any() or (buckets > 40).any():
+            raise FormatError(f"{name}: tx block has an undefined escape bucket")
+    else:
+        buckets = np.zeros(0, np.int64)
+    # raw bits: signs then escape suffixes, per lane
+    first = j == 0
+    nz = (sym > 0) | first
+    sidx = np.flatnonzero(nz)
+    s_lane = g_lane[sidx]
+    nsign = np.bincount(s_lane, minlength=S)
+    nsuf = np.bincount(g_lane[esc], weights=buckets, minlength=S).astype(np.int64) if esc.size else np.zeros(S, np.int64)
+    nbits = nsign + nsuf
+    kb = np.minimum(nbits, BACK_BITS)
+    raw_start = ends - (nbits - kb + 7) // 8
+    from .rans import STATE_BYTES
+
+    ok = dec.check(raw_start, kb) & (raw_start >= starts + STATE_BYTES)
+    if not ok.all():
+        raise FormatError(f"{name}: tx block stream is malformed (its symbols do not end where its raw bits start)")
+    back = dec.back()
+    soff = np.arange(sidx.size) - (np.cumsum(nsign) - nsign)[s_lane]     # bit offset within the lane
+    sbit = _raw_bits(buf, raw_start, back, kb, s_lane, soff)
+    vals = sym[sidx].astype(np.int64)
+    vals += first[sidx]
+    if esc.size:
+        eoff = nsign[e_lane] + (np.cumsum(buckets) - buckets) - (np.cumsum(nsuf) - nsuf)[e_lane]
+        suffix = np.zeros(esc.size, np.int64)
+        for b in range(int(buckets.max(initial=0))):
+            m = buckets > b
+            suffix[m] |= _raw_bits(buf, raw_start, back, kb, e_lane[m], eoff[m] + b).astype(np.int64) << b
+        vals[(np.cumsum(nz) - 1)[esc]] = ESC + first[esc] + ((1 << buckets) - 1) + suffix
+    return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
+
+
+def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, j, ctx1) -> np.ndarray:
+    """The magnitude symbols of every lane (flat, lane-major, uint8), decoded in steps over the lanes
+    that still have symbols.
+
+    Step-major layout: lanes are ranked by their number of symbols (longest first), so the
+    lanes active at step k are ranks [0, m_k) and symbol k of rank r sits at offs[k] + r: every
+    per-step read and write is a contiguous slice (the lanes' states too, kept in rank order),
+    and a symbol's two predecessors in its lane are at the same rank in the two steps before.
+    ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1). A group's
+    first symbol always counts as a nonzero neighbour, so the symbols after it (j = 1, 2) get
+    that +1 up front and look back only at symbols of their group past the first (j >= 2, 3);
+    the contexts are kept shifted to their slot-table rows (<< PROB_BITS). Each step is one
+    :func:`mag_words` look-up; the buffer is padded by two bytes a step, so the reads need no
+    clamping (the caller's end check refuses a stream that reads past its own bytes).
+    """
+    tot = ctx1.size
+    order = np.argsort(-per_lane, kind="stable")
+    rank = np.empty(S, np.int64)
+    rank[order] = np.arange(S)
+    lens = per_lane[order]
+    K = int(lens[0]) if S else 0
+    cnt = np.searchsorted(-lens, -np.arange(K), side="left")          # lanes with more than k symbols
+    offs = np.cumsum(cnt) - cnt
+    sm = offs[np.arange(tot) - np.repeat(lane_start, per_lane)] + np.repeat(rank, per_lane)   # lane-major → step-major
+    c1 = np.empty(tot, np.uint32)
+    c1[sm] = ctx1
+    jm = np.empty(tot, np.int8)
+    jm[sm] = np.minimum(j, 3)
+    c1 += (jm == 1) | (jm == 2)                                        # (contiguous passes from here)
+    c1 <<= PROB_BITS
+    g1 = (jm >= 2).astype(np.uint32) << PROB_BITS                      # the previous symbol counts
+    g2 = (jm >= 3).astype(np.uint32) << PROB_BITS                      # ... and the one before it
+    del jm
+    words = np.empty(tot, np.uint32)                                   # each symbol's table word
+    nz = np.zeros(tot, bool)
+    tab = mag_words(tables)
+    x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order]
+    buf, top = dec.buf, dec.top
+    bufp = np.concatenate([buf[:top + 1], np.zeros(2 * K + 2, np.uint8)])
+    offl = offs.tolist()
+    for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
+        if m < TAIL_LANES:                                             # few lanes left: plain Python
+            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables)
+            break
+        if k >= 1:
+            o1 = offl[k - 1]
+            c = c1[o:o + m] + nz[o1:o1 + m] * g1[o:o + m]
+            if k >= 2:
+                o2 = offl[k - 2]
+                c += nz[o2:o2 + m] * g2[o:o + m]
+        else:
+            c = c1[o:o + m].copy()
+        x = x_all[:m]
+        c |= x & _MASK
+        w = words[o:o + m]
+        np.take(tab, c, out=w, mode="clip")        # (c is in range; "raise" buffers the output)
+        fr = (w >> 12) & 0x1FFF
+        fr *= x >> PROB_BITS
+        np.add(fr, w & 0xFFF, out=x)
+        p = p_all[:m]
+        need = x < RANS_L
+        np.copyto(x, (x << 8) | bufp[p], where=need)
+        p += need
+        if x.min() < RANS_L:                                           # a second byte (most steps of many lanes)
+            need = x < RANS_L
+            np.copyto(x, (x << 8) | bufp[p], where=need)
+            p += need
+        np.greater_equal(w, _MAG_NZ, out=nz[o:o + m])
+    dec.x[order], dec.ptr[order] = x_all, p_all
+    return np.right_shift(words, 25, out=words).astype(np.uint8)[sm]
+
+
+def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables) -> None:
+    """:func:`_magnitudes` from step ``k`` on, where only ranks [0, m) have symbols left: each
+    lane to its end in plain Python (the same integers; a numpy step costs ~20 calls whatever
+    the lanes). Reads past the buffer are clamped as in the numpy steps (the caller's end check
+    refuses such a stream)."""
+    o0 = offl[k]
+    c1l, g1l, g2l = c1[o0:].tolist(), g1[o0:].tolist(), g2[o0:].tolist()
+    tab = memoryview(mag_words(tables))
+    data = memoryview(buf)
+    out = []
+    for r in range(m):
+        x, p = int(x_all[r]), int(p_all[r])
+        n1 = bool(nz[offl[k - 1] + r]) if k >= 1 else False        # the lane's two previous symbols
+        n2 = bool(nz[offl[k - 2] + r]) if k >= 2 else False
+        for kk in range(k, int(lens[r])):
+            i = offl[kk] + r - o0
+            c = c1l[i] + (g1l[i] if n1 else 0) + (g2l[i] if n2 else 0)
+            w = tab[c | (x & _MASK)]
+            x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
+            while x < RANS_L:
+                x = (x << 8) | data[p if p < top else top]
+                p += 1
+            out.append((i, w))
+            n2, n1 = n1, w >= _MAG_NZ_INT
+        x_all[r], p_all[r] = x, p
+    if out:
+        idx, val = np.array(out, np.int64).T
+        words[o0 + idx] = val
+
+
+_MAG_NZ_INT = 1 << 25
+_MAG_NZ = np.uint32(_MAG_NZ_INT)          # a word of a nonzero symbol is at least this
+
+
+def mag_words(tables: Tables) -> np.ndarray:
+    """(C·M,) uint32 per context and slot: (slot − cum) | freq << 12 | symbol << 25 (the layout of
+    the numpy magnitude steps: the symbol's test for zero one comparison); alphabets up to 128
+    symbols. Cached on the tables."""
+    got = getattr(tables, "_mag_words", None)
+    if got is None:
+        C, A = tables.freq.shape
+        if A > 128:
+            raise ValueError("magnitude words hold alphabets of at most 128 symbols")
+        f = tables.freq.reshape(-1).astype(np.int64)
+        # as slot_words: each symbol's word minus its flat start, repeated over its slots, plus
+        # the flat slot index g (uint32 arithmetic wraps; the result, g − start < freq, does not)
+        start = (np.arange(C, dtype=np.int64)[:, None] * RANS_M + tables.cum[:, :A]).reshape(-1)
+        word = ((np.tile(np.arange(A, dtype=np.int64), C) << 25) | (f << 12)) - start
+        got = np.repeat((word & 0xFFFFFFFF).astype(np.uint32), f)
+        got += np.arange(C * RANS_M, dtype=np.uint32)
+        tables._mag_words = got
+    return got
+
+
+def slot_words(tables: Tables) -> np.ndarray:
+    """(C·M,) uint32 per context and slot: symbol | freq << 7 | (slot − cum) << 20, so one
+    look-up serves a decode step (x = freq·(x >> n) + slot − cum); alphabets up to 128 symbols.
+    Cached on the tables."""
+    got = getattr(tables, "_slot_words", None)
+    if got is None:
+        C, A = tables.freq.shape
+        if A > 128:
+            raise ValueError("slot words hold alphabets of at most 128 symbols")
+        f = tables.freq.reshape(-1).astype(np.int64)       # (each row sums to M: Tables checks it)
+        # slot − cum = g − start, g the flat slot index (context·M + slot) and start = context·M
+        # + cum: each symbol's word with −start << 20 (mod 2^32) repeated over its slots, then
+        # g << 20 added in uint32 (wrapping): two passes over the C·M words (0.6 ms, not 7)
+        start = (np.arange(C, dtype=np.int64)[:, None] * RANS_M + tables.cum[:, :A]).reshape(-1)
+        word = (np.tile(np.arange(A, dtype=np.int64), C) | (f << 7)) + ((-start << 20) & 0xFFFFFFFF)
+        got = np.repeat((word & 0xFFFFFFFF).astype(np.uint32), f)
+        got += np.arange(C * RANS_M, dtype=np.uint32) << np.uint32(20)
+        tables._slot_words = got
+    return got
+
+
+def _raw_bits(buf, start, back, kb, lane, off):
+    """Raw bit ``off`` of lane ``lane`` (arrays; ``start``, ``back``, ``kb`` per lane, the
+    callers' check having put every ``start`` inside the buffer): bits below ``kb`` from the
+    start state's R (``back``), the others from the stored bits at byte ``start`` (LSB-first).
+    Returns uint8 bits (the stored ones read for every request in uint8, then the few below
+    ``kb`` replaced)."""
+    kl = kb[lane]
+    st = off - kl
+    np.maximum(st, 0, out=st)
+    at = st >> 3
+    at += start[lane]
+    np.minimum(at, buf.size - 1, out=at)
+    bit = buf[at]
+    bit >>= (st & 7).astype(np.uint8)
+    bit &= 1
+    low = np.flatnonzero(off < kl)
+    if low.size:
+        bit[low] = (back[lane[low]] >> np.minimum(off[low], 62)) & 1
+    return bit
+
+
+def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) -> Parsed:
+    """One stream in plain Python (the same results as :func:`parse_lanes`; faster than lanes
+    for a few streams).
+
+    Every rANS step is inlined on locals (the tables' per-context slot → symbol bytes and
+    frequency and cum lists: Python ints below 2^30, CPython's one-digit ints); each nonzero
+    coefficient is one Python int, ``(g·64 + position) << 8 | magnitude`` (g = tb·P + plane;
+    an escape's magnitude symbol, the rest of it added afterwards), and the signs are bits
+    0..K−1 of the raw bits. ``pcs``: the planes' classes (a list of ints is used as it is)."""
+    pcl = pcs if type(pcs) is list else [int(v) for v in pcs]
+    P = len(pcl)
+    if len(data) < STATE_BYTES:
+        raise FormatError(f"rANS stream shorter than its {STATE_BYTES}-byte state")
+    slot_t, freq_t, cum_t = scalar_tables(tables)
+    x = int.from_bytes(data[:STATE_BYTES], "little")
+    ptr = STATE_BYTES
+    modes, lasts = [], []            # lasts: (g, last) of each coded (tb, plane), in order
+    esc = []                         # the places in words of escape symbols (and bad ones)
+    words = []
+    put = words.append
+    try:
+        ctx = CTX_MODE + kind * 4 + 3
+        for _ in range(nt):
+            s, x, ptr = scalar_step(slot_t, freq_t, cum_t, ctx, x, ptr, data)
+            if s >= N_MODES:
+                raise FormatError("tx block has an undefined tb mode")
+            modes.append(s)
+            ctx = CTX_MODE + kind * 4 + s
+        lrows = _LAST_CTX[key]
+        for t in range(nt):
+            mt = modes[t]
+            if mt != MODE_SKIP:
+                row = lrows[mt == MODE_INTRA]
+                for p in range(P):
+                    v, x, ptr = scalar_step(slot_t, freq_t, cum_t, row[pcl[p]], x, ptr, data)
+                    if v > 64:
+                        raise FormatError("tx block has a last position past 64")
+                    if v:
+                        lasts.append((t * P + p, v))
+        for g, n in lasts:
+            bb = _MAG_ROWS[pcl[g % P], key]          # per position: context of the first symbol
+            g8 = g << 14                             # (g·64) << 8
+            pos = n - 1
+            ctx = bb[pos]
+            sl = x & _MASK
+            s = slot_t[ctx][sl]
+            x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+            while x < RANS_L:
+                x = (x << 8) | data[ptr]
+                ptr += 1
+            if s >= ESC:
+                esc.append((len(words), s))
+            put(g8 | (pos << 8) | (s + 1))           # the first is nonzero: its magnitude is s + 1
+            nb, n1 = 2, 1                            # 1 + nonzero among the two previous; the previous
+            for pos in range(n - 2, -1, -1):
+                ctx = bb[pos] + nb
+                sl = x & _MASK
+                s = slot_t[ctx][sl]
+                x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+                while x < RANS_L:
+                    x = (x << 8) | data[ptr]
+                    ptr += 1
+                if s:                                # zeros carry no sign, escape or level
+                    if s >= ESC:
+                        esc.append((len(words), s))
+                    put(g8 | (pos << 8) | s)
+                    nb, n1 = 2 + n1, 1
+                else:
+                    nb, n1 = 1 + n1, 0
+        buckets = []
+        for i, s in esc:
+            if s > ESC:
+                raise FormatError("tx block has an undefined magnitude symbol")
+            k, x, ptr = scalar_step(slot_t, freq_t, cum_t, CTX_ESC + pcl[(words[i] >> 14) % P], x, ptr, data)
+            if k >= N_BUCKETS:
+                raise FormatError("tx block has an undefined escape bucket")
+            buckets.append(k)
+    except IndexError:
+        raise FormatError("rANS stream reads past its end") from None
+    nsign = len(words)                               # every coefficient kept is nonzero
+    nbits = nsign + sum(buckets)
+    kb = min(nbits, BACK_BITS)
+    raw_start = len(data) - (nbits - kb + 7) // 8
+    if not (0 <= x - RANS_L < (1 << kb) and ptr == raw_start):
+        raise FormatError("tx block stream is malformed (its symbols do not end where its raw bits start)")
+    raw = (x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
+    if nsign <= SMALL_SIGNS:                         # few coefficients: Python ints, then two arrays
+        mag = [wd & 255 for wd in words]
+        bit = nsign
+        for (i, _), k in zip(esc, buckets):          # |c| = ESC + first + 2^k − 1 + k raw bits
+            mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
+            bit += k
+        for i in range(nsign):
+            if (raw >> i) & 1:
+                mag[i] = -mag[i]
+        return Parsed(np.array([modes], np.int64), np.array([wd >> 8 for wd in words], np.int64),
+                      np.array(mag, np.int64), P)
+    w = np.array(words, np.int64)
+    index, mag = w >> 8, w & 255
+    bit = nsign
+    for (i, _), k in zip(esc, buckets):
+        mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
+        bit += k
+    nb = (nsign + 7) >> 3
+    signs = np.unpackbits(np.frombuffer((raw & ((1 << (8 * nb)) - 1)).to_bytes(nb, "little"), np.uint8),
+                          count=nsign, bitorder="little")
+    np.negative(mag, out=mag, where=signs.view(bool))
+    return Parsed(np.array([modes], np.int64), index, mag, P)
+
+
+#: coefficients up to which :func:`parse_one` signs them in Python ints (above: numpy)
+SMALL_SIGNS = 48
+
+
+#: per (plane class, key), per scan position: the context of a (tb, plane)'s first magnitude
+#: symbol; the symbols after it add 1 + their count of nonzero neighbours
+_MAG_ROWS = {(pc, key): [CTX_MAG + pc * N_BANDS * 8 + key * 4 + b for b in _BAND8]
+             for pc in range(N_PC) for key in (0, 1)}
+#: per key, mode class (intra?) and plane class: the context of a (tb, plane)'s last position
+_LAST_CTX = [[[CTX_LAST + (pc * 2 + ci) * 2 + key for pc in range(N_PC)] for ci in (0, 1)] for key in (0, 1)]
