@@ -66,8 +66,8 @@ def floats(text: str, n: int, what: str) -> tuple:
 def grid(text: str) -> tuple[int, int]:
     m = re.fullmatch(r"\s*(\d{1,5})\s*[xX]\s*(\d{1,5})\s*", text)
     if not m or int(m.group(1)) < 1 or int(m.group(2)) < 1:
-        raise ParameterError(f"expected ROWSxCOLS (COLSxROWS for --quilt) with positive integers, e.g. 9x9; "
-                             f"got {text!r}")
+        raise ParameterError(f"expected ROWSxCOLS (COLSxROWS for --quilt) with integers in 1..99999, e.g. "
+                             f"9x9; got {text!r}")
     return int(m.group(1)), int(m.group(2))
 
 

@@ -302,6 +302,7 @@ def _run(*args):
     (["encode", str(SAMPLE), "x.lfc", "--min-view-psnr", "1e11"], "floor"),
     (["view", "nope.lfc"], "no such file"),
     (["view", "README.md", "--port", "70000"], "--port"),
+    (["encode", str(SAMPLE), "x.lfc", "--grid", "100000x2"], "1..99999"),
 ])
 def test_bad_input_one_line_exit_2(args, needle):
     code, out, err = _run(*args)
