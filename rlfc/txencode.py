@@ -1,5 +1,7 @@
 """Encoder of the ``tx`` profile: structure, open-loop maps, closed-loop rate-distortion coding
-and packing (:class:`TxEncoder`); the search that drives it to a target is :mod:`rlfc.txrate`.
+(:class:`TxEncoder`); its parameters are :mod:`rlfc.txparams`, its entropy model
+:mod:`rlfc.txmodel`, its quantizer :mod:`rlfc.txquant`, its symbols and file :mod:`rlfc.txpack`;
+the search that drives it to a target is :mod:`rlfc.txrate`.
 
 Distortion is measured where PSNR is: YCoCg-R plane errors weighted by their share of the
 RGB mean squared error (Y 1, Co 1/6, Cg 1/4; :func:`formats.pixels.rgb_mse_weights`), so each
@@ -13,11 +15,10 @@ from __future__ import annotations
 
 import math
 import zlib
-from dataclasses import asdict, dataclass, replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from formats.codec_api import check_field_types
 from formats.errors import ParameterError
 from formats.metrics import colour_sq_error, psnr_from_sq_error
 from formats.parallel import Runner
@@ -27,247 +28,37 @@ from formats.viewstack import view_of
 from formats.pixels import from_planes, luma_of, rgb_mse_weights, to_planes
 
 from .header import RlfcHeader
-from .transform import COEF_MAX, FORWARD_SCAN as _FWD_SCAN, UNZIG, inverse_float
 from .j2ksearch import smallest_j2k
 from .txestimate import estimate_maps, reprice_maps_both
-from .txlayout import MAX_REFS, SPLIT_VERSION, VERSION, WARP_VERSION, WP_VERSION, TxLayout, weighted_views
+from .txlayout import MAX_REFS
 from .txwarp import pair_params, view_offsets, warp_params
 from .txpredict import TB, fit_price, fit_weights, priced_weights, mode_weights, planar, predict_tbs, upsample_thumb
 from .txsample import KeyAtlas, predict_view
-from .txmaps import maps_bytes, pack_maps
-from .txsections import pack_index, pack_thumbs, stream_order, varints
+from .txmaps import maps_bytes
+from .txsections import pack_thumbs, varints
 from .txstructure import build, build_intra
-from .txsyntax import (ALPHABET, BAND, ESC, MODE_INTRA, MODE_RES, MODE_SKIP, N_CTX, block_symbols, count_symbols,
-                       PACK_CELLS, ctx_esc, ctx_last, ctx_mag, ctx_mode, pack_streams, plane_classes,
-                       quantize_counts, tables_from_quantized, tables_to_bytes)
+from .txsyntax import MODE_INTRA, MODE_RES, MODE_SKIP, plane_classes
+from .txmodel import Model, default_counts
+from .txpack import FilePacker
+from .txparams import TxParams
+from .txquant import RdoQuantizer
 from .xp import NUMPY
 
-#: encoder decisions :attr:`TxParams.ablate` may turn off
-ABLATE = ("intra_tbs", "lambda_trim", "maps_reprice", "promote", "rdoq", "ref_modes")
 INTRA_MIN_BITS = 24      # below this a tb's prediction-based cost cannot be beaten by intra coding
 #: intra 8×8 blocks are tried only where the block's energy about its mean is below this many
 #: times its prediction residual's (measured on the six dense grids at 40 dB: 98.7–99.9% of the
 #: blocks that chose intra lie below 4; 0 = try every candidate)
 INTRA_ENERGY_RATIO = 4.0
-#: auto key_split: the shortest estimated key-row stream worth its own state and index entry
-KEY_SEGMENT_BYTES = 256
-#: auto key_split: a decoder parses the streams of many key rows as lanes in lockstep, one step
-#: per symbol of the longest (~30 µs a numpy step on the 2-core box, whatever the lanes), so rows
-#: that KEY_SEGMENT_BYTES splits are split further until no stream holds more magnitude symbols
-#: than this (a first frame's key rows then parse in ≲ 60 ms), while streams keep at least
-#: KEY_MIN_SEGMENT_BYTES. Grids only, and rows that are split already: lytro_dino_2067's rows
-#: of one stream at 40 dB split in 3 cost 1.2% and made its first frame slower (42 → 72 ms: lanes
-#: instead of one by one); mitsuba_objects_360's (every view intra, a request reads one view's
-#: rows) 4 → 8 cost 0.8% and decoded no faster.
-KEY_LANE_SYMBOLS = 2048
-KEY_MIN_SEGMENT_BYTES = 64
 FLUSH_BITS = 20           # a coded block stream's overhead: 3-byte state less the raw bits it carries, padding
-PAD = 8
 #: estimated per-view warps (``warps``) are kept only where they take at least this share of
 #: the maps' open-loop luma prediction error away (stanford_chess 32%: −10% bytes at 40 dB;
 #: stanford_lytro_general_11 7%, a noisy Lytro grid whose error is mostly noise: +1.3%)
 WARP_MIN_ERROR_DROP = 0.15
 
 
-@dataclass(frozen=True)
-class TxParams:
-    """Encoder parameters of the ``tx`` profile (stored in the file for information).
-
-    Attributes:
-        block_size: random-access block edge in pixels (a multiple of 8).
-        key_spacing: views between key views along rows and columns (0 = chosen by grid size).
-        key_ratio: key views' quantizer step is the others' divided by this (0 = chosen from
-            how much the other views inherit from the keys: :meth:`TxEncoder.auto_key_ratio`).
-        lam: λ = lam·Δ² (Δ the luma step of the views coded).
-        max_disparity: largest |disparity| searched, pixels per view step.
-        step: luma quantizer step Δ in pixel units (None: rate control or the default).
-        lossless: every plane coded exactly (no transform).
-        intra_codec: intra key views as "j2k" (JPEG 2000 at the quality the transform path
-            reaches), "tx" (thumbnail + transform), or "auto" (j2k without alpha, lossy).
-        search_sample: a PSNR target's search codes the key views and every SEARCH_STRIDE-th
-            other view (grids with at least SEARCH_MIN_VIEWS other views), then checks the
-            chosen step on every view (False: every search pass codes every view).
-        ablate: encoder decisions turned off, to measure what each buys (``tools/ablation_tx.py``;
-            the decoder is the same): any of :data:`ABLATE` — "ref_modes" (every 8×8 block blends
-            its references; no single-reference modes), "rdoq" (levels rounded to nearest, the
-            last position is the last nonzero: no rate-distortion quantization), "intra_tbs" (no
-            intra 8×8 blocks), "promote" (no view coded alone as a JPEG 2000 key), "lambda_trim"
-            (no λ trim between two quantizer steps), "maps_reprice" (the maps' corrections are
-            not judged again at the coding λ the probe predicts).
-        key_split: streams per key-view block row (0 = chosen from the rows' estimated bytes:
-            :meth:`TxEncoder.key_split`); more streams parse faster as parallel lanes and cost
-            about 4 bytes each.
-        weighted: weighted prediction (``tx`` version 4): each predicted view's prediction gets
-            a gain and an offset per plane, fitted by least squares, where a plane's fit takes
-            :data:`rlfc.txpredict.FIT_MIN_GAIN` of its prediction error away, error worth
-            :data:`rlfc.txpredict.FIT_PRICE_BITS` bits at the view's λ, and lowers the view's
-            estimated rate-distortion cost by more than its parameters' bits
-            (:func:`rlfc.txpredict.priced_weights`: an occluder's blocks, coded either way, do not
-            buy a fit that adds error to skipped blocks): views exposed differently
-            (hci_antinous with a gain per view in [0.9, 1.1] at 40 dB, −79% bytes), vignetting,
-            noisy predicted chroma. On by default; a file without a kept fit stays version 2/3
-            (BENCHMARKS.md, weighted prediction).
-        warps: per-view warps (``tx`` version 5, :mod:`rlfc.txwarp`) for rigs that are not
-            rectified: each view's rotation, scale and shift against the grid is estimated from
-            the views (:func:`formats.rectify.estimate_warps`, 2-8 CPU-s on the shared grids) and,
-            where some pixel moves by at least :data:`formats.rectify.MIN_CORRECTION_PX` and the
-            warps take :data:`WARP_MIN_ERROR_DROP` of the maps' prediction error away, stored,
-            and every prediction samples its references through them: the pixels coded are the
-            captured ones (``--rectify`` resamples them instead). Off by default (its estimate's
-            cost); grids only.
-    """
-
-    block_size: int = 16
-    key_spacing: int = 0
-    key_ratio: float = 0.0
-    lam: float = 0.12
-    max_disparity: float = 64.0
-    step: float | None = None
-    lossless: bool = False
-    intra_codec: str = "auto"
-    search_sample: bool = True
-    ablate: tuple = ()
-    key_split: int = 0
-    weighted: bool = True
-    warps: bool = False
-
-    def __post_init__(self):
-        check_field_types(self)           # types first: a string or a list fails range tests untyped
-        ab = self.ablate
-        if isinstance(ab, str) or not isinstance(ab, (tuple, list)) or not set(ab) <= set(ABLATE):
-            raise ParameterError(f"ablate must be a list of {', '.join(ABLATE)}, got {ab!r}")
-        object.__setattr__(self, "ablate", tuple(sorted(set(ab))))
-        if self.intra_codec not in ("auto", "tx", "j2k"):
-            raise ParameterError(f"intra codec must be auto, tx or j2k, got {self.intra_codec!r}")
-        if not isinstance(self.search_sample, bool):
-            raise ParameterError(f"search_sample must be true or false, got {self.search_sample!r}")
-        if self.block_size not in (8, 16, 32):
-            raise ParameterError(f"tx block size must be 8, 16 or 32, got {self.block_size}")
-        if not 0 <= self.key_spacing <= 64:
-            raise ParameterError(f"key spacing must be 0 (auto) .. 64, got {self.key_spacing}")
-        if not (self.key_ratio == 0 or 1.0 <= self.key_ratio <= 8.0):
-            raise ParameterError(f"key ratio must be 0 (auto) or within 1..8, got {self.key_ratio}")
-        if not 0 < self.lam <= 10:
-            raise ParameterError(f"lam must be within (0, 10], got {self.lam}")
-        if not 0 <= self.max_disparity <= 256:
-            raise ParameterError(f"max disparity must be within 0..256, got {self.max_disparity}")
-        if isinstance(self.key_split, bool) or not isinstance(self.key_split, int) or not 0 <= self.key_split <= 4096:
-            raise ParameterError(f"key split must be 0 (auto) .. 4096 streams per key row, got {self.key_split!r}")
-        if self.step is not None and not 1 <= self.step <= 1 << 16:
-            raise ParameterError(f"step must be within 1..65536, got {self.step}")
-
-
-def params_info(p: TxParams) -> dict:
-    """The parameters as the file's configuration records them (``ablate`` and ``key_split``
-    only when set, ``weighted`` only when turned off)."""
-    d = asdict(p)
-    if d["ablate"]:
-        d["ablate"] = list(d["ablate"])
-    else:
-        del d["ablate"]
-    if not d["key_split"]:
-        del d["key_split"]
-    if d["weighted"]:
-        del d["weighted"]
-    if not d["warps"]:
-        del d["warps"]
-    return d
-
-
 def auto_spacing(rows: int, cols: int) -> int:
     """Key spacing by grid size (measured on the shared dense grids; BENCHMARKS.md)."""
     return 2 if max(rows, cols) <= 5 else 4
-
-
-# -- the entropy model used for decisions ----------------------------------------------------
-def default_counts() -> np.ndarray:
-    """A plausible first model (before any statistics): mostly skips, small magnitudes."""
-    c = np.ones((N_CTX, ALPHABET))
-    for kind in range(2):
-        for prev in range(4):
-            c[ctx_mode(kind, prev), :3] = [60, 30, 3]
-    for pc in range(3):
-        for mode in (MODE_RES, MODE_INTRA):
-            for key in range(2):
-                c[ctx_last(pc, mode, key), :65] = np.r_[80, 60 * np.exp(-np.arange(64) / 8)] + 0.1
-        for band in range(6):
-            for key in range(2):
-                for nb in range(4):
-                    c[ctx_mag(pc, band, key, nb), :16] = 1000 * np.exp(-np.arange(16) * (1.0 + 0.2 * band)) + 0.1
-        c[ctx_esc(pc), :24] = 2.0 ** -np.arange(24) * 1000 + 0.01
-    return c
-
-
-class Model:
-    """Code lengths (bits) for decisions, from (N_CTX, ALPHABET) counts (add-one smoothed)."""
-
-    def __init__(self, counts: np.ndarray):
-        self.counts = counts                  # (kept: models between two steps interpolate them)
-        c = counts + 0.5
-        bits = -np.log2(c / c.sum(axis=1, keepdims=True))
-        self.mode = np.zeros((2, 3))
-        for kind in range(2):
-            rows = [ctx_mode(kind, p) for p in range(4)]
-            m = c[rows, :3].sum(0)
-            self.mode[kind] = -np.log2(m / m.sum())
-        self.last = np.zeros((3, 2, 2, 65))
-        self.mag = np.zeros((3, 6, 2, 16))
-        self.first = np.zeros((3, 6, 2, 16))
-        self.esc = np.zeros((3, 24))
-        for pc in range(3):
-            for mi, mode in enumerate((MODE_RES, MODE_INTRA)):
-                for key in range(2):
-                    self.last[pc, mi, key] = bits[ctx_last(pc, mode, key), :65]
-            for band in range(6):
-                for key in range(2):
-                    rows = [ctx_mag(pc, band, key, nb) for nb in (1, 2, 3)]
-                    m = c[rows, :16].sum(0)
-                    self.mag[pc, band, key] = -np.log2(m / m.sum())
-                    self.first[pc, band, key] = bits[ctx_mag(pc, band, key, 0), :16]
-            self.esc[pc] = bits[ctx_esc(pc), :24]
-        self._pos = {}
-
-    def pos_bits(self, pc: int, key: int) -> np.ndarray:
-        """(64·16,) magnitude-symbol bits by scan position and symbol (flat), cached."""
-        k = (pc, key)
-        if k not in self._pos:
-            self._pos[k] = np.ascontiguousarray(self.mag[pc, BAND, key]).reshape(-1)
-        return self._pos[k]
-
-    def zero_bits(self, pc: int, key: int) -> tuple[np.ndarray, np.ndarray]:
-        """(bits of a coded 0 at each scan position (64,) float32, their prefix sums (65,)
-        float64), cached: the quantizer's costs."""
-        k = (pc, key, 0)
-        if k not in self._pos:
-            b = self.pos_bits(pc, key)[::16]
-            self._pos[k] = (b.astype(np.float32), np.concatenate([[0.0], np.cumsum(b)]))
-        return self._pos[k]
-
-
-def _level_bits(model: Model, l: np.ndarray, pc: int, key: int) -> np.ndarray:
-    """Bits of coding magnitudes l (>= 0, (T, 64) in scan order), not the last one: symbol,
-    sign, escape bucket and suffix."""
-    return _level_bits_at(model, l, np.arange(64)[None, :], pc, key)
-
-
-def _level_bits_at(model: Model, l: np.ndarray, col: np.ndarray, pc: int, key: int) -> np.ndarray:
-    """:func:`_level_bits` of magnitudes ``l`` (>= 0) at scan positions ``col`` (arrays that
-    broadcast together: (n,) and (n,), or (T, 64) and (1, 64))."""
-    tab = model.pos_bits(pc, key)                           # (64·16,) flat: position·16 + symbol
-    b = tab.take(col * 16 + np.minimum(l, ESC)) + (l > 0)
-    big = l >= ESC
-    if big.any():
-        r = l[big] - ESC
-        k = np.floor(np.log2(r + 1.0)).astype(np.int64)
-        b[big] += model.esc[pc, np.minimum(k, 23)] + k
-    return b
-
-
-#: the forward transform in float32, for the quantizer's decisions
-_FWD_SCAN32 = _FWD_SCAN.astype(np.float32)
-#: (128, 65) 0/1: [costs coded (T, 64) | costs dropped (T, 64)] @ _PREFIX = the cost of every last
-#: position L = 0..64: Σ_{i<L} coded + Σ_{i>=L} dropped
-_PREFIX = np.vstack([np.triu(np.ones((64, 65), np.float32), 1), np.tril(np.ones((64, 65), np.float32))])
 
 
 # -- one view ----------------------------------------------------------------------------------
@@ -301,22 +92,7 @@ class ViewCode:
         return out
 
 
-def _dequantize_float(q: np.ndarray, step16: np.ndarray) -> np.ndarray:
-    """:func:`rlfc.kernels.dequantize` of (T, p, 64) levels at steps ``step16`` (p,) (1/16),
-    clipped to ±COEF_MAX, as float64 (the inverse transform's input): sign(q)·floor((|q|·q16 +
-    8) / 16) in floats, exact (|q| < 2^22, q16 < 2^22: every value an integer below 2^53), about
-    twice as fast as the int64 arithmetic and its cast."""
-    f = q.astype(np.float64)
-    a = np.abs(f)
-    a *= step16.astype(np.float64)[None, :, None]
-    a += 8.0
-    a *= 1 / 16
-    np.floor(a, out=a)
-    np.copysign(a, f, out=a)
-    return np.clip(a, -COEF_MAX, COEF_MAX, out=a)
-
-
-class TxEncoder:
+class TxEncoder(RdoQuantizer, FilePacker):
     """Everything independent of the quantizer (planes, structure, maps), and the closed loop."""
 
     #: hold the final pass's decoded views (:attr:`formats.codec_api.Encoded.decoded`); else its
@@ -674,195 +450,6 @@ class TxEncoder:
         lv = self.thumb_levels(k, thumb16, pixels)
         return lv, self.code_view(k, self.thumb_pred(lv, thumb16), s16k, lam_k, model, pixels=pixels,
                                   keep_pixels=keep_pixels)
-
-    # -- coding one view ---------------------------------------------------------------------
-    def _tbs(self, img: np.ndarray) -> np.ndarray:
-        """(Hp, Wp, P) → (nloc8, 8, 8, P) in raster tb order."""
-        return img.reshape(self.nby8, TB, self.nbx8, TB, -1).transpose(0, 2, 1, 3, 4).reshape(-1, TB, TB, img.shape[-1])
-
-    def _untbs(self, t: np.ndarray) -> np.ndarray:
-        return t.reshape(self.nby8, self.nbx8, TB, TB, -1).transpose(0, 2, 1, 3, 4).reshape(self.Hp, self.Wp, -1)
-
-    #: tbs quantized at once (the quantizer's float64 temporaries are ~70 bytes per coefficient;
-    #: every tb's decisions are its own, so the chunks change no result)
-    QUANT_TBS = 1024
-
-    def _quantize(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
-        """:meth:`_quantize_tbs` in chunks of QUANT_TBS tbs (bounded temporaries)."""
-        T = r.shape[0]
-        if T <= self.QUANT_TBS:
-            return self._quantize_tbs(r, step16, lam, model, key, mode_cls)
-        out = None                    # (each chunk's results written in place: no list of parts to join)
-        for a in range(0, T, self.QUANT_TBS):
-            part = self._quantize_tbs(r[a:a + self.QUANT_TBS], step16, lam, model, key, mode_cls)
-            if out is None:
-                out = tuple(np.empty((T,) + x.shape[1:], x.dtype) for x in part)
-            for o, x in zip(out, part):
-                o[a:a + x.shape[0]] = x
-            del part
-        return out
-
-    def _quantize_tbs(self, r: np.ndarray, step16: np.ndarray, lam: float, model: Model, key: int, mode_cls: int):
-        """RDO quantization of tbs' residuals r (T, 8, 8, P) → (levels (T, P, 64) scan order,
-        cost J (T,), distortion-if-skipped D0 (T,), must_code (T,) bool, model bits R (T,)).
-
-        Per coefficient the candidates are round-to-nearest, one less, and 0 (cost
-        w·error² + λ·bits); per tb the last coded position is the argmin of the cumulative
-        cost (coded below it, dropped above). Tbs none of whose coefficients round away from 0
-        skip the search (its result is known: nothing coded).
-
-        The costs are float32 (decisions only: the levels are integers and the reconstruction
-        is exact whatever they are), and the 65 cumulative costs of a tb are one product with a
-        fixed 0/1 matrix (:data:`_PREFIX`): a float32 GEMM is 2× faster than two float64
-        cumulative sums along rows on this box."""
-        T = r.shape[0]
-        P = self.P
-        levels = np.zeros((T, P, 64), np.int32)          # (|levels| < 2^22: coefficients < 2^21·8)
-        J = np.zeros(T)
-        D0 = np.zeros(T)
-        must = np.zeros(T, bool)
-        Rb = np.zeros(T)
-        tr = np.flatnonzero(~self.bypass)
-        if tr.size:                 # the analysis of every transformed plane: one GEMM, scan order out
-            rt = np.empty((T, tr.size, 64), np.float32)      # (one cast copy: tb by tb, planes within)
-            rv = r.reshape(T, 64, P).transpose(0, 2, 1)
-            np.copyto(rt, rv if tr.size == P else rv[:, tr], casting="unsafe")
-            Xall = (rt.reshape(-1, 64) @ _FWD_SCAN32).reshape(T, tr.size, 64)
-        pos = np.arange(64)
-        plain = "rdoq" in self.p.ablate                          # plain rounding (ablation)
-        for p in range(P):
-            pc = int(self.pcs[p])
-            if self.bypass[p]:                                   # exact: levels are the residual samples
-                rp = r[..., p].astype(np.float64)
-                lv = np.rint(rp.reshape(T, 64) * 16 / step16[p]).astype(np.int64)
-                levels[:, p] = lv
-                nz = lv != 0
-                must |= nz.any(axis=1)
-                last = np.where(nz.any(1), 64 - np.argmax(nz[:, ::-1], axis=1), 0)
-                bits = _level_bits(model, np.abs(lv), pc, key)
-                inside = pos[None, :] < last[:, None]
-                rb = (bits * inside).sum(1) + model.last[pc, mode_cls, key, last]
-                J += lam * rb
-                Rb += rb
-                continue
-            wgt = self.w[p]
-            ip = int(np.searchsorted(tr, p))
-            X = Xall[:, ip]
-            X2 = X * X
-            e = X2.sum(1).astype(np.float64)
-            D0 += wgt * e
-            if wgt == 0:
-                continue
-            d = step16[p] / 16.0
-            lastb = model.last[pc, mode_cls, key]
-            # tbs whose every coefficient rounds to 0 code nothing: J = their error + the bits of
-            # "last = 0" (exactly what the search below finds for them), so only the rest search
-            # (a comparison then any(): 3.6x faster than a row max on this box, the same tbs: X2 >= 0,
-            # and the bound is compared in float32 either way)
-            act = np.flatnonzero((X2 >= 0.25 * d * d).any(1))
-            idle = np.ones(T, bool)
-            idle[act] = False
-            J[idle] += wgt * e[idle] + lam * lastb[0]
-            Rb[idle] += lastb[0]
-            if act.size == 0:
-                continue
-            Ta = act.size
-            xa = X[act]
-            ax = np.abs(xa)
-            # A = [cost of each coefficient as chosen | cost past the last position (not coded)]
-            A = np.empty((Ta, 128), np.float32)
-            dz = A[:, 64:]
-            np.multiply(X2[act], np.float32(wgt), out=dz)
-            zero_bits, zcum = model.zero_bits(pc, key)
-            np.add(dz, np.float32(lam) * zero_bits, out=A[:, :64])   # as a coded zero
-            # the candidates are evaluated only where rounding gives a nonzero level: where it
-            # gives 0 every candidate is 0 and costs exactly the coded zero, so the decisions
-            # there are known
-            t = ax * np.float32(1.0 / d)
-            t += np.float32(0.5)
-            nzi = np.flatnonzero(t >= 1.0)                        # flat (Ta·64) indices of ln > 0
-            row, col = np.divmod(nzi, 64)
-            fa = nzi + (row << 6)                                 # the same places in A
-            ln = np.floor(t.ravel()[nzi]).astype(np.int64)
-            lo = ln - 1
-            a = ax.ravel()[nzi].astype(np.float64)
-            b_ln = _level_bits_at(model, ln, col, pc, key)
-            b_lo = _level_bits_at(model, lo, col, pc, key)
-            j_ln = wgt * (a - ln * d) ** 2 + lam * b_ln
-            if plain:
-                use_lo, z = np.zeros(nzi.size, bool), np.zeros(nzi.size, bool)
-                A.ravel()[fa] = j_ln
-            else:
-                j_lo = wgt * (a - lo * d) ** 2 + lam * b_lo
-                use_lo = j_lo < j_ln
-                jmin = np.minimum(j_lo, j_ln)
-                j0 = A.ravel()[fa]
-                z = j0 <= jmin
-                # (a level of 0 costs exactly the coded zero whichever way it was reached)
-                A.ravel()[fa] = np.minimum(j0, jmin)
-            lvs = (ln - use_lo) * ~z                              # the levels at nzi (0 elsewhere)
-            nz = lvs != 0
-            # the last position L (coefficients >= L dropped): J(L) = Σ_{i<L} coded + Σ_{i>=L} dz + λ·bits(L),
-            # L − 1 nonzero (or L = 0)
-            JL = A @ _PREFIX
-            JL += (lam * lastb).astype(np.float32)
-            if plain:                                             # the last nonzero, whatever it costs
-                L = np.zeros(Ta, np.int64)
-                np.maximum.at(L, row[nz], col[nz] + 1)
-            else:
-                last_ok = np.full((Ta, 64), np.inf, np.float32)
-                last_ok.ravel()[nzi[nz]] = 0.0
-                JL[:, 1:] += last_ok
-                L = JL.argmin(1)
-            J[act] += JL[np.arange(Ta), L]
-            keep = col < L[row]
-            # bits of the kept coefficients: the coded zeros' prefix sum, plus the chosen levels'
-            # difference from a coded zero
-            delta = np.where(use_lo, b_lo, b_ln) - zero_bits[col]
-            Rb[act] += zcum[L] + lastb[L] + np.bincount(row, weights=delta * (nz & keep), minlength=Ta)
-            lvs = lvs * keep
-            lvs *= 1 - 2 * (xa.ravel()[nzi] < 0)                  # the coefficients' signs (a where= ufunc: 4x slower)
-            lp = np.zeros((Ta, 64), np.int32)
-            lp.ravel()[nzi] = lvs
-            levels[act, p] = lp
-        return levels, J, D0, must, Rb
-
-    #: tbs reconstructed at once (float64 temporaries of ~40 bytes per sample: 8 MiB at 3 planes;
-    #: every tb is its own, so the chunks change no result)
-    RECON_TBS = 1024
-
-    def _reconstruct(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
-        """(T, 8, 8, P) clipped reconstruction of tbs from base predictions and levels (exact
-        decoder integers: the clipped coefficients are below 2^40, so :func:`inverse_float`
-        carries them in float64 exactly, and so does the sum with the prediction), in chunks of
-        RECON_TBS tbs."""
-        T = levels.shape[0]
-        if T <= self.RECON_TBS:
-            return self._reconstruct_tbs(base, levels, step16)
-        out = np.empty(base.shape, np.int32)
-        for a in range(0, T, self.RECON_TBS):
-            out[a:a + self.RECON_TBS] = self._reconstruct_tbs(base[a:a + self.RECON_TBS],
-                                                              levels[a:a + self.RECON_TBS], step16)
-        return out
-
-    def _reconstruct_tbs(self, base: np.ndarray, levels: np.ndarray, step16: np.ndarray) -> np.ndarray:
-        T, P = levels.shape[0], self.P
-        res = np.empty((T, TB, TB, P))
-        for planes, tr in ((np.flatnonzero(~self.bypass), True), (np.flatnonzero(self.bypass), False)):
-            if planes.size == 0:
-                continue
-            lv = levels if planes.size == P else levels[:, planes]
-            blocks = _dequantize_float(lv[..., UNZIG] if tr else lv, step16[planes]).reshape(T, planes.size, TB, TB)
-            if tr:
-                blocks = inverse_float(blocks)
-            if planes.size == P:
-                res[...] = np.moveaxis(blocks, 1, -1)
-            else:
-                res[..., planes] = np.moveaxis(blocks, 1, -1)
-        res += base
-        flat = res.reshape(T, TB * TB * P)
-        np.minimum(np.maximum(flat, self.lo_tb, out=flat), self.hi_tb, out=flat)
-        return res.astype(np.int32)
 
     def code_view(self, v: int, pred: np.ndarray, step16: np.ndarray, lam: float, model: Model,
                   pixels: np.ndarray | None = None, keep_pixels: bool | np.ndarray = True,
@@ -1390,199 +977,6 @@ class TxEncoder:
         """(views,) colour PSNR of each view of a run over every view (inf where exact; exactly
         :func:`formats.metrics.psnr_views` of its decoded views)."""
         return np.array([psnr_from_sq_error(c.sse, c.cnt, float(self.peak)) for c in res["codes"]])
-
-    # -- symbols and packing -----------------------------------------------------------------
-    SYMBOL_CHUNK = 1024        # random-access blocks turned into symbols at a time (bounds memory)
-
-    def coded_blocks(self, res: dict) -> np.ndarray:
-        """(n0, nloc) bool: the random-access blocks of the views that are not key views that
-        have a stream."""
-        coded = np.zeros((self.n0, self.nby * self.nbx), bool)
-        for v, c in enumerate(res["codes"]):
-            if not self.is_key[v] and c is not None:
-                coded[v] = c.coded
-        return coded
-
-    def symbol_parts(self, res: dict, counts_only: bool = False, split: int = 1):
-        """Every stream's symbols, in ``tx.blocks`` order (the key views' rows, then the other
-        views' coded blocks, location-major), a part at a time: yields (lanes in the part,
-        symbols of :func:`rlfc.txsyntax.block_symbols` with lanes numbered within the part).
-        Parts are one key view, or up to SYMBOL_CHUNK blocks of the others, so that symbols
-        of a high-rate light field never all exist at once. ``counts_only``: each part's symbol
-        counts instead (no ordering, no raw bits). ``split``: streams per key row."""
-        tbi = self._ra_tbs()
-        for k in self.coded_keys(res):                   # key rows: split lanes of nbx·nt/split tbs each
-            yield self.nby * split, self._key_symbols(k, res["codes"][k], counts_only, split)
-        sv, sl = stream_order(self.coded_blocks(res))     # location-major, views ascending
-        for a in range(0, sv.size, self.SYMBOL_CHUNK):
-            v_, l_ = sv[a:a + self.SYMBOL_CHUNK], sl[a:a + self.SYMBOL_CHUNK]
-            modes = np.zeros((v_.size, self.nt), np.int64)
-            levels = np.zeros((v_.size, self.nt, self.P, 64), np.int64)
-            for v in np.unique(v_).tolist():
-                i = np.flatnonzero(v_ == v)
-                c = res["codes"][v]
-                modes[i] = c.modes[tbi[l_[i]]]
-                levels[i] = c.levels(tbi[l_[i]].reshape(-1)).reshape(i.size, self.nt, self.P, 64)
-            yield v_.size, block_symbols(modes, levels, self.intra[v_].astype(np.int64), np.zeros(v_.size, np.int64),
-                                         self.pcs, counts_only)
-
-    def _key_symbols(self, k: int, c: ViewCode, counts_only: bool = False, split: int = 1):
-        """The symbols of key view k coded as ``c``: ``split`` lanes per block row (nbx·nt/split
-        tbs each, the row's blocks in order), as :func:`rlfc.txsyntax.block_symbols` gives them
-        (``counts_only``: their counts)."""
-        tbi = self._ra_tbs()
-        n, seg = self.nby * split, self.nbx * self.nt // split
-        modes = c.modes[tbi].astype(np.int64).reshape(n, seg)
-        levels = c.levels(tbi.reshape(-1)).reshape(n, seg, self.P, 64)
-        return block_symbols(modes, levels, np.full(n, int(self.intra[k])), np.ones(n, np.int64),
-                             self.pcs, counts_only)
-
-    def key_split(self, res: dict) -> int:
-        """Streams per key-view block row for the file of a run: ``TxParams.key_split`` (the
-        largest divisor of the blocks per row not above it), or, when 0, the most streams whose
-        estimated length stays at least :data:`KEY_SEGMENT_BYTES` (each costs a 3-byte state and
-        an index entry; a decoder parses a row's streams as parallel lanes). Where that splits
-        the rows of a grid, more while the longest stream would hold over
-        :data:`KEY_LANE_SYMBOLS` magnitude symbols (the decoder's steps), in streams of at least
-        :data:`KEY_MIN_SEGMENT_BYTES`."""
-        divs = [d for d in range(1, self.nbx + 1) if self.nbx % d == 0]
-        if self.p.key_split:
-            return max(d for d in divs if d <= self.p.key_split)
-        ck = self.coded_keys(res)
-        if not ck:
-            return 1
-        row_bytes = sum(res["codes"][k].bits for k in ck) / 8 / (len(ck) * self.nby)
-        split = max(d for d in divs if d == 1 or row_bytes / d >= KEY_SEGMENT_BYTES)
-        if split == 1 or self.all_intra:    # (see KEY_LANE_SYMBOLS)
-            return split
-        blocks = np.stack([self._block_symbols(res["codes"][k]) for k in ck])      # (keys, nby, nbx)
-        for d in divs:
-            if d <= split:
-                continue
-            if (blocks.reshape(len(ck), self.nby, split, -1).sum(3).max() <= KEY_LANE_SYMBOLS
-                    or row_bytes / d < KEY_MIN_SEGMENT_BYTES):
-                break
-            split = d
-        return split
-
-    def _block_symbols(self, c: ViewCode) -> np.ndarray:
-        """(nby, nbx) magnitude symbols of each random-access block of a coded view: the tbs'
-        last positions (1 + the last nonzero level's scan index), summed over planes and tbs."""
-        per_tb = np.zeros(self.nby8 * self.nbx8, np.int64)
-        if c.tbs.size:
-            nz = c.lv != 0
-            per_tb[c.tbs] = np.where(nz.any(-1), 64 - np.argmax(nz[..., ::-1], -1), 0).sum(1)
-        return per_tb[self._ra_tbs()].sum(1).reshape(self.nby, self.nbx)
-
-    def counts_of(self, res: dict, split: int = 1) -> np.ndarray:
-        """(N_CTX, ALPHABET) symbol counts of a run (part by part; ``split`` streams per key row)."""
-        total = None
-        for _, c in self.symbol_parts(res, counts_only=True, split=split):
-            total = c if total is None else total + c
-        return total if total is not None else count_symbols(np.zeros(0, np.int64), np.zeros(0, np.int64))
-
-    def coded_keys(self, res: dict) -> list:
-        """Key views coded as row streams (not JPEG 2000), in key order."""
-        return [k for k in self.s.keys if k not in res["keyimg"] and res["codes"][k] is not None]
-
-    def structure_of(self, res: dict):
-        """(keys, refs, weights, cell, intra) of a run: the plan with the views it coded alone
-        as JPEG 2000 (``res["promoted"]``) made intra keys (no references, no map); promoted
-        views that were not keys come after the planned keys, in view order."""
-        promoted = [int(v) for v in res.get("promoted", ())]
-        refs, weights, cell = self.s.refs.copy(), self.s.weights.copy(), self.s.cell.copy()
-        refs[promoted], weights[promoted], cell[promoted] = -1, 0, -1
-        keys = list(self.s.keys) + sorted(v for v in promoted if not self.is_key[v])
-        return keys, refs, weights, cell, (refs < 0).all(axis=1)
-
-    def model_of(self, res: dict) -> Model:
-        """The entropy model the next pass decides with: this pass's symbol counts, plus those
-        of the transform trials of key views that JPEG 2000 coded. Without them the intra
-        contexts had no counts: the next pass's trial of the intra key, with costs from the
-        smoothing alone, could code it at a much lower quality, which JPEG 2000 then matched
-        (hci_antinous at step 84.9: the intra key 32.3 dB instead of 37.6, every view 2.2 dB
-        lower)."""
-        c = self.counts_of(res)
-        if res.get("trial_counts") is not None:
-            c = c + res["trial_counts"]
-        return Model(c + default_counts() * 1e-3)
-
-    def weights_of(self, res: dict) -> np.ndarray:
-        """(N0, P, 2) the gains and offsets of a run's weighted predictions, as its file records
-        them (the identity, gain 64 and offset 0, for views without one and for intra views)."""
-        intra = self.structure_of(res)[4]
-        wp = np.zeros((self.n0, self.P, 2), np.int64)
-        wp[..., 0] = 64
-        for v, c in enumerate(res["codes"]):
-            if c is not None and c.wp is not None and not intra[v]:
-                wp[v] = c.wp
-        return wp
-
-    def pack(self, res: dict) -> tuple[dict, list]:
-        """(config, sections) of a run: the tables from every part's counts, then each part's
-        streams (a lane's bytes depend on its own symbols and the tables only)."""
-        split = self.key_split(res)
-        q = quantize_counts(self.counts_of(res, split))
-        tables = tables_from_quantized(q)
-        streams: list = []
-        # parts are coded together until lanes × longest lane reaches PACK_CELLS (a lane's bytes
-        # depend on its own symbols only): a key view's few long row streams alone would make
-        # thousands of rANS steps of a dozen lanes each
-        held: list = []                                  # (lanes, longest lane, part)
-
-        def flush():
-            if held:
-                off = np.cumsum([0] + [n for n, _, _ in held[:-1]]).tolist()      # (python ints keep the lanes' types)
-                cat = [np.concatenate([p[i] + (o if i in (0, 3) else 0) for o, (_, _, p) in zip(off, held)])
-                       for i in range(5)]
-                streams.extend(pack_streams(sum(n for n, _, _ in held), *cat, tables))
-                held.clear()
-
-        for n, part in self.symbol_parts(res, split=split):
-            k = int(np.bincount(part[0], minlength=1).max()) if part[0].size else 0
-            if held and (sum(h[0] for h in held) + n) * max(k, *(h[1] for h in held)) > PACK_CELLS:
-                flush()
-            held.append((n, k, part))
-        flush()
-        coded = self.coded_blocks(res)
-        ck = self.coded_keys(res)
-        keys, refs, weights, cell, intra = self.structure_of(res)
-        nk = len(ck) * self.nby * split
-        key_lengths = np.array([len(b) for b in streams[:nk]], np.int64)
-        lengths = np.array([len(b) for b in streams[nk:]], np.int64)
-        ordered = streams
-        intra_keys = [k for k in ck if intra[k]]
-        imgs = [res["keyimg"][k] for k in keys if k in res["keyimg"]]
-        # one entry per intra key (0 = that view is transform-coded) when any is JPEG 2000
-        key_images = tuple(len(res["keyimg"][k]) if k in res["keyimg"] else 0
-                           for k in keys if intra[k]) if imgs else ()
-        thumbs = np.stack([res["thumbs"][k] for k in intra_keys]) if intra_keys else \
-            np.zeros((0, self.nby8, self.nbx8, self.P), np.int64)
-        wp = self.weights_of(res)
-        weighted = bool(weighted_views(wp).any())
-        warped = self.s.warp is not None                # (version 5: version 4's tables, then the warps)
-        lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
-                       len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
-                       "j2k" if imgs else "tx", key_images,
-                       WARP_VERSION if warped else WP_VERSION if weighted else SPLIT_VERSION if split > 1 else VERSION,
-                       split, wp if weighted or warped else None, self.s.warp)
-        lay.check("tx encoder")
-        # maps no view uses any more (every view of the cell coded alone): the shared map, no modes
-        disp, modes = self.disp, self.modes
-        unused = np.setdiff1d(np.arange(len(self.s.cell_views)), cell[cell >= 0])
-        if unused.size:
-            disp, modes = disp.copy(), modes.copy()
-            disp[unused], modes[unused] = self.base[None, :], 0
-        cfg = {**self.hdr.to_config(), "tx": lay.to_config(),
-               "params": {**params_info(self.p), "step": res["step"], "lam_scale": res.get("lam_scale", 1.0)},
-               "n_blocks": int(coded.sum()), "n_key_views": len(keys)}
-        sections = [("tx.layout", lay.to_bytes()), ("tx.tables", tables_to_bytes(q)),
-                    ("tx.maps", pack_maps(self.base, disp, modes, (self.nby8, self.nbx8))),
-                    ("tx.thumbs", pack_thumbs(thumbs)), ("tx.keyimg", b"".join(imgs)),
-                    ("tx.index", pack_index(key_lengths, coded, lengths)),
-                    ("tx.blocks", b"".join(ordered) + bytes(PAD))]
-        return cfg, sections
-
 
 def _dct_task(enc: TxEncoder, v: int) -> tuple[tuple[np.ndarray, int], float]:
     """(:func:`rlfc.j2kalloc.dct_samples`, :func:`rlfc.j2kalloc.smooth_psnr`) of view v."""

@@ -19,7 +19,9 @@ from .params import flags
 from .txlayout import weighted_views
 from .ratesearch import secant_search
 from .txmaps import maps_bytes
-from .txencode import Model, TxEncoder, TxParams, _dct_task, default_counts, params_info
+from .txencode import TxEncoder, _dct_task
+from .txmodel import Model, default_counts
+from .txparams import TxParams, params_info
 
 
 def _params_from(options: EncodeOptions) -> TxParams:

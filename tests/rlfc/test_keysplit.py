@@ -68,6 +68,7 @@ def test_auto_split_keeps_streams_of_at_least_the_segment_bytes(wide):
     """``key_split`` 0: the most streams per row (a divisor of the blocks per row) whose
     estimated bytes stay at least KEY_SEGMENT_BYTES; explicit values round down to a divisor."""
     import rlfc.txencode as T
+    import rlfc.txpack as K
     import rlfc.txrate as R
 
     enc = T.TxEncoder(wide, R._params_from(EncodeOptions(params={"block_size": 8, "step": 4.0})), None, 10.0, None)
@@ -81,7 +82,7 @@ def test_auto_split_keeps_streams_of_at_least_the_segment_bytes(wide):
             codes[k] = dataclasses.replace(codes[k], bits=8.0 * b * enc.nby)
         return {**res, "codes": codes}
 
-    seg = T.KEY_SEGMENT_BYTES
+    seg = K.KEY_SEGMENT_BYTES
     assert enc.key_split(with_row_bytes(2.9 * seg)) == 1
     assert enc.key_split(with_row_bytes(3 * seg)) == 3
     assert enc.key_split(with_row_bytes(8.9 * seg)) == 3
@@ -98,6 +99,7 @@ def test_auto_split_bounds_the_longest_stream_in_magnitude_symbols(wide, monkeyp
     import numpy as np
 
     import rlfc.txencode as T
+    import rlfc.txpack as K
     import rlfc.txrate as R
     import rlfc.txparse as ts
 
@@ -114,15 +116,15 @@ def test_auto_split_bounds_the_longest_stream_in_magnitude_symbols(wide, monkeyp
             codes[k] = dataclasses.replace(codes[k], bits=8.0 * b * enc.nby)
         return {**res, "codes": codes}
 
-    rows3 = with_row_bytes(3 * T.KEY_SEGMENT_BYTES)                     # the bytes alone: 3 streams
-    monkeypatch.setattr(T, "KEY_LANE_SYMBOLS", longest[3])
+    rows3 = with_row_bytes(3 * K.KEY_SEGMENT_BYTES)                     # the bytes alone: 3 streams
+    monkeypatch.setattr(K, "KEY_LANE_SYMBOLS", longest[3])
     assert enc.key_split(rows3) == 3
-    monkeypatch.setattr(T, "KEY_LANE_SYMBOLS", longest[3] - 1)
+    monkeypatch.setattr(K, "KEY_LANE_SYMBOLS", longest[3] - 1)
     assert enc.key_split(rows3) == 9
-    monkeypatch.setattr(T, "KEY_MIN_SEGMENT_BYTES", T.KEY_SEGMENT_BYTES / 3 + 1)
+    monkeypatch.setattr(K, "KEY_MIN_SEGMENT_BYTES", K.KEY_SEGMENT_BYTES / 3 + 1)
     assert enc.key_split(rows3) == 3                                    # 9 streams would be too short
-    monkeypatch.setattr(T, "KEY_LANE_SYMBOLS", 1)
-    assert enc.key_split(with_row_bytes(2.9 * T.KEY_SEGMENT_BYTES)) == 1  # rows of one stream stay so
+    monkeypatch.setattr(K, "KEY_LANE_SYMBOLS", 1)
+    assert enc.key_split(with_row_bytes(2.9 * K.KEY_SEGMENT_BYTES)) == 1  # rows of one stream stay so
 
     # the counts are the lanes the decoder steps through (one stream per block: a lane per block)
     import rlfc.profiles.tx as P
@@ -198,7 +200,7 @@ def test_split_rows_on_every_sample_layout(kw):
 @pytest.mark.parametrize("bad", [-1, 4097, True, 2.5, "4"])
 def test_bad_key_split_is_a_parameter_error(bad):
     from formats.errors import ParameterError
-    from rlfc.txencode import TxParams
+    from rlfc.txparams import TxParams
 
     with pytest.raises(ParameterError, match="key.split"):
         TxParams(key_split=bad)

@@ -946,7 +946,7 @@ def test_lambda_trim_hits_with_its_first_pass_and_gives_up_on_a_staircase():
 def test_ablate_switches_decode_the_closed_loop_and_are_recorded():
     """Each lever ``tools/ablation_tx.py`` turns off gives a valid file: it decodes to the
     encoder's closed loop, records what was turned off, and changes what the lever decides."""
-    from rlfc.txencode import ABLATE
+    from rlfc.txparams import ABLATE
 
     lf = smooth_lf(rows=5, cols=5, h=24, w=32, seed=3)
     noisy = lf.views.astype(np.int32) + np.random.default_rng(1).integers(-6, 7, lf.views.shape)
@@ -1261,7 +1261,7 @@ def test_the_thumbnail_step_is_chosen_by_distortion_and_bits(monkeypatch):
 def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
     """The packer codes several parts (key views' row streams, chunks of blocks) in one rANS call
     up to PACK_CELLS; every lane's bytes are its own, so the file is the same as part by part."""
-    import rlfc.txencode as txe
+    import rlfc.txpack as txe
 
     lf = smooth_lf(rows=1, cols=6, c=4)
     lf.layout = "posed"                          # six intra key views: six parts of row streams
@@ -1320,7 +1320,8 @@ def _quantize_reference(enc, r, s16, lam, model, key, mode_cls):
     """The RDO quantizer's search written as loops over tbs, planes and last positions, in
     float64: per coefficient the cheapest of round-to-nearest, one less and 0; per tb the last
     position L (L − 1 coded nonzero, or L = 0) of least cost. Returns (levels, J, Rb)."""
-    import rlfc.txencode as T
+    import rlfc.txmodel as T
+    from rlfc.transform import FORWARD_SCAN
 
     T_, P = r.shape[0], enc.P
     levels = np.zeros((T_, P, 64), np.int64)
@@ -1328,7 +1329,7 @@ def _quantize_reference(enc, r, s16, lam, model, key, mode_cls):
     for p in range(P):
         pc, w, d = int(enc.pcs[p]), enc.w[p], s16[p] / 16.0
         lastb = model.last[pc, mode_cls, key]
-        X = r[..., p].reshape(T_, 64).astype(np.float64) @ T._FWD_SCAN
+        X = r[..., p].reshape(T_, 64).astype(np.float64) @ FORWARD_SCAN
         for t in range(T_):
             lv, cost, bits = np.zeros(64, np.int64), np.zeros(64), np.zeros(64)
             for i in range(64):
@@ -1494,7 +1495,7 @@ def test_an_entropy_model_between_two_measured_ones_interpolates_their_counts():
     """A search step between two steps whose entropy models were measured (at most MODEL_SPAN
     octaves apart) gets their counts interpolated geometrically in log2 of the step; outside
     them, or farther apart, none (the search measures one)."""
-    from rlfc.txencode import Model, default_counts
+    from rlfc.txmodel import Model, default_counts
     from rlfc.txrate import MODEL_SPAN, _between_models
 
     ca = default_counts().astype(np.float64) + 1.0
