@@ -7,41 +7,34 @@ is opened. Every other view is predicted block by block from the key views aroun
 disparity and one prediction mode per 8×8 block and cell of views), plus, where the encoder
 found it worth its bits, one stored stream per B×B block: 8×8 integer-DCT coefficients
 (HEVC's matrix), rANS-coded with static per-file tables (:mod:`rlfc.txsyntax`). One block
-request = the in-memory key views + at most one stored stream.
+request = the in-memory key views + at most one stored stream. The decoder's parts: what it
+decodes on first need (maps, key-view block rows: :mod:`rlfc.profiles.tx_lazy`) and its lean
+one-request paths (:mod:`rlfc.profiles.tx_single`).
 
 Levels: 0 = full quality; 1 = prediction only (key views stay full).
 """
 from __future__ import annotations
 
 import threading
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
-from formats.parallel import LOCAL_THREADS
 from formats.pixels import from_planes
 
-from ..kernels import dequantize
-from ..transform import COEF_MAX, ZIGZAG, inverse_float
+from ..transform import ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout, weighted_views
-from ..txwarp import max_row_offset, offsets, pair_params, view_offsets
-from ..txpredict import DISP_BITS, TB, mode_weights, planar, predict_tbs, upsample_thumb, weigh
+from ..txwarp import offsets, pair_params, view_offsets
+from ..txpredict import TB, mode_weights, planar, predict_tbs, weigh
 from ..txmaps import LazyMaps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
-from ..txsample import (KeyAtlas, block_pixel_refs, block_refs, predict as remap_predict, predict_block,
-                        predict_block_pixels, predict_view)
+from ..txsample import KeyAtlas, predict as remap_predict, predict_view
 from ..txparse import concat_parsed, parse_lanes, parse_one
 from ..txsyntax import MODE_INTRA, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
-
-
-def _dequantize_clipped(values, q16) -> np.ndarray:
-    """:func:`rlfc.kernels.dequantize` of levels ``values`` at steps ``q16`` (1/16; numpy), clipped
-    to ±COEF_MAX."""
-    deq = dequantize(NUMPY, values, q16)
-    return np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
+from .tx_lazy import OnDemand
+from .tx_single import SingleRequests, _dequantize_clipped
 
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
@@ -59,7 +52,6 @@ PREPARSE_MIN = 1024
 ONE_BY_ONE_RATIO = 48
 GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
 SCRATCH_BYTES = 64 << 20   # the largest int32 planes a thread keeps for views() (GROUP_PIXELS' at 4 planes: 32 MiB)
-KEY_PARSE_TBS = 1 << 20  # tbs of key-view rows parsed together (bounds the parsed coefficients held)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
 
 
@@ -73,12 +65,9 @@ def plane_limits(planes: int, peak: int) -> tuple[np.ndarray, np.ndarray, np.nda
     return lo.astype(np.int64), hi.astype(np.int64), flat.astype(np.int64)
 
 
-#: views whose warp offsets the lean single-block path keeps (:meth:`TxDecoder._warp_pixels`;
-#: 128 KiB a view of 512² pixels)
-WARP_PX_VIEWS = 64
 
 
-class TxDecoder(ProfileDecoder):
+class TxDecoder(OnDemand, SingleRequests, ProfileDecoder):
     """Planes decoder of a ``tx`` file (see :class:`rlfc.profiles.base.ProfileDecoder`)."""
 
     levels = 1
@@ -215,252 +204,6 @@ class TxDecoder(ProfileDecoder):
         self._scratch = threading.local()              # .planes: this thread's buffer for views()
         self._thumb_up: dict = {}
         self._reach = np.zeros((N0, self.nby), np.int64)       # rows filled as their maps are decoded
-
-    # -- maps, on demand ------------------------------------------------------------------------
-    @property
-    def disp(self) -> np.ndarray:
-        """(n_maps, nby8·nbx8) int64 disparities (1/16 px per view step), every map decoded."""
-        return self._maps_of(None)[0]
-
-    @property
-    def modes(self) -> np.ndarray:
-        """(n_maps, nby8·nbx8) int64 prediction modes, every map decoded."""
-        return self._maps_of(None)[1]
-
-    def view_map(self, view: int) -> np.ndarray:
-        """(nby8, nbx8) int64 disparity map (1/16 px per view step, one value per 8×8 block) that
-        predicts view ``view`` (decoded now if not yet); ``view`` must have one (``lay.cell >= 0``)."""
-        cell = int(self.lay.cell[view])
-        if cell < 0:
-            raise ValueError(f"view {view} is not predicted through a map")
-        return self._maps_of([view])[0][cell].reshape(self.nby8, self.nbx8)
-
-    def _maps_of(self, views) -> tuple[np.ndarray, np.ndarray]:
-        """(disp, modes) (n_maps, nby8·nbx8) int64 with the maps of ``views`` (ints; None: every
-        view) decoded; the other maps' rows may be zeros."""
-        if views is None:
-            if not self._map_done.all():
-                self._have_maps(np.arange(self._map_done.size))
-        else:
-            cell = self.lay.cell[views]
-            if not self._map_done[cell[cell >= 0]].all():
-                self._have_maps(cell[cell >= 0])
-        return self._map_store.disp, self._map_store.modes
-
-    def _have_maps(self, cells: np.ndarray) -> None:
-        """Decode maps ``cells`` where not done yet, and the key-view reach of their views' block
-        rows (:meth:`_reach_rows`)."""
-        with self._map_lock:
-            new = self._map_store.need(cells)
-            if new:
-                self._reach_rows(np.asarray(new, np.int64))
-                self._map_done[new] = True          # (threads read these flags without the lock)
-
-    def _reach_rows(self, maps: np.ndarray) -> None:
-        """Fill ``_reach`` (N0, nby) int64 for the views of ``maps``: how far (pixels, up or
-        down) the prediction of a block row of each view with references samples its key views:
-        ⌈max |disparity·Δrow| / 16⌉ + 1 (bilinear's second tap) over the block row's 8×8 blocks
-        and the view's references; 0 for views without references."""
-        lay = self.lay
-        users = np.flatnonzero(np.isin(lay.cell, maps))
-        if users.size == 0:
-            return
-        dmax = np.zeros((self._map_done.size, self.nby), np.int64)                            # (n_maps, nby)
-        dmax[maps] = np.abs(self._map_store.disp[maps]).reshape(maps.size, self.nby, self.tpb * self.nbx8).max(axis=2)
-        refs = lay.refs[users]
-        dy = np.abs(lay.positions[users][:, None, 0] - lay.positions[refs.clip(0), 0])
-        dy = np.where(refs >= 0, dy, 0).max(axis=1)                                            # (U,)
-        self._reach[users] = -(-(dmax[lay.cell[users]] * dy[:, None]) // (1 << DISP_BITS)) + 1
-        if self.warp_dw is not None:          # (plus the warps' largest vertical offset: one more pixel
-            self._reach[users] += max_row_offset(self.warp_dw[users], self.Hp, self.Wp)[:, None] + 1   # for its rounding)
-
-    # -- key views, by block rows, on demand ------------------------------------------------------
-    def _row_span(self, views: np.ndarray, by: np.ndarray):
-        """(lo, hi) block rows of the key views that block rows ``by`` of views with references
-        sample (inclusive, clipped to the view)."""
-        B = self.block_size
-        self._maps_of(views)
-        r = self._reach[views, by]
-        return np.maximum(by * B - r, 0) // B, np.minimum((by + 1) * B - 1 + r, self.Hp - 1) // B
-
-    def _spans(self, slots: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
-        """(n_keys, nby) bool: block rows lo..hi (inclusive) of key slots ``slots`` (all (n,))."""
-        nk, nby = self._key_done.shape
-        diff = np.zeros((nk, nby + 1), np.int64)
-        np.add.at(diff, (slots, lo), 1)
-        np.add.at(diff, (slots, hi + 1), -1)
-        return np.cumsum(diff[:, :nby], axis=1) > 0
-
-    def _need_mask(self, views: np.ndarray, by: np.ndarray) -> np.ndarray:
-        """(n_keys, nby) bool: the key-view block rows that requests (views, block rows) read:
-        a key view its own row, any other view its references' rows around it."""
-        key = self.is_key[views]
-        v, b = views[~key], by[~key]
-        refs = self.lay.refs[v]                                                  # (M, 4)
-        lo, hi = self._row_span(v, b)
-        has = refs >= 0
-        return self._spans(np.concatenate([self.key_slot[views[key]], self.key_slot[refs.clip(0)][has]]),
-                           np.concatenate([by[key], np.broadcast_to(lo[:, None], refs.shape)[has]]),
-                           np.concatenate([by[key], np.broadcast_to(hi[:, None], refs.shape)[has]]))
-
-    def _need_views(self, views: np.ndarray) -> np.ndarray:
-        """(n_keys, nby) bool: every block row of the key views that whole ``views`` read."""
-        need = np.zeros(self._key_done.shape, bool)
-        for v in np.unique(views).tolist():
-            if self.is_key[v]:
-                need[self.key_slot[v]] = True
-            else:
-                r = self.lay.refs[v]
-                need[self.key_slot[r[r >= 0]]] = True
-        return need
-
-    def _have_rows(self, views: np.ndarray, by: np.ndarray) -> None:
-        """Decode the key-view rows that requests (views, block rows) read, where not done yet."""
-        ok = self._rows_ok[views, by]
-        if not ok.all():
-            self._have_keys(self._need_mask(views[~ok], by[~ok]))
-            self._rows_ok[views, by] = True
-
-    def _have_keys(self, need: np.ndarray) -> None:
-        """Decode the key-view block rows of ``need`` (n_keys, nby) that are not decoded yet."""
-        if self._keys_all or not (need & ~self._key_done).any():
-            return
-        with self._key_lock:
-            self._decode_key_rows(need)
-
-    def decode_keys(self) -> None:
-        """Decode every key view now (what opening a file did before key views were decoded on
-        demand; the torch path and whole-view decodes of every view need them all)."""
-        if not self._keys_all:
-            self._have_keys(np.ones(self._key_done.shape, bool))
-
-    def decode_maps(self) -> None:
-        """Decode every map now (:meth:`_maps_of` of every view), with what a single request of
-        each view reads from it (:meth:`_pixel_refs`, :meth:`_cell_map`)."""
-        self._maps_of(None)
-        if self.atlas is not None:
-            for v in np.flatnonzero(~self.is_key & (self.lay.cell >= 0)).tolist():
-                if self._pixel_refs(v) is not None:
-                    self._cell_map(int(self.lay.cell[v]))
-
-    def _decode_key_rows(self, need: np.ndarray) -> None:
-        """Under the key lock: ``need``'s missing rows and the rows of other keys they are
-        predicted from, keys in coding order (a key is predicted from keys before it). Block rows
-        of transform-coded keys are parsed together (:meth:`_parse_streams`), in groups of about
-        KEY_PARSE_TBS tbs (whole keys)."""
-        self._in_keys.active = True
-        try:
-            self._decode_key_rows_now(need)
-        finally:
-            self._in_keys.active = False
-
-    def _decode_key_rows_now(self, need: np.ndarray) -> None:
-        lay = self.lay
-        keys = [int(k) for k in lay.keys]
-        need = need & ~self._key_done
-        for s in range(len(keys) - 1, -1, -1):          # rows of the references a needed row samples
-            k = keys[s]
-            if not need[s].any():
-                continue
-            if k in self.img_of:                         # JPEG 2000: the whole view at once
-                need[s] = ~self._key_done[s]
-                continue
-            if lay.intra[k]:
-                continue
-            rr = np.flatnonzero(need[s])
-            lo, hi = self._row_span(np.full(rr.size, k), rr)
-            refs = lay.refs[k]
-            t = self.key_slot[refs[refs >= 0]]
-            need |= self._spans(np.repeat(t, rr.size), np.tile(lo, t.size), np.tile(hi, t.size)) & ~self._key_done
-        pending = [s for s in range(len(keys)) if keys[s] not in self.img_of and need[s].any()]
-        group = max(1, KEY_PARSE_TBS // (self.nbx * self.nt))       # block rows per parse
-        parsed: dict = {}
-        pos = 0
-
-        def parse_next():                                  # the next keys' rows, about a group
-            nonlocal pos
-            chunk, n = [], 0
-            while pos < len(pending) and (not chunk or n + int(need[pending[pos]].sum()) <= group):
-                t = pending[pos]
-                chunk += [(t, r) for r in np.flatnonzero(need[t]).tolist()]
-                n += int(need[t].sum())
-                pos += 1
-            parsed.update(self._parse_key_rows(chunk))
-
-        images = [keys[s] for s in range(len(keys)) if keys[s] in self.img_of and need[s].any()]
-        # JPEG 2000 keys decode on a thread of their own (OpenJPEG releases the GIL) while the
-        # first group of transform-coded rows is parsed: a first frame waits for both
-        pool = ThreadPoolExecutor(1) if images and pending else None
-        try:
-            got = {k: pool.submit(self._key_image, k, 1) for k in images} if pool else {}
-            if pool:
-                parse_next()
-            self._key_rows_in_order(keys, need, parsed, parse_next, got)
-        finally:
-            if pool:
-                pool.shutdown()
-        if self._key_done.all():
-            self._keys_all = True
-            self._thumb_up.clear()
-
-    def _key_rows_in_order(self, keys, need, parsed, parse_next, got) -> None:
-        """:meth:`_decode_key_rows_now`'s rows ``need``, key by key in coding order: JPEG 2000
-        keys from ``got`` (futures) or decoded now, the others reconstructed from ``parsed``
-        (filled by ``parse_next``)."""
-        lay, B, nby = self.lay, self.block_size, self.nby
-        for s in range(len(keys)):
-            rr = np.flatnonzero(need[s])
-            if rr.size == 0:
-                continue
-            k = keys[s]
-            if k in self.img_of:
-                self._set_key_image(k, got[k].result() if k in got else self._key_image(k, LOCAL_THREADS))
-                continue
-            if s not in parsed:
-                parse_next()
-            p = parsed.pop(s)
-            locs = (rr[:, None] * self.nbx + np.arange(self.nbx)).reshape(-1)
-            pred = None
-            if lay.intra[k]:
-                up = self._thumb_up.get(k)
-                if up is None:
-                    th = (self.thumbs[self.thumb_of[k]] * lay.thumb_step16 + 8) >> 4
-                    up = self._thumb_up[k] = upsample_thumb(th, self.Hp, self.Wp).reshape(
-                        nby, self.tpb, TB, self.nbx, self.tpb, TB, self.P).transpose(0, 3, 1, 4, 2, 5, 6).reshape(
-                        nby * self.nbx, self.nt, TB, TB, self.P)
-                pred = up[locs]
-            blocks = self._reconstruct(np.full(locs.size, k), locs, 0, pred, p)
-            rows = blocks.reshape(rr.size, self.nbx, B, B, self.P).transpose(0, 2, 1, 3, 4).reshape(
-                rr.size, B, self.Wp, self.P)
-            self._set_key_rows(s, rr, rows)
-
-    def _parse_key_rows(self, rows: list) -> dict:
-        """{key slot: Parsed (that key's rows × nbx lanes of nt tbs, rows ascending)} of the
-        block-row streams ``rows`` [(slot, row)], grouped by slot in ascending order."""
-        if not rows:
-            return {}
-        keys = self.lay.keys
-        sl = np.array([s for s, _ in rows], np.int64)
-        rw = np.array([r for _, r in rows], np.int64)
-        kk = np.asarray(keys, np.int64)[sl]
-        ci = np.array([self.row_of[int(k)] for k in kk], np.int64)
-        ks = self.key_split                              # streams per row: consecutive lanes, row order
-        buf, s2, e2 = self._streams(self.key_start[ci, rw].reshape(-1), self.key_end[ci, rw].reshape(-1))
-        kind = np.repeat(self.lay.intra[kk].astype(np.int64), ks)
-        got = self._parse_streams(buf, s2, e2, self.nt * self.nbx // ks, kind, np.ones(kind.size, np.int64))
-        cut = np.flatnonzero(np.diff(sl)) + 1
-        bounds = np.concatenate([[0], cut, [sl.size]])
-        parts = got.split(bounds * ks)
-        return {int(sl[a]): p.reshape((b - a) * self.nbx, self.nt) for p, a, b in zip(parts, bounds[:-1], bounds[1:])}
-
-    def _set_key_rows(self, slot: int, rows: np.ndarray, planes: np.ndarray) -> None:
-        """Store decoded block rows ``rows`` (n,) of key slot ``slot``: planes (n, B, Wp, P)."""
-        B = self.block_size
-        self.keyplanes[slot].reshape(self.nby, B, self.Wp, self.P)[rows] = planes
-        if self.atlas is not None:
-            self.atlas.set_rows(slot, rows, B, planes)
-        self._kp = None
-        self._key_done[slot, rows] = True
 
     # -- streams ----------------------------------------------------------------------------
     def _streams(self, starts: np.ndarray, ends: np.ndarray):
@@ -784,199 +527,6 @@ class TxDecoder(ProfileDecoder):
                                            pixels=pixels)
         B = self.block_size
         return out.reshape(views.size, B * B, self.P)
-
-    def _view_refs(self, v: int):
-        """Per-view constants of the scalar path: reference key slots (R,), weights per tb mode
-        (R + 1, R) (mode 0: the view's blend weights; mode k: all 64 on reference k − 1),
-        position offsets (R, 2)."""
-        return self.ref_slots[v], self.wmode[v], self.ref_dpos[v]
-
-    def _block_refs(self, v: int):
-        """:func:`rlfc.txsample.block_refs` of view v (cached; None where its references lie in
-        more than one atlas group)."""
-        got = self._blockref_cache.get(v, False)
-        if got is False:
-            slots, wmode, dpos = self._view_refs(v)
-            got = self._blockref_cache[v] = block_refs(self.atlas, slots, wmode, dpos)
-        return got
-
-    def block_pixels(self, view: int, by: int, bx: int, level: int) -> np.ndarray | None:
-        """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
-        one atlas group: :func:`rlfc.txsample.predict_block_pixels`, the same pixels as
-        :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
-        (its stream parsed by :func:`rlfc.txparse.parse_one`) is added there too, unless a tb
-        of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
-        (the caller takes :meth:`block`)."""
-        if self.is_key[view] or self.atlas is None:
-            return None
-        prefs = self._pixel_refs(view)
-        if prefs is None:
-            return None
-        B, loc = self.block_size, by * self.nbx + bx
-        res = bounds = None
-        if level == 0 and self.coded[view, loc]:
-            parsed = self._parse_one(view, loc)
-            if (parsed.modes == MODE_INTRA).any():
-                return from_planes(self.block(view, by, bx, level, parsed).reshape(B, B, self.P), self.dtype)
-            if parsed.index.size:
-                res, bounds = self._residual_rows(parsed), self._pixel_bounds
-        disp, modes = self._cell_map(self._one_ready(view, by))
-        warp = None
-        if self.warp_dw is not None:
-            wy, wx = self._warp_pixels(view)
-            warp = (wy[loc], wx[loc])
-        return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
-                                    self._peak_f, self.dtype, res, bounds, warp)
-
-    def _warp_pixels(self, view: int) -> tuple:
-        """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
-        by block: each (nby·nbx, R·nt) float32 (sixteenths: exact), row by·nbx + bx the pairs of
-        that block, reference-major, 8×8 blocks in raster order (cached per view, for at most
-        :data:`WARP_PX_VIEWS` views at once: 8·R bytes per 8×8 block each)."""
-        got = self._warp_px_cache.get(view)
-        if got is None:
-            if len(self._warp_px_cache) >= WARP_PX_VIEWS:
-                self._warp_px_cache.clear()
-            t, ny, nx = self.tpb, self.nby, self.nbx
-            R = self.warp_dw.shape[1]
-
-            def blocks(o):
-                o = o.reshape(R, ny, t, nx, t).transpose(1, 3, 0, 2, 4).reshape(ny * nx, R * t * t)
-                return (o * 0.0625).astype(np.float32)
-
-            oy, ox = view_offsets(self.warp_dw[view], self.nby8, self.nbx8)
-            got = self._warp_px_cache[view] = (blocks(oy), blocks(ox))
-        return got
-
-    def _residual_rows(self, parsed) -> np.ndarray:
-        """:meth:`_residual_one` of a stream of a view with references laid out as
-        :func:`rlfc.txsample.predict_block_pixels` adds it: (nt·64, C) in the atlas's float type
-        (C its channels; 0 past the P planes), 8×8 blocks and their samples in raster order.
-        Values past 2^24 may round in float32; the sum with the prediction is then past the
-        planes' bounds either way and clips alike."""
-        nt, P, C = self.nt, self.P, self.atlas.C
-        idx = parsed.index
-        at, q16 = self._res_tables()                  # (per index g·64 + scan position: its place, its step)
-        X = np.zeros((nt * P, 64))
-        X.reshape(-1)[at[idx]] = _dequantize_clipped(parsed.values, q16[idx])
-        res = np.zeros((nt, 64, C), self.atlas.ftype)
-        res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
-        return res.reshape(nt * 64, C)
-
-    def _res_tables(self) -> tuple:
-        """Per index g·64 + scan position of a block's coefficients (g = tb·P + plane): its place
-        in (nt·P, 64) raster rows (zig-zag for transformed planes, as is for bypassed ones) and
-        its step (1/16) in a view with references: :meth:`_residual_rows`' look-ups (cached)."""
-        got = self._res_tab
-        if got is None:
-            g = np.arange(self.nt * self.P)
-            raster = np.where(self.lay.bypass[self._row_planes][:, None], np.arange(64), ZIGZAG[None, :])
-            got = self._res_tab = (((g * 64)[:, None] + raster).reshape(-1), np.repeat(self._q16_rows, 64))
-        return got
-
-    def _pixel_refs(self, view: int):
-        """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references
-        lie in more than one atlas group)."""
-        prefs = self._pixref_cache.get(view, False)
-        if prefs is False:
-            refs = self._block_refs(view)
-            prefs = self._pixref_cache[view] = None if refs is None else \
-                block_pixel_refs(self.atlas, refs, self.tpb, self.lay.wp[view] if self._weighted[view] else None,
-                                 self.lo, self.hi)
-        return prefs
-
-    def _cell_map(self, cell: int) -> tuple:
-        """(disparities as float32, modes) of a decoded map, block-major: (nby·nbx, nt), row
-        by·nbx + bx the 8×8 blocks of block (by, bx) in raster order (cached; a request reads
-        one row, a view)."""
-        dm = self._cell_maps.get(cell)
-        if dm is None:
-            t, ny, nx = self.tpb, self.nby, self.nbx
-
-            def blocks(a):
-                return np.ascontiguousarray(a.reshape(ny, t, nx, t).swapaxes(1, 2)).reshape(ny * nx, t * t)
-
-            dm = self._cell_maps[cell] = (blocks(self._map_store.disp[cell].astype(np.float32)),
-                                          blocks(self._map_store.modes[cell].astype(np.uint8)))
-        return dm
-
-    def _one_rows(self, view: int, by: int) -> None:
-        """For one request: the key-view rows its block row reaches, decoded where they are not
-        yet (a scalar check: the one-request paths are lean)."""
-        if not self._keys_all and not self._rows_ok[view, by]:
-            self._have_rows(np.array([view]), np.array([by]))
-
-    def _one_ready(self, view: int, by: int) -> int:
-        """For one request of a view with references: :meth:`_one_rows`, and the view's map
-        decoded where it is not yet (a scalar check, not :meth:`_maps_of`); returns the map."""
-        self._one_rows(view, by)
-        cell = self.lay.cell[view]
-        if not self._map_done[cell]:                    # (not _maps_of: a scalar check)
-            self._have_maps(np.array([cell]))
-        return cell
-
-    def block(self, view: int, by: int, bx: int, level: int, parsed=None) -> np.ndarray:
-        """One request, lean: the prediction of the block's nt tbs from every reference at once
-        (one remap call), plus at most one parsed stream (``parsed``: the caller parsed it); the
-        same integers as :meth:`blocks`."""
-        B, P, tpb = self.block_size, self.P, self.tpb
-        if self.is_key[view]:
-            self._one_rows(view, by)
-            s = self.key_slot[view]
-            return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
-        cell = self._one_ready(view, by)
-        disp, modes = self._map_store.disp, self._map_store.modes
-        loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
-        refs = self._block_refs(view) if self.atlas is not None and self.warp_dw is None else None
-        if refs is not None:                                # the remap kernel, every reference at once
-            out = predict_block(self.atlas, refs, disp[cell, loc8], modes[cell, loc8],
-                                self._tb_y + np.float32(by * B), self._tb_x + np.float32(bx * B))
-        else:                  # references in several atlas groups, or key views too large for OpenCV
-            slots, wmode, dpos = self._view_refs(view)
-            ty = by * tpb + self._tby
-            tx = bx * tpb + self._tbx
-            dd = disp[cell, loc8][:, None, None] * dpos[None]          # (nt, R, 2)
-            dy, dx = dd[..., 0], dd[..., 1]
-            if self.warp_dw is not None:               # (a warped view: each reference's offset, per 8×8 block)
-                oy, ox = offsets(np.broadcast_to(self.warp_dw[view], (ty.size,) + self.warp_dw.shape[1:]), ty, tx)
-                dy, dx = dy + oy, dx + ox
-            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[modes[cell, loc8]], dy, dx, ty * TB, tx * TB)
-            out = remap_predict(self.atlas, *args) if self.atlas is not None else \
-                predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
-        out = self._weigh(out, view)
-        loc = by * self.nbx + bx
-        if level == 0 and self.coded[view, loc]:
-            if parsed is None:
-                parsed = self._parse_one(view, loc)
-            out = self._add_residual(out[None], self._residual_one(view, parsed)[None], parsed.modes)[0]
-        return out.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(B * B, P)
-
-    def _parse_one(self, view: int, loc: int):
-        """:meth:`_parse` of one request's stream (a scalar range: no arrays around it)."""
-        if self._remote:
-            return self._parse(np.array([view]), np.array([loc]))
-        s, e = int(self.start[view, loc]), int(self.end[view, loc])
-        with self._io:
-            if e > s:
-                self.container.verify_span("tx.blocks", s, e)
-        return parse_one(bytes(self.buf[s:e]), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
-                         int(self.is_key[view]))
-
-    def _residual_one(self, view: int, parsed) -> np.ndarray:
-        """:meth:`_residual` of one parsed stream, (nt, 8, 8, P) int32: every 8×8 block of the
-        request transformed at once (a block without coefficients transforms to exact zeros), in
-        about half the numpy calls."""
-        lay, P, nt = self.lay, self.P, self.nt
-        idx = parsed.index
-        if not idx.size:
-            return np.zeros((nt, TB, TB, P), np.int32)
-        g, pos = idx >> 6, idx & 63                                          # tb·P + plane, scan position
-        plane = g % P
-        deq, raster = self._dequantized(parsed.values, lay.step16[0 if self.is_key[view] else 1][plane], plane, pos)
-        X = np.zeros((nt * P, 64))
-        X[g, raster] = deq
-        X = self._inverse_rows(X, self._row_planes)
-        return X.reshape(nt, P, 64).transpose(0, 2, 1).astype(np.int32).reshape(nt, TB, TB, P)
 
     def views(self, views, level):
         """Whole views; the coded blocks of all of them parsed together (the rANS lanes step

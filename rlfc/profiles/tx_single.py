@@ -1,0 +1,226 @@
+"""One random-access request of a ``tx`` file, lean (:class:`SingleRequests`, a part of
+:class:`rlfc.profiles.tx.TxDecoder`): a single block predicted in one remap call, and its one
+stream parsed in plain Python, in as few numpy calls as the same integers allow."""
+from __future__ import annotations
+
+import numpy as np
+
+from formats.pixels import from_planes
+
+from ..kernels import dequantize
+from ..transform import COEF_MAX, ZIGZAG
+from ..txpredict import TB, predict_tbs
+from ..txparse import parse_one
+from ..txsample import (block_pixel_refs, block_refs, predict as remap_predict, predict_block,
+                        predict_block_pixels)
+from ..txsyntax import MODE_INTRA
+from ..txwarp import offsets, view_offsets
+from ..xp import NUMPY
+
+#: views whose warp offsets the lean single-block path keeps (:meth:`TxDecoder._warp_pixels`;
+#: 128 KiB a view of 512² pixels)
+WARP_PX_VIEWS = 64
+
+
+def _dequantize_clipped(values, q16) -> np.ndarray:
+    """:func:`rlfc.kernels.dequantize` of levels ``values`` at steps ``q16`` (1/16; numpy), clipped
+    to ±COEF_MAX."""
+    deq = dequantize(NUMPY, values, q16)
+    return np.minimum(np.maximum(deq, -COEF_MAX, out=deq), COEF_MAX, out=deq)
+
+
+class SingleRequests:
+    """The one-request paths: :meth:`block` (planes) and :meth:`block_pixels` (pixels)."""
+
+    def _view_refs(self, v: int):
+        """Per-view constants of the scalar path: reference key slots (R,), weights per tb mode
+        (R + 1, R) (mode 0: the view's blend weights; mode k: all 64 on reference k − 1),
+        position offsets (R, 2)."""
+        return self.ref_slots[v], self.wmode[v], self.ref_dpos[v]
+
+    def _block_refs(self, v: int):
+        """:func:`rlfc.txsample.block_refs` of view v (cached; None where its references lie in
+        more than one atlas group)."""
+        got = self._blockref_cache.get(v, False)
+        if got is False:
+            slots, wmode, dpos = self._view_refs(v)
+            got = self._blockref_cache[v] = block_refs(self.atlas, slots, wmode, dpos)
+        return got
+
+    def block_pixels(self, view: int, by: int, bx: int, level: int) -> np.ndarray | None:
+        """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
+        one atlas group: :func:`rlfc.txsample.predict_block_pixels`, the same pixels as
+        :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
+        (its stream parsed by :func:`rlfc.txparse.parse_one`) is added there too, unless a tb
+        of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
+        (the caller takes :meth:`block`)."""
+        if self.is_key[view] or self.atlas is None:
+            return None
+        prefs = self._pixel_refs(view)
+        if prefs is None:
+            return None
+        B, loc = self.block_size, by * self.nbx + bx
+        res = bounds = None
+        if level == 0 and self.coded[view, loc]:
+            parsed = self._parse_one(view, loc)
+            if (parsed.modes == MODE_INTRA).any():
+                return from_planes(self.block(view, by, bx, level, parsed).reshape(B, B, self.P), self.dtype)
+            if parsed.index.size:
+                res, bounds = self._residual_rows(parsed), self._pixel_bounds
+        disp, modes = self._cell_map(self._one_ready(view, by))
+        warp = None
+        if self.warp_dw is not None:
+            wy, wx = self._warp_pixels(view)
+            warp = (wy[loc], wx[loc])
+        return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
+                                    self._peak_f, self.dtype, res, bounds, warp)
+
+    def _warp_pixels(self, view: int) -> tuple:
+        """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
+        by block: each (nby·nbx, R·nt) float32 (sixteenths: exact), row by·nbx + bx the pairs of
+        that block, reference-major, 8×8 blocks in raster order (cached per view, for at most
+        :data:`WARP_PX_VIEWS` views at once: 8·R bytes per 8×8 block each)."""
+        got = self._warp_px_cache.get(view)
+        if got is None:
+            if len(self._warp_px_cache) >= WARP_PX_VIEWS:
+                self._warp_px_cache.clear()
+            t, ny, nx = self.tpb, self.nby, self.nbx
+            R = self.warp_dw.shape[1]
+
+            def blocks(o):
+                o = o.reshape(R, ny, t, nx, t).transpose(1, 3, 0, 2, 4).reshape(ny * nx, R * t * t)
+                return (o * 0.0625).astype(np.float32)
+
+            oy, ox = view_offsets(self.warp_dw[view], self.nby8, self.nbx8)
+            got = self._warp_px_cache[view] = (blocks(oy), blocks(ox))
+        return got
+
+    def _residual_rows(self, parsed) -> np.ndarray:
+        """:meth:`_residual_one` of a stream of a view with references laid out as
+        :func:`rlfc.txsample.predict_block_pixels` adds it: (nt·64, C) in the atlas's float type
+        (C its channels; 0 past the P planes), 8×8 blocks and their samples in raster order.
+        Values past 2^24 may round in float32; the sum with the prediction is then past the
+        planes' bounds either way and clips alike."""
+        nt, P, C = self.nt, self.P, self.atlas.C
+        idx = parsed.index
+        at, q16 = self._res_tables()                  # (per index g·64 + scan position: its place, its step)
+        X = np.zeros((nt * P, 64))
+        X.reshape(-1)[at[idx]] = _dequantize_clipped(parsed.values, q16[idx])
+        res = np.zeros((nt, 64, C), self.atlas.ftype)
+        res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
+        return res.reshape(nt * 64, C)
+
+    def _res_tables(self) -> tuple:
+        """Per index g·64 + scan position of a block's coefficients (g = tb·P + plane): its place
+        in (nt·P, 64) raster rows (zig-zag for transformed planes, as is for bypassed ones) and
+        its step (1/16) in a view with references: :meth:`_residual_rows`' look-ups (cached)."""
+        got = self._res_tab
+        if got is None:
+            g = np.arange(self.nt * self.P)
+            raster = np.where(self.lay.bypass[self._row_planes][:, None], np.arange(64), ZIGZAG[None, :])
+            got = self._res_tab = (((g * 64)[:, None] + raster).reshape(-1), np.repeat(self._q16_rows, 64))
+        return got
+
+    def _pixel_refs(self, view: int):
+        """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references
+        lie in more than one atlas group)."""
+        prefs = self._pixref_cache.get(view, False)
+        if prefs is False:
+            refs = self._block_refs(view)
+            prefs = self._pixref_cache[view] = None if refs is None else \
+                block_pixel_refs(self.atlas, refs, self.tpb, self.lay.wp[view] if self._weighted[view] else None,
+                                 self.lo, self.hi)
+        return prefs
+
+    def _cell_map(self, cell: int) -> tuple:
+        """(disparities as float32, modes) of a decoded map, block-major: (nby·nbx, nt), row
+        by·nbx + bx the 8×8 blocks of block (by, bx) in raster order (cached; a request reads
+        one row, a view)."""
+        dm = self._cell_maps.get(cell)
+        if dm is None:
+            t, ny, nx = self.tpb, self.nby, self.nbx
+
+            def blocks(a):
+                return np.ascontiguousarray(a.reshape(ny, t, nx, t).swapaxes(1, 2)).reshape(ny * nx, t * t)
+
+            dm = self._cell_maps[cell] = (blocks(self._map_store.disp[cell].astype(np.float32)),
+                                          blocks(self._map_store.modes[cell].astype(np.uint8)))
+        return dm
+
+    def _one_rows(self, view: int, by: int) -> None:
+        """For one request: the key-view rows its block row reaches, decoded where they are not
+        yet (a scalar check: the one-request paths are lean)."""
+        if not self._keys_all and not self._rows_ok[view, by]:
+            self._have_rows(np.array([view]), np.array([by]))
+
+    def _one_ready(self, view: int, by: int) -> int:
+        """For one request of a view with references: :meth:`_one_rows`, and the view's map
+        decoded where it is not yet (a scalar check, not :meth:`_maps_of`); returns the map."""
+        self._one_rows(view, by)
+        cell = self.lay.cell[view]
+        if not self._map_done[cell]:                    # (not _maps_of: a scalar check)
+            self._have_maps(np.array([cell]))
+        return cell
+
+    def block(self, view: int, by: int, bx: int, level: int, parsed=None) -> np.ndarray:
+        """One request, lean: the prediction of the block's nt tbs from every reference at once
+        (one remap call), plus at most one parsed stream (``parsed``: the caller parsed it); the
+        same integers as :meth:`blocks`."""
+        B, P, tpb = self.block_size, self.P, self.tpb
+        if self.is_key[view]:
+            self._one_rows(view, by)
+            s = self.key_slot[view]
+            return self.keyplanes[s, by * B:(by + 1) * B, bx * B:(bx + 1) * B].reshape(B * B, P)
+        cell = self._one_ready(view, by)
+        disp, modes = self._map_store.disp, self._map_store.modes
+        loc8 = (by * tpb * self.nbx8 + bx * tpb) + self._tb_off              # (nt,) raster within the block
+        refs = self._block_refs(view) if self.atlas is not None and self.warp_dw is None else None
+        if refs is not None:                                # the remap kernel, every reference at once
+            out = predict_block(self.atlas, refs, disp[cell, loc8], modes[cell, loc8],
+                                self._tb_y + np.float32(by * B), self._tb_x + np.float32(bx * B))
+        else:                  # references in several atlas groups, or key views too large for OpenCV
+            slots, wmode, dpos = self._view_refs(view)
+            ty = by * tpb + self._tby
+            tx = bx * tpb + self._tbx
+            dd = disp[cell, loc8][:, None, None] * dpos[None]          # (nt, R, 2)
+            dy, dx = dd[..., 0], dd[..., 1]
+            if self.warp_dw is not None:               # (a warped view: each reference's offset, per 8×8 block)
+                oy, ox = offsets(np.broadcast_to(self.warp_dw[view], (ty.size,) + self.warp_dw.shape[1:]), ty, tx)
+                dy, dx = dy + oy, dx + ox
+            args = (np.broadcast_to(slots, (ty.size, slots.size)), wmode[modes[cell, loc8]], dy, dx, ty * TB, tx * TB)
+            out = remap_predict(self.atlas, *args) if self.atlas is not None else \
+                predict_tbs(NUMPY, self.kp, (self.Hp, self.Wp), *args)
+        out = self._weigh(out, view)
+        loc = by * self.nbx + bx
+        if level == 0 and self.coded[view, loc]:
+            if parsed is None:
+                parsed = self._parse_one(view, loc)
+            out = self._add_residual(out[None], self._residual_one(view, parsed)[None], parsed.modes)[0]
+        return out.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(B * B, P)
+
+    def _parse_one(self, view: int, loc: int):
+        """:meth:`_parse` of one request's stream (a scalar range: no arrays around it)."""
+        if self._remote:
+            return self._parse(np.array([view]), np.array([loc]))
+        s, e = int(self.start[view, loc]), int(self.end[view, loc])
+        with self._io:
+            if e > s:
+                self.container.verify_span("tx.blocks", s, e)
+        return parse_one(bytes(self.buf[s:e]), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
+                         int(self.is_key[view]))
+
+    def _residual_one(self, view: int, parsed) -> np.ndarray:
+        """:meth:`_residual` of one parsed stream, (nt, 8, 8, P) int32: every 8×8 block of the
+        request transformed at once (a block without coefficients transforms to exact zeros), in
+        about half the numpy calls."""
+        lay, P, nt = self.lay, self.P, self.nt
+        idx = parsed.index
+        if not idx.size:
+            return np.zeros((nt, TB, TB, P), np.int32)
+        g, pos = idx >> 6, idx & 63                                          # tb·P + plane, scan position
+        plane = g % P
+        deq, raster = self._dequantized(parsed.values, lay.step16[0 if self.is_key[view] else 1][plane], plane, pos)
+        X = np.zeros((nt * P, 64))
+        X[g, raster] = deq
+        X = self._inverse_rows(X, self._row_planes)
+        return X.reshape(nt, P, 64).transpose(0, 2, 1).astype(np.int32).reshape(nt, TB, TB, P)
