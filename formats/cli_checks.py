@@ -76,3 +76,10 @@ def is_set(source) -> bool:
     from .registry import set_codec
 
     return set_codec(source) is not None
+
+
+#: what ``decode --view ROW,COL --out FILE`` writes: formats that keep every channel and bit depth
+#: (a JPEG, say, would turn a 16-bit grey + alpha view into 8-bit colour without a word)
+VIEW_SUFFIXES = (".png", ".tif", ".tiff", ".npy")
+#: names that stand for one file, not a folder, as decode's OUTDIR with --view or --block
+FILE_SUFFIXES = VIEW_SUFFIXES + (".exr", ".jpg", ".jpeg", ".bmp", ".webp", ".gif", ".jp2", ".j2k", ".jxl", ".ppm")

@@ -51,7 +51,7 @@ def test_a_lossy_grid_report_measures_the_file_written(tmp_path, capsys, monkeyp
     figures are those of the file decoded a few views at a time (SSIM, YCoCg and per-view PSNR
     included); a lossless encode keeps the encoder's decoded views (its decoder's parse holds
     more than they do)."""
-    import formats.cli as cli
+    import formats.cli_encode as cli
     from formats.lfcfile import open_lfc
     from formats.metrics import quality_report
     from formats.registry import open_decoder
