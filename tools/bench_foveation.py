@@ -41,7 +41,7 @@ import torch
 
 from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
-from lfn_stream.render import MIP_BLEND, size_levels
+from lfn_stream.foveation import MIP_BLEND, size_levels
 from lfn_stream.training import targets_of
 from tools.common import log, machine
 

@@ -12,7 +12,7 @@ from formats.lfcfile import lfc_bytes, open_lfc
 from formats.lightfield import LightField
 from lfn_stream import (CODEC_VERSION, MOVED_KEYS, LfnConfig, LfnRenderer, NestedLFN, OccupancyNet, TrainOptions,
                         to_sections, train)
-from lfn_stream import render as render_module
+from lfn_stream import foveation as foveation_module
 from lfn_stream.evaluate import prefix_bytes
 from lfn_stream.pack import pack_network, step_bytes, step_name, step_offsets, unpack_network
 from lfn_stream.rays import view_rays
@@ -388,7 +388,7 @@ def test_render_lod_mip_draws_each_size_at_its_own_density():
     r = LfnRenderer(open_lfc(_lfc_bytes(_model(), None, lf)), device="cpu")
     lo, hi = r.neuron_range
     per = np.log2(1 / r.cfg.min_scale) / (r.cfg.max_neurons - r.cfg.min_neurons)
-    sharpen = render_module.MIP_SHARPEN              # level j runs the size made for level j − sharpen
+    sharpen = foveation_module.MIP_SHARPEN              # level j runs the size made for level j − sharpen
     assert r.mip_neurons(0) == hi and r.mip_neurons(1) == np.ceil(hi - (1 - sharpen) / per)
     assert r.mip_neurons(3) == np.ceil(hi - (3 - sharpen) / per) and r.mip_neurons(8) == lo
     full = r.render(0, 0, hi, scale=1.0)
@@ -412,7 +412,7 @@ def test_render_lod_mip_draws_each_size_at_its_own_density():
                                atol=1e-5)
     # between two levels: linear over the middle `blend` of the interval, one level elsewhere
     lv1 = r.render_lod_mip(0, 0, np.full((16, 16), hi - 1 / per))
-    off = render_module.MIP_OFFSET               # a pixel at level m reads the lattices around m + off
+    off = foveation_module.MIP_OFFSET               # a pixel at level m reads the lattices around m + off
     at = lambda m, **kw: r.render_lod_mip(0, 0, np.full((16, 16), hi - (m - off) / per), **kw)    # noqa: E731
     assert off <= 0.375 and np.array_equal(at(off), full)      # the fovea: the full-density lattice alone
     assert np.allclose(at(0.25, blend=1.0), 0.75 * full + 0.25 * lv1, atol=1e-5)       # trilinear
@@ -522,7 +522,7 @@ def test_native_render_samples_the_network_at_its_own_scale(tmp_path):
 def test_dither_sizes_mix_neighbouring_sizes_in_proportion():
     """Dithered sizes take only the two sizes around each value, keep a constant field's mean
     (to the threshold grid's resolution) and, over frames, each pixel's own value."""
-    from lfn_stream.render import dither_sizes, dither_threshold
+    from lfn_stream.foveation import dither_sizes, dither_threshold
 
     sizes = np.array([16.0, 32.0, 64.0, 128.0])
     t = dither_threshold(64, 64)
@@ -543,7 +543,7 @@ def test_plan_passes_is_the_cheapest_grouping():
     """Groups of contiguous pass widths of least Σ rays·width², checked by brute force."""
     import itertools
 
-    from lfn_stream.render import plan_passes
+    from lfn_stream.foveation import plan_passes
 
     rng = np.random.default_rng(0)
 
