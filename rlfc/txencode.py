@@ -220,7 +220,7 @@ class TxEncoder(RdoQuantizer, FilePacker):
         estimated warps take away: ``costs`` (the estimate's, with the warps, (n_maps, modes,
         nloc8)) against the same maps and modes sampled without them. Recorded in
         ``warp_report`` as ``error_drop``."""
-        from .txestimate import Estimator
+        from .txcosts import Estimator
 
         plain = Estimator(luma, replace(self.s, warp=None), list(self.s.keys)).costs_maps(self.disp, self.runner)
         pick = self.modes[:, None, :]

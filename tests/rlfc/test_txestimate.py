@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import formats.parallel as fp
-from rlfc import txestimate
+from rlfc import txcosts, txestimate
 from rlfc.txstructure import build
 
 
@@ -21,9 +21,9 @@ def _warp(img, dy, dx):
 def test_shift_equals_warp(dy, dx):
     img = np.random.default_rng(3).random((16, 40), dtype=np.float32) * 255
     want = _warp(img, float(dy), float(dx))
-    assert np.array_equal(txestimate._shift(img, float(dy), float(dx)), want)
+    assert np.array_equal(txcosts._shift(img, float(dy), float(dx)), want)
     out = np.full_like(img, np.nan)                   # (the estimator's reused buffer)
-    assert txestimate._shift(img, float(dy), float(dx), out) is out and np.array_equal(out, want)
+    assert txcosts._shift(img, float(dy), float(dx), out) is out and np.array_equal(out, want)
 
 
 def test_threads_give_the_serial_maps(monkeypatch):
@@ -98,7 +98,7 @@ def test_the_estimates_costs_are_those_the_repricing_would_evaluate():
     luma, s = _noisy_shifted(), build(5, 5, 2)
     base, disp, modes, full = txestimate.estimate_maps(luma, s, max_disparity=8, side_lambda=0.5, with_costs=True)
     assert (disp != base[None, :]).sum() > 20                    # (blocks moved off the shared map)
-    est = txestimate.Estimator(luma, s, list(s.keys))
+    est = txcosts.Estimator(luma, s, list(s.keys))
     assert np.array_equal(full, est.costs_maps(disp))
     for lam in (2.0, 50.0):
         a = txestimate.reprice_maps_both(luma, s, base, disp, side_lambda=0.5, correction_lambda=lam)
@@ -117,7 +117,7 @@ def test_integer_luma_gives_the_costs_of_its_float32_copy(monkeypatch, dtype, sc
     luma = (_noisy_shifted(seed=11).astype(np.int64) * scale).astype(dtype)
     s = build(5, 5, 2)
     as_float = luma.astype(np.float32)
-    ints, floats = txestimate.Estimator(luma, s, list(s.keys)), txestimate.Estimator(as_float, s, list(s.keys))
+    ints, floats = txcosts.Estimator(luma, s, list(s.keys)), txcosts.Estimator(as_float, s, list(s.keys))
     ds = [-3.0, 0.0, 2.0]
     for a, b in zip(ints.costs_global_many(ds), floats.costs_global_many(ds)):
         assert np.array_equal(a, b)
@@ -125,15 +125,15 @@ def test_integer_luma_gives_the_costs_of_its_float32_copy(monkeypatch, dtype, sc
     want = floats.costs_maps(d16)
     assert np.array_equal(ints.costs_maps(d16), want)
     assert ints._refs32 and all(a.dtype == np.float32 for a in ints._refs32.values())   # (kept once)
-    monkeypatch.setattr(txestimate, "REF_FLOAT_BYTES", 0)
-    fresh = txestimate.Estimator(luma, s, list(s.keys))
+    monkeypatch.setattr(txcosts, "REF_FLOAT_BYTES", 0)
+    fresh = txcosts.Estimator(luma, s, list(s.keys))
     assert np.array_equal(fresh.costs_maps(d16), want) and fresh._refs32 == {}
     for n in (0, 1, 3):               # sampling arrays kept for none, one or a few view offsets
-        monkeypatch.setattr(txestimate, "OFFSET_ARRAYS", n)
-        assert np.array_equal(txestimate.Estimator(luma, s, list(s.keys)).costs_maps(d16), want)
-    monkeypatch.setattr(txestimate, "OFFSET_ARRAYS", 8)
-    monkeypatch.setattr(txestimate, "OFFSET_BYTES", 2 * 4 * luma[0].size)      # (a byte budget of two)
-    assert np.array_equal(txestimate.Estimator(luma, s, list(s.keys)).costs_maps(d16), want)
+        monkeypatch.setattr(txcosts, "OFFSET_ARRAYS", n)
+        assert np.array_equal(txcosts.Estimator(luma, s, list(s.keys)).costs_maps(d16), want)
+    monkeypatch.setattr(txcosts, "OFFSET_ARRAYS", 8)
+    monkeypatch.setattr(txcosts, "OFFSET_BYTES", 2 * 4 * luma[0].size)      # (a byte budget of two)
+    assert np.array_equal(txcosts.Estimator(luma, s, list(s.keys)).costs_maps(d16), want)
     assert np.array_equal(txestimate.estimate_maps(luma, s, max_disparity=8)[1],
                           txestimate.estimate_maps(as_float, s, max_disparity=8)[1])
 
@@ -145,6 +145,6 @@ def test_fractional_global_shifts_take_the_float_path():
     luma, s = _noisy_shifted(seed=12), build(5, 5, 2)
     from dataclasses import replace
     s = replace(s, positions=s.positions * 1.5)
-    a = txestimate.Estimator(luma, s, list(s.keys)).costs_global_many([1.0])[0]
-    b = txestimate.Estimator(luma.astype(np.float32), s, list(s.keys)).costs_global_many([1.0])[0]
+    a = txcosts.Estimator(luma, s, list(s.keys)).costs_global_many([1.0])[0]
+    b = txcosts.Estimator(luma.astype(np.float32), s, list(s.keys)).costs_global_many([1.0])[0]
     assert np.array_equal(a, b)
