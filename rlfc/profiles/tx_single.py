@@ -11,8 +11,8 @@ from ..kernels import dequantize
 from ..transform import COEF_MAX, ZIGZAG
 from ..txpredict import TB, predict_tbs
 from ..txparse import parse_one
-from ..txsample import (block_pixel_refs, block_refs, predict as remap_predict, predict_block,
-                        predict_block_pixels)
+from ..txsample import predict as remap_predict
+from ..txsample_block import block_pixel_refs, block_refs, predict_block, predict_block_pixels
 from ..txsyntax import MODE_INTRA
 from ..txwarp import offsets, view_offsets
 from ..xp import NUMPY
@@ -39,7 +39,7 @@ class SingleRequests:
         return self.ref_slots[v], self.wmode[v], self.ref_dpos[v]
 
     def _block_refs(self, v: int):
-        """:func:`rlfc.txsample.block_refs` of view v (cached; None where its references lie in
+        """:func:`rlfc.txsample_block.block_refs` of view v (cached; None where its references lie in
         more than one atlas group)."""
         got = self._blockref_cache.get(v, False)
         if got is False:
@@ -49,7 +49,7 @@ class SingleRequests:
 
     def block_pixels(self, view: int, by: int, bx: int, level: int) -> np.ndarray | None:
         """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
-        one atlas group: :func:`rlfc.txsample.predict_block_pixels`, the same pixels as
+        one atlas group: :func:`rlfc.txsample_block.predict_block_pixels`, the same pixels as
         :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
         (its stream parsed by :func:`rlfc.txparse.parse_one`) is added there too, unless a tb
         of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
@@ -97,7 +97,7 @@ class SingleRequests:
 
     def _residual_rows(self, parsed) -> np.ndarray:
         """:meth:`_residual_one` of a stream of a view with references laid out as
-        :func:`rlfc.txsample.predict_block_pixels` adds it: (nt·64, C) in the atlas's float type
+        :func:`rlfc.txsample_block.predict_block_pixels` adds it: (nt·64, C) in the atlas's float type
         (C its channels; 0 past the P planes), 8×8 blocks and their samples in raster order.
         Values past 2^24 may round in float32; the sum with the prediction is then past the
         planes' bounds either way and clips alike."""
@@ -122,7 +122,7 @@ class SingleRequests:
         return got
 
     def _pixel_refs(self, view: int):
-        """:func:`rlfc.txsample.block_pixel_refs` of a view (cached; None where its references
+        """:func:`rlfc.txsample_block.block_pixel_refs` of a view (cached; None where its references
         lie in more than one atlas group)."""
         prefs = self._pixref_cache.get(view, False)
         if prefs is False:

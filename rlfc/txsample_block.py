@@ -1,0 +1,210 @@
+"""One random-access block predicted from its references through OpenCV's remap, in as few numpy
+calls as the same integers allow (:func:`predict_block`: planes; :func:`predict_block_pixels`:
+pixels, the YCoCg-R inverse folded in), with the per-view constants they read
+(:func:`block_refs`, :func:`block_pixel_refs`). The same integers as :func:`rlfc.txsample.predict`
+(tested); :mod:`rlfc.profiles.tx_single` calls them.
+"""
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+
+from .txpredict import TB, W_BITS
+from .txsample import _F16, KeyAtlas, _one_row, _sample_blend
+
+
+def block_refs(atlas: KeyAtlas, slots: np.ndarray, weights_by_mode: np.ndarray, dpos: np.ndarray):
+    """Per-view constants of :func:`predict_block`, or None where the view's references lie in
+    more than one atlas group (then :func:`predict` serves the view).
+
+    Args:
+        slots: (R,) key slots of the view's references; weights_by_mode: (R + 1, R) blend
+            weights of each 8×8 block mode (:func:`rlfc.txpredict.mode_weights`); dpos: (R, 2)
+            position offsets (displacement = disparity × offset, in 1/16 pixel).
+
+    Returns:
+        (group image, (1, R, 1, 1) float32 first row of each reference in it, (R,) float32 and
+        (R,) float32 offsets in pixels per unit of disparity, (R + 1, 1, R) weights in the
+        atlas's float type).
+    """
+    g, within = np.divmod(np.asarray(slots, np.int64), atlas.per_group)
+    if g.size == 0 or (g != g[0]).any():
+        return None
+    src = atlas.groups[int(g[0])]
+    return (src, (within * atlas.hp).astype(np.float32).reshape(1, -1, 1, 1),
+            (dpos[:, 0] * _F16).astype(np.float32), (dpos[:, 1] * _F16).astype(np.float32),
+            np.asarray(weights_by_mode, src.dtype)[:, None, :])
+
+
+
+def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
+    """:func:`predict` of the few 8×8 blocks of one view that one random-access request
+    needs, in about half the numpy calls of the general path (calls, not pixels, cost here).
+    The coordinates are the same float32 values (``y0 + d·offset/16``: integers and sixteenths,
+    exact), so the integers are those of :func:`predict`.
+
+    Args:
+        refs: :func:`block_refs` of the view (not None). disp: (M,) disparity of each 8×8
+            block; modes: (M,) their modes; y0, x0: (M,) float32 pixel origins.
+
+    Returns:
+        (M, 8, 8, P) int32.
+    """
+    src, rows0, dpy, dpx, wm = refs
+    d = np.asarray(disp).astype(np.float32)[:, None]                       # (M, 1)
+    Y = d * dpy
+    Y += y0[:, None]
+    X = d * dpx
+    X += x0[:, None]
+    return _sample_blend(atlas, src, Y, X, rows0, wm[modes])
+
+
+@functools.lru_cache(maxsize=32)
+def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
+    """(2C, P) matrix M with ``[planes, floor(planes / 2)] @ M`` = the YCoCg-R inverse of
+    :func:`formats.pixels.inverse_int` (R, G, B; alpha and grey planes pass through): its
+    ``>> 1`` steps are the floor halves, the rest is sums and differences, exact on integers in
+    the float type. C: the atlas's channels (a fourth, unused one for three planes)."""
+    M = np.zeros((2 * C, P), ftype)
+    if P < 3:
+        M[np.arange(P), np.arange(P)] = 1
+        return M
+    y, co, cg, co_h, cg_h = 0, 1, 2, C + 1, C + 2
+    M[[y, co, co_h, cg_h], 0] = [1, 1, -1, -1]            # r = b + co
+    M[[y, cg, cg_h], 1] = [1, 1, -1]                      # g = cg + t, t = y - (cg >> 1)
+    M[[y, co_h, cg_h], 2] = [1, -1, -1]                   # b = t - (co >> 1)
+    if P == 4:
+        M[3, 3] = 1
+    M.setflags(write=False)                               # (cached: one per layout)
+    return M
+
+
+@functools.lru_cache(maxsize=32)
+def _window_grid(R: int, tpb: int) -> tuple:
+    """The part of :func:`block_pixel_refs` every view of R references shares (read-only): per
+    (reference, 8×8 block) pair, reference-major, the window's pixel rows and columns within the
+    block (R·tpb², 64) float32 and the pair's 8×8 block (R·tpb²,)."""
+    nt = tpb * tpb
+    e = np.arange(TB * TB, dtype=np.float32)
+    t = np.arange(nt)
+    gy = np.tile((t // tpb * TB).astype(np.float32), R)[:, None] + (e // TB)[None, :]    # (R·nt, 64)
+    gx = np.tile((t % tpb * TB).astype(np.float32), R)[:, None] + (e % TB)[None, :]
+    rep = np.tile(t, R)
+    for a in (gy, gx, rep):
+        a.setflags(write=False)
+    return gy, gx, rep
+
+
+def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None) -> tuple:
+    """Per-view constants of :func:`predict_block_pixels`, from :func:`block_refs`' tuple, for
+    blocks of tpb × tpb 8×8 blocks (raster order within the block): per (reference, 8×8 block)
+    pair (``R·nt`` rows, reference-major) the window's pixel grid (8×8 positions, flat: (2, R·nt,
+    64) rows in the atlas, its key view's first row added, and columns), the offsets per unit of
+    disparity (2, R·nt) and the rows' bounds in the atlas (the key view's first and last rows,
+    each (R·nt, 1): the rows' clamp); the blend's weights per mode over 64, the two halves of
+    :func:`pixel_matrix` (planes, floor halves); and the view's weighted prediction, where
+    ``wp`` (P, 2) gives one: its gains, offsets and the planes' bounds ``lo``, ``hi`` (P,) in
+    the atlas's float type over its C channels, each tiled to (nt·64, C) (else None)."""
+    src, rows0, dpy, dpx, wm = refs
+    R, nt = dpy.size, tpb * tpb
+    gy, gx, rep = _window_grid(R, tpb)
+    wpf = None
+    if wp is not None:
+        ft, P = atlas.ftype, atlas.P
+        g, o = np.full(atlas.C, 64, ft), np.zeros(atlas.C, ft)
+        lw, hg = np.full(atlas.C, -np.inf, ft), np.full(atlas.C, np.inf, ft)
+        g[:P], o[:P], lw[:P], hg[:P] = wp[:, 0], wp[:, 1], lo, hi
+        # tiled over a block's samples (nt·64, C): same-shape operands (the C values broadcast
+        # along the last axis make numpy's inner loops C elements long: 4x the time, measured)
+        wpf = tuple(np.tile(a, (nt * TB * TB, 1)) for a in (g, o, lw, hg))
+    M = pixel_matrix(atlas.P, atlas.C, atlas.ftype)
+    r0 = np.repeat(rows0.reshape(R), nt)[:, None]                          # (R·nt, 1) first rows in the atlas
+    grid = np.stack([gy + r0, gx])                                         # (2, R·nt, 64) rows (in the atlas), columns
+    dp = np.stack([np.repeat(dpy, nt), np.repeat(dpx, nt)])                # (2, R·nt)
+    return (src, grid, dp, r0, r0 + np.float32(atlas.hp - 1), rep, wm / atlas.ftype(1 << W_BITS), M[:atlas.C],
+            M[atlas.C:], wpf)
+
+
+def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
+                         res=None, bounds=None, warp=None) -> np.ndarray:
+    """The pixels of one random-access block predicted from its references (and a coded one's
+    residual added, ``res``): the same values as :func:`predict_block` (and the residual added
+    and clipped) followed by :func:`formats.pixels.from_planes`, in fewer numpy calls (a single
+    request costs calls, not pixels).
+
+    The sampling positions are the same exact values as :func:`predict_block`'s, summed in
+    another order (disparity × offset + block origin, + the window's pixel grid; integers and
+    sixteenths, exact in float32 wherever they fall inside the image, and clamped alike where
+    they do not). Columns are not clamped: the remap's replicated border gives the clamped
+    coordinate's sample exactly, as rows clamped to their key view do in the stacked atlas. The
+    blend's weights are divided by 64 (exact: each product and sum has at most 24 significant
+    bits), so ``floor(x + 0.5)`` is its rounded shift; the YCoCg-R inverse is one product with
+    :func:`pixel_matrix` of the planes and their floor halves.
+
+    A coded block (``res``) adds its residual to the prediction and clips the sum to the planes'
+    bounds before the YCoCg-R inverse, as :meth:`rlfc.profiles.tx.TxDecoder.block` does in
+    integers. Exact: the prediction lies within the bounds (|bound| < 2^18), so a residual
+    within ±(hi − lo) sums exactly, and a larger one (rounded or not: float rounding is
+    monotone, the bounds are exact) puts the sum past the same bound.
+
+    Args:
+        prefs: :func:`block_pixel_refs` of the view; d: (nt,) float32 disparities of the
+            block's 8×8 blocks (raster order) and ``modes`` (nt,) their modes; by_px, bx_px:
+            the block's pixel origin; tpb: 8×8 blocks per block side; peak (a number of the
+            atlas's float type), dtype: the pixels'.
+        res: None (predicted only), or (nt·64, C) residual samples in the atlas's float type
+            (0 past the P planes), 8×8 blocks and their samples in raster order; bounds: then
+            the planes' (lo, hi) in that type (±inf past the P planes), each (C,) or tiled to
+            (nt·64, C) (faster: no broadcast along the last axis).
+        warp: None, or the (y, x) offsets in pixels (each (R·nt,) float32 sixteenths,
+            reference-major as the pairs) of a view with per-view warps (:mod:`rlfc.txwarp`).
+
+    Returns:
+        (8·tpb, 8·tpb, P) pixels of ``dtype``.
+    """
+    src, grid, dp, lo, hi, rep, w64, M1, M2, wpf = prefs
+    C, P = atlas.C, atlas.P
+    nt = d.size
+    t = d[rep] * dp                                                       # (2, R·nt) displacement per pair
+    t[0] += by_px
+    t[1] += bx_px
+    if warp is not None:
+        t[0] += warp[0]
+        t[1] += warp[1]
+    pos = t[:, :, None] + grid                                            # (2, R·nt, 64) rows in the atlas, columns
+    mr = pos[0]
+    np.minimum(np.maximum(mr, lo, out=mr), hi, out=mr)                  # rows within their key view (ufuncs)
+    smp = cv2.remap(src, _one_row(pos[1]), _one_row(mr), cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    np.floor(smp, out=smp)                                                # atlas + 0.5: rounded
+    R = grid.shape[1] // nt
+    ml = modes.tolist()
+    if ml.count(ml[0]) == nt:                                             # one mode (most blocks): one product
+        acc = np.dot(w64[ml[0]], smp.reshape(R, -1)).reshape(nt * TB * TB, C)
+    else:                                                                 # (nt, 1, R) @ (nt, R, 64·C)
+        acc = np.matmul(w64[modes], smp.reshape(R, nt, -1).transpose(1, 0, 2)).reshape(nt * TB * TB, C)
+    acc += 0.5
+    np.floor(acc, out=acc)                                                # (Σ w·p + 32) >> 6
+    if wpf is not None:                   # weighted prediction: ((p·g + 32) >> 6) + o, clipped (exact:
+        g, o, lw, hg = wpf                # products below 2^23, offsets below 2^18)
+        acc *= g
+        acc += 32
+        acc *= 1 / 64
+        np.floor(acc, out=acc)
+        acc += o
+        np.minimum(np.maximum(acc, lw, out=acc), hg, out=acc)
+    if res is not None:                   # a coded block: + its residual, clipped to the planes' bounds
+        acc += res
+        np.minimum(np.maximum(acc, bounds[0], out=acc), bounds[1], out=acc)
+    if P >= 3:
+        half = acc * 0.5
+        np.floor(half, out=half)                                          # the planes >> 1
+        px = np.dot(acc, M1)
+        px += np.dot(half, M2)
+    else:
+        px = acc[:, :P]
+    np.minimum(np.maximum(px, 0, out=px), peak, out=px)
+    out = np.empty((tpb, TB, tpb, TB, P), dtype)
+    np.copyto(out, px.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4), casting="unsafe")
+    return out.reshape(tpb * TB, tpb * TB, P)
