@@ -12,7 +12,9 @@ fresh process per file (and per code version with ``--against``: the same measur
 ``PYTHONPATH=OLD_CHECKOUT``, rounds interleaved, so the ratios hold on a noisy box) measures:
 
 - open: seconds to open the file and decode every key view (since 2026-11-24 key views are
-  decoded by block rows on demand; ``first block``: a fresh open plus one random block);
+  decoded by block rows on demand; ``first block``: a fresh open plus one random block, after
+  the process has imported every RLFC profile's modules, whose time is reported beside it: a
+  process's first open imports them, ~0.1 s, more where Python compiles them from source);
 - batched: one ``decode_blocks`` call of ``--batch`` random (view, block) requests over every
   view ("cold": the maps it touches are decoded in it), then the same call again ("warm": a
   renderer's steady state), µs per block and Mpix/s, with each thread count of ``--threads`` (``threads=`` of
@@ -79,11 +81,22 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
     with open(peer, "rb") as fh:
         p = pickle.load(fh)
     rng = np.random.default_rng(seed + 1)
+    # the profiles' modules (and OpenCV) load on a process's first open: timed apart, once, so
+    # that "first block" is the file's own work (a renderer imports them at its start)
+    t = time.perf_counter()
+    try:
+        from rlfc.profiles import available_profiles, get_profile
+
+        for pid in available_profiles():
+            get_profile(pid)
+    except ImportError:                         # (an older checkout without the registry)
+        pass
+    imports_s = time.perf_counter() - t
     t = time.perf_counter()
     d = RlfcDecoder(open_lfc(path))            # a fresh open, then one random block
     d.decode_block(int(rng.integers(d.rows)), int(rng.integers(d.cols)), int(rng.integers(d.nby)),
                    int(rng.integers(d.nbx)))
-    r = {"first_block_s": time.perf_counter() - t}
+    r = {"first_block_s": time.perf_counter() - t, "imports_s": imports_s}
     del d
     t = time.perf_counter()
     d = RlfcDecoder(open_lfc(path))
@@ -224,6 +237,7 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
     med = lambda k: statistics.median(x[k] for x in rounds)       # noqa: E731
     lat = np.concatenate([x["single_us"] for x in rounds])
     s = {"block_size": B, "open_s": med("open_s"), "first_block_ms": med("first_block_s") * 1e3, "view_ms": med("view_s") * 1e3,
+         "imports_ms": med("imports_s") * 1e3 if all("imports_s" in x for x in rounds) else float("nan"),
          "j2k_view_ms": med("j2k_view_s") * 1e3,
          "gather_mpix": B * B / med("gather_us"),
          "single_p50_us": float(np.percentile(lat, 50)), "single_p90_us": float(np.percentile(lat, 90)),
@@ -254,14 +268,15 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
 def _table(res: dict, label: str, threads: list[int]) -> list[str]:
     th = [t for t in threads if any(f"batch_mpix_t{t}" in r[label] for r in res.values())]
     ta = [t for t in threads if any(f"all_s_t{t}" in r[label] for r in res.values())]
-    head = ["grid", "open s", "first block ms"] + [f"batched Mpix/s ({t} thr) cold / warm" for t in th] + [
+    head = ["grid", "open s", "first block ms (the process's imports before it, ms)"] + [
+        f"batched Mpix/s ({t} thr) cold / warm" for t in th] + [
         "gather limit Mpix/s", "single p50/p90/p99 µs", "single warm p50/p99 µs", "view ms (J2K ms, ×)",
         "views in sequence ms (J2K ms, ×)"] + [
         f"all s, {t} thr (J2K s, ×)" for t in ta]
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, r in res.items():
         s = r[label]
-        row = [name, f"{s['open_s']:.2f}", f"{s['first_block_ms']:.0f}"] + [
+        row = [name, f"{s['open_s']:.2f}", f"{s['first_block_ms']:.0f} ({s.get('imports_ms', float('nan')):.0f})"] + [
             f"{s.get(f'batch_mpix_t{t}', float('nan')):.1f} / {s.get(f'batch_warm_mpix_t{t}', float('nan')):.1f}"
             for t in th] + [
             f"{s['gather_mpix']:.0f}", f"{s['single_p50_us']:.0f} / {s['single_p90_us']:.0f} / {s['single_p99_us']:.0f}",
