@@ -29,7 +29,8 @@ from ..txpredict import TB, mode_weights, planar, predict_tbs, weigh
 from ..txmaps import LazyMaps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, predict as remap_predict, predict_view
-from ..txparse import concat_parsed, parse_lanes, parse_one
+from ..txparse import concat_parsed, parse_lanes
+from ..txparse_one import parse_one
 from ..txsyntax import MODE_INTRA, plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder

@@ -10,7 +10,7 @@ from formats.pixels import from_planes
 from ..kernels import dequantize
 from ..transform import COEF_MAX, ZIGZAG
 from ..txpredict import TB, predict_tbs
-from ..txparse import parse_one
+from ..txparse_one import parse_one
 from ..txsample import predict as remap_predict
 from ..txsample_block import block_pixel_refs, block_refs, predict_block, predict_block_pixels
 from ..txsyntax import MODE_INTRA
@@ -51,7 +51,7 @@ class SingleRequests:
         """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
         one atlas group: :func:`rlfc.txsample_block.predict_block_pixels`, the same pixels as
         :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
-        (its stream parsed by :func:`rlfc.txparse.parse_one`) is added there too, unless a tb
+        (its stream parsed by :func:`rlfc.txparse_one.parse_one`) is added there too, unless a tb
         of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
         (the caller takes :meth:`block`)."""
         if self.is_key[view] or self.atlas is None:

@@ -1,12 +1,14 @@
 """tx block syntax: symbols → streams → lanes parser == reference parser == the input, and
 the compact tables round-trip; malformed streams raise FormatError."""
+import threading
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from formats.errors import FormatError
-from rlfc import txparse as px, txsyntax as tx
+from rlfc import txparse as px, txparse_one as p1, txsyntax as tx
 
 
 def _random_blocks(rng, S, nt, P, density, big):
@@ -58,7 +60,7 @@ def test_streams_parse_back_exactly(seed, S, nt, P, density, big, tail):
     assert (got.modes == modes).all() and (got.levels == levels).all()
     ones = []
     for i in range(S):
-        one = px.parse_one(streams[i], tables, nt, pcs, int(kind[i]), int(key[i]))
+        one = p1.parse_one(streams[i], tables, nt, pcs, int(kind[i]), int(key[i]))
         assert (one.modes[0] == modes[i]).all() and (one.levels[0] == levels[i]).all()
         ones.append(one)
     cat = px.concat_parsed(ones)                      # the scalar path of a few streams, joined
@@ -98,7 +100,7 @@ def test_malformed_streams_raise(tail, monkeypatch):
             px.parse_lanes(buf, starts[:-1], starts[1:], tables, 4, pcs, kind, key)
         with pytest.raises(FormatError):
             for b in bad:
-                px.parse_one(b, tables, 4, pcs, 0, 0)
+                p1.parse_one(b, tables, 4, pcs, 0, 0)
     with pytest.raises(FormatError):
         tx.tables_from_bytes(b"\x78\x9c\x03\x00\x00\x00\x00\x01", "x")
 
@@ -125,7 +127,7 @@ def test_one_stream_parser_and_lanes_agree_on_damaged_streams(seed, nt, P, big, 
             b += bytes(rng.integers(0, 256, hits).astype(np.uint8))
         b = bytes(b)
         try:
-            one = px.parse_one(b, tables, nt, pcs, int(kind[i]), int(key[i]))
+            one = p1.parse_one(b, tables, nt, pcs, int(kind[i]), int(key[i]))
         except FormatError:
             one = None
         buf, starts = _packed([b])
@@ -322,3 +324,30 @@ def test_taking_lanes_gives_their_coefficients(seed, S, nt, P, n):
     for got in (p.take(lanes), p.take(lanes, b)):
         assert got.P == P and (got.modes == p.modes[lanes]).all()
         assert (got.levels == levels[lanes]).all()
+
+
+def test_the_plain_python_tail_of_a_zero_state_ends():
+    """A damaged stream can bring a lane's rANS state to 0 (its stored state bytes zero). The
+    numpy steps read at most two bytes per symbol; the plain-Python tail that finishes the last
+    lanes read until the state reached RANS_L, and a 0 state fed with the clamped zero byte past
+    the buffer never did (a decoder hung on such a file: found by the damaged-streams test).
+    Now the tail reads at most two bytes per symbol too, the same as the numpy steps: the state
+    stays 0 and the pointer moves two bytes a symbol (the caller's end check refuses the
+    stream)."""
+    from rlfc.txsyntax import CTX_MAG
+    from rlfc.rans import PROB_BITS
+
+    rng = np.random.default_rng(0)
+    modes, levels = _random_blocks(rng, 2, 1, 1, 1.0, False)
+    _, tables = _encode(modes, levels, np.zeros(2, np.int64), np.zeros(2, np.int64), tx.plane_classes(1))
+    n = 3                                                                # symbols of the one lane
+    c1 = np.full(n, CTX_MAG << PROB_BITS, np.uint32)
+    x_all, p_all = np.zeros(1, np.uint32), np.zeros(1, np.int64)
+    buf = np.zeros(4, np.uint8)
+    args = (0, 1, list(range(n)), np.array([n]), c1, np.zeros(n, np.uint32), np.zeros(n, np.uint32),
+            np.zeros(n, bool), np.zeros(n, np.uint32), x_all, p_all, buf, buf.size - 1, tables)
+    run = threading.Thread(target=px._magnitudes_tail, args=args, daemon=True)   # (a hang fails, not blocks)
+    run.start()
+    run.join(30)
+    assert not run.is_alive(), "the tail never ended on a 0 state"
+    assert int(x_all[0]) == 0 and int(p_all[0]) == 2 * n
