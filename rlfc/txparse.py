@@ -291,11 +291,12 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf,
             c = c1l[i] + (g1l[i] if n1 else 0) + (g2l[i] if n2 else 0)
             w = tab[c | (x & _MASK)]
             x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
-            for _ in range(2):             # at most two bytes, as the numpy steps (x >= 8 after a
-                if x >= RANS_L:            # step of a state >= RANS_L; a damaged stream's 0 state
-                    break                  # stays 0 here instead of reading the clamped byte forever)
-                x = (x << 8) | data[p if p < top else top]
-                p += 1
+            if x < RANS_L:                 # at most two bytes, as the numpy steps (x >= 8 after a
+                x = (x << 8) | data[p if p < top else top]   # step of a state >= RANS_L; a damaged
+                p += 1                     # stream's 0 state stays 0 instead of reading forever)
+                if x < RANS_L:
+                    x = (x << 8) | data[p if p < top else top]
+                    p += 1
             out.append((i, w))
             n2, n1 = n1, w >= _MAG_NZ_INT
         x_all[r], p_all[r] = x, p
