@@ -1,9 +1,17 @@
 import os
-from pathlib import Path
 
-import numpy as np
-import pytest
-from hypothesis import settings
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # One thread per worker for the math libraries (read when they load, so before numpy/torch do):
+    # `-n 2` on two cores with each worker's torch and OpenBLAS taking both cores runs 5-10x slower.
+    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("MKL_NUM_THREADS", "1")
+
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import settings  # noqa: E402
 
 # deterministic property tests: the same examples on every run and machine, no example database
 settings.register_profile("lfcodec", derandomize=True, database=None, deadline=None)
