@@ -19,7 +19,8 @@ from .params import flags
 from .txlayout import weighted_views
 from .ratesearch import secant_search
 from .txmaps import maps_bytes
-from .txencode import TxEncoder, _dct_task
+from .txencode import TxEncoder
+from .txj2kview import _dct_task
 from .txmodel import Model, default_counts
 from .txparams import TxParams, params_info
 

@@ -1191,7 +1191,9 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
     assert secs == enc.pack({**res, "trial_counts": None})[1]
     # intra keys coded ahead on threads (posed captures) hand their trial's counts back too
     s16 = enc.steps16(2.5)
-    lv, code, img, tc2 = T._intra_key_task(enc, k, res["thumb16"], s16[0], enc.p.lam * (s16[0, 0] / 16) ** 2,
+    from rlfc.txpass import _intra_key_task
+
+    lv, code, img, tc2 = _intra_key_task(enc, k, res["thumb16"], s16[0], enc.p.lam * (s16[0, 0] / 16) ** 2,
                                            enc.model_of(res), False)
     assert (img is None) == (tc2 is None)
     if img is not None:
