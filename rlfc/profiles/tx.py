@@ -9,7 +9,8 @@ found it worth its bits, one stored stream per B×B block: 8×8 integer-DCT coef
 (HEVC's matrix), rANS-coded with static per-file tables (:mod:`rlfc.txsyntax`). One block
 request = the in-memory key views + at most one stored stream. The decoder's parts: what it
 decodes on first need (maps, key-view block rows: :mod:`rlfc.profiles.tx_lazy`) and its lean
-one-request paths (:mod:`rlfc.profiles.tx_single`).
+one-request paths (:mod:`rlfc.profiles.tx_single`) and its residual path: parsing,
+dequantization, inverse transform (:mod:`rlfc.profiles.tx_residual`).
 
 Levels: 0 = full quality; 1 = prediction only (key views stay full).
 """
@@ -22,35 +23,22 @@ import numpy as np
 from formats.errors import FormatError, UnsupportedError
 from formats.pixels import from_planes
 
-from ..transform import ZIGZAG, inverse_float
 from ..txlayout import MAX_REFS, TxLayout, weighted_views
 from ..txwarp import offsets, pair_params, view_offsets
 from ..txpredict import TB, mode_weights, planar, predict_tbs, weigh
 from ..txmaps import LazyMaps
 from ..txsections import stream_order, unpack_index, unpack_thumbs
 from ..txsample import KeyAtlas, predict as remap_predict, predict_view
-from ..txparse import concat_parsed, parse_lanes
-from ..txparse_one import parse_one
-from ..txsyntax import MODE_INTRA, plane_classes, tables_from_bytes, tables_from_quantized
+from ..txsyntax import plane_classes, tables_from_bytes, tables_from_quantized
 from ..xp import NUMPY
 from .base import Profile, ProfileDecoder
 from .tx_lazy import OnDemand
-from .tx_single import SingleRequests, _dequantize_clipped
+from .tx_residual import Residuals
+from .tx_single import SingleRequests
 
 PAD = 8
 PRED_TBS = 1024         # 8×8 blocks per prediction pass (temporaries stay in cache)
 PARSE_TBS = 16384       # 8×8 blocks per parse (the rANS lanes of all their streams step together)
-#: a batched call's coded requests are parsed ahead of its chunks (:meth:`TxDecoder.preparse`)
-#: in parses of this many streams, where it has at least PREPARSE_MIN: on epfl_iso_chart_1's
-#: 10 862 streams of 20 000 random requests, 1 024 / 2 048 / 4 096 streams a parse took 178 /
-#: 141 / 124 ms (a parse's temporaries: 16 / 29 / 62 MB)
-PREPARSE_LANES = 4096
-PREPARSE_MIN = 1024
-#: streams are parsed one by one (plain Python, ~1.5 µs per byte) rather than as numpy lanes
-#: stepping together (~85 µs per byte of the longest stream, whatever the number of lanes) while
-#: their bytes sum to less than this many times the longest one's (measured on the dense grids'
-#: key rows: one key's 19-27 rows parse 3-9× faster one by one)
-ONE_BY_ONE_RATIO = 48
 GROUP_PIXELS = 1 << 21  # pixels of the views decoded together by decode_views
 SCRATCH_BYTES = 64 << 20   # the largest int32 planes a thread keeps for views() (GROUP_PIXELS' at 4 planes: 32 MiB)
 SECTIONS = ("tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.keyimg", "tx.index", "tx.blocks")
@@ -68,7 +56,7 @@ def plane_limits(planes: int, peak: int) -> tuple[np.ndarray, np.ndarray, np.nda
 
 
 
-class TxDecoder(OnDemand, SingleRequests, ProfileDecoder):
+class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
     """Planes decoder of a ``tx`` file (see :class:`rlfc.profiles.base.ProfileDecoder`)."""
 
     levels = 1
@@ -314,66 +302,6 @@ class TxDecoder(OnDemand, SingleRequests, ProfileDecoder):
         tx = (bx[:, None] * self.tpb + t % self.tpb).reshape(-1)
         return xp.repeat(views, self.nt), ty, tx
 
-    def _residual(self, views, parsed):
-        """(S, nt, 8, 8, P) int32 residuals of parsed streams of ``views``: the nonzero
-        coefficients dequantized where they are, then only the 8×8 blocks that have any are
-        inverse-transformed."""
-        lay, P, nt = self.lay, self.P, self.nt
-        S = views.size
-        res = np.zeros((S * nt, 64, P), np.int32)            # (S, nt, 8, 8, P) as it is returned
-        idx, q = parsed.index, parsed.values
-        if idx.size:
-            blk, pos = idx >> 6, idx & 63                                    # (lane, tb, plane), scan position
-            plane = blk % P
-            deq, raster = self._dequantized(q, lay.step16[np.where(self.is_key[views[blk // (nt * P)]], 0, 1), plane],
-                                            plane, pos)
-            new = np.ones(blk.size, bool)
-            new[1:] = blk[1:] != blk[:-1]
-            ub = blk[new]                                                    # blocks with coefficients
-            X = np.zeros((ub.size, 64), np.float64)
-            X[np.cumsum(new) - 1, raster] = deq
-            X = self._inverse_rows(X, ub % P)
-            res[ub // P, :, ub % P] = X           # (written planes-last: the sum with the prediction
-        return res.reshape(S, nt, TB, TB, P)      # then reads it contiguously, 2x faster than a strided view)
-
-    def _inverse_rows(self, X, plane):
-        """(n, 64) float64 dequantized 8×8 blocks (raster rows) of planes ``plane`` (n,) → their
-        residuals: the inverse transform of the rows of transformed planes, bypassed ones as
-        they are (in place where only some rows are transformed)."""
-        bypass = self.lay.bypass
-        if not bypass.any():
-            return inverse_float(X.reshape(-1, TB, TB)).reshape(-1, 64)
-        tr = ~bypass[plane]
-        if tr.any():
-            X[tr] = inverse_float(X[tr].reshape(-1, TB, TB)).reshape(-1, 64)
-        return X
-
-    def _dequantized(self, values, q16, plane, pos):
-        """(dequantized coefficients clipped to ±COEF_MAX, each one's raster position in its 8×8
-        block: zig-zag for transformed planes, as is for bypassed ones) of nonzero levels
-        ``values`` at scan positions ``pos`` of planes ``plane``, steps ``q16`` (1/16)."""
-        deq = _dequantize_clipped(values, q16)
-        bypass = self.lay.bypass
-        return deq, (np.where(bypass[plane], pos, ZIGZAG[pos]) if bypass.any() else ZIGZAG[pos])
-
-    def _parse(self, views, locs):
-        """Parse the streams of (view, location) pairs that have one."""
-        s, e = self.start[views, locs], self.end[views, locs]
-        buf, s2, e2 = self._streams(s, e)
-        kind = self.lay.intra[views].astype(np.int64)
-        key = self.is_key[views].astype(np.int64)
-        return self._parse_streams(buf, s2, e2, self.nt, kind, key)
-
-    def _parse_streams(self, buf, s2, e2, nt: int, kind, key):
-        """Parsed of streams ``buf[s2[i]:e2[i]]`` of ``nt`` tbs each (one lane per stream): one
-        by one or as lanes, whichever :data:`ONE_BY_ONE_RATIO` says is faster."""
-        n = e2 - s2
-        if n.size and int(n.sum()) < ONE_BY_ONE_RATIO * max(int(n.max()), 1):
-            got = [parse_one(bytes(buf[a:b]), self.tables, nt, self._pcl, int(k), int(y))
-                   for a, b, k, y in zip(s2.tolist(), e2.tolist(), kind.tolist(), key.tolist())]
-            return got[0] if len(got) == 1 else concat_parsed(got)
-        return parse_lanes(buf, s2, e2, self.tables, nt, self.pcs, kind, key, self.container.name)
-
     def _reconstruct(self, views, locs, level, pred=None, parsed=None, have=None, pixels=None):
         """(M, B, B, P) int32 planes of block requests (views with references, or ``pred`` given
         as (M, nt, 8, 8, P)); ``parsed``: the syntax of the requests ``have`` (default: of every
@@ -402,19 +330,6 @@ class TxDecoder(OnDemand, SingleRequests, ProfileDecoder):
             out = from_planes(out, pixels)
         # tbs → blocks: (M, tpb, tpb, 8, 8, P) → (M, B, B, P)
         return out.reshape(M, self.tpb, self.tpb, TB, TB, P).transpose(0, 1, 3, 2, 4, 5).reshape(M, B, B, P)
-
-    def _add_residual(self, pred, res, modes):
-        """Clipped prediction (intra tbs: the flat value) + residual, (S, nt, 8, 8, P) int32.
-        Predictions need no clipping: they blend clipped key views with weights summing to 64."""
-        base = np.add(pred, res, dtype=np.int32)
-        intra = modes == MODE_INTRA                                   # (S, nt): flat value + residual
-        if intra.any():
-            base[intra] = (res[intra] + self.flat.astype(np.int32)).astype(np.int32)
-        # clipped per plane with the bounds tiled over a tb (8·8·P): numpy's inner loop then runs
-        # 64·P samples, not P (the (P,) bounds broadcast against the last axis: 7x slower, measured)
-        flat = base.reshape(-1, TB * TB * self.P)
-        np.minimum(np.maximum(flat, self.lo_tb, out=flat), self.hi_tb, out=flat)   # ufuncs: np.clip costs µs
-        return base
 
     def _view_planes(self, v: int, level: int, parsed=None, out=None) -> np.ndarray:
         """(Hp, Wp, P) int32 planes of a view with references: its 8×8 blocks predicted in
@@ -483,21 +398,6 @@ class TxDecoder(OnDemand, SingleRequests, ProfileDecoder):
         first = (self.key_slot[views] * self.Hp + by * B) * self.Wp + bx * B           # (M,) top-left pixel
         idx = (first[:, None] + np.arange(B) * self.Wp)[:, :, None] + np.arange(B)     # (M, B, B)
         return self.keyplanes.reshape(-1, self.P).take(idx.reshape(-1), axis=0).reshape(views.size, B, B, self.P)
-
-    def preparse(self, views, by, bx, level):
-        """For a batched call (``views``, ``by``, ``bx`` in the order its chunks take them): its
-        coded requests of views with references, to be parsed :data:`PREPARSE_LANES` streams at
-        a time as its chunks first need them (:class:`ParseAhead`). The rANS lanes of a parse
-        step together, one step per symbol of its longest stream, so fewer and fuller parses
-        cost less than one per chunk (BENCHMARKS.md). None where there are too few to gain (or
-        at a level without residuals)."""
-        if level != 0:
-            return None
-        loc = by * self.nbx + bx
-        have = np.flatnonzero(~self.is_key[views] & self.coded[views, loc])
-        if have.size < PREPARSE_MIN:
-            return None
-        return ParseAhead(self, views[have], loc[have], have, views.size)
 
     #: :meth:`blocks` gives pixels where asked (``pixels=dtype``)
     blocks_to_pixels = True
@@ -598,51 +498,6 @@ class TxDecoder(OnDemand, SingleRequests, ProfileDecoder):
                 "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split,
                 "layout_version": int(lay.version), "weighted_views": int(self._weighted.sum()),
                 "warped_views": 0 if lay.warp is None else int(lay.warp.any(axis=1).sum())}
-
-
-class ParseAhead:
-    """The coded requests of one batched call (streams of views with references), parsed in
-    groups of :data:`PREPARSE_LANES` streams, each group once, by the first chunk that needs it
-    (others that need it wait; chunks on other threads predict meanwhile).
-
-    Args:
-        core: the :class:`TxDecoder`; views, locs: (S,) the coded requests' views and block
-            locations, in the call's order; at: (S,) their places among the call's M requests.
-    """
-
-    def __init__(self, core, views, locs, at, M: int):
-        self.core, self.views, self.locs = core, views, locs
-        self.lane = np.full(M, -1, np.int64)
-        self.lane[at] = np.arange(at.size)
-        n = -(-at.size // PREPARSE_LANES)
-        self.parsed: list = [None] * n                 # per group: (Parsed, its lane bounds)
-        self.locks = [threading.Lock() for _ in range(n)]
-
-    def _group(self, g: int) -> tuple:
-        with self.locks[g]:
-            if self.parsed[g] is None:
-                a, b = g * PREPARSE_LANES, (g + 1) * PREPARSE_LANES
-                p = self.core._parse(self.views[a:b], self.locs[a:b])
-                self.parsed[g] = (p, p.lane_bounds())
-            return self.parsed[g]
-
-    def chunk(self, idx: np.ndarray) -> tuple:
-        """(places within ``idx`` of its coded requests, their Parsed) for the call's requests
-        ``idx`` (ascending, as the decoder's chunks take them; else those streams are parsed
-        on their own)."""
-        lane = self.lane[idx]
-        have = np.flatnonzero(lane >= 0)
-        lane = lane[have]
-        if not lane.size:
-            return have, None
-        if lane.size > 1 and (np.diff(lane) <= 0).any():      # (not in the call's order: parsed as they are)
-            return have, self.core._parse(self.views[lane], self.locs[lane])
-        parts = []
-        for g in range(int(lane[0]) // PREPARSE_LANES, int(lane[-1]) // PREPARSE_LANES + 1):
-            p, bounds = self._group(g)
-            sel = lane[(lane >= g * PREPARSE_LANES) & (lane < (g + 1) * PREPARSE_LANES)]
-            parts.append(p.take(sel - g * PREPARSE_LANES, bounds))
-        return have, parts[0] if len(parts) == 1 else concat_parsed(parts)
 
 
 def pred_inputs(tables, nbx8: int, views, ty, tx):

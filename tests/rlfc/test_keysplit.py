@@ -54,7 +54,7 @@ def test_split_rows_decode_to_the_same_pixels_on_every_path(wide, one_per_row, a
     assert (TorchBlockDecoder(d, "cpu").decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
     # a fresh decoder that parses one key row's streams, one by one (plain Python), the same
     fresh = RlfcDecoder(open_lfc(blob))
-    import rlfc.profiles.tx as T
+    import rlfc.profiles.tx_residual as T
 
     old = T.ONE_BY_ONE_RATIO
     try:
@@ -127,7 +127,7 @@ def test_auto_split_bounds_the_longest_stream_in_magnitude_symbols(wide, monkeyp
     assert enc.key_split(with_row_bytes(2.9 * K.KEY_SEGMENT_BYTES)) == 1  # rows of one stream stay so
 
     # the counts are the lanes the decoder steps through (one stream per block: a lane per block)
-    import rlfc.profiles.tx as P
+    import rlfc.profiles.tx_residual as P
 
     monkeypatch.setattr(P, "ONE_BY_ONE_RATIO", 0)                      # (lanes, however few)
     seen = []

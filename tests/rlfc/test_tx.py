@@ -369,11 +369,12 @@ def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
 @pytest.mark.parametrize("threads", [1, 2])
 def test_batched_calls_parse_their_streams_ahead_in_groups(threads, monkeypatch):
     """A batched call's coded streams are parsed in groups larger than its chunks
-    (:class:`rlfc.profiles.tx.ParseAhead`, each group once, by the first chunk that needs it,
+    (:class:`rlfc.profiles.tx_residual.ParseAhead`, each group once, by the first chunk that needs it,
     on any thread): the same pixels as the whole views, with groups that straddle chunks, on
     one and two threads; requests out of the call's order are parsed on their own."""
     import rlfc.decoder as rd
     import rlfc.profiles.tx as ptx
+    import rlfc.profiles.tx_residual as ptx_res
 
     lf, e, _ = _noisy_grid_encoded({}, amp8=9, seed=3, step8=2.0)
     d, _ = open_encoded(lf, e)
@@ -386,8 +387,8 @@ def test_batched_calls_parse_their_streams_ahead_in_groups(threads, monkeypatch)
     coded = (~core.is_key[views] & core.coded[views, by * d.nbx + bx]).sum()
     assert coded > 200
     monkeypatch.setattr(rd, "DECODE_CHUNK", 37 * B * B)               # chunks of 37 requests
-    monkeypatch.setattr(ptx, "PREPARSE_LANES", 50)                    # groups of 50 streams: several per
-    monkeypatch.setattr(ptx, "PREPARSE_MIN", 10)                      # chunk, and chunks across groups
+    monkeypatch.setattr(ptx_res, "PREPARSE_LANES", 50)                    # groups of 50 streams: several per
+    monkeypatch.setattr(ptx_res, "PREPARSE_MIN", 10)                      # chunk, and chunks across groups
     parses = []
     real = ptx.TxDecoder._parse
     monkeypatch.setattr(ptx.TxDecoder, "_parse", lambda self, v, l: parses.append(v.size) or real(self, v, l))
