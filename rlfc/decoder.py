@@ -186,7 +186,9 @@ class RlfcDecoder(Decoder):
     def decode_views(self, views=None, level: int = 0, planes: bool = False, threads: int | None = None
                      ) -> np.ndarray:
         """Decode whole views (flat indices; None = all) at a progressive level, in the groups
-        the profile asks for (on ``threads`` threads; default: the decoder's ``threads``).
+        the profile asks for (on ``threads`` threads; default: the decoder's ``threads``); views
+        the profile decodes straight to pixels (``image_views``: whole JPEG 2000 images no view
+        is predicted from, e.g. a posed capture's) skip the planes unless ``planes`` is asked.
 
         Returns:
             (n, H, W, C) pixels (or int32 planes with ``planes=True``), cropped to the image.
@@ -200,12 +202,27 @@ class RlfcDecoder(Decoder):
         self.file.container.check_unchanged()
         H, W = self.height, self.width
         out = np.empty((views.size, H, W, self.P if planes else self.channels), np.int32 if planes else self.dtype)
-        groups = self.core.view_groups(views)          # views whose streams are parsed together
+        # views the profile decodes straight to pixels (whole images no view is predicted from,
+        # e.g. a posed capture's JPEG 2000 views): each on its own, OpenJPEG's threads with it alone
+        direct = getattr(self.core, "image_views", None)
+        img = np.flatnonzero(direct(views)) if direct is not None and not planes else np.zeros(0, np.int64)
+        if img.size:
+            def one(j: int) -> None:
+                out[j] = self.core.image_pixels(int(views[j]), threads if img.size == 1 else 1)[:H, :W]
+
+            self._run(one, img.tolist(), threads)
+        rest = np.setdiff1d(np.arange(views.size), img) if img.size else np.arange(views.size)
+        if not rest.size:
+            return out
+        groups = self.core.view_groups(views[rest])    # views whose streams are parsed together
         starts = np.concatenate([[0], np.cumsum([g.size for g in groups])])
 
         def run(i: int) -> None:
             p = self.core.views(groups[i], level)[:, :H, :W]
-            out[starts[i]:starts[i + 1]] = p if planes else from_planes(p, self.dtype)
+            at = rest[starts[i]:starts[i + 1]]
+            if at.size == at[-1] - at[0] + 1:          # (consecutive: a slice, no fancy-index copy)
+                at = slice(int(at[0]), int(at[-1]) + 1)
+            out[at] = p if planes else from_planes(p, self.dtype)
 
         self._run(run, range(len(groups)), threads)
         return out

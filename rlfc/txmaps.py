@@ -177,9 +177,10 @@ def unpack_maps(data, n_maps: int, shape: tuple[int, int], n_modes: int, what: s
 class LazyMaps:
     """The maps of a ``tx.maps`` section, each decoded when first asked for.
 
-    Opening reads the section's lengths and tables and decodes the shared map (one stream);
-    :meth:`need` decodes the per-map streams asked for (a request touches the maps of its views
-    only: a first frame one to five of a grid's dozens). ``disp`` and ``modes`` (n_maps, nloc)
+    Opening reads the section's lengths and tables; :meth:`need` decodes the shared map (one
+    stream) with the first map asked for, and the per-map streams asked for (a request touches
+    the maps of its views only: a first frame one to five of a grid's dozens; a posed capture's
+    views have none). ``disp`` and ``modes`` (n_maps, nloc)
     int64 hold the decoded maps' rows (zeros elsewhere); ``done`` (n_maps,) bool says which.
     A map's stream is checked when it is decoded (its symbols, its end, its disparities within
     ±2^20 and its modes at most ``max_mode[m]``): a damaged map raises
@@ -206,8 +207,9 @@ class LazyMaps:
         pos = head + int(lens[0])
         tables = tables_from_quantized(tables_from_bytes_n(raw[head:pos], _n_ctx(ver), ALPHABET, what), ver)
         self.tabs = scalar_tables(tables)
-        # the shared map: one stream, sequential (MED needs the decoded neighbours)
-        self.base = np.asarray(_shared_map(raw[pos:pos + int(lens[1])], self.tabs, ny, nx, ver, what), np.int64)
+        # the shared map: one stream, sequential (MED needs the decoded neighbours), decoded with
+        # the first map asked for (a file whose views are all intra asks for none)
+        self._base_span, self._base = (pos, pos + int(lens[1])), None
         pos += int(lens[1])
         self.starts = pos + np.concatenate([[0], np.cumsum(lens[2:])]).astype(np.int64)    # (n_maps + 1,)
         self.shape, self.n_modes, self.what = (ny, nx), n_modes, what
@@ -215,6 +217,16 @@ class LazyMaps:
         self.disp = np.zeros((n_maps, nloc), np.int64)
         self.modes = np.zeros((n_maps, nloc), np.int64)
         self.done = np.zeros(n_maps, bool)
+
+    @property
+    def base(self) -> np.ndarray:
+        """(nloc,) int64 the shared map (every map's disparities are corrections to it), decoded on
+        first use (:class:`formats.errors.FormatError` where its stream is damaged)."""
+        if self._base is None:
+            a, b = self._base_span
+            self._base = np.asarray(_shared_map(self.raw[a:b], self.tabs, *self.shape, self.version, self.what),
+                                    np.int64)
+        return self._base
 
     def need(self, maps) -> list[int]:
         """Decode maps ``maps`` (ints) not decoded yet; → those decoded now (ascending)."""

@@ -16,6 +16,7 @@ Levels: 0 = full quality; 1 = prediction only (key views stay full).
 """
 from __future__ import annotations
 
+import collections
 import threading
 
 import numpy as np
@@ -170,7 +171,9 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         self.warp_dw = None if lay.warp is None or not lay.warp.any() else pair_params(lay.warp, lay.refs)
         self.keyplanes = np.zeros((keys.size, self.Hp, self.Wp, self.P), np.int32)
         self._kp = None
-        fits = KeyAtlas.fits(self.Hp, self.Wp, self.P)
+        # the float atlas the prediction samples: none where no view is predicted (a posed
+        # capture, every view an intra key; it would hold a float copy of every decoded view)
+        fits = KeyAtlas.fits(self.Hp, self.Wp, self.P) and not lay.intra.all()
         self.atlas = KeyAtlas(keys.size, self.Hp, self.Wp, self.P, KeyAtlas.sample_bits(self.dtype, self.P)) \
             if fits else None
         self._pixel_bounds = None          # the planes' (lo, hi) over the atlas's C channels, its float type (±inf
@@ -186,6 +189,10 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)
+        self._referenced = np.zeros(N0, bool)      # views some view is predicted from (image_views)
+        self._referenced[lay.refs[lay.refs >= 0]] = True
+        self._img_cache: collections.OrderedDict = collections.OrderedDict()   # (image_pixels)
+        self._img_bytes, self._img_lock = 0, threading.Lock()
         self._rows_ok = np.zeros((N0, self.nby), bool)            # (view, block row): its key rows are decoded
         self._keys_all = keys.size == 0
         self._key_lock = threading.RLock()

@@ -13,6 +13,9 @@ from ..txpredict import DISP_BITS, TB, upsample_thumb
 from ..txwarp import max_row_offset
 
 KEY_PARSE_TBS = 1 << 20  # tbs of key-view rows parsed together (bounds the parsed coefficients held)
+#: pixels of whole JPEG 2000 views kept after a whole-view decode (:meth:`OnDemand.image_pixels`;
+#: a posed capture's 960×540 RGB view is 1.5 MiB)
+IMAGE_CACHE_BYTES = 64 << 20
 
 
 class OnDemand:
@@ -104,6 +107,40 @@ class OnDemand:
         return self._spans(np.concatenate([self.key_slot[views[key]], self.key_slot[refs.clip(0)][has]]),
                            np.concatenate([by[key], np.broadcast_to(lo[:, None], refs.shape)[has]]),
                            np.concatenate([by[key], np.broadcast_to(hi[:, None], refs.shape)[has]]))
+
+    def image_views(self, views: np.ndarray) -> np.ndarray:
+        """(n,) bool: which of ``views`` (flat indices) :meth:`image_pixels` decodes straight to
+        pixels: JPEG 2000 intra key views that no view is predicted from (a posed capture's
+        views; a grid's views promoted to JPEG 2000) and whose planes are not decoded yet.
+        Their whole-view decodes then skip the planes (YCoCg-R there and back: lossless, so the
+        same pixels); a block request still decodes and keeps the planes."""
+        views = np.asarray(views, np.int64)
+        if not self.img_of:
+            return np.zeros(views.size, bool)
+        ok = np.array([int(v) in self.img_of for v in views.tolist()], bool) & ~self._referenced[views]
+        ok[ok] = ~self._key_done[self.key_slot[views[ok]]].any(axis=1)
+        return ok
+
+    def image_pixels(self, v: int, threads: int = 1) -> np.ndarray:
+        """(Hp, Wp, C) pixels of view ``v``, one of :meth:`image_views`, decoded from its
+        JPEG 2000 codestream on ``threads`` of OpenJPEG's threads, and kept in a cache of
+        :data:`IMAGE_CACHE_BYTES` (least recently used out first: a viewer stepping back to a
+        view copies it; read-only, callers copy)."""
+        v = int(v)
+        with self._img_lock:
+            px = self._img_cache.get(v)
+            if px is not None:
+                self._img_cache.move_to_end(v)
+                return px
+        px = self._key_image(v, threads)
+        px.flags.writeable = False
+        with self._img_lock:
+            if v not in self._img_cache and px.nbytes <= IMAGE_CACHE_BYTES:
+                self._img_cache[v] = px
+                self._img_bytes += px.nbytes
+                while self._img_bytes > IMAGE_CACHE_BYTES:
+                    self._img_bytes -= self._img_cache.popitem(last=False)[1].nbytes
+        return px
 
     def _need_views(self, views: np.ndarray) -> np.ndarray:
         """(n_keys, nby) bool: every block row of the key views that whole ``views`` read."""

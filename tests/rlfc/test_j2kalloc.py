@@ -3,6 +3,7 @@ the open-loop shares, the smoothness screen, and the encoder's search on JPEG 20
 import math
 
 import numpy as np
+import pytest
 
 from formats.codec_api import EncodeOptions
 from formats.metrics import psnr_rgb
@@ -102,6 +103,36 @@ def test_posed_grey16_views_take_the_jpeg2000_search():
     d, _ = open_encoded(lf, e)
     full = d.decode_all()
     assert full.dtype == np.uint16 and (full == e.decoded).all() and psnr_rgb(lf.views, full) >= 44.0
+
+
+@pytest.mark.parametrize("kind", ["rgb8", "grey16"])
+def test_posed_jpeg2000_views_decode_straight_to_pixels(kind):
+    """Whole views of a posed capture's JPEG 2000 views (no view is predicted from them) decode
+    from their codestreams straight to pixels, keeping no planes and no float atlas: the same
+    pixels as the planes path (every key decoded first) and as block requests, on one thread
+    and two, again from the decoder's image cache; a view whose planes a block request decoded
+    takes the planes path."""
+    from formats.lfcfile import open_lfc
+    from rlfc import RlfcDecoder
+
+    views = _dino(4) if kind == "rgb8" else to_planes(_dino(4))[..., :1].clip(0, 255).astype(np.uint16) * 257
+    lf = _posed(views)
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=40.0))
+    d, blob = open_encoded(lf, e)
+    core = d.core
+    img = core.image_views(np.arange(4))
+    assert img.all() and core.atlas is None
+    full = d.decode_all(threads=2)
+    assert (full == e.decoded).all() and not core._key_done.any()       # nothing kept as planes
+    assert (d.decode_all(threads=1) == full).all() and (d.decode_view(0, 1) == full[0, 1]).all()
+    planes = RlfcDecoder(open_lfc(blob))
+    planes.decode_keys()
+    assert not planes.core.image_views(np.arange(4)).any() and (planes.decode_all() == full).all()
+    B = d.block_size
+    blk = d.decode_block(0, 2, 1, 2)
+    assert (blk == full[0, 2, B:2 * B, 2 * B:3 * B]).all()
+    assert not core.image_views(np.array([2]))[0] and core.image_views(np.array([3]))[0]
+    assert (d.decode_all() == full).all()
 
 
 def test_smooth_posed_views_go_to_the_full_search():

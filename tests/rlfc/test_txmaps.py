@@ -117,9 +117,10 @@ def test_estimated_sizes_are_the_coded_ones_within_a_few_bytes(seed, big):
 
 
 def test_lazy_maps_decode_each_map_when_asked_and_check_it_then():
-    """LazyMaps decodes the shared map at open and each map's stream on its first request (the
-    same values as decoding all); a damaged map is refused when it is asked for, the others
-    still decode, and a map whose modes exceed its views' references is refused."""
+    """LazyMaps decodes the shared map with the first map asked for and each map's stream on its
+    first request (the same values as decoding all); a damaged map is refused when it is asked
+    for, the others still decode; a damaged shared map opens and is refused with the first map;
+    and a map whose modes exceed its views' references is refused."""
     rng = np.random.default_rng(11)
     base, disp, modes = _maps(rng, 4, 6, 5, 80, 0.1)
     data = txmaps.pack_maps(base, disp, modes, (6, 5))
@@ -141,6 +142,15 @@ def test_lazy_maps_decode_each_map_when_asked_and_check_it_then():
     with pytest.raises(FormatError):
         lm.need([2])
     assert not lm.done[2]
+    # the shared map's stream damaged (it lies before the first map's): open reads lengths and
+    # tables only; the first map asked for decodes it and refuses the file
+    lm = txmaps.LazyMaps(data, 4, (6, 5), 5, "t")
+    a = int(lm._base_span[0])
+    bad = bytearray(data)
+    bad[a:int(lm.starts[0])] = bytes(int(lm.starts[0]) - a)
+    lm = txmaps.LazyMaps(bytes(bad), 4, (6, 5), 5, "t")
+    with pytest.raises(FormatError):
+        lm.need([0])
     limit = np.array([4, 4, 4, int(modes[3].max()) - 1])
     lm = txmaps.LazyMaps(data, 4, (6, 5), 5, "t", limit)
     lm.need([0, 1, 2])
