@@ -11,6 +11,10 @@ file reaches on that view, so both decoders deliver the same quality. Then, per 
 fresh process per file (and per code version with ``--against``: the same measurements with
 ``PYTHONPATH=OLD_CHECKOUT``, rounds interleaved, so the ratios hold on a noisy box) measures:
 
+- fresh: a fresh open and one random whole view, beside JPEG 2000 decoding that view; a fresh
+  open and ``decode_all`` on one thread (its ratio: against the JPEG 2000 light field on one
+  thread). The columns after it run once every key view is decoded, which on a posed capture
+  (every view a key view) leaves copies of decoded views;
 - open: seconds to open the file and decode every key view (since 2026-11-24 key views are
   decoded by block rows on demand; ``first block``: a fresh open plus one random block, after
   the process has imported every RLFC profile's modules, whose time is reported beside it: a
@@ -97,6 +101,23 @@ def _worker(path: str, peer: str, seed: int, n_batch: int, n_single: int, thread
     d.decode_block(int(rng.integers(d.rows)), int(rng.integers(d.cols)), int(rng.integers(d.nby)),
                    int(rng.integers(d.nbx)))
     r = {"first_block_s": time.perf_counter() - t, "imports_s": imports_s}
+    # a fresh open's first whole view and whole light field (what a user who opens a file to
+    # read views pays; the columns below run after every key view is decoded, which on a posed
+    # capture, every view a key view, leaves them copies), beside JPEG 2000 on that view
+    fv = int(rng.integers(d.rows * d.cols))
+    del d
+    t = time.perf_counter()
+    d = RlfcDecoder(open_lfc(path))
+    d.decode_view(*divmod(fv, d.cols))
+    r["fresh_view_s"] = time.perf_counter() - t
+    t = time.perf_counter()
+    imagecodecs.jpeg2k_decode(p["blobs"][fv])
+    r["j2k_fresh_view_s"] = time.perf_counter() - t
+    del d
+    t = time.perf_counter()
+    d = RlfcDecoder(open_lfc(path))
+    d.decode_all(**({"threads": 1} if "threads" in inspect.signature(d.decode_all).parameters else {}))
+    r["fresh_all_s"] = time.perf_counter() - t
     del d
     t = time.perf_counter()
     d = RlfcDecoder(open_lfc(path))
@@ -259,6 +280,12 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
             s[k], s[f"j2k_all_s_t{th}"] = med(k), med(f"j2k_all_s_t{th}")
             s[f"all_vs_j2k_t{th}"] = s[k] / s[f"j2k_all_s_t{th}"]
     s["view_vs_j2k"] = s["view_ms"] / s["j2k_view_ms"]
+    if all("fresh_view_s" in x for x in rounds):
+        s["fresh_view_ms"], s["j2k_fresh_view_ms"] = med("fresh_view_s") * 1e3, med("j2k_fresh_view_s") * 1e3
+        s["fresh_view_vs_j2k"] = s["fresh_view_ms"] / s["j2k_fresh_view_ms"]
+        s["fresh_all_s"] = med("fresh_all_s")
+        if "j2k_all_s_t1" in s:
+            s["fresh_all_vs_j2k"] = s["fresh_all_s"] / s["j2k_all_s_t1"]
     if all("view_seq_s" in x for x in rounds):
         s["view_seq_ms"], s["j2k_view_seq_ms"] = med("view_seq_s") * 1e3, med("j2k_view_seq_s") * 1e3
         s["view_seq_vs_j2k"] = s["view_seq_ms"] / s["j2k_view_seq_ms"]
@@ -268,7 +295,8 @@ def _summarize(rounds: list[dict], threads: list[int]) -> dict:
 def _table(res: dict, label: str, threads: list[int]) -> list[str]:
     th = [t for t in threads if any(f"batch_mpix_t{t}" in r[label] for r in res.values())]
     ta = [t for t in threads if any(f"all_s_t{t}" in r[label] for r in res.values())]
-    head = ["grid", "open s", "first block ms (the process's imports before it, ms)"] + [
+    head = ["grid", "open s", "first block ms (the process's imports before it, ms)",
+            "fresh open + one view ms (J2K ms, ×)", "fresh open + all s, 1 thr (× J2K)"] + [
         f"batched Mpix/s ({t} thr) cold / warm" for t in th] + [
         "gather limit Mpix/s", "single p50/p90/p99 µs", "single warm p50/p99 µs", "view ms (J2K ms, ×)",
         "views in sequence ms (J2K ms, ×)"] + [
@@ -276,7 +304,10 @@ def _table(res: dict, label: str, threads: list[int]) -> list[str]:
     lines = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     for name, r in res.items():
         s = r[label]
-        row = [name, f"{s['open_s']:.2f}", f"{s['first_block_ms']:.0f} ({s.get('imports_ms', float('nan')):.0f})"] + [
+        row = [name, f"{s['open_s']:.2f}", f"{s['first_block_ms']:.0f} ({s.get('imports_ms', float('nan')):.0f})",
+               f"{s['fresh_view_ms']:.1f} ({s['j2k_fresh_view_ms']:.1f}, {s['fresh_view_vs_j2k']:.2f}×)"
+               if "fresh_view_ms" in s else "–",
+               f"{s['fresh_all_s']:.2f} ({s['fresh_all_vs_j2k']:.2f}×)" if "fresh_all_vs_j2k" in s else "–"] + [
             f"{s.get(f'batch_mpix_t{t}', float('nan')):.1f} / {s.get(f'batch_warm_mpix_t{t}', float('nan')):.1f}"
             for t in th] + [
             f"{s['gather_mpix']:.0f}", f"{s['single_p50_us']:.0f} / {s['single_p90_us']:.0f} / {s['single_p99_us']:.0f}",
@@ -294,6 +325,7 @@ def _ratio_table(res: dict, threads: list[int]) -> list[str]:
     keys = [("open_s", "open"), *[(f"batch_us_t{t}", f"batched µs/block ({t} thr)") for t in threads],
             *[(f"batch_warm_us_t{t}", f"warm batched ({t} thr)") for t in threads],
             ("single_p50_us", "single p50"), ("single_p99_us", "single p99"), ("single_warm_p99_us", "warm single p99"),
+            ("fresh_view_ms", "fresh open + view"), ("fresh_all_s", "fresh open + all"),
             ("view_ms", "whole view"), ("view_seq_ms", "views in sequence"),
             *[(f"all_s_t{t}", f"whole light field ({t} thr)") for t in threads]]
     keys = [(k, n) for k, n in keys if all(k in r["new"] and k in r["old"] for r in res.values())]

@@ -28,12 +28,14 @@ def test_bench_decode_worker_reports_every_figure(tmp_path, monkeypatch):
     assert len(peer["views"]) == 6 and peer["psnr_j2k"] > 30
     r = bench_decode._worker(str(f), peer["file"], 0, 300, 20, [1, 2])
     for k in ("open_s", "batch_us_t1", "batch_us_t2", "batch_warm_us_t1", "batch_warm_us_t2", "all_s_t1",
-              "j2k_all_s_t2", "gather_us", "view_s", "j2k_view_s", "view_seq_s", "j2k_view_seq_s"):
+              "j2k_all_s_t2", "gather_us", "view_s", "j2k_view_s", "view_seq_s", "j2k_view_seq_s", "fresh_view_s",
+              "j2k_fresh_view_s", "fresh_all_s"):
         assert r[k] > 0, k
     assert len(r["single_us"]) == len(r["single_warm_us"]) == 20
     s = bench_decode._summarize([r, r], [1, 2])
     assert s["batch_mpix_t2"] > 0 and s["batch_warm_mpix_t1"] > 0
     assert s["view_vs_j2k"] > 0 and s["view_seq_vs_j2k"] > 0 and np.isfinite(s["single_p99_us"])
+    assert s["fresh_view_vs_j2k"] > 0 and s["fresh_all_vs_j2k"] > 0
     assert 0 < s["single_warm_p50_us"] <= s["single_warm_p99_us"]
     table = bench_decode._table({"tiny": {"new": s}}, "new", [1, 2])
     assert table[2].startswith("| tiny |")
