@@ -180,8 +180,8 @@ class LazyMaps:
     Opening reads the section's lengths and tables; :meth:`need` decodes the shared map (one
     stream) with the first map asked for, and the per-map streams asked for (a request touches
     the maps of its views only: a first frame one to five of a grid's dozens; a posed capture's
-    views have none). ``disp`` and ``modes`` (n_maps, nloc)
-    int64 hold the decoded maps' rows (zeros elsewhere); ``done`` (n_maps,) bool says which.
+    views have none). ``disp`` and ``modes`` (n_maps, nloc) int64 hold the decoded maps' rows
+    (zeros elsewhere); ``done`` (n_maps,) bool says which.
     A map's stream is checked when it is decoded (its symbols, its end, its disparities within
     ±2^20 and its modes at most ``max_mode[m]``): a damaged map raises
     :class:`formats.errors.FormatError` at its first use, not at open. Not thread-safe: callers
