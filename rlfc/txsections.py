@@ -45,19 +45,28 @@ def varints(values: np.ndarray) -> bytes:
 def unvarints(data, count: int, what: str) -> np.ndarray:
     """Inverse of :func:`varints`: exactly ``count`` values filling ``data``."""
     b = np.frombuffer(bytes(data), np.uint8)
+    if b.size == count and not (b >= 128).any():     # every value one byte (most sections): zig-zag only
+        x = b.astype(np.int64)
+        return (x >> 1) ^ -(x & 1)
     ends = np.flatnonzero(b < 128)
     if ends.size != count or (count and ends[-1] != b.size - 1) or (count == 0 and b.size):
         raise FormatError(f"{what}: expected {count} varints in {b.size} bytes")
-    starts = np.concatenate([[0], ends[:-1] + 1]) if count else np.zeros(0, np.int64)
-    lens = ends - starts + 1
-    if (lens > MAX_VARINT_BYTES).any():
-        raise FormatError(f"{what}: a varint is longer than {MAX_VARINT_BYTES} bytes")
-    u = np.zeros(count, np.uint64)
-    for k in range(MAX_VARINT_BYTES):
-        m = lens > k
-        if not m.any():
-            break
-        u[m] |= (b[starts[m] + k].astype(np.uint64) & np.uint64(127)) << np.uint64(7 * k)
+    if count:
+        starts = np.concatenate([[0], ends[:-1] + 1])
+        lens = ends - starts + 1
+        if (lens > MAX_VARINT_BYTES).any():
+            raise FormatError(f"{what}: a varint is longer than {MAX_VARINT_BYTES} bytes")
+        # every value's first byte at once; the later bytes only for the values that have them
+        # (few: most values in these sections are small), not masked passes over every value
+        u = (b[starts] & 127).astype(np.uint64)
+        more = np.flatnonzero(lens > 1)
+        for k in range(1, MAX_VARINT_BYTES):
+            if not more.size:
+                break
+            u[more] |= (b[starts[more] + k].astype(np.uint64) & np.uint64(127)) << np.uint64(7 * k)
+            more = more[lens[more] > k + 1]
+    else:
+        u = np.zeros(0, np.uint64)
     v = (u >> np.uint64(1)).view(np.int64) ^ -(u & np.uint64(1)).view(np.int64)
     return v
 
