@@ -1,14 +1,12 @@
 # usage: PYTHONPATH=CHECKOUT python unvarints_real.py CHECKOUT FILE.lfc   (each unvarints call of an open, timed alone)
 import sys, time
 sys.path.insert(0, sys.argv[1])
-import numpy as np
 import rlfc.txsections as T
 calls = []
 real = T.unvarints
 def spy(data, count, what):
     calls.append((bytes(data), count, what)); return real(data, count, what)
 T.unvarints = spy
-import rlfc.profiles.tx as P
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
 RlfcDecoder(open_lfc(sys.argv[2]))
