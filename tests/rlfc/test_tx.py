@@ -369,9 +369,9 @@ def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
 @pytest.mark.parametrize("threads", [1, 2])
 def test_batched_calls_parse_their_streams_ahead_in_groups(threads, monkeypatch):
     """A batched call's coded streams are parsed in groups larger than its chunks
-    (:class:`rlfc.profiles.tx_residual.ParseAhead`, each group once, by the first chunk that needs it,
-    on any thread): the same pixels as the whole views, with groups that straddle chunks, on
-    one and two threads; requests out of the call's order are parsed on their own."""
+    (:class:`rlfc.profiles.tx_residual.ParseAhead`, each group once, by the first chunk that
+    needs it, on any thread): the same pixels as the whole views, with groups that straddle
+    chunks, on one and two threads; requests out of the call's order are parsed on their own."""
     import rlfc.decoder as rd
     import rlfc.profiles.tx as ptx
     import rlfc.profiles.tx_residual as ptx_res
@@ -387,8 +387,8 @@ def test_batched_calls_parse_their_streams_ahead_in_groups(threads, monkeypatch)
     coded = (~core.is_key[views] & core.coded[views, by * d.nbx + bx]).sum()
     assert coded > 200
     monkeypatch.setattr(rd, "DECODE_CHUNK", 37 * B * B)               # chunks of 37 requests
-    monkeypatch.setattr(ptx_res, "PREPARSE_LANES", 50)                    # groups of 50 streams: several per
-    monkeypatch.setattr(ptx_res, "PREPARSE_MIN", 10)                      # chunk, and chunks across groups
+    monkeypatch.setattr(ptx_res, "PREPARSE_LANES", 50)                # groups of 50 streams: several per
+    monkeypatch.setattr(ptx_res, "PREPARSE_MIN", 10)                  # chunk, and chunks across groups
     parses = []
     real = ptx.TxDecoder._parse
     monkeypatch.setattr(ptx.TxDecoder, "_parse", lambda self, v, l: parses.append(v.size) or real(self, v, l))
@@ -1195,7 +1195,7 @@ def test_the_model_keeps_the_transform_trial_of_a_jpeg2000_intra_key():
     from rlfc.txpass import _intra_key_task
 
     lv, code, img, tc2 = _intra_key_task(enc, k, res["thumb16"], s16[0], enc.p.lam * (s16[0, 0] / 16) ** 2,
-                                           enc.model_of(res), False)
+                                         enc.model_of(res), False)
     assert (img is None) == (tc2 is None)
     if img is not None:
         assert tc2[rows].sum() == enc.nby * enc.nbx * enc.nt
