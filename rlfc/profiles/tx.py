@@ -189,8 +189,11 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)
-        self._referenced = np.zeros(N0, bool)      # views some view is predicted from (image_views)
-        self._referenced[lay.refs[lay.refs >= 0]] = True
+        # views a whole-view decode takes straight from their JPEG 2000 codestream to pixels
+        # (image_views): JPEG 2000 intra keys that no view is predicted from
+        self._direct = np.zeros(N0, bool)
+        self._direct[list(self.img_of)] = True
+        self._direct[lay.refs[lay.refs >= 0]] = False
         self._img_cache: collections.OrderedDict = collections.OrderedDict()   # (image_pixels)
         self._img_bytes, self._img_lock = 0, threading.Lock()
         self._rows_ok = np.zeros((N0, self.nby), bool)            # (view, block row): its key rows are decoded

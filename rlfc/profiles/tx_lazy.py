@@ -115,9 +115,7 @@ class OnDemand:
         Their whole-view decodes then skip the planes (YCoCg-R there and back: lossless, so the
         same pixels); a block request still decodes and keeps the planes."""
         views = np.asarray(views, np.int64)
-        if not self.img_of:
-            return np.zeros(views.size, bool)
-        ok = np.array([int(v) in self.img_of for v in views.tolist()], bool) & ~self._referenced[views]
+        ok = self._direct[views]
         ok[ok] = ~self._key_done[self.key_slot[views[ok]]].any(axis=1)
         return ok
 
@@ -127,11 +125,9 @@ class OnDemand:
         :data:`IMAGE_CACHE_BYTES` (least recently used out first: a viewer stepping back to a
         view copies it; read-only, callers copy)."""
         v = int(v)
-        with self._img_lock:
-            px = self._img_cache.get(v)
-            if px is not None:
-                self._img_cache.move_to_end(v)
-                return px
+        px = self._cached_image(v)
+        if px is not None:
+            return px
         px = self._key_image(v, threads)
         px.flags.writeable = False
         with self._img_lock:
@@ -140,6 +136,15 @@ class OnDemand:
                 self._img_bytes += px.nbytes
                 while self._img_bytes > IMAGE_CACHE_BYTES:
                     self._img_bytes -= self._img_cache.popitem(last=False)[1].nbytes
+        return px
+
+    def _cached_image(self, k: int) -> np.ndarray | None:
+        """The pixels :meth:`image_pixels` kept of JPEG 2000 view ``k`` (now the most recently
+        used), or None."""
+        with self._img_lock:
+            px = self._img_cache.get(k)
+            if px is not None:
+                self._img_cache.move_to_end(k)
         return px
 
     def _need_views(self, views: np.ndarray) -> np.ndarray:
@@ -226,7 +231,8 @@ class OnDemand:
                 pos += 1
             parsed.update(self._parse_key_rows(chunk))
 
-        images = [keys[s] for s in range(len(keys)) if keys[s] in self.img_of and need[s].any()]
+        images = [keys[s] for s in range(len(keys)) if keys[s] in self.img_of and need[s].any()
+                  and keys[s] not in self._img_cache]          # (kept pixels of a whole-view decode: no decode)
         # JPEG 2000 keys decode on a thread of their own (OpenJPEG releases the GIL) while the
         # first group of transform-coded rows is parsed: a first frame waits for both
         pool = ThreadPoolExecutor(1) if images and pending else None
@@ -253,7 +259,8 @@ class OnDemand:
                 continue
             k = keys[s]
             if k in self.img_of:
-                self._set_key_image(k, got[k].result() if k in got else self._key_image(k, LOCAL_THREADS))
+                img = got[k].result() if k in got else self._cached_image(k)
+                self._set_key_image(k, img if img is not None else self._key_image(k, LOCAL_THREADS))
                 continue
             if s not in parsed:
                 parse_next()
