@@ -81,8 +81,8 @@ class RlfcCodec(Codec):
                        help="tx: key views' quantizer step is the others' divided by this (default: set from a probe "
                             "pass, 1.2-2.5)")
         g.add_argument("--intra-codec", default=None, choices=["auto", "tx", "j2k"],
-                       help="tx: the intra key view as JPEG 2000 where that is smaller (auto, default) or always "
-                            "with the transform coder")
+                       help="tx: the intra key view as JPEG 2000 where that is smaller (auto, default; views with "
+                            "alpha: their colour, the alpha plane exact after it) or always with the transform coder")
         g.add_argument("--key-split", type=int, default=None,
                        help="tx: streams per key-view block row; a decoder parses them in parallel (default: as "
                             "many as keep each about 256 bytes or more; 1 = one stream per row)")

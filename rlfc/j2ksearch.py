@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from .topcodec import decode_image
+from .topcodec import alpha_stream, decode_view_j2k, encode_view_j2k, has_alpha
 
 #: first level asked above the target PSNR (dB), and how close two levels get before stopping
 FIRST_ASK_DB = 0.3
@@ -28,7 +28,9 @@ def smallest_j2k(img: np.ndarray, max_sse: float, sq_error: Callable[[np.ndarray
     """The smallest codestream found whose decoded image has squared error ≤ ``max_sse``.
 
     Args:
-        img: (H, W, C) uint8/uint16 image to code (C = 1 or 3; coded as it is).
+        img: (H, W, C) uint8/uint16 image to code (C = 1 or 3 coded as it is; with alpha, C = 2
+            or 4, the colour channels are JPEG 2000 and the alpha plane follows exactly, as
+            :func:`rlfc.topcodec.encode_view_j2k` codes it: its bytes count in every size here).
         max_sse: the error budget, in the units of ``sq_error``.
         sq_error: decoded (H, W, C) image → its squared error (the caller's metric, e.g. the
             colour error over the view's own pixels).
@@ -47,17 +49,15 @@ def smallest_j2k(img: np.ndarray, max_sse: float, sq_error: Callable[[np.ndarray
     Returns:
         (codestream, decoded image) or None when no try met the budget below ``give_up_bytes``.
     """
-    import imagecodecs
-
-    a = img[..., 0] if img.shape[-1] == 1 else img
+    alpha = alpha_stream(img[..., -1]) if has_alpha(img.shape[-1]) else b""
     lo = hi = None                    # levels that missed / met the budget
     best = None
     prev = None                       # (level, dB over budget) of the previous try
     ask = target_db + (hint.get("ask_db", FIRST_ASK_DB) if hint is not None else FIRST_ASK_DB)
     met_at = None                     # the level of the codestream kept
     for _ in range(MAX_TRIES):
-        data = bytes(imagecodecs.jpeg2k_encode(a, level=float(min(ask, 99.0)), codecformat="J2K", numthreads=threads))
-        dec = decode_image("j2k", data, img.shape, img.dtype, threads=threads)
+        data = encode_view_j2k(img, min(ask, 99.0), threads, alpha)
+        dec = decode_view_j2k(data, img.shape, img.dtype, len(alpha), threads, img[..., -1] if alpha else None)
         err = sq_error(dec)
         off = 10 * math.log10(max(err, 1e-30) / max(max_sse, 1e-30))       # dB over the budget
         if err <= max_sse:

@@ -157,10 +157,9 @@ class TxEncoder(PassCoder, J2kViews, RdoQuantizer, FilePacker):
         self.key_slot[self.s.keys] = np.arange(len(self.s.keys))
         ic = params.intra_codec
         if ic == "auto":
-            ic = "j2k" if ch in (1, 3) and not params.lossless else "tx"
-        if ic == "j2k" and ch not in (1, 3):
-            raise ParameterError("JPEG 2000 intra key views need grey or RGB views (alpha must stay exact)")
-        self.intra_codec = ic
+            ic = "tx" if params.lossless else "j2k"
+        self.intra_codec = ic                     # (views with alpha: JPEG 2000 colour, exact alpha after it)
+        self._alpha_len: dict = {}                # view → bytes of its alpha stream (alpha_length)
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
         self._map_cost: dict = {}                 # predicted key → bytes of its own map; "all": the section (_map_bytes)
@@ -301,6 +300,18 @@ class TxEncoder(PassCoder, J2kViews, RdoQuantizer, FilePacker):
             return np.asarray(pixels)                  # (np.pad copies even with nothing to add)
         pad = ((0, self.Hp - self.h), (0, self.Wp - self.w_px), (0, 0))
         return np.pad(np.asarray(pixels), pad, mode="edge")
+
+    def alpha_length(self, v: int) -> int:
+        """Bytes of view v's alpha stream (:func:`rlfc.topcodec.alpha_stream` of its padded alpha
+        plane) at the end of its JPEG 2000 image entry; 0 for views without alpha. Cached."""
+        from .topcodec import alpha_stream, has_alpha
+
+        if not has_alpha(self.lf.views.shape[-1]):
+            return 0
+        n = self._alpha_len.get(v)
+        if n is None:
+            n = self._alpha_len[v] = len(alpha_stream(self.padded(self.view_pixels(v))[..., -1]))
+        return n
 
     def view_pixels(self, v: int) -> np.ndarray:
         """(H, W, C) pixels of view v (row-major view index): read from the light field, or the

@@ -26,6 +26,7 @@ VERSION = 2          # 2: rANS tables built in integers (1: float arithmetic)
 SPLIT_VERSION = 3    # 3: as 2, with key-view block rows coded as ``key_split`` streams each
 WP_VERSION = 4       # 4: as 3 (``key_split`` >= 1), with a weighted prediction per view and plane
 WARP_VERSION = 5     # 5: as 4, with a warp per view (rlfc.txwarp: rigs that are not rectified)
+ALPHA_VERSION = 6    # 6: as 5, with views' alpha planes exact after their JPEG 2000 colour (``key_alpha``)
 #: a weighted prediction's gain, in 1/64 (64: the identity), lies within these
 WP_GAIN = (32, 96)
 
@@ -63,13 +64,18 @@ class TxLayout:
             a decoder parses a key row as that many independent rANS lanes.
         version: 2 (1: the first files, whose rANS tables were built in float arithmetic; 3: as
             2 with ``key_split`` > 1; 4: weighted prediction, ``key_split`` >= 1; 5: as 4, with
-            a warp per view).
+            a warp per view; 6: as 5, with ``key_alpha``).
         wp: (N0, P, 2) int64 or None (before version 4): per view and plane, the gain g (1/64)
             and offset o of its weighted prediction: a predicted view's blended prediction p
             becomes clip(((p·g + 32) >> 6) + o) to the plane's range, before its residual
             (intra views: the identity, g = 64, o = 0).
         warp: (N0, 4) int64 or None (before version 5): per view, the warp (a, b, cx, cy) of
             :mod:`rlfc.txwarp` its predictions sample their references with.
+        key_alpha: version 6 (views with alpha, intra_codec "j2k"), one entry per ``key_images``
+            entry: the byte length of the alpha stream (:func:`rlfc.topcodec.alpha_stream`) that
+            ends that image entry, its JPEG 2000 codestream before it holding the colour
+            channels only (0 where the entry is 0). Before version 6 a JPEG 2000 entry is one
+            codestream of every channel.
     """
 
     positions: np.ndarray
@@ -87,6 +93,7 @@ class TxLayout:
     key_split: int = 1
     wp: np.ndarray | None = None
     warp: np.ndarray | None = None
+    key_alpha: tuple = ()
 
     @property
     def n_views(self) -> int:
@@ -109,7 +116,8 @@ class TxLayout:
                 "step16": self.step16.tolist(), "bypass": [bool(b) for b in self.bypass],
                 "thumb_step16": int(self.thumb_step16), "intra_codec": self.intra_codec,
                 "key_images": list(map(int, self.key_images))} | (
-                    {"key_split": int(self.key_split)} if self.version >= SPLIT_VERSION else {})
+                    {"key_split": int(self.key_split)} if self.version >= SPLIT_VERSION else {}) | (
+                    {"key_alpha": list(map(int, self.key_alpha))} if self.version >= ALPHA_VERSION else {})
 
     def to_bytes(self) -> bytes:
         """Section ``tx.layout``: zlib of zig-zag varints: positions (N0×2), refs (N0×4),
@@ -131,7 +139,9 @@ class TxLayout:
         from .txsections import MAX_VARINT_BYTES, inflate, unvarints
 
         where = f.where
-        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION, WP_VERSION, WARP_VERSION))
+        version = f.int("version", choices=(1, VERSION, SPLIT_VERSION, WP_VERSION, WARP_VERSION, ALPHA_VERSION))
+        if version >= ALPHA_VERSION and planes not in (2, 4):
+            raise FormatError(f"{where}: version {ALPHA_VERSION} (alpha streams) needs views with alpha")
         count = n_views * (2 + 2 * MAX_REFS + 1) + (2 * n_views * planes if version >= WP_VERSION else 0) + \
             (4 * n_views if version >= WARP_VERSION else 0)
         what = f"{name}: section 'tx.layout'"
@@ -164,8 +174,9 @@ class TxLayout:
         intra_codec = f.str("intra_codec", choices=("tx", "j2k"))
         key_images = f.int_list("key_images", max_len=n_views, lo=0, hi=1 << 30)
         key_split = f.int("key_split", 1 if version >= WP_VERSION else 2, 1 << 16) if version >= SPLIT_VERSION else 1
+        key_alpha = tuple(f.int_list("key_alpha", max_len=n_views, lo=0, hi=1 << 30)) if version >= ALPHA_VERSION else ()
         lay = TxLayout(positions, tuple(keys), refs, weights, cell, n_maps, step16, np.asarray(bp), thumb,
-                       intra_codec, tuple(key_images), version, key_split, wp, warp)
+                       intra_codec, tuple(key_images), version, key_split, wp, warp, key_alpha)
         lay.check(where)
         return lay
 
@@ -176,6 +187,15 @@ class TxLayout:
             return {}
         ik = [k for k in self.keys if self.intra[k]]
         return {k: n for k, n in zip(ik, self.key_images) if n > 0}
+
+    @property
+    def alpha_of(self) -> dict:
+        """{JPEG 2000 intra key view: byte length of the alpha stream ending its entry} (version
+        6; empty before)."""
+        if self.version < ALPHA_VERSION:
+            return {}
+        ik = [k for k in self.keys if self.intra[k]]
+        return {k: a for k, n, a in zip(ik, self.key_images, self.key_alpha) if n > 0}
 
     @property
     def coded_keys(self) -> list:
@@ -193,7 +213,7 @@ class TxLayout:
         if (self.wp is not None) != (self.version >= WP_VERSION):
             raise FormatError(f"{where}: weighted prediction needs version {WP_VERSION} or later (and only they)")
         if (self.warp is not None) != (self.version >= WARP_VERSION):
-            raise FormatError(f"{where}: per-view warps need version {WARP_VERSION} (and only it)")
+            raise FormatError(f"{where}: per-view warps need version {WARP_VERSION} or later (and only they)")
         if self.warp is not None:
             check_params(self.warp, where)
         if self.wp is not None:
@@ -207,6 +227,16 @@ class TxLayout:
         want = int(self.intra[list(self.keys)].sum()) if self.intra_codec == "j2k" else 0
         if len(self.key_images) != want:
             raise FormatError(f"{where}: key_images lists {len(self.key_images)} images, expected {want}")
+        if self.version >= ALPHA_VERSION:
+            if self.intra_codec != "j2k" or not any(self.key_images):
+                raise FormatError(f"{where}: version {ALPHA_VERSION} (alpha streams) needs JPEG 2000 key views")
+            if len(self.key_alpha) != len(self.key_images):
+                raise FormatError(f"{where}: key_alpha lists {len(self.key_alpha)} streams, expected {len(self.key_images)}")
+            for size, a in zip(self.key_images, self.key_alpha):
+                if (size == 0 and a != 0) or (size > 0 and not 0 < a < size):
+                    raise FormatError(f"{where}: an alpha stream of {a} bytes does not fit its image entry of {size}")
+        elif self.key_alpha:
+            raise FormatError(f"{where}: key_alpha needs version {ALPHA_VERSION}")
         if len(set(self.keys)) != len(self.keys):
             raise FormatError(f"{where}: a key view is listed twice")
         order = np.full(n, -1)

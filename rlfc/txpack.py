@@ -7,7 +7,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .txlayout import SPLIT_VERSION, VERSION, WARP_VERSION, WP_VERSION, TxLayout, weighted_views
+from .txlayout import ALPHA_VERSION, SPLIT_VERSION, VERSION, WARP_VERSION, WP_VERSION, TxLayout, weighted_views
 from .txmaps import pack_maps
 from .txmodel import Model, default_counts
 from .txparams import params_info
@@ -205,11 +205,17 @@ class FilePacker:
         wp = self.weights_of(res)
         weighted = bool(weighted_views(wp).any())
         warped = self.s.warp is not None                # (version 5: version 4's tables, then the warps)
+        # version 6: views with alpha, whose JPEG 2000 entries end in their alpha streams
+        key_alpha = tuple(self.alpha_length(k) if k in res["keyimg"] else 0
+                          for k in keys if intra[k]) if imgs else ()
+        alpha = any(key_alpha)
+        version = ALPHA_VERSION if alpha else WARP_VERSION if warped else WP_VERSION if weighted else \
+            SPLIT_VERSION if split > 1 else VERSION
+        warp = self.s.warp if warped or not alpha else np.zeros((self.n0, 4), np.int64)
         lay = TxLayout(self.s.positions, tuple(keys), refs, weights, cell,
                        len(self.s.cell_views), res["steps16"], self.bypass, res["thumb16"],
-                       "j2k" if imgs else "tx", key_images,
-                       WARP_VERSION if warped else WP_VERSION if weighted else SPLIT_VERSION if split > 1 else VERSION,
-                       split, wp if weighted or warped else None, self.s.warp)
+                       "j2k" if imgs else "tx", key_images, version,
+                       split, wp if weighted or warped or alpha else None, warp, key_alpha if alpha else ())
         lay.check("tx encoder")
         # maps no view uses any more (every view of the cell coded alone): the shared map, no modes
         disp, modes = self.disp, self.modes

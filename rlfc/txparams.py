@@ -25,7 +25,8 @@ class TxParams:
         step: luma quantizer step Δ in pixel units (None: rate control or the default).
         lossless: every plane coded exactly (no transform).
         intra_codec: intra key views as "j2k" (JPEG 2000 at the quality the transform path
-            reaches), "tx" (thumbnail + transform), or "auto" (j2k without alpha, lossy).
+            reaches; views with alpha: their colour, the alpha plane exact after it), "tx"
+            (thumbnail + transform), or "auto" (j2k when lossy).
         search_sample: a PSNR target's search codes the key views and every SEARCH_STRIDE-th
             other view (grids with at least SEARCH_MIN_VIEWS other views), then checks the
             chosen step on every view (False: every search pass codes every view).

@@ -344,15 +344,13 @@ class PassCoder:
 def _j2k_task(enc: TxEncoder, v: int, level: float, keep: bool) -> tuple[bytes, ViewCode]:
     """View v's padded image as JPEG 2000 at OpenJPEG's quality ``level`` (dB): (codestream,
     its code: no tbs, the colour error over the view's own pixels, the pixels where ``keep``)."""
-    import imagecodecs
-
-    from .topcodec import decode_image
+    from .topcodec import alpha_stream, decode_view_j2k, encode_view_j2k, has_alpha
 
     orig = enc.view_pixels(v)
     img = enc.padded(orig)
-    data = bytes(imagecodecs.jpeg2k_encode(img[..., 0] if img.shape[-1] == 1 else img, level=level,
-                                           codecformat="J2K"))
-    crop = decode_image("j2k", data, img.shape, img.dtype)[:enc.h, :enc.w_px]
+    alpha = alpha_stream(img[..., -1]) if has_alpha(img.shape[-1]) else b""
+    data = encode_view_j2k(img, level, 1, alpha)
+    crop = decode_view_j2k(data, img.shape, img.dtype, len(alpha), 1, img[..., -1] if alpha else None)[:enc.h, :enc.w_px]
     sse, cnt = colour_sq_error(orig, crop)
     return data, enc.image_code(np.ascontiguousarray(crop) if keep else None, None, sse, cnt)
 

@@ -12,7 +12,7 @@ HTTP-style byte ranges, full/view/batched-block/single-block/torch decoders, eve
 and the paths must agree bit for bit (or all raise a typed :class:`~formats.errors.LfcError`).
 Every accepted mutant is then decoded again by a reference reader written from docs/FORMAT.md
 alone, at every level, and must give the same pixels: :mod:`tools.refdecode` (slow Python;
-profiles bise and dcp bit for bit, LFN within one grey level in float64) or, for profile tx versions 2-4, the
+profiles bise and dcp bit for bit, LFN within one grey level in float64) or, for profile tx versions 2-6, the
 browser viewer's JavaScript decoder under Node (``tools/web_decode.mjs``; its int32 planes must
 equal the library's). A reference that refuses a file the library accepted is a mismatch too.
 Mutants run in a worker process under an address-space limit with a per-mutant deadline, so a
@@ -413,7 +413,7 @@ def run_one(blob: bytes, seed: int, workdir: str) -> tuple[str, str, dict | None
             return "sampled", "", None
         if check_reference(blob, out):
             return "referenced", "", None
-        return "exact", "", out["planes"] if out["tx_version"] in (2, 3, 4) else None
+        return "exact", "", out["planes"] if out["tx_version"] in (2, 3, 4, 5, 6) else None
     except IllConditioned as e:
         return "illcond", str(e), None
     except LfcError as e:
@@ -432,7 +432,7 @@ WEB_DECODE = ROOT / "tools" / "web_decode.mjs"
 
 
 def check_js(blob: bytes, planes: dict, workdir: str, timeout_s: float = 120.0) -> tuple[str, str]:
-    """Decode a tx (version 2, 3 or 4) file with the JavaScript reader at every level and compare its
+    """Decode a tx (versions 2 to 6) file with the JavaScript reader at every level and compare its
     int32 planes with the library's → ("referenced", "") or ("mismatch", why)."""
     path = os.path.join(workdir, "js.lfc")
     out = os.path.join(workdir, "js")

@@ -110,6 +110,12 @@ def rlfc_fixtures() -> dict:
         # sub-pixel offset (up to 0.7 px), coded with fixed warps (see fixed_warps)
         "rlfc_tx5_warped_rgb8": (shifted(v["rgb8"]), dict(profile="tx", block_size=8, step=4.0, key_spacing=3,
                                                           intra_codec="tx", warps=True)),
+        # tx layout version 6: views with alpha as JPEG 2000 colour + an exact alpha stream (zlib);
+        # 8-bit RGBA with one view predicted from them, and 16-bit grey + alpha (every view JPEG 2000)
+        "rlfc_tx6_alpha_rgba8": (v["rgba8"], dict(profile="tx", block_size=8, step=8.0, key_spacing=3,
+                                                  intra_codec="j2k")),
+        "rlfc_tx6_alpha_ga16": (v["ga16"], dict(profile="tx", block_size=8, step=8.0 * 257, key_spacing=3,
+                                                intra_codec="j2k")),
     })
     out = {}
     for name, (views, kw) in specs.items():

@@ -9,7 +9,7 @@ text of FORMAT.md, and loops over blocks and values in plain Python. It is delib
 Covered: the container; RLFC profiles ``bise`` and ``dcp`` (every level); the LFN codec (every
 level, float64 — compare within one grey level). Profile ``tx`` is checked against the second
 reader written from FORMAT.md, the browser viewer's JavaScript decoder
-(``tools/web_decode.mjs``), which reads tx layout versions 2-4 (tx.maps versions 2 and 3).
+(``tools/web_decode.mjs``), which reads tx layout versions 2-6 (tx.maps versions 2 and 3).
 
 Usage::
 

@@ -655,11 +655,12 @@ export class TxDecoder {
     this.hi = this.pcs.map(() => this.peak);
     this.flat = this.pcs.map((c) => (c === 1 ? 0 : (this.peak + 1) / 2));
     const tx = need(cfg, "tx", "config");
-    const ver = int(tx, "version", "config.tx", 1, 5);
+    const ver = int(tx, "version", "config.tx", 1, 6);
     if (ver === 1) throw new UnsupportedError(`${name}: tx version 1 files (float rANS tables) are not read here`);
     // version 3: each key-view block row is key_split streams of nbx / key_split blocks; version 4:
     // key_split >= 1, and a weighted prediction (gain, offset) per view and plane in tx.layout;
-    // version 5: as 4, with a warp per view (rlfc/txwarp.py)
+    // version 5: as 4, with a warp per view (rlfc/txwarp.py); version 6: as 5, with key_alpha (views
+    // with alpha: a JPEG 2000 key's entry is its colour codestream, then its alpha plane, zlib)
     this.keySplit = ver >= 3 ? int(tx, "key_split", "config.tx", ver >= 4 ? 1 : 2, 1 << 16) : 1;
     if (nbx % this.keySplit) throw new FormatError(`${name}: config.tx.key_split ${this.keySplit} does not divide the ${nbx} blocks of a row`);
     this.keys = intList(tx, "keys", "config.tx", null, 0, N0 - 1);
@@ -676,6 +677,8 @@ export class TxDecoder {
     const ic = need(tx, "intra_codec", "config.tx");
     if (ic !== "tx" && ic !== "j2k") throw new FormatError(`${name}: config.tx.intra_codec must be tx or j2k`);
     const keyImages = intList(tx, "key_images", "config.tx", null, 0, 1 << 30);
+    if (ver >= 6 && P !== 2 && P !== 4) throw new FormatError(`${name}: tx version 6 (alpha streams) needs views with alpha`);
+    const keyAlpha = ver >= 6 ? intList(tx, "key_alpha", "config.tx", null, 0, 1 << 30) : [];
 
     // tx.layout: positions (N0×2), refs (N0×4), weights (N0×4), cell (N0); version 4: then the
     // gains − 64 (N0×P) and the offsets (N0×P) of the weighted predictions; version 5: then each
@@ -714,6 +717,16 @@ export class TxDecoder {
     const want = ic === "j2k" ? intraKeys.length : 0;
     if (keyImages.length !== want) throw new FormatError(`${name}: key_images lists ${keyImages.length} images, expected ${want}`);
     this.imgOf = new Map();
+    this.alphaOf = new Map();
+    if (ver >= 6) {
+      if (ic !== "j2k" || !keyImages.some((n) => n > 0)) throw new FormatError(`${name}: tx version 6 (alpha streams) needs JPEG 2000 key views`);
+      if (keyAlpha.length !== keyImages.length) throw new FormatError(`${name}: key_alpha lists ${keyAlpha.length} streams, expected ${keyImages.length}`);
+      keyImages.forEach((n, i) => {
+        const a = keyAlpha[i];
+        if ((n === 0 && a !== 0) || (n > 0 && !(a > 0 && a < n))) throw new FormatError(`${name}: an alpha stream of ${a} bytes does not fit its image entry of ${n}`);
+        if (n > 0) this.alphaOf.set(intraKeys[i], a);
+      });
+    }
     if (ic === "j2k") intraKeys.forEach((k, i) => { if (keyImages[i] > 0) this.imgOf.set(k, keyImages[i]); });
     this.codedKeys = this.keys.filter((k) => !this.imgOf.has(k));
 
@@ -982,8 +995,20 @@ export class TxDecoder {
     if (this.imgOf.has(k)) {
       if (!this.keyImage) throw new UnsupportedError(`${this.file.name}: key view ${k} is JPEG 2000 and no JPEG 2000 decoder is loaded`);
       const [a, b] = this.imgRange.get(k);
-      const px = await this.keyImage(await this.file.read("tx.keyimg", a, b), Hp, Wp, this.C, this.dtype);
-      return toPlanes(px, Hp * Wp, this.C);
+      const entry = await this.file.read("tx.keyimg", a, b);
+      if (!this.alphaOf.has(k)) return toPlanes(await this.keyImage(entry, Hp, Wp, this.C, this.dtype), Hp * Wp, this.C);
+      // version 6: the colour channels' codestream, then the alpha plane (zlib, little-endian samples)
+      const cut = entry.length - this.alphaOf.get(k), C = this.C, n = Hp * Wp;
+      const col = await this.keyImage(entry.subarray(0, cut), Hp, Wp, C - 1, this.dtype);
+      const bytes = this.dtype === "uint8" ? 1 : 2;
+      const raw = await inflate(entry.subarray(cut), n * bytes, `${this.file.name}: key view ${k}'s alpha stream`);
+      if (raw.length !== n * bytes) throw new FormatError(`${this.file.name}: key view ${k}'s alpha stream holds ${raw.length} bytes, expected ${n * bytes}`);
+      const px = bytes === 1 ? new Uint8Array(n * C) : new Uint16Array(n * C);
+      for (let i = 0; i < n; i++) {
+        for (let c = 0; c < C - 1; c++) px[i * C + c] = col[i * (C - 1) + c];
+        px[i * C + C - 1] = bytes === 1 ? raw[i] : raw[2 * i] | (raw[2 * i + 1] << 8);
+      }
+      return toPlanes(px, n, C);
     }
     const img = new Int32Array(Hp * Wp * P);
     if (this.intra[k]) {                                   // the thumbnail, upsampled

@@ -136,6 +136,7 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
             raise FormatError(f"{name}: section 'tx.keyimg' has {c.info('tx.keyimg').length} bytes, the header "
                               f"says {img_off[-1]}")
         self.img_of = {k: (int(img_off[i]), int(img_off[i + 1])) for i, k in enumerate(img_keys)}
+        self.alpha_of = lay.alpha_of                          # (version 6: bytes of alpha ending each entry)
         sv, sl = stream_order(coded)
         self.start = np.full((N0, nloc), -1, np.int64)
         self.end = np.full((N0, nloc), -1, np.int64)
@@ -385,11 +386,13 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
     def _key_image(self, k: int, threads: int) -> np.ndarray:
         """(Hp, Wp, C) pixels of JPEG 2000 intra key view ``k``, decoded on ``threads`` of
         OpenJPEG's threads (its bytes read under the I/O lock: a byte-range source is shared)."""
-        from ..topcodec import decode_image
+        from ..topcodec import decode_image, decode_view_j2k
 
         a, b = self.img_of[k]
         with self._io:
             data = bytes(self.container.read("tx.keyimg", a, b))
+        if k in self.alpha_of:                                # colour codestream, then the alpha stream
+            return decode_view_j2k(data, (self.Hp, self.Wp, self.P), self.dtype, self.alpha_of[k], threads)
         return decode_image("j2k", data, (self.Hp, self.Wp, self.P), self.dtype, threads=threads)
 
     def _set_key_image(self, k: int, img: np.ndarray) -> None:

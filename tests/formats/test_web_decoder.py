@@ -57,7 +57,7 @@ def assert_same_planes(path: Path, out: Path, exact: bool = True, chunk_budget=N
 
 @pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16", "rlfc_tx2_lossy_rgb8", "rlfc_tx2_lossy_rgba8",
                                   "rlfc_tx3_lossy_rgb8", "rlfc_txsplit_lossy_rgb8", "rlfc_tx4_weighted_rgb8",
-                                  "rlfc_tx5_warped_rgb8"])
+                                  "rlfc_tx5_warped_rgb8", "rlfc_tx6_alpha_rgba8", "rlfc_tx6_alpha_ga16"])
 def test_golden_files_bit_exact(name, tmp_path):
     assert_same_planes(GOLDEN / f"{name}.lfc", tmp_path)
 

@@ -1461,9 +1461,10 @@ def test_a_posed_search_pass_is_the_file_without_another_pass():
     # every view of a posed capture is coded in every pass of the search (keeping its pixels):
     # where the chosen pass's entropy model was measured near its step, that pass is the file,
     # with no further ("refined") pass; the file decodes to the pixels the encoder reports
+    # (views with alpha coded by the transform path, as intra_codec "tx" asks)
     lf = smooth_lf(rows=1, cols=4, c=4)
     lf.layout = "posed"
-    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0))
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0, params={"intra_codec": "tx"}))
     assert e.target_met and e.summary["psnr_rgb"] >= 36.0
     assert [t for t in e.trace if "step" in t] and not any(t.get("refined") for t in e.trace)
     d, _ = open_encoded(lf, e)
@@ -1487,7 +1488,7 @@ def test_a_posed_search_measures_a_far_model_on_a_sample_of_views(monkeypatch):
         return r
 
     monkeypatch.setattr(T.TxEncoder, "run", run)
-    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0))
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=36.0, params={"intra_codec": "tx"}))    # (the transform path)
     assert seen[0] == 16 // R.SEARCH_STRIDE and all(n == 16 for n in seen[1:])
     assert e.target_met and e.summary["psnr_rgb"] >= 36.0
     d, _ = open_encoded(lf, e)

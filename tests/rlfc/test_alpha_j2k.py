@@ -1,0 +1,148 @@
+"""Views with alpha as JPEG 2000 colour plus an exact alpha stream (tx layout version 6): the
+streams round-trip, posed RGBA and grey+alpha captures take JPEG 2000 by default with alpha
+exact and every decode path agreeing, and files whose alpha streams or lengths are wrong are
+refused with typed errors."""
+import json
+import zlib
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from formats.codec_api import EncodeOptions
+from formats.container import build_container
+from formats.errors import FormatError, LfcError
+from formats.lfcfile import open_lfc
+from formats.metrics import psnr_rgb
+from formats.pixels import to_planes
+from formats.registry import open_decoder
+from formats.scenes import read_scene
+from rlfc import encode
+from rlfc.topcodec import alpha_stream, read_alpha
+from tests.conftest import ROOT
+from tests.rlfc.helpers import check_agreement, make_lf, open_encoded
+from tools.fuzz import split_file
+
+GOLDEN = ROOT / "tests" / "data" / "golden"
+
+
+@settings(max_examples=60, deadline=None)
+@given(h=st.integers(1, 12), w=st.integers(1, 12), wide=st.booleans(), data=st.data())
+def test_alpha_streams_round_trip_exactly(h, w, wide, data):
+    dt = np.uint16 if wide else np.uint8
+    a = np.array(data.draw(st.lists(st.integers(0, int(np.iinfo(dt).max)), min_size=h * w, max_size=h * w)),
+                 dt).reshape(h, w)
+    got = read_alpha(alpha_stream(a), h, w, dt, "alpha")
+    assert got.dtype == dt and np.array_equal(got, a)
+    with pytest.raises(FormatError):                     # one sample short, one too many
+        read_alpha(alpha_stream(a), h, w + 1, dt, "alpha")
+    with pytest.raises(FormatError):
+        read_alpha(zlib.compress(a.astype(np.dtype(dt).newbyteorder("<")).tobytes() + b"\0\0"), h, w, dt, "alpha")
+
+
+def test_alpha_streams_refuse_garbage_and_bombs():
+    with pytest.raises(FormatError, match="zlib"):
+        read_alpha(b"not zlib at all", 4, 4, np.uint8, "alpha")
+    bomb = zlib.compress(bytes(1 << 24), 9)              # 16 MiB of zeros in 16 KiB: read no further than 16 bytes
+    with pytest.raises(FormatError, match="bound"):
+        read_alpha(bomb, 4, 4, np.uint8, "alpha")
+
+
+def _views_with_alpha(n=4, grey16=False):
+    """n posed views of the bundled Lytro crop with a soft-edged disc of alpha (0 outside,
+    opaque inside, a ramp between), 8-bit RGBA or 16-bit grey + alpha."""
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    v = lf.views.reshape((-1,) + lf.views.shape[2:])[:n]
+    h, w = v.shape[1:3]
+    yy, xx = np.mgrid[:h, :w]
+    r = np.hypot(yy - h / 2, xx - w / 2) / (0.4 * min(h, w))
+    a = (np.clip((1.2 - r) / 0.2, 0, 1) * 255).round().astype(np.uint8)
+    if grey16:
+        g = to_planes(v)[..., :1].clip(0, 255).astype(np.uint16) * 257
+        return np.concatenate([g, np.broadcast_to((a.astype(np.uint16) * 257)[None, ..., None], g.shape)], -1)
+    return np.concatenate([v, np.broadcast_to(a[None, ..., None], v.shape[:-1] + (1,))], -1)
+
+
+def _posed(views):
+    lf = make_lf(np.ascontiguousarray(views)[None])
+    lf.layout = "posed"
+    return lf
+
+
+@pytest.mark.parametrize("grey16", [False, True])
+def test_posed_views_with_alpha_are_jpeg2000_with_exact_alpha(grey16):
+    """A posed capture with alpha at a PSNR target: every view JPEG 2000 (its colour) and its
+    alpha stream, version 6, alpha exact, the target met; every decode path gives the same
+    pixels (whole views straight from the codestreams, the planes path, blocks, torch); smaller than
+    the transform path that used to code such views."""
+    lf = _posed(_views_with_alpha(4, grey16))
+    target = 44.0 if grey16 else 40.0
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=target))
+    t = e.config["tx"]
+    assert t["version"] == 6 and t["intra_codec"] == "j2k"
+    assert min(t["key_images"]) > 0 and all(0 < a < n for a, n in zip(t["key_alpha"], t["key_images"]))
+    d, blob = open_encoded(lf, e)
+    assert d.core.image_views(np.arange(4)).all()
+    full = d.decode_all()
+    assert (full == e.decoded).all() and psnr_rgb(lf.views, full) >= target
+    assert np.array_equal(full[..., -1], lf.views[..., -1])
+    check_agreement(d, e.decoded.shape)
+    from rlfc.torch_decode import TorchBlockDecoder
+
+    v = np.repeat(np.arange(4), d.nby * d.nbx)
+    by, bx = np.tile(np.repeat(np.arange(d.nby), d.nbx), 4), np.tile(np.arange(d.nbx), 4 * d.nby)
+    fresh = open_decoder(open_lfc(blob))
+    assert (TorchBlockDecoder(fresh, "cpu").decode_blocks(v, by, bx) == d.decode_blocks(v, by, bx)).all()
+    planes = open_decoder(open_lfc(blob))
+    planes.core.decode_keys()
+    assert (planes.decode_all() == full).all()
+    tx = encode(lf, EncodeOptions(profile="tx", target_psnr=target, params={"intra_codec": "tx"}))
+    assert tx.config["tx"]["version"] < 6
+    assert sum(len(x) for _, x in e.sections) < sum(len(x) for _, x in tx.sections)
+
+
+def _rebuild(meta, secs):
+    return b"".join(bytes(p) for p in build_container(json.dumps(meta).encode(), secs))
+
+
+@pytest.mark.parametrize("change, match", [
+    (lambda t: t["key_alpha"].pop(), "key_alpha lists"),
+    (lambda t: t["key_alpha"].__setitem__(0, t["key_images"][0]), "does not fit"),
+    (lambda t: t["key_alpha"].__setitem__(0, 0), "does not fit"),
+    (lambda t: t.pop("key_alpha"), "key_alpha"),
+    (lambda t: t.__setitem__("version", 5), "key_images|image|declares|decodes"),
+])
+def test_wrong_alpha_lengths_are_refused(change, match):
+    meta, secs = split_file((GOLDEN / "rlfc_tx6_alpha_rgba8.lfc").read_bytes())
+    change(meta["config"]["tx"])
+    with pytest.raises(LfcError, match=match):
+        open_decoder(open_lfc(_rebuild(meta, secs))).decode_all()
+
+
+def test_version_6_needs_views_with_alpha():
+    from formats.schema import Fields
+    from rlfc.txlayout import TxLayout
+
+    meta, secs = split_file((GOLDEN / "rlfc_tx6_alpha_rgba8.lfc").read_bytes())
+    lay = dict(secs)["tx.layout"]
+    f = meta["config"]["tx"]
+    assert TxLayout.read(Fields(f, "config.tx"), lay, 16, 4).alpha_of
+    with pytest.raises(FormatError, match="needs views with alpha"):
+        TxLayout.read(Fields(f, "config.tx"), lay, 16, 3)
+
+
+def test_a_damaged_alpha_stream_is_refused_when_its_view_is_decoded():
+    """An alpha stream's last bytes changed (the section's checksum recomputed): that view's
+    decode raises a typed error; the views before it decode."""
+    meta, secs = split_file((GOLDEN / "rlfc_tx6_alpha_ga16.lfc").read_bytes())
+    t = meta["config"]["tx"]
+    first = t["key_images"][0]
+    s = dict(secs)
+    img = bytearray(s["tx.keyimg"])
+    img[first - 3:first] = b"\xff\xff\xff"                      # the end of view keys[0]'s alpha stream
+    secs = [(n, bytes(img) if n == "tx.keyimg" else b) for n, b in secs]
+    d = open_decoder(open_lfc(_rebuild(meta, secs)))
+    k = t["keys"][0]
+    with pytest.raises(LfcError):
+        d.decode_view(*divmod(k, d.cols))
