@@ -34,6 +34,9 @@ The grids are derived deterministically from ../shared/data:
   focus breathing (up to 1.5 px at the edges).
 - ``antinous_jpeg85``: hci_antinous with every view JPEG-coded at quality 85 (OpenCV, 4:2:0), as
   rigs that store JPEG deliver them: each view carries 8×8 block artefacts no other view predicts.
+- ``layers_rgba_9x9``: the two foreground layers of ``layers_9x9`` alone, RGBA (a renderer's
+  output with transparency): colour over black where nothing is, alpha their soft-edged
+  coverage, no noise. Its JPEG 2000 peer codes the colour and keeps the alpha exact (zlib).
 
 For each: per-view JPEG 2000 (imagecodecs) at several PSNRs, interpolated at the target like
 tools/bench.py; and the RLFC profile at the target (the CLI's ``--target-psnr``), with the
@@ -97,6 +100,35 @@ def layers(data: Path, rows=9, cols=9, h=256, w=320, seed=0) -> LightField:
             acc += rng.normal(0, 1.5, acc.shape).astype(np.float32)
             out[r, c] = np.clip(np.rint(acc), 0, 255).astype(np.uint8)
     return _grid(out, "synthetic layers (textures: LLFF statue, ollie, canclip)")
+
+
+def layers_rgba(data: Path, rows=9, cols=9, h=256, w=320) -> LightField:
+    """The two foreground layers of :func:`layers` alone, as RGBA: colour premultiplied over
+    black (what a renderer writes where nothing is), alpha their soft-edged coverage (a disc at
+    0.9 and a rectangle at 2.2 px per view step, occluding each other), no noise."""
+    tex = []
+    for s in ("llff_ollie", "llff_canclip"):
+        sv = read_scene(data / s).views
+        v = sv.reshape(-1, *sv.shape[2:])[0].astype(np.float32)
+        tex.append(cv2.resize(v[..., :3], (w + 80, h + 80), interpolation=cv2.INTER_AREA))
+    yy, xx = np.mgrid[0:h + 80, 0:w + 80]
+    disc = np.clip(0.28 * h - np.hypot(yy - (h + 80) * 0.55, xx - (w + 80) * 0.35) + 0.5, 0, 1).astype(np.float32)
+    rect = ((np.abs(yy - (h + 80) * 0.35) < 0.18 * h) & (np.abs(xx - (w + 80) * 0.68) < 0.16 * w)).astype(np.float32)
+    out = np.zeros((rows, cols, h, w, 4), np.uint8)
+    for r in range(rows):
+        for c in range(cols):
+            col, cov = np.zeros((h, w, 3), np.float32), np.zeros((h, w, 1), np.float32)
+            for img, mask, d in ((tex[0], disc, 0.9), (tex[1], rect, 2.2)):
+                dy, dx = (r - rows // 2) * d, (c - cols // 2) * d
+                m = np.float32([[1, 0, dx + 40], [0, 1, dy + 40]])
+                warped = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
+                                        borderMode=cv2.BORDER_REFLECT)
+                a = cv2.warpAffine(mask, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)[..., None]
+                col = col * (1 - a) + warped * a
+                cov = cov * (1 - a) + a
+            out[r, c, ..., :3] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
+            out[r, c, ..., 3] = np.clip(np.rint(cov[..., 0] * 255), 0, 255).astype(np.uint8)
+    return _grid(out, "synthetic RGBA layers over nothing (textures: LLFF ollie, canclip)")
 
 
 def noisy(views: np.ndarray, sigma: float, seed: int = 0) -> np.ndarray:
@@ -222,15 +254,25 @@ def scenes(data: Path) -> dict[str, LightField]:
                                            "hci_antinous, a gain per view and channel in [0.94, 1.06]"),
             "antinous_rotate": _grid(rotated(ant.views), "hci_antinous, each view rotated by up to 0.5 deg"),
             "antinous_zoom": _grid(zoomed(ant.views), "hci_antinous, each view scaled by 1 +- 0.6%"),
-            "antinous_jpeg85": _grid(jpeg_sourced(ant.views), "hci_antinous, each view JPEG quality 85")}
+            "antinous_jpeg85": _grid(jpeg_sourced(ant.views), "hci_antinous, each view JPEG quality 85"),
+            "layers_rgba_9x9": layers_rgba(data)}
 
 
 def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
+    """Per-view JPEG 2000's bpp at ``target`` dB (colour PSNR), interpolated between levels. Views
+    with alpha: the colour channels coded, the alpha plane exactly beside them (zlib, as
+    :func:`rlfc.topcodec.alpha_stream`), its bytes counted."""
+    from rlfc.topcodec import alpha_stream, has_alpha
+
     views = lf.views.reshape(-1, *lf.views.shape[2:])
+    extra = 0
+    if has_alpha(views.shape[-1]):
+        extra = sum(len(alpha_stream(v[..., -1])) for v in views)
+        views = np.ascontiguousarray(views[..., :-1])
     peer, pts = j2k(), []
     for lev in (target - 4, target - 2, target, target + 2, target + 4, target + 6):
         r = peer.run(views, lev)
-        pts.append({"codec": "j2k", "bpp": bpp(r["bytes"], len(views), lf.height, lf.width),
+        pts.append({"codec": "j2k", "bpp": bpp(r["bytes"] + extra, len(views), lf.height, lf.width),
                     "psnr_rgb": psnr_rgb(views, r["decoded"])})
     return bpp_at(pts, "j2k", target), pts
 
