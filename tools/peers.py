@@ -19,7 +19,8 @@ from tools.common import median_time_result as _median
 
 
 class PerViewImageCodec:
-    """Every view coded alone (random-access unit: one view)."""
+    """Every view coded alone (random-access unit: one view); views with alpha: the colour by
+    the codec, the alpha plane exact beside it (zlib)."""
 
     unit = "view"
 
@@ -30,6 +31,21 @@ class PerViewImageCodec:
         return None
 
     def run(self, views: np.ndarray, setting):
+        from rlfc.topcodec import alpha_stream, has_alpha, read_alpha
+
+        if has_alpha(views.shape[-1]):
+            # the colour channels by this codec, the alpha plane exact beside them (zlib, as lfcodec
+            # keeps it: tx version 6 codes such views the same way); every codec here is scored on
+            # the colour. 4-component JPEG 2000 at a PSNR level (alpha lossy with the colour) was
+            # 2.0x larger on mitsuba_objects_360 at 40 dB
+            r = self.run(np.ascontiguousarray(views[..., :-1]), setting)
+            streams = [alpha_stream(v[..., -1]) for v in views]
+            t0 = time.perf_counter()
+            alpha = np.stack([read_alpha(a, *views.shape[1:3], views.dtype, "alpha") for a in streams])
+            ta = time.perf_counter() - t0
+            return {"bytes": r["bytes"] + sum(map(len, streams)),
+                    "decoded": np.concatenate([r["decoded"].reshape(views.shape[:-1] + (-1,)), alpha[..., None]], -1),
+                    "decode_view_s": r["decode_view_s"] + ta / len(views), "decode_all_s": r["decode_all_s"] + ta}
         blobs = [self._enc(v, setting) for v in views]
         t_one, _ = _median(lambda: self._dec(blobs[len(blobs) // 2]), 5)
         t0 = time.perf_counter()

@@ -259,20 +259,13 @@ def scenes(data: Path) -> dict[str, LightField]:
 
 
 def j2k_at(lf: LightField, target: float) -> tuple[float | None, list]:
-    """Per-view JPEG 2000's bpp at ``target`` dB (colour PSNR), interpolated between levels. Views
-    with alpha: the colour channels coded, the alpha plane exactly beside them (zlib, as
-    :func:`rlfc.topcodec.alpha_stream`), its bytes counted."""
-    from rlfc.topcodec import alpha_stream, has_alpha
-
+    """Per-view JPEG 2000's bpp at ``target`` dB (colour PSNR), interpolated between levels
+    (views with alpha: the alpha plane exact beside the colour, :class:`tools.peers.PerViewImageCodec`)."""
     views = lf.views.reshape(-1, *lf.views.shape[2:])
-    extra = 0
-    if has_alpha(views.shape[-1]):
-        extra = sum(len(alpha_stream(v[..., -1])) for v in views)
-        views = np.ascontiguousarray(views[..., :-1])
     peer, pts = j2k(), []
     for lev in (target - 4, target - 2, target, target + 2, target + 4, target + 6):
         r = peer.run(views, lev)
-        pts.append({"codec": "j2k", "bpp": bpp(r["bytes"] + extra, len(views), lf.height, lf.width),
+        pts.append({"codec": "j2k", "bpp": bpp(r["bytes"], len(views), lf.height, lf.width),
                     "psnr_rgb": psnr_rgb(views, r["decoded"])})
     return bpp_at(pts, "j2k", target), pts
 

@@ -56,3 +56,24 @@ def test_bench_lfn_curve_display_and_summary():
     assert displayed(p, [4, 5, 7, 8], 4).tolist() == [10.0, 11.0, 11.0, 12.0, 11.0]
     s = summary(displayed(p, [4, 5, 7, 8], 4))
     assert s["drops_over_0.1dB"] == 1 and s["worst_drop_db"] == -1.0 and s["last_psnr"] == 11.0
+
+
+def test_per_view_peers_keep_alpha_exact_and_count_it():
+    """Views with alpha: a per-view peer codes the colour and keeps the alpha plane exact beside
+    it (zlib, as tx version 6 does), its bytes counted; views without alpha are untouched."""
+    import numpy as np
+
+    from rlfc.topcodec import alpha_stream
+
+    rng = np.random.default_rng(3)
+    rgb = rng.integers(0, 256, (3, 24, 40, 3), dtype=np.uint8)
+    alpha = np.zeros((3, 24, 40, 1), np.uint8)
+    alpha[:, 6:18, 10:30] = 255
+    alpha[:, 6, 10:30] = 97
+    for make in (peers.j2k, peers.jxl):
+        p = make()
+        r = p.run(np.concatenate([rgb, alpha], -1), p.settings[2])
+        plain = p.run(rgb, p.settings[2])
+        assert r["decoded"].shape == (3, 24, 40, 4) and (r["decoded"][..., 3:] == alpha).all()
+        assert (r["decoded"][..., :3] == plain["decoded"].reshape(rgb.shape)).all()
+        assert r["bytes"] == plain["bytes"] + sum(len(alpha_stream(a[..., 0])) for a in alpha)
