@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import zlib
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -105,10 +106,13 @@ class TxLayout:
         k[list(self.keys)] = True
         return k
 
-    @property
+    @cached_property
     def intra(self) -> np.ndarray:
-        """(N0,) views with no references."""
-        return (self.refs < 0).all(axis=1)
+        """(N0,) views with no references (read-only; computed once: an open of a posed capture
+        asked for it 400 times)."""
+        a = (self.refs < 0).all(axis=1)
+        a.flags.writeable = False
+        return a
 
     def to_config(self) -> dict:
         """The JSON part (``config.tx``); the per-view tables go to :meth:`to_bytes`."""
