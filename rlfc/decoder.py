@@ -263,5 +263,10 @@ class RlfcDecoder(Decoder):
                    f"0..{self.levels} (0 = full quality)")
         if core.get("warped_views"):
             summary += f"; {core['warped_views']} views predicted through per-view warps (--warps)"
+        if core.get("jpeg2000_views"):
+            n = core["jpeg2000_views"]
+            summary += f"; {n} view{'s' if n > 1 else ''} coded alone as JPEG 2000"
+            if core.get("alpha_stream_bytes"):
+                summary += f" (their colour; alpha exact, {core['alpha_stream_bytes']} bytes of alpha streams)"
         return {"codec": CODEC_ID, "profile": self.profile, "levels": self.levels, "block_size": self.block_size,
                 "summary": summary, **core}

@@ -510,7 +510,8 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         return {"key_views": len(lay.keys), "maps": lay.n_maps, "coded_blocks": int(self.coded.sum()),
                 "blocks_per_view": self.nby * self.nbx, "key_row_streams": self.key_split,
                 "layout_version": int(lay.version), "weighted_views": int(self._weighted.sum()),
-                "warped_views": 0 if lay.warp is None else int(lay.warp.any(axis=1).sum())}
+                "warped_views": 0 if lay.warp is None else int(lay.warp.any(axis=1).sum()),
+                "jpeg2000_views": len(self.img_of), "alpha_stream_bytes": int(sum(self.alpha_of.values()))}
 
 
 def pred_inputs(tables, nbx8: int, views, ty, tx):

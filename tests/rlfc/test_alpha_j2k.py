@@ -201,3 +201,17 @@ def test_a_narrow_miss_at_every_finer_slope_step_tries_a_quarter_octave_finer(mo
     assert not any("lossless" in n for n in e.notes) and sum(len(x) for _, x in e.sections) < 12_000
     d, _ = open_encoded(lf, e)
     assert (d.decode_all() == e.decoded).all()
+
+
+def test_info_says_which_views_are_jpeg2000_and_what_their_alpha_costs():
+    from formats.cli import main
+
+    d = open_decoder(open_lfc(GOLDEN / "rlfc_tx6_alpha_ga16.lfc"))
+    info = d.info()
+    t = split_file((GOLDEN / "rlfc_tx6_alpha_ga16.lfc").read_bytes())[0]["config"]["tx"]
+    assert info["jpeg2000_views"] == sum(1 for n in t["key_images"] if n) == 16
+    assert info["alpha_stream_bytes"] == sum(t["key_alpha"]) > 0
+    assert "16 views coded alone as JPEG 2000 (their colour; alpha exact" in info["summary"]
+    plain = open_decoder(open_lfc(GOLDEN / "rlfc_tx5_warped_rgb8.lfc")).info()
+    assert plain["jpeg2000_views"] == 0 and plain["alpha_stream_bytes"] == 0 and "JPEG 2000" not in plain["summary"]
+    assert main(["info", str(GOLDEN / "rlfc_tx6_alpha_ga16.lfc")]) == 0
