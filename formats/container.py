@@ -397,7 +397,9 @@ class Container:
         c0 = starts[keep] // info.chunk_size
         n = (stops[keep] - 1) // info.chunk_size - c0 + 1
         first = np.repeat(np.cumsum(n) - n, n)
-        chunks = np.unique(np.repeat(c0, n) + np.arange(int(n.sum())) - first)
+        cs = np.repeat(c0, n) + np.arange(int(n.sum())) - first
+        lo = int(cs.min())                                     # each chunk once, ascending (a bincount over the
+        chunks = np.flatnonzero(np.bincount(cs - lo)) + lo     # section's chunks: np.unique imports numpy.ma, ~9 ms)
         self.check_unchanged()
         for c in chunks.tolist():
             if (info.name, c) not in self._verified:

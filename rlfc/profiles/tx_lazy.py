@@ -150,7 +150,7 @@ class OnDemand:
     def _need_views(self, views: np.ndarray) -> np.ndarray:
         """(n_keys, nby) bool: every block row of the key views that whole ``views`` read."""
         need = np.zeros(self._key_done.shape, bool)
-        for v in np.unique(views).tolist():
+        for v in sorted(set(np.asarray(views).tolist())):     # (np.unique imports numpy.ma on a first call)
             if self.is_key[v]:
                 need[self.key_slot[v]] = True
             else:
