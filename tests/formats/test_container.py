@@ -291,3 +291,21 @@ def test_sources_that_are_not_files_urls_or_bytes(source):
 
     with pytest.raises(LfcError):
         open_lfc(source)
+
+
+@settings(max_examples=60, deadline=None)
+@given(ranges=st.lists(st.tuples(st.integers(0, 2500), st.integers(0, 400)), min_size=2, max_size=12))
+def test_verify_ranges_reads_every_touched_chunk_once_in_order(ranges):
+    """Many ranges (empty ones too, overlapping, in any order): each chunk any of them touches
+    is read once, in ascending order, and no other."""
+    payload = bytes(np.random.default_rng(1).integers(0, 256, 2600, dtype=np.uint8))
+    c = Container(_bytes(sections=(("p", payload),), chunk=100))
+    starts = np.array([a for a, _ in ranges])
+    stops = np.minimum(starts + np.array([n for _, n in ranges]), len(payload))
+    want = sorted({ch for a, b in zip(starts.tolist(), stops.tolist()) if b > a
+                   for ch in range(a // 100, (b - 1) // 100 + 1)})
+    got = []
+    real = c.read
+    c.read = lambda name, lo, hi, **k: got.append(lo // 100) or real(name, lo, hi, **k)
+    c.verify_ranges("p", starts, stops)
+    assert got == want
