@@ -24,7 +24,7 @@ CLOSE_DB = 0.03
 
 def smallest_j2k(img: np.ndarray, max_sse: float, sq_error: Callable[[np.ndarray], float], target_db: float,
                  give_up_bytes: float = math.inf, hint: dict | None = None,
-                 threads: int = 1) -> tuple[bytes, np.ndarray] | None:
+                 threads: int = 1, alpha: bytes | None = None) -> tuple[bytes, np.ndarray] | None:
     """The smallest codestream found whose decoded image has squared error ≤ ``max_sse``.
 
     Args:
@@ -45,11 +45,14 @@ def smallest_j2k(img: np.ndarray, max_sse: float, sq_error: Callable[[np.ndarray
         threads: OpenJPEG's own threads for each encode and decode (the same codestreams and
             pixels whatever their number, checked; a 448×448 view encodes in 22.9 ms on one,
             14.9 on two).
+        alpha: the image's alpha stream where the caller has it (images with alpha; made here
+            otherwise).
 
     Returns:
         (codestream, decoded image) or None when no try met the budget below ``give_up_bytes``.
     """
-    alpha = alpha_stream(img[..., -1]) if has_alpha(img.shape[-1]) else b""
+    if alpha is None:
+        alpha = alpha_stream(img[..., -1]) if has_alpha(img.shape[-1]) else b""
     lo = hi = None                    # levels that missed / met the budget
     best = None
     prev = None                       # (level, dB over budget) of the previous try

@@ -159,7 +159,7 @@ class TxEncoder(PassCoder, J2kViews, RdoQuantizer, FilePacker):
         if ic == "auto":
             ic = "tx" if params.lossless else "j2k"
         self.intra_codec = ic                     # (views with alpha: JPEG 2000 colour, exact alpha after it)
-        self._alpha_len: dict = {}                # view → bytes of its alpha stream (alpha_length)
+        self._alpha: dict = {}                    # view → its alpha stream (alpha_stream_of)
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
         self._map_cost: dict = {}                 # predicted key → bytes of its own map; "all": the section (_map_bytes)
@@ -301,17 +301,18 @@ class TxEncoder(PassCoder, J2kViews, RdoQuantizer, FilePacker):
         pad = ((0, self.Hp - self.h), (0, self.Wp - self.w_px), (0, 0))
         return np.pad(np.asarray(pixels), pad, mode="edge")
 
-    def alpha_length(self, v: int) -> int:
-        """Bytes of view v's alpha stream (:func:`rlfc.topcodec.alpha_stream` of its padded alpha
-        plane) at the end of its JPEG 2000 image entry; 0 for views without alpha. Cached."""
-        from .topcodec import alpha_stream, has_alpha
+    def alpha_stream_of(self, v: int) -> bytes:
+        """View v's alpha stream (:func:`rlfc.topcodec.alpha_stream` of its padded alpha plane),
+        which ends its JPEG 2000 image entry; b"" for views without alpha. Made once per view
+        (every JPEG 2000 search and level pass of the view, and the packer, take it from here)."""
+        from .topcodec import alpha_stream
 
-        if not has_alpha(self.lf.views.shape[-1]):
-            return 0
-        n = self._alpha_len.get(v)
-        if n is None:
-            n = self._alpha_len[v] = len(alpha_stream(self.padded(self.view_pixels(v))[..., -1]))
-        return n
+        if not self.lf.has_alpha:
+            return b""
+        a = self._alpha.get(v)
+        if a is None:
+            a = self._alpha[v] = alpha_stream(self.padded(self.view_pixels(v))[..., -1])
+        return a
 
     def view_pixels(self, v: int) -> np.ndarray:
         """(H, W, C) pixels of view v (row-major view index): read from the light field, or the

@@ -58,7 +58,7 @@ class J2kViews:
         # searched before starts from the last view's)
         hint = self._j2k_hints.setdefault(v, dict(self._j2k_hints.get("last", {}) if start is None else start))
         found = smallest_j2k(self.padded(orig), budget, err, target, tx_bytes if give_up else math.inf, hint,
-                             threads=threads)
+                             threads=threads, alpha=self.alpha_stream_of(v))
         if start is None:
             self._j2k_hints["last"] = hint
         if found is None or len(found[0]) >= tx_bytes:

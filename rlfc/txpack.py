@@ -206,7 +206,7 @@ class FilePacker:
         weighted = bool(weighted_views(wp).any())
         warped = self.s.warp is not None                # (version 5: version 4's tables, then the warps)
         # version 6: views with alpha, whose JPEG 2000 entries end in their alpha streams
-        key_alpha = tuple(self.alpha_length(k) if k in res["keyimg"] else 0
+        key_alpha = tuple(len(self.alpha_stream_of(k)) if k in res["keyimg"] else 0
                           for k in keys if intra[k]) if imgs else ()
         alpha = any(key_alpha)
         version = ALPHA_VERSION if alpha else WARP_VERSION if warped else WP_VERSION if weighted else \

@@ -49,6 +49,7 @@ def _params_from(options: EncodeOptions) -> TxParams:
     return TxParams(**p)
 
 
+FINEST_NOTE = "even the finest quantizer misses the target; the closest setting is written"
 COARSEST_NOTE = ("even the coarsest quantizer (and the smallest key views) cannot reach this bpp; the closest "
                  "setting is written")
 SEARCH_STRIDE = 4      # the search's sample: every 4th view that is not a key view …
@@ -162,7 +163,7 @@ def side_lambda(lf, options: EncodeOptions, params: TxParams) -> float:
         d = params.step ** 2 / 12
     else:
         d = (8.0 * depth_scale(lf.views.dtype)) ** 2 / 12
-    alpha = ALPHA_SIDE_SCALE if lf.views.shape[-1] in (2, 4) else 1.0       # (views with alpha)
+    alpha = ALPHA_SIDE_SCALE if lf.has_alpha else 1.0
     return SIDE_SCALE * params.lam * 12 * d * alpha
 
 
@@ -575,8 +576,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             maps_ratio = maps_kind = None
             restored = True
         if not found:
-            notes.append("even the finest quantizer misses the target; the closest setting is written" if floor else
-                         COARSEST_NOTE)
+            notes.append(FINEST_NOTE if floor else COARSEST_NOTE)
         # one more pass with the model of the chosen point, kept where it meets the target and,
         # for a bpp target, gives better quality; but a posed capture's search pass coded every
         # view (each keeping its pixels), and where its model was measured within MODEL_REACH
@@ -646,7 +646,7 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
             # promotion, and was written lossless, 4× larger)
             if options.target_psnr is not None and not found and enc.psnr(res) >= options.target_psnr:
                 found = True
-                for n in (COARSEST_NOTE, "even the finest quantizer misses the target; the closest setting is written"):
+                for n in (COARSEST_NOTE, FINEST_NOTE):
                     if n in notes:
                         notes.remove(n)
     enc.hold(())

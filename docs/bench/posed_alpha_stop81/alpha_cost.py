@@ -1,4 +1,4 @@
-import numpy as np, sys
+import numpy as np
 from pathlib import Path
 from tools.unseen import layers_rgba, _grid
 from rlfc import encode

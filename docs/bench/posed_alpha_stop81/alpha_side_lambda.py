@@ -1,4 +1,4 @@
-import numpy as np, sys
+import sys
 from pathlib import Path
 from tools.unseen import layers_rgba
 from tools.make_golden import variants, lf_of
