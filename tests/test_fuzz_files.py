@@ -9,11 +9,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from formats.container import build_container
 from formats.errors import FormatError, LfcError
 from formats.lfcfile import open_lfc
 from formats.registry import open_decoder
-from tools.fuzz import DEFECTS, corpus_files, fuzz, run_lengths, split_file
+from tools.fuzz import DEFECTS, corpus_files, fuzz, join_file, run_lengths, split_file
 
 GOLDEN = Path(__file__).parent / "data" / "golden"
 
@@ -74,8 +73,7 @@ def test_lfn_reference_tolerance_follows_float32s_own_spread(tmp_path):
         check_reference(blob, {"levels": {0: bad}})
 
 
-def _rebuild(meta, secs):
-    return b"".join(bytes(p) for p in build_container(json.dumps(meta).encode(), secs))
+_rebuild = join_file
 
 
 def _bise_runs():
@@ -129,7 +127,7 @@ def test_lfn_metadata_checked_before_allocation(field, value):
     for k in field[:-1]:
         node = node[k]
     node[field[-1]] = value
-    blob = b"".join(bytes(p) for p in build_container(json.dumps(meta).encode(), secs))
+    blob = _rebuild(meta, secs)
     with pytest.raises(LfcError):
         open_decoder(open_lfc(blob)).decode_all()
 

@@ -77,6 +77,12 @@ def split_file(blob: bytes) -> tuple[dict, list[tuple[str, bytes]]]:
     return meta, secs
 
 
+def join_file(meta: dict, secs: list) -> bytes:
+    """The inverse of :func:`split_file`: a valid container of ``meta`` and ``secs`` (checksums
+    recomputed), for hand-made hostile files."""
+    return b"".join(bytes(p) for p in build_container(json.dumps(meta).encode(), secs))
+
+
 # -- mutations -------------------------------------------------------------------------------
 def _paths(obj, path=()):
     """Every (path, value) in a JSON tree, containers included."""

@@ -13,6 +13,11 @@ def make_lf(views, layout="grid"):
     return LightField(views=views, positions=grid_positions(r, c), layout=layout)
 
 
+def posed_lf(views):
+    """(n, H, W, C) views as a posed capture (one row, every view an intra key for tx)."""
+    return make_lf(np.ascontiguousarray(views)[None], layout="posed")
+
+
 def roundtrip(lf, params=None):
     """Encode in memory, reopen, return (decoder, nbytes, loop result)."""
     params = params or RlfcParams()

@@ -2,7 +2,6 @@
 streams round-trip, posed RGBA and grey+alpha captures take JPEG 2000 by default with alpha
 exact and every decode path agreeing, and files whose alpha streams or lengths are wrong are
 refused with typed errors."""
-import json
 import zlib
 
 import numpy as np
@@ -11,7 +10,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from formats.codec_api import EncodeOptions
-from formats.container import build_container
 from formats.errors import FormatError, LfcError
 from formats.lfcfile import open_lfc
 from formats.metrics import psnr_rgb
@@ -21,8 +19,8 @@ from formats.scenes import read_scene
 from rlfc import encode
 from rlfc.topcodec import alpha_stream, read_alpha
 from tests.conftest import ROOT
-from tests.rlfc.helpers import check_agreement, make_lf, open_encoded
-from tools.fuzz import split_file
+from tests.rlfc.helpers import check_agreement, make_lf, open_encoded, posed_lf
+from tools.fuzz import join_file, split_file
 
 GOLDEN = ROOT / "tests" / "data" / "golden"
 
@@ -64,10 +62,7 @@ def _views_with_alpha(n=4, grey16=False):
     return np.concatenate([v, np.broadcast_to(a[None, ..., None], v.shape[:-1] + (1,))], -1)
 
 
-def _posed(views):
-    lf = make_lf(np.ascontiguousarray(views)[None])
-    lf.layout = "posed"
-    return lf
+_posed = posed_lf
 
 
 @pytest.mark.parametrize("grey16", [False, True])
@@ -102,8 +97,7 @@ def test_posed_views_with_alpha_are_jpeg2000_with_exact_alpha(grey16):
     assert sum(len(x) for _, x in e.sections) < sum(len(x) for _, x in tx.sections)
 
 
-def _rebuild(meta, secs):
-    return b"".join(bytes(p) for p in build_container(json.dumps(meta).encode(), secs))
+_rebuild = join_file
 
 
 @pytest.mark.parametrize("change, match", [

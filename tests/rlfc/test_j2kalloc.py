@@ -12,7 +12,7 @@ from formats.scenes import read_scene
 from rlfc import encode
 from rlfc import j2kalloc as J
 from tests.conftest import ROOT
-from tests.rlfc.helpers import check_agreement, make_lf, open_encoded
+from tests.rlfc.helpers import check_agreement, open_encoded, posed_lf
 
 
 def _texture(rng, h=64, w=80, sigma=1.0, dtype=np.uint8):
@@ -63,10 +63,7 @@ def test_smooth_psnr_tells_gradients_from_texture(rng):
     assert J.smooth_psnr(grey16) < 30
 
 
-def _posed(views):
-    lf = make_lf(np.ascontiguousarray(views)[None])
-    lf.layout = "posed"
-    return lf
+_posed = posed_lf
 
 
 def _dino(n=6):
