@@ -71,32 +71,48 @@ def _grid(views: np.ndarray, name: str) -> LightField:
                       layout="grid", meta={"source": name})
 
 
-def layers(data: Path, rows=9, cols=9, h=256, w=320, seed=0) -> LightField:
-    """Three textured layers with occlusion at sub-pixel disparities, plus noise."""
+def _textures(data: Path, scenes: tuple, h: int, w: int) -> list:
+    """The first view of each LLFF capture in ``scenes``, RGB float32, resized to (h + 80, w + 80)
+    (a 40 px margin on every side for the layers' shifts)."""
     tex = []
-    for s in ("llff_statue", "llff_ollie", "llff_canclip"):
+    for s in scenes:
         sv = read_scene(data / s).views
         v = sv.reshape(-1, *sv.shape[2:])[0].astype(np.float32)
         tex.append(cv2.resize(v[..., :3], (w + 80, h + 80), interpolation=cv2.INTER_AREA))
+    return tex
+
+
+def _rect(h: int, w: int) -> np.ndarray:
+    """The rectangular foreground layer's mask, over the textures' (h + 80, w + 80)."""
+    yy, xx = np.mgrid[0:h + 80, 0:w + 80]
+    return ((np.abs(yy - (h + 80) * 0.35) < 0.18 * h) & (np.abs(xx - (w + 80) * 0.68) < 0.16 * w)).astype(np.float32)
+
+
+def _placed(img: np.ndarray, mask, d: float, r: int, c: int, rows: int, cols: int, h: int, w: int) -> tuple:
+    """A layer of disparity ``d`` px per view step as view (r, c) sees it: (its texture bicubic,
+    its mask bilinear (h, w, 1), or None without one)."""
+    dy, dx = (r - rows // 2) * d, (c - cols // 2) * d
+    m = np.float32([[1, 0, dx + 40], [0, 1, dy + 40]])
+    warped = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP, borderMode=cv2.BORDER_REFLECT)
+    if mask is None:
+        return warped, None
+    return warped, cv2.warpAffine(mask, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)[..., None]
+
+
+def layers(data: Path, rows=9, cols=9, h=256, w=320, seed=0) -> LightField:
+    """Three textured layers with occlusion at sub-pixel disparities, plus noise."""
+    tex = _textures(data, ("llff_statue", "llff_ollie", "llff_canclip"), h, w)
     yy, xx = np.mgrid[0:h + 80, 0:w + 80]
     disc = ((yy - (h + 80) * 0.55) ** 2 + (xx - (w + 80) * 0.35) ** 2 < (0.28 * h) ** 2).astype(np.float32)
-    rect = ((np.abs(yy - (h + 80) * 0.35) < 0.18 * h) & (np.abs(xx - (w + 80) * 0.68) < 0.16 * w)).astype(np.float32)
-    layers_ = [(tex[0], None, -0.35), (tex[1], disc, 0.9), (tex[2], rect, 2.2)]
+    layers_ = [(tex[0], None, -0.35), (tex[1], disc, 0.9), (tex[2], _rect(h, w), 2.2)]
     rng = np.random.default_rng(seed)
     out = np.zeros((rows, cols, h, w, 3), np.uint8)
     for r in range(rows):
         for c in range(cols):
             acc = np.zeros((h, w, 3), np.float32)
             for img, mask, d in layers_:
-                dy, dx = (r - rows // 2) * d, (c - cols // 2) * d
-                m = np.float32([[1, 0, dx + 40], [0, 1, dy + 40]])
-                warped = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
-                                        borderMode=cv2.BORDER_REFLECT)
-                if mask is None:
-                    acc = warped
-                else:
-                    a = cv2.warpAffine(mask, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)[..., None]
-                    acc = acc * (1 - a) + warped * a
+                warped, a = _placed(img, mask, d, r, c, rows, cols, h, w)
+                acc = warped if a is None else acc * (1 - a) + warped * a
             acc += rng.normal(0, 1.5, acc.shape).astype(np.float32)
             out[r, c] = np.clip(np.rint(acc), 0, 255).astype(np.uint8)
     return _grid(out, "synthetic layers (textures: LLFF statue, ollie, canclip)")
@@ -106,24 +122,16 @@ def layers_rgba(data: Path, rows=9, cols=9, h=256, w=320) -> LightField:
     """The two foreground layers of :func:`layers` alone, as RGBA: colour premultiplied over
     black (what a renderer writes where nothing is), alpha their soft-edged coverage (a disc at
     0.9 and a rectangle at 2.2 px per view step, occluding each other), no noise."""
-    tex = []
-    for s in ("llff_ollie", "llff_canclip"):
-        sv = read_scene(data / s).views
-        v = sv.reshape(-1, *sv.shape[2:])[0].astype(np.float32)
-        tex.append(cv2.resize(v[..., :3], (w + 80, h + 80), interpolation=cv2.INTER_AREA))
+    tex = _textures(data, ("llff_ollie", "llff_canclip"), h, w)
     yy, xx = np.mgrid[0:h + 80, 0:w + 80]
     disc = np.clip(0.28 * h - np.hypot(yy - (h + 80) * 0.55, xx - (w + 80) * 0.35) + 0.5, 0, 1).astype(np.float32)
-    rect = ((np.abs(yy - (h + 80) * 0.35) < 0.18 * h) & (np.abs(xx - (w + 80) * 0.68) < 0.16 * w)).astype(np.float32)
+    layers_ = ((tex[0], disc, 0.9), (tex[1], _rect(h, w), 2.2))
     out = np.zeros((rows, cols, h, w, 4), np.uint8)
     for r in range(rows):
         for c in range(cols):
             col, cov = np.zeros((h, w, 3), np.float32), np.zeros((h, w, 1), np.float32)
-            for img, mask, d in ((tex[0], disc, 0.9), (tex[1], rect, 2.2)):
-                dy, dx = (r - rows // 2) * d, (c - cols // 2) * d
-                m = np.float32([[1, 0, dx + 40], [0, 1, dy + 40]])
-                warped = cv2.warpAffine(img, m, (w, h), flags=cv2.INTER_CUBIC | cv2.WARP_INVERSE_MAP,
-                                        borderMode=cv2.BORDER_REFLECT)
-                a = cv2.warpAffine(mask, m, (w, h), flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)[..., None]
+            for img, mask, d in layers_:
+                warped, a = _placed(img, mask, d, r, c, rows, cols, h, w)
                 col = col * (1 - a) + warped * a
                 cov = cov * (1 - a) + a
             out[r, c, ..., :3] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
