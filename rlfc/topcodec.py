@@ -63,11 +63,12 @@ def encode_view_j2k(img: np.ndarray, level: float, threads: int = 1, alpha: byte
 
 
 def decode_view_j2k(data, shape: tuple, dtype, alpha_bytes: int = 0, threads: int = 1,
-                    alpha: np.ndarray | None = None) -> np.ndarray:
+                    alpha: np.ndarray | None = None, what: str = "a view") -> np.ndarray:
     """(H, W, C) pixels of an image entry of :func:`encode_view_j2k`: where the views carry
     alpha (C = 2 or 4) the entry's last ``alpha_bytes`` bytes are its alpha stream, and the
     JPEG 2000 codestream before them holds C − 1 components (``alpha``: the (H, W) plane where
-    the caller knows it, an encoder, which then passes ``alpha_bytes`` = its stream's length).
+    the caller knows it, an encoder, which then passes ``alpha_bytes`` = its stream's length;
+    ``what``: the view, as errors name it).
 
     Raises:
         ChecksumError / FormatError: a codestream or alpha stream that does not decode to the shape.
@@ -76,11 +77,11 @@ def decode_view_j2k(data, shape: tuple, dtype, alpha_bytes: int = 0, threads: in
     if not has_alpha(C):
         return decode_image("j2k", data, shape, dtype, threads=threads)
     if not 0 < alpha_bytes < len(data):
-        raise FormatError(f"an image entry of {len(data)} bytes cannot end in an alpha stream of {alpha_bytes}")
+        raise FormatError(f"{what}: an image entry of {len(data)} bytes cannot end in an alpha stream of {alpha_bytes}")
     cut = len(data) - alpha_bytes
     col = decode_image("j2k", data[:cut], (H, W, C - 1), dtype, threads=threads)
     if alpha is None:
-        alpha = read_alpha(data[cut:], H, W, dtype, "a view's alpha stream")
+        alpha = read_alpha(data[cut:], H, W, dtype, f"{what}'s alpha stream")
     out = np.empty((H, W, C), np.dtype(dtype))
     out[..., :C - 1] = col
     out[..., C - 1] = alpha

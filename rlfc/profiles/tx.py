@@ -392,7 +392,8 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         with self._io:
             data = bytes(self.container.read("tx.keyimg", a, b))
         if k in self.alpha_of:                                # colour codestream, then the alpha stream
-            return decode_view_j2k(data, (self.Hp, self.Wp, self.P), self.dtype, self.alpha_of[k], threads)
+            return decode_view_j2k(data, (self.Hp, self.Wp, self.P), self.dtype, self.alpha_of[k], threads,
+                                   what=f"{self.container.name}: view {k}")
         return decode_image("j2k", data, (self.Hp, self.Wp, self.P), self.dtype, threads=threads)
 
     def _set_key_image(self, k: int, img: np.ndarray) -> None:
