@@ -12,15 +12,17 @@ A codec asks a :class:`Runner` for two things:
   results in the order given whatever order they finish in.
 * ``map_threaded(fn, arglists)``: the same for tasks that release the GIL (OpenCV, numpy on
   large arrays); the serial runner runs them on a few threads of this process (one OpenCV
-  thread each), the others as ``map``.
+  thread and one BLAS thread each), the others as ``map``.
 
-Tasks must be deterministic functions of their arguments: the file an encode writes is then
-the same, byte for byte, whatever runs it (same platform and numpy build; floating-point
-results of a different CPU or numpy may differ). Workers run one thread each: the pool is the
-parallelism. The pool spawns fresh interpreters, so a script that asks for workers must keep
-its top level under ``if __name__ == "__main__":`` (as every multiprocessing program does).
-Failures come back as the task's own exception (an :class:`LfcError` stays one);
-a worker that dies (out of memory, killed) is a :class:`WorkerError`.
+Tasks must be deterministic functions of their arguments: the file an encode writes is then the
+same, byte for byte, whatever runs it (same platform and numpy build; floating-point results of
+a different CPU or numpy may differ; numpy's BLAS runs on one thread during an encode,
+:func:`one_blas_thread`, so a GEMM's floats do not depend on the machine's cores). Workers run
+one thread each: the pool is the parallelism. The pool spawns fresh interpreters, so a script
+that asks for workers must keep its top level under ``if __name__ == "__main__":`` (as every
+multiprocessing program does). Failures come back as the task's own exception (an
+:class:`LfcError` stays one); a worker that dies (out of memory, killed) is a
+:class:`WorkerError`.
 """
 from __future__ import annotations
 
@@ -57,6 +59,25 @@ def one_cv2_thread():
         cv2.setNumThreads(n)
 
 
+_BLAS: list = []          # threadpoolctl's controller of the loaded BLAS libraries, made at first use
+
+
+@contextlib.contextmanager
+def one_blas_thread():
+    """numpy's BLAS (OpenBLAS, the GEMMs of the encoder's quantizer and transforms) on one thread
+    inside the block, restored after it: our own threads are the parallelism there. Left alone,
+    each of two task threads' GEMMs wakes the BLAS library's own threads, which spin while they
+    wait: on the 2-core box a default encode took 1.3-1.8x the CPU and 1.2-1.5x the wall time
+    (BENCHMARKS.md, "Encode cost"). One thread also makes a GEMM's floats, and so the file, the
+    same whatever the machine's cores. Through threadpoolctl (~20 µs a block)."""
+    if not _BLAS:
+        from threadpoolctl import ThreadpoolController
+
+        _BLAS.append(ThreadpoolController())
+    with _BLAS[0].limit(limits=1, user_api="blas"):
+        yield
+
+
 class Runner:
     """Runs tasks in this process, one after another (``--workers 1``, the default)."""
 
@@ -87,7 +108,7 @@ class Runner:
     def map_threaded(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None,
                      threads: int | None = None, take: Callable[[int, Any], Any] | None = None) -> list:
         """:meth:`map` for tasks that release the GIL (OpenCV, large numpy arrays): in this
-        process, on a pool of ``threads`` (default LOCAL_THREADS) threads with one OpenCV thread
+        process, on a pool of ``threads`` (default LOCAL_THREADS) threads with one OpenCV and one BLAS thread
         each; results in order, the same values as :meth:`map`. Other runners: their own map."""
         n = LOCAL_THREADS if threads is None else threads
         if self.kind != "serial" or len(arglists) < 2:
@@ -98,7 +119,7 @@ class Runner:
             from concurrent.futures import ThreadPoolExecutor
 
             out = []
-            with ThreadPoolExecutor(n) as ex:
+            with one_blas_thread(), ThreadPoolExecutor(n) as ex:
                 for i, r in enumerate(ex.map(lambda a: fn(*a), arglists)):
                     out.append(take(i, r) if take else r)
                     if done:
@@ -109,7 +130,7 @@ class Runner:
                 finish: Callable[[int, Any], Any] | None = None, threads: int | None = None) -> list:
         """``[fn(*args) for args in arglists]`` where task i may start only once the tasks
         ``deps[i]`` (indices below i) have finished, on ``threads`` threads of this process
-        (default LOCAL_THREADS; one OpenCV thread each), always the lowest-indexed ready task
+        (default LOCAL_THREADS; one OpenCV and one BLAS thread each), always the lowest-indexed ready task
         first (put the tasks others wait on first). ``finish(i, result)``, where given, runs in
         the calling thread as each task finishes and before any task that waits on it starts
         (it may write what those tasks read); its value is kept. With one thread: in index order.
@@ -137,7 +158,7 @@ class Runner:
         ready = [i for i in range(n) if waiting[i] == 0]
         heapq.heapify(ready)
         out: list = [None] * n
-        with one_cv2_thread(), ThreadPoolExecutor(t) as ex:
+        with one_cv2_thread(), one_blas_thread(), ThreadPoolExecutor(t) as ex:
             running: dict = {}
             try:
                 while ready or running:

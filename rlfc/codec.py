@@ -8,6 +8,7 @@ import numpy as np
 
 from formats.codec_api import Codec, EncodeOptions, Encoded
 from formats.errors import ParameterError, UnsupportedError
+from formats.parallel import one_blas_thread
 
 from .decoder import RlfcDecoder
 from .header import CODEC_ID, CODEC_VERSION
@@ -40,7 +41,8 @@ class RlfcCodec(Codec):
         pid = choose_profile(lf, options.profile)
         if pid != "tx" and not isinstance(lf.views, np.ndarray):     # only tx reads views as it codes them
             lf = dataclasses.replace(lf, views=np.asarray(lf.views))
-        enc = get_profile(pid).encode(lf, options, progress)
+        with one_blas_thread():     # (our threads are the parallelism; and the same floats, so the same
+            enc = get_profile(pid).encode(lf, options, progress)    # file, whatever the cores)
         enc.config["profile"] = pid
         enc.summary.setdefault("profile", pid)
         return enc

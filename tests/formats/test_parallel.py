@@ -190,3 +190,48 @@ def test_pool_encode_of_views_left_in_their_files_is_the_same_file(small_lf, ser
     assert enc.summary["runner"] == "pool" and blob == serial_file[0]
     # the parent: every view once for the maps, the search's keys and sample once more
     assert lf.views.arr.decodes < 2 * 25
+
+
+def _blas_threads(_):
+    from threadpoolctl import threadpool_info
+
+    return sorted({d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"})
+
+
+@pytest.mark.parametrize("how", ["map_threaded", "map_dag"])
+def test_tasks_on_threads_get_one_blas_thread_each(how):
+    """Tasks on the runner's threads see numpy's BLAS on one thread (our threads are the
+    parallelism; its own threads spin beside them), and the caller's setting comes back after."""
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(2, user_api="blas"):
+        assert _blas_threads(0) == [2]
+        args = [(i,) for i in range(4)]
+        got = (Runner().map_threaded(_blas_threads, args, threads=2) if how == "map_threaded"
+               else Runner().map_dag(_blas_threads, args, [[]] * 4, threads=2))
+        assert got == [[1]] * 4
+        assert _blas_threads(0) == [2]
+
+
+def test_an_encode_runs_with_one_blas_thread(monkeypatch):
+    """The whole encode (main thread included) sees numpy's BLAS on one thread: a GEMM's floats
+    then do not depend on how many threads the BLAS library would take on this machine, so
+    neither does the file (epfl_iso_chart_1 at 40 dB came out 45 bytes apart with 1 and 2)."""
+    import rlfc.codec as rc
+    from threadpoolctl import threadpool_limits
+
+    seen = []
+
+    class Probe:
+        def encode(self, lf, options, progress=None):
+            seen.append(_blas_threads(0))
+            raise ParameterError("probe")
+
+    monkeypatch.setattr(rc, "get_profile", lambda pid: Probe())
+    monkeypatch.setattr(rc, "choose_profile", lambda lf, requested: "tx")
+    lf = read_scene(SAMPLE)
+    with threadpool_limits(2, user_api="blas"):
+        with pytest.raises(ParameterError, match="probe"):
+            RlfcCodec().encode(lf, EncodeOptions())
+        assert _blas_threads(0) == [2]
+    assert seen == [[1]]
