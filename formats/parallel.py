@@ -71,6 +71,7 @@ def one_blas_thread():
     (BENCHMARKS.md, "Encode cost"). One thread also makes a GEMM's floats, and so the file, the
     same whatever the machine's cores. Through threadpoolctl (~20 µs a block)."""
     if not _BLAS:
+        import cv2  # noqa: F401  (OpenCV brings an OpenBLAS of its own: loaded before the libraries are listed)
         from threadpoolctl import ThreadpoolController
 
         _BLAS.append(ThreadpoolController())

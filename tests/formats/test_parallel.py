@@ -202,6 +202,7 @@ def _blas_threads(_):
 def test_tasks_on_threads_get_one_blas_thread_each(how):
     """Tasks on the runner's threads see numpy's BLAS on one thread (our threads are the
     parallelism; its own threads spin beside them), and the caller's setting comes back after."""
+    import cv2  # noqa: F401  (its own OpenBLAS loads with it: loaded before the limits below are set)
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(2, user_api="blas"):
@@ -230,6 +231,7 @@ def test_an_encode_runs_with_one_blas_thread(monkeypatch):
     monkeypatch.setattr(rc, "get_profile", lambda pid: Probe())
     monkeypatch.setattr(rc, "choose_profile", lambda lf, requested: "tx")
     lf = read_scene(SAMPLE)
+    import cv2  # noqa: F401  (as above)
     with threadpool_limits(2, user_api="blas"):
         with pytest.raises(ParameterError, match="probe"):
             RlfcCodec().encode(lf, EncodeOptions())
