@@ -30,6 +30,7 @@ import contextlib
 import os
 import pickle
 import tempfile
+import threading
 import uuid
 from collections import OrderedDict
 from typing import Any, Callable, Sequence
@@ -59,7 +60,8 @@ def one_cv2_thread():
         cv2.setNumThreads(n)
 
 
-_BLAS: list = []          # threadpoolctl's controller of the loaded BLAS libraries, made at first use
+_BLAS: dict = {"controller": None, "depth": 0, "limiter": None}
+_BLAS_LOCK = threading.Lock()
 
 
 @contextlib.contextmanager
@@ -67,16 +69,28 @@ def one_blas_thread():
     """numpy's BLAS (OpenBLAS, the GEMMs of the encoder's quantizer and transforms) on one thread
     inside the block, restored after it: our own threads are the parallelism there. Left alone,
     each of two task threads' GEMMs wakes the BLAS library's own threads, which spin while they
-    wait: on the 2-core box a default encode took 1.3-1.8x the CPU and 1.2-1.5x the wall time
+    wait: on the 2-core box a default encode took 1.2-1.9x the CPU and 1.1-1.7x the wall time
     (BENCHMARKS.md, "Encode cost"). One thread also makes a GEMM's floats, and so the file, the
-    same whatever the machine's cores. Through threadpoolctl (~20 µs a block)."""
-    if not _BLAS:
-        import cv2  # noqa: F401  (OpenCV brings an OpenBLAS of its own: loaded before the libraries are listed)
-        from threadpoolctl import ThreadpoolController
+    same whatever the machine's cores. The setting is process-wide (threadpoolctl): blocks may
+    nest and overlap across threads (two encodes on two threads); the first to enter sets it,
+    the last to leave restores the caller's."""
+    with _BLAS_LOCK:
+        if _BLAS["controller"] is None:
+            import cv2  # noqa: F401  (OpenCV brings an OpenBLAS of its own: loaded before the libraries are listed)
+            from threadpoolctl import ThreadpoolController
 
-        _BLAS.append(ThreadpoolController())
-    with _BLAS[0].limit(limits=1, user_api="blas"):
+            _BLAS["controller"] = ThreadpoolController()
+        if _BLAS["depth"] == 0:
+            _BLAS["limiter"] = _BLAS["controller"].limit(limits=1, user_api="blas")
+        _BLAS["depth"] += 1
+    try:
         yield
+    finally:
+        with _BLAS_LOCK:
+            _BLAS["depth"] -= 1
+            if _BLAS["depth"] == 0:
+                _BLAS["limiter"].restore_original_limits()
+                _BLAS["limiter"] = None
 
 
 class Runner:
@@ -109,8 +123,9 @@ class Runner:
     def map_threaded(self, fn: Callable, arglists: Sequence[tuple], done: Callable[[int], None] | None = None,
                      threads: int | None = None, take: Callable[[int, Any], Any] | None = None) -> list:
         """:meth:`map` for tasks that release the GIL (OpenCV, large numpy arrays): in this
-        process, on a pool of ``threads`` (default LOCAL_THREADS) threads with one OpenCV and one BLAS thread
-        each; results in order, the same values as :meth:`map`. Other runners: their own map."""
+        process, on a pool of ``threads`` (default LOCAL_THREADS) threads with one OpenCV and one
+        BLAS thread each; results in order, the same values as :meth:`map`. Other runners: their
+        own map."""
         n = LOCAL_THREADS if threads is None else threads
         if self.kind != "serial" or len(arglists) < 2:
             return self.map(fn, arglists, done, take)
@@ -131,8 +146,8 @@ class Runner:
                 finish: Callable[[int, Any], Any] | None = None, threads: int | None = None) -> list:
         """``[fn(*args) for args in arglists]`` where task i may start only once the tasks
         ``deps[i]`` (indices below i) have finished, on ``threads`` threads of this process
-        (default LOCAL_THREADS; one OpenCV and one BLAS thread each), always the lowest-indexed ready task
-        first (put the tasks others wait on first). ``finish(i, result)``, where given, runs in
+        (default LOCAL_THREADS; one OpenCV and one BLAS thread each), always the lowest-indexed
+        ready task first (put the tasks others wait on first). ``finish(i, result)``, where given, runs in
         the calling thread as each task finishes and before any task that waits on it starts
         (it may write what those tasks read); its value is kept. With one thread: in index order.
         Tasks must not depend on what runs beside them: the results are then the same whatever

@@ -237,3 +237,22 @@ def test_an_encode_runs_with_one_blas_thread(monkeypatch):
             RlfcCodec().encode(lf, EncodeOptions())
         assert _blas_threads(0) == [2]
     assert seen == [[1]]
+
+
+def test_one_blas_thread_blocks_may_overlap():
+    """Two encodes on two threads overlap their blocks (A enters, B enters, A leaves, B leaves):
+    BLAS stays on one thread until the last one leaves, then the caller's setting is back."""
+    import cv2  # noqa: F401  (as above)
+    from threadpoolctl import threadpool_limits
+
+    from formats.parallel import one_blas_thread
+
+    with threadpool_limits(2, user_api="blas"):
+        a, b = one_blas_thread(), one_blas_thread()
+        a.__enter__()
+        b.__enter__()
+        assert _blas_threads(0) == [1]
+        a.__exit__(None, None, None)
+        assert _blas_threads(0) == [1]
+        b.__exit__(None, None, None)
+        assert _blas_threads(0) == [2]
