@@ -60,7 +60,7 @@ def one_cv2_thread():
         cv2.setNumThreads(n)
 
 
-_BLAS: dict = {"controller": None, "depth": 0, "limiter": None}
+_BLAS: dict = {"depth": 0, "limiter": None}
 _BLAS_LOCK = threading.Lock()
 
 
@@ -71,17 +71,16 @@ def one_blas_thread():
     each of two task threads' GEMMs wakes the BLAS library's own threads, which spin while they
     wait: on the 2-core box a default encode took 1.2-1.9x the CPU and 1.1-1.7x the wall time
     (BENCHMARKS.md, "Encode cost"). One thread also makes a GEMM's floats, and so the file, the
-    same whatever the machine's cores. The setting is process-wide (threadpoolctl): blocks may
-    nest and overlap across threads (two encodes on two threads); the first to enter sets it,
-    the last to leave restores the caller's."""
+    same whatever the machine's cores. The setting is process-wide (threadpoolctl, on every BLAS
+    library loaded when the outermost block starts): blocks may nest and overlap across threads
+    (two encodes on two threads); the first to enter sets it, the last to leave restores the
+    caller's."""
     with _BLAS_LOCK:
-        if _BLAS["controller"] is None:
-            import cv2  # noqa: F401  (OpenCV brings an OpenBLAS of its own: loaded before the libraries are listed)
+        if _BLAS["depth"] == 0:       # the libraries loaded now (scipy's OpenBLAS may have come since the
+            import cv2  # noqa: F401  # last block); OpenCV brings one of its own: loaded before they are listed
             from threadpoolctl import ThreadpoolController
 
-            _BLAS["controller"] = ThreadpoolController()
-        if _BLAS["depth"] == 0:
-            _BLAS["limiter"] = _BLAS["controller"].limit(limits=1, user_api="blas")
+            _BLAS["limiter"] = ThreadpoolController().limit(limits=1, user_api="blas")     # (~0.4 ms)
         _BLAS["depth"] += 1
     try:
         yield
