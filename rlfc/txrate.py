@@ -595,20 +595,16 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 # target the pass had met): the full pass decides
                 if sample is not None or restored:
                     tries, miss = 0, None
-                    while found and ps < options.target_psnr and tries < 3:
+                    while found and ps < options.target_psnr and tries < 4:
                         tries += 1           # below the target on all views: a finer step, by the slope
                         miss = (math.log2(res["step"]), ps)
-                        step = res["step"] * 2.0 ** ((options.target_psnr + 0.02 - ps) / PSNR_SLOPE)
-                        again = enc.run(step, enc.model_of(again), progress, keep_pixels=True)
-                        ps = enc.psnr(again)
-                        trace.append({"step": step, "psnr_rgb": ps, "bpp": None, "refined": True})
-                        res = again
-                    if found and ps < options.target_psnr:
-                        # the slope's steps were too small to move a flat PSNR (a 4×4 RGBA crop at
-                        # 45 dB missed by 0.005 dB at three steps 0.6% apart, and was written
-                        # lossless as if no lossy step reached it): a quarter octave finer, once
-                        miss = (math.log2(res["step"]), ps)
-                        step = enc.grid_step(res["step"] * 2.0 ** -FALLBACK_OCTAVES)
+                        if tries <= 3:
+                            step = res["step"] * 2.0 ** ((options.target_psnr + 0.02 - ps) / PSNR_SLOPE)
+                        else:
+                            # the slope's steps were too small to move a flat PSNR (a 4×4 RGBA crop
+                            # at 45 dB missed by 0.005 dB at three steps 0.6% apart, and was written
+                            # lossless as if no lossy step reached it): a quarter octave finer, once
+                            step = enc.grid_step(res["step"] * 2.0 ** -FALLBACK_OCTAVES)
                         again = enc.run(step, enc.model_of(again), progress, keep_pixels=True)
                         ps = enc.psnr(again)
                         trace.append({"step": step, "psnr_rgb": ps, "bpp": None, "refined": True})
