@@ -12,7 +12,7 @@ from typing import Callable
 
 import numpy as np
 
-from .topcodec import alpha_stream, decode_view_j2k, encode_view_j2k, has_alpha
+from .topcodec import alpha_stream, has_alpha, j2k_round_trip
 
 #: first level asked above the target PSNR (dB), and how close two levels get before stopping
 FIRST_ASK_DB = 0.3
@@ -59,8 +59,7 @@ def smallest_j2k(img: np.ndarray, max_sse: float, sq_error: Callable[[np.ndarray
     ask = target_db + (hint.get("ask_db", FIRST_ASK_DB) if hint is not None else FIRST_ASK_DB)
     met_at = None                     # the level of the codestream kept
     for _ in range(MAX_TRIES):
-        data = encode_view_j2k(img, min(ask, 99.0), threads, alpha)
-        dec = decode_view_j2k(data, img.shape, img.dtype, len(alpha), threads, img[..., -1] if alpha else None)
+        data, dec = j2k_round_trip(img, min(ask, 99.0), threads, alpha)
         err = sq_error(dec)
         off = 10 * math.log10(max(err, 1e-30) / max(max_sse, 1e-30))       # dB over the budget
         if err <= max_sse:

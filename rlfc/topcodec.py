@@ -88,6 +88,14 @@ def decode_view_j2k(data, shape: tuple, dtype, alpha_bytes: int = 0, threads: in
     return out
 
 
+def j2k_round_trip(img: np.ndarray, level: float, threads: int = 1, alpha: bytes = b"") -> tuple[bytes, np.ndarray]:
+    """An encoder's trial of one view as JPEG 2000: (its image entry, :func:`encode_view_j2k` at
+    OpenJPEG quality ``level``, and the (H, W, C) pixels it decodes to). ``alpha``: the view's
+    alpha stream (views with alpha; b"" otherwise): its alpha plane is ``img``'s own, exact."""
+    data = encode_view_j2k(img, level, threads, alpha)
+    return data, decode_view_j2k(data, img.shape, img.dtype, len(alpha), threads, img[..., -1] if alpha else None)
+
+
 def encode_image(img: np.ndarray, codec: str = "auto", psnr: float | None = None) -> tuple[str, bytes]:
     """Encode (H, W, C) uint8/uint16 → (codec name, bytes). ``psnr`` makes JPEG 2000 lossy."""
     import imagecodecs

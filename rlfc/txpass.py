@@ -344,13 +344,11 @@ class PassCoder:
 def _j2k_task(enc: TxEncoder, v: int, level: float, keep: bool) -> tuple[bytes, ViewCode]:
     """View v's padded image as JPEG 2000 at OpenJPEG's quality ``level`` (dB): (codestream,
     its code: no tbs, the colour error over the view's own pixels, the pixels where ``keep``)."""
-    from .topcodec import decode_view_j2k, encode_view_j2k
+    from .topcodec import j2k_round_trip
 
     orig = enc.view_pixels(v)
-    img = enc.padded(orig)
-    alpha = enc.alpha_stream_of(v)
-    data = encode_view_j2k(img, level, 1, alpha)
-    crop = decode_view_j2k(data, img.shape, img.dtype, len(alpha), 1, img[..., -1] if alpha else None)[:enc.h, :enc.w_px]
+    data, dec = j2k_round_trip(enc.padded(orig), level, 1, enc.alpha_stream_of(v))
+    crop = dec[:enc.h, :enc.w_px]
     sse, cnt = colour_sq_error(orig, crop)
     return data, enc.image_code(np.ascontiguousarray(crop) if keep else None, None, sse, cnt)
 
