@@ -185,11 +185,17 @@ class TxLayout:
         return lay
 
     @property
+    def intra_keys(self) -> list:
+        """The intra key views (no references), in key order: one ``key_images`` (and
+        ``key_alpha``) entry each."""
+        return [k for k in self.keys if self.intra[k]]
+
+    @property
     def image_of(self) -> dict:
         """{intra key view: JPEG 2000 byte length} for the keys coded as JPEG 2000 (j2k files)."""
         if self.intra_codec != "j2k":
             return {}
-        ik = [k for k in self.keys if self.intra[k]]
+        ik = self.intra_keys
         return {k: n for k, n in zip(ik, self.key_images) if n > 0}
 
     @property
@@ -198,7 +204,7 @@ class TxLayout:
         6; empty before)."""
         if self.version < ALPHA_VERSION:
             return {}
-        ik = [k for k in self.keys if self.intra[k]]
+        ik = self.intra_keys
         return {k: a for k, n, a in zip(ik, self.key_images, self.key_alpha) if n > 0}
 
     @property
