@@ -26,7 +26,7 @@ def to_sections(model: NestedLFN, occ: OccupancyNet | None, info: dict, dtype: s
     cfg: LfnConfig = model.cfg
     sections = stream_sections(model, occ, dtype)
     config = {"network": cfg.to_dict(), "norm": info["norm"], "weights": dtype, "train": {
-        k: info[k] for k in ("train_views", "test_views", "steps", "train_s") if k in info},
+        k: info[k] for k in ("train_views", "test_views", "steps") if k in info},
         "step_bytes": [step_bytes(cfg, j, dtype) for j in (cfg.min_neurons, cfg.max_neurons - 1)]}
     if info.get("display"):
         config["display"] = [int(w) for w in info["display"]]

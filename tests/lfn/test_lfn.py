@@ -580,6 +580,13 @@ def test_train_checkpoint_resume_and_cli(tmp_path, capsys):
                  "--quiet"]) == 0
     rep = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert rep["bytes"] == out.stat().st_size
+    # the same command writes the same file: the file records no wall-clock time (the report does)
+    again = tmp_path / "s2.lfc"
+    assert main(["train", str(ROOT / "samples" / "dino_crop"), str(again), "--depth", "2", "--min-neurons", "4",
+                 "--max-neurons", "8", "--steps", "30", "--batch", "256", "--resolution", "32", "--json",
+                 "--quiet"]) == 0
+    assert "train_s" in json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert again.read_bytes() == out.read_bytes()
     # held-out views (every 4th of 81) scored at the scene's resolution beside the nearest training view
     assert rep["heldout_views"] == 20 and 5 < rep["psnr_heldout"] < 60 and rep["psnr_heldout_nearest_view"] > 30
     assert any("below the nearest training view" in n for n in rep["notes"]) == \
