@@ -1,4 +1,6 @@
-import numpy as np, time, timeit
+"""TAIL_LANES (rlfc.txparse) against 64 / 128 / 256 on the lane parses of a fresh first block, every key and
+decode_all of three 40 dB files (stop 83): the same parsed integers, best of 3 ms each."""
+import numpy as np, timeit
 import rlfc.profiles.tx_residual as trm
 import rlfc.txparse as tp
 from rlfc.txparse import parse_lanes

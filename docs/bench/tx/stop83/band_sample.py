@@ -1,6 +1,6 @@
 """Feasibility: PSNR of a horizontal band of every view against the whole views, at steps around
 the 40 dB step, the same key ratio and entropy-model procedure (maps estimated per light field)."""
-import sys, time, math
+import sys, time
 import numpy as np
 import formats.parallel as fp
 fp.LOCAL_THREADS = 1
