@@ -8,7 +8,7 @@ from formats.codec_api import check_field_types
 from formats.errors import ParameterError
 
 #: encoder decisions :attr:`TxParams.ablate` may turn off
-ABLATE = ("intra_tbs", "lambda_trim", "maps_reprice", "promote", "rdoq", "ref_modes")
+ABLATE = ("intra_tbs", "j2k_all", "lambda_trim", "maps_reprice", "promote", "rdoq", "ref_modes")
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,8 @@ class TxParams:
             last position is the last nonzero: no rate-distortion quantization), "intra_tbs" (no
             intra 8×8 blocks), "promote" (no view coded alone as a JPEG 2000 key), "lambda_trim"
             (no λ trim between two quantizer steps), "maps_reprice" (the maps' corrections are
-            not judged again at the coding λ the probe predicts).
+            not judged again at the coding λ the probe predicts), "j2k_all" (a grid whose file
+            codes most views alone does not try every view as JPEG 2000).
         key_split: streams per key-view block row (0 = chosen from the rows' estimated bytes:
             :meth:`TxEncoder.key_split`); more streams parse faster as parallel lanes and cost
             about 4 bytes each.

@@ -249,8 +249,9 @@ class PassCoder:
     def run_j2k(self, levels: np.ndarray, step: float, progress=None) -> dict:
         """Every view (a posed capture's: each an intra key) as JPEG 2000 at its own OpenJPEG
         quality ``levels`` (n0,) (dB): a run as :meth:`run` returns it, with no transform-coded
-        view (``step`` is only recorded). The views are coded on a few threads (OpenJPEG releases
-        the GIL); their decoded pixels are kept where :attr:`keep_decoded` says."""
+        view (``step`` is only recorded; a grid's views that the plan predicts are "promoted":
+        intra keys of the file). The views are coded on a few threads (OpenJPEG releases the
+        GIL); their decoded pixels are kept where :attr:`keep_decoded` says."""
         keep = self.keep_decoded
         done = [0]
 
@@ -262,7 +263,7 @@ class PassCoder:
         out = Runner().map_threaded(_j2k_task, [(self, v, float(levels[v]), keep) for v in range(self.n0)], tick)
         res = {"steps16": self.steps16(step), "thumb16": 16, "thumbs": {}, "codes": [c for _, c in out], "step": step,
                "keyimg": {v: data for v, (data, _) in enumerate(out)}, "model": Model(default_counts()),
-               "promoted": [], "j2k_ref": None, "lam_scale": 1.0, "j2k_hints": {}, "trial_counts": None,
+               "promoted": np.flatnonzero(~self.intra).tolist(), "j2k_ref": None, "lam_scale": 1.0, "j2k_hints": {}, "trial_counts": None,
                "kept": True}
         if keep:
             res["pixels"] = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)

@@ -299,6 +299,34 @@ def _maps_pay_repriced(enc: "TxEncoder", step: float, model, ratio: float, sampl
     return what
 
 
+#: a grid whose file codes at least this share of its views alone as JPEG 2000 (high rates on
+#: views that predict each other badly: stanford_chess at 45 dB, 47 of 49) also tries every view
+#: as JPEG 2000, on OpenJPEG's own levels as a posed capture's views are searched
+J2K_ALL_SHARE = 0.5
+
+
+def _every_view_j2k(enc: TxEncoder, res: dict, options: EncodeOptions, step: float, found: bool, trace: list,
+                    progress) -> dict | None:
+    """Every view of a grid coded alone as JPEG 2000 (:func:`_search_j2k_levels`), where that
+    meets the target and its file is smaller than ``res``'s (a PSNR target; a size target: a
+    better PSNR within the size); else None. Where most views are coded alone already, the
+    per-view levels this search shares out (one shift of every view's level) reach the target
+    with fewer bytes than JPEG 2000 views each matched to its transform coding's error, beside
+    a few predicted views and their streams (stanford_chess at 45 dB, BENCHMARKS.md)."""
+    nv = enc.n0
+    got = Runner().map_threaded(_dct_task, [(enc, v) for v in range(nv)])
+    alone, met = _search_j2k_levels(enc, options.target_psnr, options.target_bpp, step, [s for s, _ in got], trace,
+                                    progress, options.min_view_psnr if options.target_bpp is None else None)
+    if not met:
+        return None
+    size, size_alone = file_bytes(enc.lf, *enc.pack(res)), file_bytes(enc.lf, *enc.pack(alone))
+    if options.target_psnr is not None:
+        better = size_alone < size or not found
+    else:
+        better = not found or enc.psnr(alone) > enc.psnr(res)
+    return alone if better else None
+
+
 CLOSE_TRIES = 2         # full passes that close in on the target after a corrected miss
 FALLBACK_OCTAVES = 0.25  # where the finer steps by the prior slope all missed: one pass this much finer
 
@@ -645,6 +673,15 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 for n in (COARSEST_NOTE, FINEST_NOTE):
                     if n in notes:
                         notes.remove(n)
+    if (not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid" and not j2k_only
+            and (options.target_psnr is not None or options.target_bpp is not None) and params.step is None
+            and len(res["keyimg"]) >= J2K_ALL_SHARE * nv and "j2k_all" not in params.ablate):
+        alone = _every_view_j2k(enc, res, options, step0, found, trace, progress)
+        if alone is not None:
+            res, found = alone, True
+            notes = [n for n in notes if n not in (COARSEST_NOTE, FINEST_NOTE) and "cost less coded alone" not in n]
+            notes.append(f"every view coded alone as JPEG 2000 makes a smaller file at the target than "
+                         f"predicting views: the {nv} views are JPEG 2000 images (no view is predicted)")
     enc.hold(())
     cfg, sections = enc.pack(res)
     split = enc.key_split(res)

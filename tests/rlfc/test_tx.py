@@ -740,6 +740,30 @@ def test_views_cheaper_coded_alone_become_jpeg2000_key_views():
     assert len(blob) <= 1.05 * alone, (len(blob), alone)
 
 
+def test_a_grid_whose_views_go_alone_tries_every_view_as_jpeg2000():
+    """Where most of a grid's views are coded alone (views that share nothing, at a high
+    target), the encoder also codes every view as JPEG 2000 on OpenJPEG's own levels and keeps
+    that file where it is smaller at the target: here it is (the views each matched to their
+    transform coding's error overshot the target), every view is a JPEG 2000 image, no block is
+    coded, and the file decodes to the encoder's pixels at the target. Without the candidate
+    ("j2k_all" ablated) the file is larger."""
+    lf = _unrelated_grid()
+    e = encode(lf, EncodeOptions(profile="tx", target_psnr=48))
+    plain = encode(lf, EncodeOptions(profile="tx", target_psnr=48, params={"ablate": ["j2k_all"]}))
+    n = lf.rows * lf.cols
+    assert any("JPEG 2000 images (no view is predicted)" in x for x in e.notes)
+    assert not any("predicted; they are key views" in x for x in e.notes)
+    assert not any("no view is predicted" in x for x in plain.notes)
+    size = sum(len(bytes(x)) for _, x in e.sections)
+    assert size < sum(len(bytes(x)) for _, x in plain.sections)
+    d, _ = open_encoded(lf, e)
+    assert sorted(d.core.img_of) == list(range(n)) and len(d.core.lay.keys) == n == e.summary["key_views"]
+    assert e.config["n_blocks"] == 0
+    full = d.decode_all()
+    assert (full == e.decoded).all() and e.target_met and psnr_rgb(lf.views, full) >= 48
+    check_agreement(d, lf.views.shape)
+
+
 def test_views_that_predict_well_stay_predicted():
     lf = smooth_lf(rows=5, cols=5, h=48, w=64)
     e = encode(lf, EncodeOptions(profile="tx", target_psnr=42))
