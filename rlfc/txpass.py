@@ -263,8 +263,8 @@ class PassCoder:
         out = Runner().map_threaded(_j2k_task, [(self, v, float(levels[v]), keep) for v in range(self.n0)], tick)
         res = {"steps16": self.steps16(step), "thumb16": 16, "thumbs": {}, "codes": [c for _, c in out], "step": step,
                "keyimg": {v: data for v, (data, _) in enumerate(out)}, "model": Model(default_counts()),
-               "promoted": np.flatnonzero(~self.intra).tolist(), "j2k_ref": None, "lam_scale": 1.0, "j2k_hints": {}, "trial_counts": None,
-               "kept": True}
+               "promoted": np.flatnonzero(~self.intra).tolist(), "j2k_ref": None, "lam_scale": 1.0,
+               "j2k_hints": {}, "trial_counts": None, "kept": True}
         if keep:
             res["pixels"] = np.empty((self.n0,) + self.lf.views.shape[2:], self.dtype)
             self._gather_pixels(res)
