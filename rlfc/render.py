@@ -117,8 +117,12 @@ class Renderer:
         self._maps = None
         if hasattr(core, "view_map") and core.lay.n_maps:
             lay = core.lay
-            self._maps = (lambda v: core.view_map(v) / 16.0, lay.positions.astype(np.float64),
-                          np.flatnonzero(lay.cell >= 0))
+            users = np.flatnonzero(lay.cell >= 0)
+            if users.size:
+                self._maps = (lambda v: core.view_map(v) / 16.0, lay.positions.astype(np.float64), users)
+            else:                 # every view coded alone: the first map (the shared one) is the geometry
+                self._maps = (lambda v: core.cell_map(0) / 16.0, lay.positions.astype(np.float64),
+                              np.arange(lay.cell.size))
         # per-view warps of a tx version 5 file (rlfc.txwarp): (N0, 4) a, b, cx, cy, else None
         warp = getattr(getattr(core, "lay", None), "warp", None)
         self._warp = None if warp is None or not np.any(warp) else np.asarray(warp, np.float64)
@@ -145,7 +149,8 @@ class Renderer:
     # -- geometry --------------------------------------------------------------------------
     def _block_map(self, s: float, t: float) -> np.ndarray | None:
         """(ny, nx) float64 disparity per 8×8 block at camera (s, t): the map of the cell of the
-        nearest view predicted from key views; None without maps."""
+        nearest view predicted from key views (where every view is coded alone, the file's first
+        map, the shared one); None without maps."""
         if self._maps is None:
             return None
         map_of, pos, users = self._maps

@@ -42,16 +42,21 @@ export class Renderer {
     }
   }
 
-  /** (H·W) disparity in pixels per view step: the map of the nearest view's cell, per 8×8 block. */
+  /** (H·W) disparity in pixels per view step: the map of the nearest view's cell, per 8×8 block
+   * (where every view is coded alone, the file's first map: the shared one, as the Python renderer). */
   disparity(s, t) {
     const d = this.d;
-    if (!this.users.length || !d.nMaps) return null;
-    let best = this.users[0], bd = Infinity;
-    for (const v of this.users) {
-      const dist = Math.hypot(d.pos[2 * v] - s, d.pos[2 * v + 1] - t);
-      if (dist < bd) { bd = dist; best = v; }
+    if (!d.nMaps) return null;
+    let m = 0;
+    if (this.users.length) {
+      let best = this.users[0], bd = Infinity;
+      for (const v of this.users) {
+        const dist = Math.hypot(d.pos[2 * v] - s, d.pos[2 * v + 1] - t);
+        if (dist < bd) { bd = dist; best = v; }
+      }
+      m = d.cell[best];
     }
-    const nloc = d.nby8 * d.nbx8, m = d.cell[best];
+    const nloc = d.nby8 * d.nbx8;
     const out = new Float32Array(d.H * d.W);
     for (let y = 0; y < d.H; y++) {
       for (let x = 0; x < d.W; x++) out[y * d.W + x] = d.disp[m * nloc + (y >> 3) * d.nbx8 + (x >> 3)] / 16;

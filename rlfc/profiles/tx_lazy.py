@@ -40,6 +40,16 @@ class OnDemand:
             raise ValueError(f"view {view} is not predicted through a map")
         return self._maps_of([view])[0][cell].reshape(self.nby8, self.nbx8)
 
+    def cell_map(self, cell: int) -> np.ndarray:
+        """(nby8, nbx8) int64 disparity map ``cell`` (1/16 px per view step; decoded now if not
+        yet), whether or not a view is predicted through it (a file whose every view is coded
+        alone keeps its maps, the shared one in every cell: the renderer's geometry)."""
+        if not 0 <= cell < self.lay.n_maps:
+            raise ValueError(f"map {cell} is not one of the file's {self.lay.n_maps}")
+        if not self._map_done[cell]:
+            self._have_maps(np.array([cell], np.int64))
+        return self._map_store.disp[cell].reshape(self.nby8, self.nbx8)
+
     def _maps_of(self, views) -> tuple[np.ndarray, np.ndarray]:
         """(disp, modes) (n_maps, nby8·nbx8) int64 with the maps of ``views`` (ints; None: every
         view) decoded; the other maps' rows may be zeros."""

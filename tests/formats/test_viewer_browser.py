@@ -46,6 +46,25 @@ def site(tmp_path_factory):
                  "--quiet"]) == 0
     assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(d / "res.lfc"), "--quant", "3", "--intra-codec",
                  "tx", "--quiet"]) == 0
+    # every view coded alone as JPEG 2000 (the encoder's choice at high rates on views that
+    # predict each other badly): no view has a map; the renderer's geometry is the shared one
+    # (a synthetic 5×5 grid with 1 px of parallax per view step: the sample's is too small for
+    # the geometry to show)
+    from formats.lfcfile import lfc_bytes
+    from rlfc.txencode import TxEncoder
+    from rlfc.txparams import TxParams
+    from tests.rlfc.helpers import make_lf
+
+    rng = np.random.default_rng(3)
+    base = rng.random((96, 120, 3))
+    for ax in (0, 1):
+        base = np.apply_along_axis(lambda m: np.convolve(m, np.ones(3) / 3, mode="same"), ax, base)
+    base = (base - base.min()) / np.ptp(base)
+    lf = make_lf(np.stack([np.stack([np.rint(base[r + 10:r + 74, c + 20:c + 100] * 255).astype(np.uint8)
+                                     for c in range(5)]) for r in range(5)]))
+    enc = TxEncoder(lf, TxParams(), None, 10.0)
+    cfg, sections = enc.pack(enc.run_j2k(np.full(enc.n0, 40.0), 8.0))
+    (d / "alone.lfc").write_bytes(lfc_bytes("rlfc", 1, cfg, lf.geometry(), sections))
     data = f.read_bytes()
     (d / "corrupt.lfc").write_bytes(data[:-40] + bytes([data[-40] ^ 1]) + data[-39:])
     (d / "cut.lfc").write_bytes(data[: len(data) // 2])
@@ -133,6 +152,30 @@ def test_viewer_matches_python(site, page, name):
     assert info["requests"] > 2 and info["bytesFetched"] <= f.stat().st_size
     stats = page.inner_text("#stats")
     assert "bytes fetched" in stats and "view cache" in stats and "frame" in stats
+
+
+def test_a_grid_whose_every_view_is_alone_renders_through_its_shared_map(site, page):
+    """Every view a JPEG 2000 image, no view predicted through a map: the page shows the views
+    (OpenJPEG's wasm against imagecodecs: within 1) and renders novel views through the file's
+    shared map (here 1 px per view step everywhere): the same frame as that disparity given as
+    the focus, not the unshifted blend it drew when it looked for a view with a map and found
+    none. (The page's final blend is bilinear, the Python renderer's bicubic: on this grid's
+    noise-like texture they differ, so the page is checked against itself.)"""
+    srv, f = site
+    assert open_viewer(page, srv, "alone.lfc") == "ready", page.inner_text("#error")
+    d = open_decoder(open_lfc(f.parent / "alone.lfc"))
+    assert (d.core.lay.cell < 0).all() and len(d.core.img_of) == d.rows * d.cols
+    assert (d.core.cell_map(0) == 16).all()
+    page.evaluate("lfcViewer.show(2, 3)")
+    assert np.abs(canvas_rgb(page).astype(int) - d.decode_view(2, 3)).max() <= 1
+    r = d.renderer()
+    for s, t in ((1.4, 2.7), (2.5, 1.5)):
+        frames = []
+        for focus in ("null", "1.0", "0.0"):
+            page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: 0}})")
+            frames.append(canvas_rgb(page).astype(int))
+        assert (frames[0] == frames[1]).all() and np.abs(frames[0] - frames[2]).max() > 8
+        assert (r.render(s, t) == r.render(s, t, 1.0)).all()          # (the Python renderer: the same rule)
 
 
 def test_drag_moves_the_viewpoint(site, page):

@@ -51,6 +51,33 @@ def test_captured_positions_are_the_decoded_views_and_blocks_are_cached(leave_ou
     assert ren.blocks_decoded == decoded and ren.blocks_requested > decoded
 
 
+def test_a_grid_whose_every_view_is_coded_alone_renders_through_its_shared_map(leave_out):
+    """A grid file whose every view is a JPEG 2000 image (the encoder's choice at high rates on
+    views that predict each other badly) keeps its maps, the shared one in every cell. The
+    renderer takes that map as the geometry; it used to look for the nearest view predicted
+    through a map, found none, and raised. Captured positions are still the decoded views."""
+    from formats.codec_api import Encoded
+    from rlfc.txencode import TxEncoder
+    from rlfc.txparams import TxParams
+
+    full, _, _ = leave_out
+    lf = make_lf(np.ascontiguousarray(full[::2, ::2]))
+    enc = TxEncoder(lf, TxParams(), None, 10.0)
+    res = enc.run_j2k(np.full(enc.n0, 44.0), 4.0)
+    d, _ = open_encoded(lf, Encoded(*enc.pack(res)))
+    lay = d.core.lay
+    assert (lay.cell < 0).all() and lay.n_maps > 0 and sorted(d.core.img_of) == list(range(enc.n0))
+    ren = d.renderer()
+    shared = d.core.cell_map(0) / 16.0
+    assert (ren._block_map(0.5, 0.5) == shared).all() and np.abs(shared).max() > 0
+    assert (ren.render(1, 2) == d.decode_view(1, 2)).all()
+    img = ren.render(0.5, 1.5)                        # (32.0 dB; without the map's parallax, 18.0)
+    assert img.shape == full.shape[2:] and psnr_rgb(full[1, 3], img) > 28
+    assert psnr_rgb(full[1, 3], img) > psnr_rgb(full[1, 3], ren.render(0.5, 1.5, 0.0)) + 6
+    with pytest.raises(ValueError):
+        d.core.cell_map(lay.n_maps)
+
+
 def test_refocus_quilt_and_bad_cameras(leave_out):
     _, d, _ = leave_out
     ren = d.renderer()
