@@ -112,17 +112,13 @@ class Renderer:
         self.blocks_requested = 0
         self._grid = None
         core = decoder.core
-        # (map of a view → (ny8, nx8) float64 px per view step, positions, views with a map):
+        # (map m → (ny8, nx8) float64 px per view step, positions, views with a map, each view's map):
         # each map read from the file when a frame first needs it
         self._maps = None
-        if hasattr(core, "view_map") and core.lay.n_maps:
+        if hasattr(core, "cell_map") and core.lay.n_maps:
             lay = core.lay
-            users = np.flatnonzero(lay.cell >= 0)
-            if users.size:
-                self._maps = (lambda v: core.view_map(v) / 16.0, lay.positions.astype(np.float64), users)
-            else:                 # every view coded alone: the first map (the shared one) is the geometry
-                self._maps = (lambda v: core.cell_map(0) / 16.0, lay.positions.astype(np.float64),
-                              np.arange(lay.cell.size))
+            self._maps = (lambda m: core.cell_map(m) / 16.0, lay.positions.astype(np.float64),
+                          np.flatnonzero(lay.cell >= 0), lay.cell)
         # per-view warps of a tx version 5 file (rlfc.txwarp): (N0, 4) a, b, cx, cy, else None
         warp = getattr(getattr(core, "lay", None), "warp", None)
         self._warp = None if warp is None or not np.any(warp) else np.asarray(warp, np.float64)
@@ -153,9 +149,11 @@ class Renderer:
         map, the shared one); None without maps."""
         if self._maps is None:
             return None
-        map_of, pos, users = self._maps
+        map_of, pos, users, cell = self._maps
+        if users.size == 0:               # every view coded alone: the first map (the shared one)
+            return map_of(0)
         near = users[np.argmin(np.hypot(pos[users, 0] - s, pos[users, 1] - t))]
-        return map_of(int(near))
+        return map_of(int(cell[near]))
 
     def disparity(self, s: float, t: float) -> np.ndarray | None:
         """(H, W) disparity in pixels per view step at camera (s, t): the map of the cell of the

@@ -658,12 +658,14 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                          if found else "where the transform path cannot") + ": they are the file")
             res, found = j2k_met, True
         j2k_met = None
+    promote_note = None
     if not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid" and "promote" not in params.ablate:
         res = enc.with_pixels(res)
         n_alone = len(enc.promote_views(res))
         if n_alone:
-            notes.append(f"{n_alone} views that are not key views cost less coded alone (JPEG 2000) than "
-                         f"predicted; they are key views of this file")
+            promote_note = (f"{n_alone} views that are not key views cost less coded alone (JPEG 2000) than "
+                            f"predicted; they are key views of this file")
+            notes.append(promote_note)
             # (a promoted view has no more error than its transform coding: a file that missed a
             # PSNR target narrowly may meet it now, and is then no miss to replace with the
             # lossless file: a 4×4 RGBA crop at 45 dB missed by 0.006 dB, met it at 45.10 after
@@ -673,13 +675,13 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
                 for n in (COARSEST_NOTE, FINEST_NOTE):
                     if n in notes:
                         notes.remove(n)
-    if (not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid" and not j2k_only
+    if (not params.lossless and enc.intra_codec == "j2k" and lf.layout == "grid"
             and (options.target_psnr is not None or options.target_bpp is not None) and params.step is None
             and len(res["keyimg"]) >= J2K_ALL_SHARE * nv and "j2k_all" not in params.ablate):
         alone = _every_view_j2k(enc, res, options, step0, found, trace, progress)
         if alone is not None:
             res, found = alone, True
-            notes = [n for n in notes if n not in (COARSEST_NOTE, FINEST_NOTE) and "cost less coded alone" not in n]
+            notes = [n for n in notes if n not in (COARSEST_NOTE, FINEST_NOTE, promote_note)]
             notes.append(f"every view coded alone as JPEG 2000 makes a smaller file at the target than "
                          f"predicting views: the {nv} views are JPEG 2000 images (no view is predicted)")
     enc.hold(())

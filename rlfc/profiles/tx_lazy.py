@@ -38,7 +38,7 @@ class OnDemand:
         cell = int(self.lay.cell[view])
         if cell < 0:
             raise ValueError(f"view {view} is not predicted through a map")
-        return self._maps_of([view])[0][cell].reshape(self.nby8, self.nbx8)
+        return self.cell_map(cell)
 
     def cell_map(self, cell: int) -> np.ndarray:
         """(nby8, nbx8) int64 disparity map ``cell`` (1/16 px per view step; decoded now if not
