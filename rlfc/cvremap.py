@@ -3,10 +3,11 @@
 OpenCV addresses source and destination images below 32 767 pixels a side (``SHRT_MAX``);
 the format allows wider views (up to 2^26 pixels, e.g. 16 × 65 536). Larger calls are cut into
 destination tiles, each remapped from the crop of the source its map reaches (plus the
-interpolation's taps). The values are the same: OpenCV rounds every map coordinate to 1/32
-pixel before sampling, a crop shifts the coordinates by whole pixels (exact in float32), and
-the crop keeps the source's own edge wherever a tap could reach it, so ``BORDER_REPLICATE``
-repeats the same pixels.
+interpolation's taps). The values are the same: a crop shifts the coordinates by whole pixels,
+exact in float32 and leaving each coordinate's fraction as it was (OpenCV 5 samples at the exact
+fraction; OpenCV 4 rounded it to 1/32 pixel, which a whole-pixel shift keeps too), and the crop
+keeps the source's own edge wherever a tap could reach it, so ``BORDER_REPLICATE`` repeats the
+same pixels.
 """
 from __future__ import annotations
 

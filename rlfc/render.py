@@ -144,16 +144,20 @@ class Renderer:
 
     # -- geometry --------------------------------------------------------------------------
     def _block_map(self, s: float, t: float) -> np.ndarray | None:
-        """(ny, nx) float64 disparity per 8×8 block at camera (s, t): the map of the cell of the
-        nearest view predicted from key views (where every view is coded alone, the file's first
-        map, the shared one); None without maps."""
+        """(ceil(H/8), ceil(W/8)) float64 disparity per 8×8 block of the frame at camera (s, t):
+        the map of the cell of the nearest view predicted from key views (where every view is
+        coded alone, the file's first map, the shared one), without the blocks of the padding
+        past the image (the robust choice's median and median filter see the frame's blocks, as
+        the viewer's renderer does); None without maps."""
         if self._maps is None:
             return None
         map_of, pos, users, cell = self._maps
         if users.size == 0:               # every view coded alone: the first map (the shared one)
-            return map_of(0)
-        near = users[np.argmin(np.hypot(pos[users, 0] - s, pos[users, 1] - t))]
-        return map_of(int(cell[near]))
+            m = map_of(0)
+        else:
+            near = users[np.argmin(np.hypot(pos[users, 0] - s, pos[users, 1] - t))]
+            m = map_of(int(cell[near]))
+        return m[:-(-self.d.height // 8), :-(-self.d.width // 8)]
 
     def disparity(self, s: float, t: float) -> np.ndarray | None:
         """(H, W) disparity in pixels per view step at camera (s, t): the map of the cell of the

@@ -92,9 +92,16 @@ class NumpyOps:
 
     def remap(self, buf, X, Y, cubic: bool = False):
         """(H, W, P) samples of ``buf`` at positions (Y, X) (inside the buffer): bilinear, or
-        bicubic (Keys, a = −0.75; taps past the buffer repeat its edge)."""
+        bicubic (Keys, a = −0.75; taps past the buffer repeat its edge), at the exact positions.
+        (OpenCV 5.0 rounds the positions of a two-channel bilinear remap to 1/32 pixel, as
+        OpenCV 4 did, and takes the others exactly: such buffers are sampled plane by plane.)"""
         import cv2
 
+        if buf.shape[2] == 2 and not cubic:
+            out = np.empty((*Y.shape, 2), buf.dtype)
+            for p in range(2):
+                out[..., p] = cvremap.remap(np.ascontiguousarray(buf[..., p]), X, Y, cv2.INTER_LINEAR).reshape(Y.shape)
+            return out
         out = cvremap.remap(buf, X, Y, cv2.INTER_CUBIC if cubic else cv2.INTER_LINEAR)
         return out.reshape(*Y.shape, buf.shape[2])
 

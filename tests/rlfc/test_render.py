@@ -2,6 +2,8 @@
 by leaving views out — a synthetic grid with known parallax encoded with every second view, the
 missing views rendered and compared with the true ones, against the nearest view and plain
 blending; exact at captured positions; refocus, quilts, the CLI and typed errors."""
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -68,8 +70,9 @@ def test_a_grid_whose_every_view_is_coded_alone_renders_through_its_shared_map(l
     lay = d.core.lay
     assert (lay.cell < 0).all() and lay.n_maps > 0 and sorted(d.core.img_of) == list(range(enc.n0))
     ren = d.renderer()
-    shared = d.core.cell_map(0) / 16.0
-    assert (ren._block_map(0.5, 0.5) == shared).all() and np.abs(shared).max() > 0
+    shared = d.core.cell_map(0) / 16.0                # (its blocks of the frame: 5 of 6 rows here)
+    got = ren._block_map(0.5, 0.5)
+    assert (got == shared[:got.shape[0], :got.shape[1]]).all() and np.abs(shared).max() > 0
     assert (ren.render(1, 2) == d.decode_view(1, 2)).all()
     img = ren.render(0.5, 1.5)                        # (32.0 dB; without the map's parallax, 18.0)
     assert img.shape == full.shape[2:] and psnr_rgb(full[1, 3], img) > 28
@@ -136,6 +139,41 @@ def test_torch_renderer_agrees_with_numpy(leave_out, robust):
     assert a.blocks_decoded == b.blocks_decoded and a.blocks_requested == b.blocks_requested
     pa = a.render_planes(1, 1, focus=3.0, aperture=1.5)
     assert np.abs(pa - b.render_planes(1, 1, focus=3.0, aperture=1.5).numpy()).max() < 1e-3
+
+
+@pytest.mark.parametrize("P", [1, 2, 3, 4])
+@pytest.mark.parametrize("cubic", [False, True])
+def test_numpy_samples_at_the_exact_positions_for_every_plane_count(P, cubic):
+    """The numpy sampler (OpenCV's remap) weighs the taps at the exact float position for 1–4
+    planes, as the torch sampler does: OpenCV 5.0 rounds a two-channel bilinear remap's
+    positions to 1/32 pixel (0.50625 → 0.5), which made grey+alpha files' robust choice differ
+    from torch's and the viewer's (16-bit: up to 1 243 levels on the golden file)."""
+    from rlfc.render_ops import make_ops
+
+    rng = np.random.default_rng(P)
+    buf = rng.uniform(0, 1000, (12, 20, P)).astype(np.float32)
+    Y = rng.uniform(1, 9, (3, 11)).astype(np.float32)
+    X = rng.uniform(1, 17, (3, 11)).astype(np.float32)
+    Y[0, 0] = 4.50625                               # (0.2/32 past a 1/32 step)
+    import torch
+
+    a = make_ops("numpy").remap(buf, X, Y, cubic)
+    b = make_ops("cpu").remap_many([torch.from_numpy(buf)], torch.from_numpy(X[None]), torch.from_numpy(Y[None]), cubic)[0].numpy()
+    assert a.shape == b.shape == (3, 11, P) and np.abs(a - b).max() < 0.02
+
+
+def test_torch_renderer_agrees_with_numpy_on_16_bit_grey_and_alpha():
+    """The golden 16-bit grey+alpha file (29×37 views: the padding's blocks past the frame are
+    not the frame's, for the robust choice's median either): torch and numpy frames within float
+    rounding (float32 sums of 16-bit values: below half a level), robust and not."""
+    from formats import open_decoder, open_lfc
+
+    d = open_decoder(open_lfc(Path(__file__).parents[1] / "data" / "golden" / "rlfc_tx2_lossless_ga16.lfc"))
+    for robust in (True, False):
+        a, b = d.renderer(robust=robust), d.renderer(robust=robust, device="cpu")
+        for cam in ((0.9, 1.8), (1.05, 1.68), (1.65, 1.2), (3.0, 1.5), (2.3, 0.4)):
+            pa, pb = a.render_planes(*cam), b.render_planes(*cam).numpy()
+            assert np.abs(pa - pb).max() < 0.5, (robust, cam)          # (of 65 535)
 
 
 def test_render_device_choice_and_errors(leave_out, tmp_path, capsys):
