@@ -92,7 +92,7 @@ async function main() {
       `view cache     ${(r.cachedBytes() / 1048576).toFixed(2)} MiB of ${cacheMiB} MiB (${r.cache.size} views)`,
       `views decoded  ${r.viewsDecoded}`,
       `open           ${openMs.toFixed(0)} ms`,
-      `frame          ${f ? f.ms.toFixed(1) : "-"} ms (${f ? f.sources : 0} source views)`,
+      `frame          ${f ? f.ms.toFixed(1) : "-"} ms (${f ? f.sources : 0} source views${f && !f.cubic ? ", bilinear preview" : ""})`,
     ].join("\n");
     $("st").textContent = `${state.s.toFixed(2)}, ${state.t.toFixed(2)}`;
     $("focusv").textContent = state.useMaps && state.aperture === 0 ? "(file's maps)" : state.focus.toFixed(2);
@@ -101,7 +101,9 @@ async function main() {
 
   const draw = async () => {
     const focus = state.useMaps && state.aperture === 0 ? null : state.focus;
-    const f = await r.render(state.s, state.t, { focus, aperture: state.aperture, level: state.level, robust: state.robust });
+    // a bilinear preview while a drag moves the camera; the frame at rest is the Python renderer's (bicubic)
+    const f = await r.render(state.s, state.t, { focus, aperture: state.aperture, level: state.level, robust: state.robust,
+      cubic: !drag });
     ctx.putImageData(new ImageData(toRGBA(f.pixels, dec.H, dec.W, dec.C, dec.peak), dec.W, dec.H), 0, 0);
     state.last = f;
     stats();
@@ -112,7 +114,12 @@ async function main() {
 
   let drag = null;
   canvas.addEventListener("pointerdown", (e) => { drag = { x: e.clientX, y: e.clientY, s: state.s, t: state.t }; canvas.classList.add("dragging"); canvas.setPointerCapture(e.pointerId); });
-  canvas.addEventListener("pointerup", () => { drag = null; canvas.classList.remove("dragging"); });
+  canvas.addEventListener("pointerup", () => {
+    const moved = drag && (drag.s !== state.s || drag.t !== state.t);
+    drag = null;
+    canvas.classList.remove("dragging");
+    if (moved) request();                          // the full-quality frame once the camera rests
+  });
   canvas.addEventListener("pointermove", (e) => {
     if (!drag) return;
     const k = Math.max(dec.rows, dec.cols) / canvas.getBoundingClientRect().width;   // the canvas width = the grid

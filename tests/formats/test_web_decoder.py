@@ -16,6 +16,7 @@ import pytest
 
 from formats import open_decoder, open_lfc
 from formats.metrics import psnr_rgb
+from tests.formats.frames import assert_same_frame
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -120,7 +121,26 @@ def test_renderer_matches_python(sample_files, tmp_path):
         js = np.fromfile(tmp_path / f"render_{i}.bin", py.dtype).reshape(py.shape)
         if c == "4,4,nan,0":                          # a captured view: exactly its pixels
             np.testing.assert_array_equal(js, d.decode_view(4, 4))
-        assert psnr_rgb(py, js) >= 45.0, c
+        assert_same_frame(py, js)
+
+
+@pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16.lfc", "rlfc_tx6_alpha_rgba8.lfc"])
+def test_renderer_matches_python_on_grey_alpha_and_16_bit(name, tmp_path):
+    """Grey+alpha 16-bit and RGBA golden files (29×37 views: padding blocks past the frame):
+    the JavaScript frames are the Python ones within rounding. Before stop 84 they were 29–32 dB
+    apart (16-bit: up to 15 082 levels): the Python robust choice took its median over the
+    padding's blocks too, and OpenCV 5.0 rounds two-channel bilinear positions to 1/32 px."""
+    f = GOLDEN / name
+    cams = ["0.9,1.8,nan,0", "1.65,1.2,nan,0", "3,1.5,nan,0", "2.3,0.4,0.7,0", "1.5,1.5,0.5,1.2"]
+    info = run_js(f, tmp_path, cams)
+    assert info["ok"], info
+    d = open_decoder(open_lfc(f))
+    r = d.renderer()
+    for i, c in enumerate(cams):
+        s, t, focus, ap = (float(x) for x in c.split(","))
+        py = r.render(s, t, None if np.isnan(focus) else focus, ap)
+        js = np.fromfile(tmp_path / f"render_{i}.bin", py.dtype).reshape(py.shape)
+        assert_same_frame(py, js, share=0.002)
 
 
 def test_renderer_applies_per_view_warps_like_python(tmp_path):
@@ -144,7 +164,7 @@ def test_renderer_applies_per_view_warps_like_python(tmp_path):
         if c == "1,2,nan,0":
             np.testing.assert_array_equal(js, d.decode_view(1, 2))
             continue
-        assert psnr_rgb(py, js) >= 45.0, c
+        assert_same_frame(py, js)
         apart = max(apart, psnr_rgb(py, js) - psnr_rgb(plain.render(s, t, focus, ap), js))
     assert apart > 3.0                               # the warps change the frames
 

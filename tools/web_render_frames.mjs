@@ -1,0 +1,33 @@
+// Novel views from the browser viewer's renderer (formats/web/render.js) under Node, written raw
+// for tools/web_render_parity.py: node tools/web_render_frames.mjs [RENDER_ROOT] FILE.lfc CAMS.json OUT.bin
+// CAMS.json: [[s, t, focus|null, aperture, robust], ...]. OUT.bin: the frames' pixels, in order,
+// each H·W·C values of the file's sample type (uint8 or uint16, little-endian). RENDER_ROOT (a
+// checkout, optional): render with that checkout's render.js (this checkout's decoder either way).
+import fs from "fs";
+import path from "path";
+import { createRequire } from "module";
+import { fileURLToPath } from "url";
+
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
+const args = process.argv.slice(2);
+const root = args.length === 4 ? args.shift() : null;
+const [file, camsFile, outFile] = args;
+const { openDecoder, BufferSource } = await import(path.join(web, "lfc.js"));
+const { makeKeyImage } = await import(path.join(web, "openjpeg.js"));
+const { Renderer } = await import(root ? path.resolve(root, "formats/web/render.js") : path.join(web, "render.js"));
+const factory = createRequire(import.meta.url)(path.join(web, "vendor/openjpegwasm_decode.js"));
+const log = console.log;
+console.log = () => {};
+const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
+const dec = await openDecoder(new BufferSource(fs.readFileSync(file)), { keyImage });
+const ren = new Renderer(dec);
+const out = [];
+const ms = [];
+for (const [s, t, focus, aperture, robust] of JSON.parse(fs.readFileSync(camsFile, "utf8"))) {
+  const got = await ren.render(s, t, { focus, aperture, robust });
+  ms.push(got.ms);
+  out.push(Buffer.from(got.pixels.buffer, got.pixels.byteOffset, got.pixels.byteLength));
+}
+fs.writeFileSync(outFile, Buffer.concat(out));
+console.log = log;
+console.log(JSON.stringify({ H: dec.H, W: dec.W, C: dec.C, ms }));
