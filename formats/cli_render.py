@@ -45,7 +45,7 @@ def cmd_render(a) -> int:
             img = ren.render(s, t, a.focus, a.aperture)
         write_image(out, img)
         if not a.quiet:
-            print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
+            print(f"wrote {out} ({img.shape[1]}x{img.shape[0]} px, WxH) in {time.perf_counter() - t0:.2f} s, "
                   f"{ren.blocks_decoded} blocks decoded")
     return 0
 
@@ -88,7 +88,7 @@ def _render_lfn_still(a, d, out: Path) -> int:
         img = _lfn_frame(a, d, _lfn_camera(a, d))
     write_image(out, img)
     if not a.quiet:
-        print(f"wrote {out} ({img.shape[0]}x{img.shape[1]}) in {time.perf_counter() - t0:.2f} s, "
+        print(f"wrote {out} ({img.shape[1]}x{img.shape[0]} px, WxH) in {time.perf_counter() - t0:.2f} s, "
               f"{_lfn_size_text(a, d)}, {d.rays_evaluated} rays evaluated")
     return 0
 
@@ -256,7 +256,7 @@ def _render_path(a, out: Path) -> int:
         if not a.quiet:
             n = len(times)
             hit = 1 - ren.blocks_decoded / max(1, ren.blocks_requested)
-            print(f"\rwrote {out}: {n} frames of {d.height}x{d.width}; render {1e3 * times[0]:.0f} ms first frame, "
+            print(f"\rwrote {out}: {n} frames of {d.width}x{d.height} px (WxH); render {1e3 * times[0]:.0f} ms first frame, "
                   f"{1e3 * float(np.median(times[1:] or times)):.0f} ms median ({1 / float(np.median(times)):.1f} fps), "
                   f"{ren.blocks_decoded / n:.0f} blocks decoded per frame, cache hit rate {hit:.0%}")
     return 0
@@ -290,7 +290,7 @@ def _render_lfn_path(a, d, out: Path) -> int:
             if not a.quiet and (i + 1) % 10 == 0:
                 print(f"\r{i + 1}/{len(poses)} frames", end="", file=sys.stderr, flush=True)
     if not a.quiet:
-        print(f"\rwrote {out}: {len(times)} frames of {img.shape[0]}x{img.shape[1]}; render "
+        print(f"\rwrote {out}: {len(times)} frames of {img.shape[1]}x{img.shape[0]} px (WxH); render "
               f"{1e3 * times[0]:.0f} ms first frame, {1e3 * float(np.median(times[1:] or times)):.0f} ms median, "
               f"{_lfn_size_text(a, d)}")
     return 0
