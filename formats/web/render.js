@@ -173,7 +173,7 @@ export class Renderer {
         Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
         X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
         const y0 = Math.floor(Y), x0 = Math.floor(X);
-        // Keys' weights of the taps at −1, 0, +1, +2 (keysWeights, inlined: this is the frame's loop)
+        // Keys' weights of the taps at −1, 0, +1, +2 (rlfc.render_ops.keys_weights, inlined: the frame's loop)
         const fx = X - x0, fx1 = fx + 1, gx = 1 - fx, fy = Y - y0, fy1 = fy + 1, gy = 1 - fy;
         const a0 = ((A * fx1 - 5 * A) * fx1 + 8 * A) * fx1 - 4 * A, a1 = ((A + 2) * fx - (A + 3)) * fx * fx + 1;
         const a2 = ((A + 2) * gx - (A + 3)) * gx * gx + 1, a3 = 1 - a0 - a1 - a2;
@@ -197,7 +197,7 @@ export class Renderer {
     }
   }
 
-  /** _blendFrame with bilinear samples (the taps at floor and floor + 1). */
+  /** _blendFrame with bilinear samples (the taps at floor and floor + 1): render(..., {cubic: false}). */
   _blendLinear(img, disp, ds, dt, wf, acc, wc = null) {
     const d = this.d, P = d.P, Wp = d.Wp, H = d.H, W = d.W, Hp1 = d.Hp - 1, Wp1 = Wp - 1;
     const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround;
