@@ -12,12 +12,19 @@
 // decoded whatever the budget).
 import { LfcError, fromPlanes } from "./lfc.js";
 
+/** Frames of at least this many pixels blend on the pool's workers when the renderer has one. */
+export const POOL_MIN_PIXELS = 1 << 15;
+
 export class Renderer {
-  constructor(dec, { cacheBytes = 256 << 20, margin = 0.5 } = {}) {
+  /** `pool`: a RenderPool (render_pool.js): bands of rows of each frame blended on its Web Workers and this thread
+   *  (the same pixels as the page's thread, bit for bit); null: the page's thread. */
+  constructor(dec, { cacheBytes = 256 << 20, margin = 0.5, pool = null } = {}) {
     if (dec.layout === "posed") throw new LfcError("novel views are rendered on grids; this capture is posed");
     this.d = dec;
     this.cacheBytes = cacheBytes;
     this.margin = margin;
+    this.pool = pool;
+    this.poolMinPixels = POOL_MIN_PIXELS;             // (smaller frames: the page's thread)
     this.cache = new Map();               // view → planes (Int32Array), in LRU order
     this.viewsDecoded = 0;
     this.users = [];
@@ -122,14 +129,25 @@ export class Renderer {
     const maps = disp !== null;
     if (!disp) disp = new Float32Array(H * W).fill(focus || 0);
     const src = this.sources(s, t, aperture);
-    const keep = new Set(src.map(([r, c]) => `${r * d.cols + c}:${level}`));
+    const keys = src.map(([r, c]) => `${r * d.cols + c}:${level}`);
+    const keep = new Set(keys);
     const imgs = [];
     for (const [r, c] of src) imgs.push(await this.view(r * d.cols + c, level));
     const warp = this._warpCoefs(src);
     if (robust && maps && src.length > 1) disp = this._consistent(s, t, src, imgs, disp, warp);
-    const acc = new Float32Array(H * W * P);
-    const blend = cubic ? this._blendFrame : this._blendLinear;
-    src.forEach(([r, c, w], j) => blend.call(this, imgs[j], disp, s - r, t - c, Math.fround(w), acc, warp && warp[j]));
+    const g = { P, Wp: d.Wp, Hp: d.Hp, H, W };
+    const jobs = src.map(([r, c, w], j) => [s - r, t - c, Math.fround(w), warp ? warp[j] : null]);
+    let acc = null;
+    if (this.pool && H * W >= this.poolMinPixels) {
+      try {
+        acc = await this.pool.blend(g, keys, imgs, disp, jobs, cubic);
+      } catch (e) {                                  // (workers that cannot run: the page's thread from now on)
+        console.warn(`render workers failed (${e.message}); rendering on the page's thread`);
+        this.pool.terminate();
+        this.pool = null;
+      }
+    }
+    if (!acc) acc = blendBand(g, imgs, disp, jobs, cubic, 0, H);
     this._trim(keep);
     const planes = new Int32Array(H * W * P);
     for (let i = 0; i < planes.length; i++) {
@@ -155,68 +173,6 @@ export class Renderer {
       const cx = W[4 * v + 2] - cam[2], cy = W[4 * v + 3] - cam[3];
       return [a * k, b * k, cy / 256, -b * k, a * k, cx / 256];
     });
-  }
-
-  /** acc += wf · (every plane of `img` sampled bicubically at every pixel of the frame, displaced
-   *  by disp·(ds, dt), plus the source's warp offset `wc` (_warpCoefs) where given): the Python
-   *  renderer's _blend of one source (positions clamped to the image, taps past the decoded
-   *  buffer repeat its edge, each sample rounded to float32 as stored there) in one pass without
-   *  index or sample arrays. */
-  _blendFrame(img, disp, ds, dt, wf, acc, wc = null) {
-    const d = this.d, P = d.P, Wp = d.Wp, H = d.H, W = d.W, Hp1 = d.Hp - 1, Wp1 = Wp - 1, row = Wp * P;
-    const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround, A = -0.75;
-    for (let y = 0, k = 0; y < H; y++) {
-      for (let x = 0; x < W; x++, k++) {
-        const dd = disp[k];
-        let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
-        if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
-        Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
-        X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
-        const y0 = Math.floor(Y), x0 = Math.floor(X);
-        // Keys' weights of the taps at −1, 0, +1, +2 (rlfc.render_ops.keys_weights, inlined: the frame's loop)
-        const fx = X - x0, fx1 = fx + 1, gx = 1 - fx, fy = Y - y0, fy1 = fy + 1, gy = 1 - fy;
-        const a0 = ((A * fx1 - 5 * A) * fx1 + 8 * A) * fx1 - 4 * A, a1 = ((A + 2) * fx - (A + 3)) * fx * fx + 1;
-        const a2 = ((A + 2) * gx - (A + 3)) * gx * gx + 1, a3 = 1 - a0 - a1 - a2;
-        const b0 = ((A * fy1 - 5 * A) * fy1 + 8 * A) * fy1 - 4 * A, b1 = ((A + 2) * fy - (A + 3)) * fy * fy + 1;
-        const b2 = ((A + 2) * gy - (A + 3)) * gy * gy + 1, b3 = 1 - b0 - b1 - b2;
-        // the taps' columns and rows, clamped to the decoded buffer (its edge repeats)
-        const c0 = (x0 > 0 ? x0 - 1 : 0) * P, c1 = (x0 < Wp1 ? x0 : Wp1) * P;
-        const c2 = (x0 + 1 < Wp1 ? x0 + 1 : Wp1) * P, c3 = (x0 + 2 < Wp1 ? x0 + 2 : Wp1) * P;
-        const r0 = (y0 > 0 ? y0 - 1 : 0) * row, r1 = (y0 < Hp1 ? y0 : Hp1) * row;
-        const r2 = (y0 + 1 < Hp1 ? y0 + 1 : Hp1) * row, r3 = (y0 + 2 < Hp1 ? y0 + 2 : Hp1) * row;
-        const o = k * P;
-        for (let p = 0; p < P; p++) {
-          const q0 = r0 + p, q1 = r1 + p, q2 = r2 + p, q3 = r3 + p;
-          const v = b0 * (img[q0 + c0] * a0 + img[q0 + c1] * a1 + img[q0 + c2] * a2 + img[q0 + c3] * a3)
-            + b1 * (img[q1 + c0] * a0 + img[q1 + c1] * a1 + img[q1 + c2] * a2 + img[q1 + c3] * a3)
-            + b2 * (img[q2 + c0] * a0 + img[q2 + c1] * a1 + img[q2 + c2] * a2 + img[q2 + c3] * a3)
-            + b3 * (img[q3 + c0] * a0 + img[q3 + c1] * a1 + img[q3 + c2] * a2 + img[q3 + c3] * a3);
-          acc[o + p] += wf * f32(v);
-        }
-      }
-    }
-  }
-
-  /** _blendFrame with bilinear samples (the taps at floor and floor + 1): render(..., {cubic: false}). */
-  _blendLinear(img, disp, ds, dt, wf, acc, wc = null) {
-    const d = this.d, P = d.P, Wp = d.Wp, H = d.H, W = d.W, Hp1 = d.Hp - 1, Wp1 = Wp - 1;
-    const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround;
-    for (let y = 0, k = 0; y < H; y++) {
-      for (let x = 0; x < W; x++, k++) {
-        const dd = disp[k];
-        let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
-        if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
-        Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
-        X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
-        const y0 = Math.floor(Y), x0 = Math.floor(X), fy = Y - y0, fx = X - x0;
-        const y1 = y0 + 1 < Hp1 ? y0 + 1 : Hp1, x1 = x0 + 1 < Wp1 ? x0 + 1 : Wp1;
-        const i00 = (y0 * Wp + x0) * P, i01 = (y0 * Wp + x1) * P, i10 = (y1 * Wp + x0) * P, i11 = (y1 * Wp + x1) * P;
-        const gx = 1 - fx, gy = 1 - fy, o = k * P;
-        for (let p = 0; p < P; p++) {
-          acc[o + p] += wf * f32((img[i00 + p] * gx + img[i01 + p] * fx) * gy + (img[i10 + p] * gx + img[i11 + p] * fx) * fy);
-        }
-      }
-    }
   }
 
   /** Bilinear samples of the first `np` planes of view planes `img` at the pixels `idx` (flat
@@ -327,6 +283,79 @@ export class Renderer {
       }
     }
     return out;
+  }
+}
+
+/** The blend of a frame's sources over rows y0..y1: a Float32Array ((y1 − y0)·W·P), acc +=
+ *  wf · (every plane of source j's planes imgs[j] sampled at each pixel (y, x), displaced by
+ *  disp·(ds, dt) plus the source's warp offset wc where given), the sources in order (jobs[j] =
+ *  [ds, dt, wf, wc]); `disp` holds the band's rows ((y1 − y0)·W); g = {P, Wp, Hp, H, W}: the
+ *  planes' layout and the frame's size. Bicubic, or bilinear where !cubic. A band's pixels do not
+ *  depend on the rows beside it, so bands computed apart (render_pool.js) make the same frame. */
+export function blendBand(g, imgs, disp, jobs, cubic, y0, y1) {
+  const acc = new Float32Array((y1 - y0) * g.W * g.P);
+  const one = cubic ? blendCubic : blendLinear;
+  jobs.forEach(([ds, dt, wf, wc], j) => one(g, imgs[j], disp, ds, dt, wf, acc, wc, y0, y1));
+  return acc;
+}
+
+/** One source of blendBand, bicubic: the Python renderer's _blend of one source (positions
+ *  clamped to the image, taps past the decoded buffer repeat its edge, each sample rounded to
+ *  float32 as stored there) in one pass without index or sample arrays. */
+function blendCubic(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
+  const { P, Wp, H, W } = g, Hp1 = g.Hp - 1, Wp1 = Wp - 1, row = Wp * P;
+  const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround, A = -0.75;
+  for (let y = y0, k = 0; y < y1; y++) {
+    for (let x = 0; x < W; x++, k++) {
+      const dd = disp[k];
+      let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
+      if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
+      Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
+      X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
+      const iy = Math.floor(Y), ix = Math.floor(X);
+      // Keys' weights of the taps at −1, 0, +1, +2 (rlfc.render_ops.keys_weights, inlined: the frame's loop)
+      const fx = X - ix, fx1 = fx + 1, gx = 1 - fx, fy = Y - iy, fy1 = fy + 1, gy = 1 - fy;
+      const a0 = ((A * fx1 - 5 * A) * fx1 + 8 * A) * fx1 - 4 * A, a1 = ((A + 2) * fx - (A + 3)) * fx * fx + 1;
+      const a2 = ((A + 2) * gx - (A + 3)) * gx * gx + 1, a3 = 1 - a0 - a1 - a2;
+      const b0 = ((A * fy1 - 5 * A) * fy1 + 8 * A) * fy1 - 4 * A, b1 = ((A + 2) * fy - (A + 3)) * fy * fy + 1;
+      const b2 = ((A + 2) * gy - (A + 3)) * gy * gy + 1, b3 = 1 - b0 - b1 - b2;
+      // the taps' columns and rows, clamped to the decoded buffer (its edge repeats)
+      const c0 = (ix > 0 ? ix - 1 : 0) * P, c1 = (ix < Wp1 ? ix : Wp1) * P;
+      const c2 = (ix + 1 < Wp1 ? ix + 1 : Wp1) * P, c3 = (ix + 2 < Wp1 ? ix + 2 : Wp1) * P;
+      const r0 = (iy > 0 ? iy - 1 : 0) * row, r1 = (iy < Hp1 ? iy : Hp1) * row;
+      const r2 = (iy + 1 < Hp1 ? iy + 1 : Hp1) * row, r3 = (iy + 2 < Hp1 ? iy + 2 : Hp1) * row;
+      const o = k * P;
+      for (let p = 0; p < P; p++) {
+        const q0 = r0 + p, q1 = r1 + p, q2 = r2 + p, q3 = r3 + p;
+        const v = b0 * (img[q0 + c0] * a0 + img[q0 + c1] * a1 + img[q0 + c2] * a2 + img[q0 + c3] * a3)
+          + b1 * (img[q1 + c0] * a0 + img[q1 + c1] * a1 + img[q1 + c2] * a2 + img[q1 + c3] * a3)
+          + b2 * (img[q2 + c0] * a0 + img[q2 + c1] * a1 + img[q2 + c2] * a2 + img[q2 + c3] * a3)
+          + b3 * (img[q3 + c0] * a0 + img[q3 + c1] * a1 + img[q3 + c2] * a2 + img[q3 + c3] * a3);
+        acc[o + p] += wf * f32(v);
+      }
+    }
+  }
+}
+
+/** blendCubic with bilinear samples (the taps at floor and floor + 1): render(..., {cubic: false}). */
+function blendLinear(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
+  const { P, Wp, H, W } = g, Hp1 = g.Hp - 1, Wp1 = Wp - 1;
+  const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround;
+  for (let y = y0, k = 0; y < y1; y++) {
+    for (let x = 0; x < W; x++, k++) {
+      const dd = disp[k];
+      let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
+      if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
+      Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
+      X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
+      const iy = Math.floor(Y), ix = Math.floor(X), fy = Y - iy, fx = X - ix;
+      const iy1 = iy + 1 < Hp1 ? iy + 1 : Hp1, ix1 = ix + 1 < Wp1 ? ix + 1 : Wp1;
+      const i00 = (iy * Wp + ix) * P, i01 = (iy * Wp + ix1) * P, i10 = (iy1 * Wp + ix) * P, i11 = (iy1 * Wp + ix1) * P;
+      const gx = 1 - fx, gy = 1 - fy, o = k * P;
+      for (let p = 0; p < P; p++) {
+        acc[o + p] += wf * f32((img[i00 + p] * gx + img[i01 + p] * fx) * gy + (img[i10 + p] * gx + img[i11 + p] * fx) * fy);
+      }
+    }
   }
 }
 

@@ -8,7 +8,8 @@
 // drag moves along the grid, or orbits a posed capture's cameras about their common target.
 // A tile set's manifest (?file=NAME.json, tiles.js) opens the same way: each tile's file is
 // opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
-// The networks' passes run on Web Workers (lfn_pool.js; &workers=N, 0 = on the page's thread),
+// Novel views' blends and the networks' passes run on Web Workers (render_pool.js, lfn_pool.js;
+// &workers=N, 0 = on the page's thread: the same pixels),
 // their dense layers on WebAssembly SIMD where the browser has it (&wasm=0: lfn.js's own loops).
 // "foveate" (&fovea=1) draws the full network where the pointer is and coarser networks on
 // sparser pixels further out (lfn.js renderMip, LfnRenderer.render_pose_lod_mip's frame).
@@ -22,6 +23,7 @@ import { LfnDecoder } from "./lfn.js";
 import { ForwardPool, defaultWorkers } from "./lfn_pool.js";
 import { makeKeyImage } from "./openjpeg.js";
 import { Renderer, toRGBA } from "./render.js";
+import { RenderPool } from "./render_pool.js";
 import { TiledLfn } from "./tiles.js";
 
 const $ = (id) => document.getElementById(id);
@@ -74,7 +76,12 @@ async function main() {
   }
   const dec = await new TxDecoder().init(file, keyImage);
   const openMs = performance.now() - t0;
-  const r = new Renderer(dec, { cacheBytes: cacheMiB * (1 << 20) });
+  // the frames' blends on the page's thread and N − 1 Web Workers (&workers=N, at least one
+  // worker; 0: the page's thread alone). By default only where the browser reports 3 or more
+  // cores: on 2 cores one worker beside the page gave 0.77–1.13× the frame (BENCHMARKS.md)
+  const renderWorkers = params.has("workers") || defaultWorkers() >= 3 ? workers : 0;
+  const pool = renderWorkers > 0 && typeof Worker !== "undefined" ? new RenderPool(Math.max(1, renderWorkers - 1)) : null;
+  const r = new Renderer(dec, { cacheBytes: cacheMiB * (1 << 20), pool });
   const canvas = $("view");
   canvas.width = dec.W;
   canvas.height = dec.H;
@@ -92,7 +99,8 @@ async function main() {
       `view cache     ${(r.cachedBytes() / 1048576).toFixed(2)} MiB of ${cacheMiB} MiB (${r.cache.size} views)`,
       `views decoded  ${r.viewsDecoded}`,
       `open           ${openMs.toFixed(0)} ms`,
-      `frame          ${f ? f.ms.toFixed(1) : "-"} ms (${f ? f.sources : 0} source views${f && !f.cubic ? ", bilinear preview" : ""})`,
+      `frame          ${f ? f.ms.toFixed(1) : "-"} ms (${f ? f.sources : 0} source views${f && !f.cubic ? ", bilinear preview" : ""}`
+        + `${r.pool ? `, blended on ${r.pool.size} worker${r.pool.size > 1 ? "s" : ""} and the page's thread` : ""})`,
     ].join("\n");
     $("st").textContent = `${state.s.toFixed(2)}, ${state.t.toFixed(2)}`;
     $("focusv").textContent = state.useMaps && state.aperture === 0 ? "(file's maps)" : state.focus.toFixed(2);
@@ -107,7 +115,8 @@ async function main() {
     ctx.putImageData(new ImageData(toRGBA(f.pixels, dec.H, dec.W, dec.C, dec.peak), dec.W, dec.H), 0, 0);
     state.last = f;
     stats();
-    return { s: state.s, t: state.t, ms: f.ms, sources: f.sources, bytesFetched: source.bytesFetched, requests: source.requests };
+    return { s: state.s, t: state.t, ms: f.ms, sources: f.sources, bytesFetched: source.bytesFetched, requests: source.requests,
+      workers: r.pool ? r.pool.size : 0 };
   };
 
   const request = scheduler(draw);

@@ -154,6 +154,49 @@ def test_viewer_matches_python(site, page, name):
     assert "bytes fetched" in stats and "view cache" in stats and "frame" in stats
 
 
+@pytest.mark.parametrize("name", ["dino.lfc", "alone.lfc"])
+def test_novel_views_blend_on_workers_with_the_same_pixels(site, page, name):
+    """The page blends a novel view's rows on its thread and Web Workers (render_pool.js; &workers=2:
+    the page and one worker; the crops are small, so the size threshold is lowered here): the
+    canvas is the one the page's own thread draws
+    (&workers=0), bit for bit, for each option set and for bilinear previews; a camera moving
+    within one cell sends the workers no view again; a worker that cannot load leaves the frame
+    to the page's thread."""
+    srv, _ = site
+    cams = [(1.4, 2.7, "null", 0.0, "true"), (2.5, 1.5, "null", 0.0, "false"), (2.2, 2.1, "0.5", 0.0, "true"),
+            (2.0, 2.0, "1.0", 1.5, "true")]
+    got = {}
+    for query in ("&workers=2", "&workers=0"):
+        assert open_viewer(page, srv, name, query) == "ready", page.inner_text("#error")
+        page.evaluate("lfcViewer.renderer.poolMinPixels = 0")
+        for i, (s, t, focus, ap, robust) in enumerate(cams):
+            info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
+            got[query, i] = canvas_rgb(page), info["workers"]
+        prev = page.evaluate("""async () => { const r = lfcViewer.renderer;
+            const f = await r.render(1.4, 2.7, {cubic: false}); return Array.from(f.pixels); }""")
+        got[query, "preview"] = np.asarray(prev), 0
+        if query == "&workers=2":
+            assert "worker" in page.inner_text("#stats")
+            sent = page.evaluate("""async () => { const r = lfcViewer.renderer, p = r.pool; let n = 0;
+                for (const w of p.workers) { const post = w.postMessage.bind(w);
+                  w.postMessage = (m, tr) => { n += Object.keys(m.send).length; post(m, tr); }; }
+                await r.render(1.45, 2.75); await r.render(1.5, 2.8); return n; }""")
+            assert sent == 0
+    for k in range(len(cams)):
+        assert got["&workers=2", k][1] == 1 and got["&workers=0", k][1] == 0
+        assert np.array_equal(got["&workers=2", k][0], got["&workers=0", k][0]), cams[k]
+    assert np.array_equal(got["&workers=2", "preview"][0], got["&workers=0", "preview"][0])
+    page.route("**/render_worker.js", lambda route: route.abort())
+    try:
+        assert open_viewer(page, srv, name, "&workers=2") == "ready", page.inner_text("#error")
+        page.evaluate("lfcViewer.renderer.poolMinPixels = 0")
+        s, t, focus, ap, robust = cams[0]
+        info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
+        assert info["workers"] == 0 and np.array_equal(canvas_rgb(page), got["&workers=0", 0][0])
+    finally:
+        page.unroute("**/render_worker.js")
+
+
 def test_a_grid_whose_every_view_is_alone_renders_through_its_shared_map(site, page):
     """Every view a JPEG 2000 image, no view predicted through a map: the page shows the views
     (OpenJPEG's wasm against imagecodecs: within 1) and renders novel views through the file's
