@@ -12,22 +12,24 @@ export function defaultWorkers() {
   return Math.max(1, Math.min(8, n));
 }
 
-export class ForwardPool {
-  /** `n` module workers (where the environment has Web Workers; else use no pool). */
-  constructor(n = defaultWorkers()) {
+/** Module workers that answer messages {id, ...} with {id, ...} or {id, error}: the bookkeeping
+ *  ForwardPool and render_pool.js's RenderPool share. A worker that cannot start or throws fails
+ *  every call from then on (the caller falls back to the page's thread). */
+export class WorkerPool {
+  /** `n` module workers running `script` (a URL; where the environment has Web Workers). */
+  constructor(script, n) {
     if (typeof Worker === "undefined") throw new Error("this environment has no Web Workers");
-    this.workers = Array.from({ length: n }, () => new Worker(new URL("./lfn_worker.js", import.meta.url), { type: "module" }));
-    this.sent = null;                 // the weights the workers hold (LfnDecoder.Wt identity: rebuilt on grow)
+    this.workers = Array.from({ length: n }, () => new Worker(script, { type: "module" }));
     this.next = 0;
     this.waiting = new Map();
     this.failed = null;
     for (const w of this.workers) {
       w.onmessage = (e) => {
-        const { id, out, error } = e.data, p = this.waiting.get(id);
-        this.waiting.delete(id);
-        if (p) (error ? p.reject(new Error(error)) : p.resolve(out));
+        const p = this.waiting.get(e.data.id);
+        this.waiting.delete(e.data.id);
+        if (p) (e.data.error ? p.reject(new Error(e.data.error)) : p.resolve(e.data));
       };
-      w.onerror = (e) => {             // (a worker that cannot start or throws: every call fails from now on)
+      w.onerror = (e) => {
         this.failed = e.message || "a worker failed";
         for (const p of this.waiting.values()) p.reject(new Error(this.failed));
         this.waiting.clear();
@@ -36,6 +38,25 @@ export class ForwardPool {
   }
 
   get size() { return this.workers.length; }
+
+  /** Post `msg` (given an id here) to worker i; resolves with its answer. */
+  _call(i, msg, transfer = []) {
+    if (this.failed) throw new Error(this.failed);
+    const id = this.next++;
+    const answer = new Promise((resolve, reject) => this.waiting.set(id, { resolve, reject }));
+    this.workers[i].postMessage({ ...msg, id }, transfer);
+    return answer;
+  }
+
+  terminate() { for (const w of this.workers) w.terminate(); this.workers = []; }
+}
+
+export class ForwardPool extends WorkerPool {
+  /** `n` module workers (where the environment has Web Workers; else use no pool). */
+  constructor(n = defaultWorkers()) {
+    super(new URL("./lfn_worker.js", import.meta.url), n);
+    this.sent = null;                 // the weights the workers hold (LfnDecoder.Wt identity: rebuilt on grow)
+  }
 
   /** The occupancy net's answers for rays i < n: Uint8Array n (1 = let through). */
   async occupancy(dec, rays, n) {
@@ -79,12 +100,8 @@ export class ForwardPool {
       const chunk = new Float32Array((b - a) * 6);
       if (idx) for (let j = a; j < b; j++) chunk.set(rays.subarray(6 * idx[j], 6 * idx[j] + 6), 6 * (j - a));
       else chunk.set(rays.subarray(6 * a, 6 * b));
-      const id = this.next++;
-      jobs.push(new Promise((resolve, reject) => this.waiting.set(id, { resolve, reject })).then((res) => [a, b, res]));
-      this.workers[p].postMessage({ id, op, neurons, n: b - a, rays: chunk }, [chunk.buffer]);
+      jobs.push(this._call(p, { op, neurons, n: b - a, rays: chunk }, [chunk.buffer]).then((res) => [a, b, res.out]));
     }
     return Promise.all(jobs);
   }
-
-  terminate() { for (const w of this.workers) w.terminate(); this.workers = []; }
 }

@@ -7,33 +7,15 @@
 // only the views it does not hold (a camera moving within one cell of the grid sends none).
 // Memory: each worker holds a copy of one frame's source views (4 for a novel view, more for a
 // wide synthetic aperture) besides the page's own view cache.
-import { defaultWorkers } from "./lfn_pool.js";
+import { WorkerPool, defaultWorkers } from "./lfn_pool.js";
 import { blendBand } from "./render.js";
 
-export class RenderPool {
+export class RenderPool extends WorkerPool {
   /** `n` module workers (where the environment has Web Workers; else use no pool). */
   constructor(n = defaultWorkers()) {
-    if (typeof Worker === "undefined") throw new Error("this environment has no Web Workers");
-    this.workers = Array.from({ length: n }, () => new Worker(new URL("./render_worker.js", import.meta.url), { type: "module" }));
+    super(new URL("./render_worker.js", import.meta.url), n);
     this.held = this.workers.map(() => new Set());     // the view keys each worker holds
-    this.next = 0;
-    this.waiting = new Map();
-    this.failed = null;
-    for (const w of this.workers) {
-      w.onmessage = (e) => {
-        const { id, acc, error } = e.data, p = this.waiting.get(id);
-        this.waiting.delete(id);
-        if (p) (error ? p.reject(new Error(error)) : p.resolve(acc));
-      };
-      w.onerror = (e) => {             // (a worker that cannot start or throws: every call fails from now on)
-        this.failed = e.message || "a worker failed";
-        for (const p of this.waiting.values()) p.reject(new Error(this.failed));
-        this.waiting.clear();
-      };
-    }
   }
-
-  get size() { return this.workers.length; }
 
   /** blendBand(g, imgs, disp, jobs, cubic, 0, g.H) computed in bands on the workers; `keys`
    *  names the views of imgs (the renderer's cache keys: the same key, the same planes). */
@@ -49,9 +31,7 @@ export class RenderPool {
       keys.forEach((k, j) => { if (!this.held[i].has(k)) send[k] = imgs[j]; });
       this.held[i] = new Set(keys);                   // (the worker keeps these, drops the others)
       const band = disp.slice(y0 * W, y1 * W);
-      const id = this.next++;
-      bands.push(new Promise((resolve, reject) => this.waiting.set(id, { resolve, reject })).then((acc) => [y0, acc]));
-      this.workers[i].postMessage({ id, g, keys, send, disp: band, jobs, cubic, y0, y1 }, [band.buffer]);
+      bands.push(this._call(i, { g, keys, send, disp: band, jobs, cubic, y0, y1 }, [band.buffer]).then((m) => [y0, m.acc]));
     }
     const out = new Float32Array(H * W * P);
     out.set(blendBand(g, imgs, disp.subarray(0, edge(1) * W), jobs, cubic, 0, edge(1)));
@@ -63,6 +43,4 @@ export class RenderPool {
     }
     return out;
   }
-
-  terminate() { for (const w of this.workers) w.terminate(); this.workers = []; }
 }
