@@ -1,15 +1,17 @@
 // The browser viewer's novel-view renderer (formats/web/render.js) against an older checkout's,
 // on one decoder (this checkout's lfc.js), in one Node process:
-//   node tools/web_render_ab.mjs OLD_CHECKOUT FILE.lfc [ROUNDS]
+//   node tools/web_render_ab.mjs OLD_CHECKOUT FILE.lfc [ROUNDS] [NEW_OPTIONS_JSON]
 // First both render 11 cameras with four option sets (robust, robust=false, a focus, an
 // aperture) and the pixels are compared; then 8 cameras along tools/bench_web's path, the two
-// renderers alternated per round. Prints one JSON line: same (every pixel equal), old_ms and
-// new_ms (median frame), ratio.
+// renderers alternated per round (NEW_OPTIONS_JSON, e.g. '{"cubic": false}': the new renderer's
+// render options in the timed rounds, against the old one's defaults). Prints one JSON line: same
+// (every pixel equal), old_ms and new_ms (median frame), ratio.
 import fs from "fs";
 import path from "path";
 import { fileURLToPath } from "url";
 import { createRequire } from "module";
-const [oldRoot, file, rounds = "3"] = process.argv.slice(2);
+const [oldRoot, file, rounds = "3", newOpts = "{}"] = process.argv.slice(2);
+const NEWOPT = JSON.parse(newOpts);
 const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
 const { openDecoder, BufferSource } = await import(web + "/lfc.js");
 const { makeKeyImage } = await import(web + "/openjpeg.js");
@@ -31,7 +33,7 @@ for (const o of opts) for (const [s, t] of cams) {
 }
 const T = { old: [], new: [] };
 for (let r = 0; r < Number(rounds); r++) for (const k of ["old", "new"]) for (const [s, t] of cams.slice(0, 8)) {
-  const t0 = performance.now(); await rens[k].render(s, t); T[k].push(performance.now() - t0);
+  const t0 = performance.now(); await rens[k].render(s, t, k === "new" ? NEWOPT : {}); T[k].push(performance.now() - t0);
 }
 const med = (a) => a.slice().sort((x, y) => x - y)[a.length >> 1];
 console.log = log;

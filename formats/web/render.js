@@ -294,15 +294,15 @@ export class Renderer {
  *  depend on the rows beside it, so bands computed apart (render_pool.js) make the same frame. */
 export function blendBand(g, imgs, disp, jobs, cubic, y0, y1) {
   const acc = new Float32Array((y1 - y0) * g.W * g.P);
-  const one = cubic ? blendCubic : blendLinear;
-  jobs.forEach(([ds, dt, wf, wc], j) => one(g, imgs[j], disp, ds, dt, wf, acc, wc, y0, y1));
+  jobs.forEach(([ds, dt, wf, wc], j) => blendOne(g, imgs[j], disp, ds, dt, wf, acc, wc, y0, y1, cubic));
   return acc;
 }
 
-/** One source of blendBand, bicubic: the Python renderer's _blend of one source (positions
- *  clamped to the image, taps past the decoded buffer repeat its edge, each sample rounded to
- *  float32 as stored there) in one pass without index or sample arrays. */
-function blendCubic(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
+/** One source of blendBand: the Python renderer's _blend of one source (positions clamped to the
+ *  image, taps past the decoded buffer repeat its edge, each sample rounded to float32 as stored
+ *  there), bicubic or bilinear (the taps at floor and floor + 1: render(..., {cubic: false})), in
+ *  one pass without index or sample arrays. */
+function blendOne(g, img, disp, ds, dt, wf, acc, wc, y0, y1, cubic) {
   const { P, Wp, H, W } = g, Hp1 = g.Hp - 1, Wp1 = Wp - 1, row = Wp * P;
   const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround, A = -0.75;
   for (let y = y0, k = 0; y < y1; y++) {
@@ -312,9 +312,18 @@ function blendCubic(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
       if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
       Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
       X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
-      const iy = Math.floor(Y), ix = Math.floor(X);
+      const iy = Math.floor(Y), ix = Math.floor(X), fy = Y - iy, fx = X - ix, o = k * P;
+      if (!cubic) {
+        const iy1 = iy + 1 < Hp1 ? iy + 1 : Hp1, ix1 = ix + 1 < Wp1 ? ix + 1 : Wp1;
+        const i00 = (iy * Wp + ix) * P, i01 = (iy * Wp + ix1) * P, i10 = (iy1 * Wp + ix) * P, i11 = (iy1 * Wp + ix1) * P;
+        const gx = 1 - fx, gy = 1 - fy;
+        for (let p = 0; p < P; p++) {
+          acc[o + p] += wf * f32((img[i00 + p] * gx + img[i01 + p] * fx) * gy + (img[i10 + p] * gx + img[i11 + p] * fx) * fy);
+        }
+        continue;
+      }
       // Keys' weights of the taps at −1, 0, +1, +2 (rlfc.render_ops.keys_weights, inlined: the frame's loop)
-      const fx = X - ix, fx1 = fx + 1, gx = 1 - fx, fy = Y - iy, fy1 = fy + 1, gy = 1 - fy;
+      const fx1 = fx + 1, gx = 1 - fx, fy1 = fy + 1, gy = 1 - fy;
       const a0 = ((A * fx1 - 5 * A) * fx1 + 8 * A) * fx1 - 4 * A, a1 = ((A + 2) * fx - (A + 3)) * fx * fx + 1;
       const a2 = ((A + 2) * gx - (A + 3)) * gx * gx + 1, a3 = 1 - a0 - a1 - a2;
       const b0 = ((A * fy1 - 5 * A) * fy1 + 8 * A) * fy1 - 4 * A, b1 = ((A + 2) * fy - (A + 3)) * fy * fy + 1;
@@ -324,7 +333,6 @@ function blendCubic(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
       const c2 = (ix + 1 < Wp1 ? ix + 1 : Wp1) * P, c3 = (ix + 2 < Wp1 ? ix + 2 : Wp1) * P;
       const r0 = (iy > 0 ? iy - 1 : 0) * row, r1 = (iy < Hp1 ? iy : Hp1) * row;
       const r2 = (iy + 1 < Hp1 ? iy + 1 : Hp1) * row, r3 = (iy + 2 < Hp1 ? iy + 2 : Hp1) * row;
-      const o = k * P;
       for (let p = 0; p < P; p++) {
         const q0 = r0 + p, q1 = r1 + p, q2 = r2 + p, q3 = r3 + p;
         const v = b0 * (img[q0 + c0] * a0 + img[q0 + c1] * a1 + img[q0 + c2] * a2 + img[q0 + c3] * a3)
@@ -332,28 +340,6 @@ function blendCubic(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
           + b2 * (img[q2 + c0] * a0 + img[q2 + c1] * a1 + img[q2 + c2] * a2 + img[q2 + c3] * a3)
           + b3 * (img[q3 + c0] * a0 + img[q3 + c1] * a1 + img[q3 + c2] * a2 + img[q3 + c3] * a3);
         acc[o + p] += wf * f32(v);
-      }
-    }
-  }
-}
-
-/** blendCubic with bilinear samples (the taps at floor and floor + 1): render(..., {cubic: false}). */
-function blendLinear(g, img, disp, ds, dt, wf, acc, wc, y0, y1) {
-  const { P, Wp, H, W } = g, Hp1 = g.Hp - 1, Wp1 = Wp - 1;
-  const dsf = Math.fround(ds), dtf = Math.fround(dt), f32 = Math.fround;
-  for (let y = y0, k = 0; y < y1; y++) {
-    for (let x = 0; x < W; x++, k++) {
-      const dd = disp[k];
-      let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
-      if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
-      Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
-      X = X < 0 ? 0 : X > W - 1 ? W - 1 : X;
-      const iy = Math.floor(Y), ix = Math.floor(X), fy = Y - iy, fx = X - ix;
-      const iy1 = iy + 1 < Hp1 ? iy + 1 : Hp1, ix1 = ix + 1 < Wp1 ? ix + 1 : Wp1;
-      const i00 = (iy * Wp + ix) * P, i01 = (iy * Wp + ix1) * P, i10 = (iy1 * Wp + ix) * P, i11 = (iy1 * Wp + ix1) * P;
-      const gx = 1 - fx, gy = 1 - fy, o = k * P;
-      for (let p = 0; p < P; p++) {
-        acc[o + p] += wf * f32((img[i00 + p] * gx + img[i01 + p] * fx) * gy + (img[i10 + p] * gx + img[i11 + p] * fx) * fy);
       }
     }
   }
