@@ -3,9 +3,11 @@ the page's own thread, in headless Chromium (Debian's ``chromium`` via Playwrigh
 settings alternated per round on the same files.
 
     python -m tools.bench_web_workers FILE.lfc [FILE.lfc ...] [--rounds 3] [--workers 2[,3...]]
+    python -m tools.bench_web_workers FILE.lfc ... --settings "workers=0&wasm=0,workers=0,workers=2"
 
 Per file: the viewer opened with ``&workers=0`` and with each ``&workers=N`` (the page's thread
-and N − 1 workers share the blend); each round renders 8
+and N − 1 workers share the blend), or with each of ``--settings`` (URL query parameters, the
+first the baseline: e.g. ``wasm=0``, the blend in render.js's loops); each round renders 8
 cameras twice (robust, bicubic; the first pass warms the views' decode and the JIT up and is
 left out) and takes the frame times the renderer reports. Paths: ``jump`` (default), the 8 cameras of
 ``tools.bench_web``'s path, which cross a row or column of views between most frames (new
@@ -28,6 +30,8 @@ def main(argv=None) -> int:
     ap.add_argument("files", nargs="+")
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--workers", default="2", help="comma-separated settings of &workers (each > 0)")
+    ap.add_argument("--settings", default=None,
+                    help="comma-separated URL query settings, the first the baseline (instead of --workers)")
     ap.add_argument("--path", choices=("jump", "drag"), default="jump")
     a = ap.parse_args(argv)
     chromium = os.environ.get("LFC_CHROMIUM") or shutil.which("chromium") or shutil.which("chromium-browser")
@@ -40,8 +44,11 @@ def main(argv=None) -> int:
         return 2
     from formats.serve import FileServer
 
-    settings = [int(x) for x in a.workers.split(",")]
-    print(f"| file ({a.path}) | &workers=0 ms | " + " | ".join(f"&workers={n} ms (ratio)" for n in settings) + " | same canvas |")
+    if a.settings:
+        base, *settings = a.settings.split(",")
+    else:
+        base, settings = "workers=0", [f"workers={int(x)}" for x in a.workers.split(",")]
+    print(f"| file ({a.path}) | &{base} ms | " + " | ".join(f"&{n} ms (ratio)" for n in settings) + " | same canvas |")
     print("|---|---|" + "---|" * len(settings) + "---|")
     with tempfile.TemporaryDirectory() as tmp, sync_playwright() as p:
         browser = p.chromium.launch(executable_path=chromium, headless=True, args=["--no-sandbox", "--disable-gpu"])
@@ -50,11 +57,11 @@ def main(argv=None) -> int:
             shutil.copyfile(f, Path(tmp) / f.name)      # (the server serves no links out of its folder)
         with FileServer(tmp, viewer=True) as srv:
             for f in (Path(x) for x in a.files):
-                times = {n: [] for n in [0] + settings}
+                times = {n: [] for n in [base] + settings}
                 frames = {}
                 for _ in range(a.rounds):
                     for n in times:
-                        page.goto(srv.viewer_url(f.name) + f"&workers={n}")
+                        page.goto(srv.viewer_url(f.name) + f"&{n}")
                         page.wait_for_function("document.body.dataset.state !== 'loading'", timeout=300_000)
                         if page.evaluate("document.body.dataset.state") != "ready":
                             print(f"{f.name}: {page.inner_text('#error')}", file=sys.stderr)
@@ -70,9 +77,9 @@ def main(argv=None) -> int:
                         frames[n] = page.evaluate("""() => { const c = document.getElementById('view');
                             return Array.from(c.getContext('2d').getImageData(0, 0, c.width, c.height).data); }""")
                 m = {n: statistics.median(v) for n, v in times.items()}
-                cells = " | ".join(f"{m[n]:.0f} ({m[n] / m[0]:.2f})" for n in settings)
-                same = all(frames[n] == frames[0] for n in settings)
-                print(f"| {f.stem} | {m[0]:.0f} | {cells} | {same} |", flush=True)
+                cells = " | ".join(f"{m[n]:.0f} ({m[n] / m[base]:.2f})" for n in settings)
+                same = all(frames[n] == frames[base] for n in settings)
+                print(f"| {f.stem} | {m[base]:.0f} | {cells} | {same} |", flush=True)
         browser.close()
     return 0
 

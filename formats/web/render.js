@@ -11,11 +11,16 @@
 // Decoded views are kept in an LRU cache bounded by `cacheBytes` (the views of one frame are
 // decoded whatever the budget).
 import { LfcError, fromPlanes } from "./lfc.js";
+import { kernelModule } from "./render_kernel.js";
 
 /** Frames of at least this many pixels blend on the pool's workers when the renderer has one. */
 export const POOL_MIN_PIXELS = 1 << 15;
 
 export class Renderer {
+  /** Whether renderers blend on WebAssembly SIMD (render_kernel.wat) where the environment has it
+   *  (false: blendOne's loops; the same pixels, bit for bit). The viewer's `&wasm=0` clears it. */
+  static useWasm = true;
+
   /** `pool`: a RenderPool (render_pool.js): bands of rows of each frame blended on its Web Workers and this thread
    *  (the same pixels as the page's thread, bit for bit); null: the page's thread. */
   constructor(dec, { cacheBytes = 256 << 20, margin = 0.5, pool = null } = {}) {
@@ -135,7 +140,7 @@ export class Renderer {
     for (const [r, c] of src) imgs.push(await this.view(r * d.cols + c, level));
     const warp = this._warpCoefs(src);
     if (robust && maps && src.length > 1) disp = this._consistent(s, t, src, imgs, disp, warp);
-    const g = { P, Wp: d.Wp, Hp: d.Hp, H, W };
+    const g = { P, Wp: d.Wp, Hp: d.Hp, H, W, wasm: Renderer.useWasm };
     const jobs = src.map(([r, c, w], j) => [s - r, t - c, Math.fround(w), warp ? warp[j] : null]);
     let acc = null;
     if (this.pool && H * W >= this.poolMinPixels) {
@@ -155,7 +160,7 @@ export class Renderer {
       planes[i] = r > 0.5 ? f + 1 : r < 0.5 ? f : (f % 2 === 0 ? f : f + 1);          // rint: half to even
     }
     const pixels = fromPlanes(planes, H, W, H, W, d.C, d.peak);
-    return { pixels, ms: performance.now() - t0, sources: src.length, cubic };
+    return { pixels, ms: performance.now() - t0, sources: src.length, cubic, wasm: g.wasm && BlendKernel.shared() !== null };
   }
 
   /** Per source [r, c, w] of a file with per-view warps (tx version 5), where its pixel lies
@@ -289,10 +294,15 @@ export class Renderer {
 /** The blend of a frame's sources over rows y0..y1: a Float32Array ((y1 − y0)·W·P), acc +=
  *  wf · (every plane of source j's planes imgs[j] sampled at each pixel (y, x), displaced by
  *  disp·(ds, dt) plus the source's warp offset wc where given), the sources in order (jobs[j] =
- *  [ds, dt, wf, wc]); `disp` holds the band's rows ((y1 − y0)·W); g = {P, Wp, Hp, H, W}: the
- *  planes' layout and the frame's size. Bicubic, or bilinear where !cubic. A band's pixels do not
- *  depend on the rows beside it, so bands computed apart (render_pool.js) make the same frame. */
+ *  [ds, dt, wf, wc]); `disp` holds the band's rows ((y1 − y0)·W); g = {P, Wp, Hp, H, W, wasm}: the
+ *  planes' layout and the frame's size, and whether to blend on WebAssembly (BlendKernel) where
+ *  this environment can. Bicubic, or bilinear where !cubic. A band's pixels do not depend on the
+ *  rows beside it, so bands computed apart (render_pool.js) make the same frame; the kernel and
+ *  the loops make the same accumulator, bit for bit. */
 export function blendBand(g, imgs, disp, jobs, cubic, y0, y1) {
+  const k = g.wasm === false ? null : BlendKernel.shared();
+  const got = k && k.band(g, imgs, disp, jobs, cubic, y0, y1);
+  if (got) return got;
   const acc = new Float32Array((y1 - y0) * g.W * g.P);
   jobs.forEach(([ds, dt, wf, wc], j) => blendOne(g, imgs[j], disp, ds, dt, wf, acc, wc, y0, y1, cubic));
   return acc;
@@ -342,6 +352,84 @@ function blendOne(g, img, disp, ds, dt, wf, acc, wc, y0, y1, cubic) {
         acc[o + p] += wf * f32(v);
       }
     }
+  }
+}
+
+/** blendBand on WebAssembly SIMD (render_kernel.wat: blendOne's operations in its order, two
+ *  planes at a time). The module's memory holds the planes of the views blended lately, one slot
+ *  of Hp·Wp·P int32 each (least recently used first out; a view is copied in when a call first
+ *  names it: along a camera path most frames copy none), then the band's disparities and
+ *  accumulator. One per thread (`shared()`; null where WebAssembly SIMD is missing). */
+export class BlendKernel {
+  /** The most bytes of views one call may blend here (a wider synthetic aperture blends in the loops). */
+  static SLOT_BYTES = 256 << 20;
+  /** Views kept between calls beyond a call's own (a camera crossing a row or column of views and
+   *  back copies none); the module's memory stays as large as the most views it held at once. */
+  static KEEP_VIEWS = 8;
+  static _shared;
+
+  static shared() {
+    if (BlendKernel._shared === undefined) {
+      const mod = kernelModule();
+      try {
+        BlendKernel._shared = mod ? new BlendKernel(mod) : null;
+      } catch {
+        BlendKernel._shared = null;
+      }
+    }
+    return BlendKernel._shared;
+  }
+
+  constructor(mod) {
+    this.inst = new WebAssembly.Instance(mod, {});
+    this.mem = this.inst.exports.memory;
+    this.slotBytes = 0;
+    this.slots = [];                     // {img, used}: the views in the module's memory, in slot order
+    this.clock = 0;
+    this.copies = 0;                     // views copied in (for tests and benchmarks)
+  }
+
+  /** blendBand's accumulator, or null where this call does not fit (the loops then blend it). */
+  band(g, imgs, disp, jobs, cubic, y0, y1) {
+    const { P, Wp, Hp, H, W } = g, n = (y1 - y0) * W, slotBytes = Hp * Wp * P * 4;
+    if (imgs.some((m) => m.length !== Hp * Wp * P) || imgs.length * slotBytes > BlendKernel.SLOT_BYTES) return null;
+    if (slotBytes !== this.slotBytes) { this.slots = []; this.slotBytes = slotBytes; }
+    const tick = ++this.clock, at = [];
+    for (const img of imgs) {                                  // the slots of the views held already
+      const i = this.slots.findIndex((sl) => sl.img === img);
+      at.push(i);
+      if (i >= 0) this.slots[i].used = tick;
+    }
+    const cap = Math.max(imgs.length, BlendKernel.KEEP_VIEWS);
+    const fresh = [];
+    imgs.forEach((img, j) => {                                 // the others: a new slot, or the least recent
+      if (at[j] >= 0) return;
+      let i = this.slots.findIndex((sl) => sl.img === img);   // (a view named twice in one call)
+      if (i < 0 && this.slots.length < cap) { i = this.slots.length; this.slots.push({ img: null, used: 0 }); }
+      if (i < 0) {
+        i = 0;
+        this.slots.forEach((sl, q) => { if (sl.used < this.slots[i].used) i = q; });
+      }
+      if (this.slots[i].img !== img) fresh.push(i);
+      this.slots[i] = { img, used: tick };
+      at[j] = i;
+    });
+    const SLOTS = 64, dispAt = SLOTS + this.slots.length * slotBytes, accAt = dispAt + n * 4;
+    const need = accAt + n * P * 4;
+    if (need > this.mem.buffer.byteLength) this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
+    const buf = this.mem.buffer;
+    for (const i of new Set(fresh)) {
+      new Int32Array(buf, SLOTS + i * slotBytes, Hp * Wp * P).set(this.slots[i].img);
+      this.copies += 1;
+    }
+    new Float32Array(buf, dispAt, n).set(disp.subarray(0, n));
+    new Float32Array(buf, accAt, n * P).fill(0);
+    const blend = this.inst.exports.blend, wcs = new Float64Array(buf, 16, 6);
+    jobs.forEach(([ds, dt, wf, wc], j) => {
+      if (wc) wcs.set(wc);
+      blend(SLOTS + at[j] * slotBytes, dispAt, accAt, W, H, Wp, Hp, P, y0, y1, ds, dt, wf, wc ? 16 : 0, cubic ? 1 : 0);
+    });
+    return new Float32Array(buf, accAt, n * P).slice();
   }
 }
 

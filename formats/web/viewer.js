@@ -10,7 +10,8 @@
 // opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
 // Novel views' blends and the networks' passes run on Web Workers (render_pool.js, lfn_pool.js;
 // &workers=N, 0 = on the page's thread: the same pixels),
-// their dense layers on WebAssembly SIMD where the browser has it (&wasm=0: lfn.js's own loops).
+// their dense layers and the novel views' blend on WebAssembly SIMD where the browser has it
+// (&wasm=0: lfn.js's and render.js's own loops; the same pixels).
 // "foveate" (&fovea=1) draws the full network where the pointer is and coarser networks on
 // sparser pixels further out (lfn.js renderMip, LfnRenderer.render_pose_lod_mip's frame).
 //
@@ -32,7 +33,10 @@ const fileUrl = params.get("file");
 const cacheMiB = Number(params.get("cache_mib") || 256);     // decoded views
 const chunkMiB = Number(params.get("chunk_mib") || 64);      // verified file chunks
 const workers = params.has("workers") ? Math.max(0, Math.min(64, Math.floor(Number(params.get("workers")) || 0))) : defaultWorkers();
-if (params.get("wasm") === "0") LfnDecoder.useWasm = false;   // the networks in lfn.js's own loops (the same pixels)
+if (params.get("wasm") === "0") {               // the networks and the blend in JS loops (the same pixels)
+  LfnDecoder.useWasm = false;
+  Renderer.useWasm = false;
+}
 
 function fail(e) {
   document.body.dataset.state = "error";
@@ -100,6 +104,7 @@ async function main() {
       `views decoded  ${r.viewsDecoded}`,
       `open           ${openMs.toFixed(0)} ms`,
       `frame          ${f ? f.ms.toFixed(1) : "-"} ms (${f ? f.sources : 0} source views${f && !f.cubic ? ", bilinear preview" : ""}`
+        + `${f ? (f.wasm ? ", WebAssembly SIMD" : ", JS loops") : ""}`
         + `${r.pool ? `, blended on ${r.pool.size} worker${r.pool.size > 1 ? "s" : ""} and the page's thread` : ""})`,
     ].join("\n");
     $("st").textContent = `${state.s.toFixed(2)}, ${state.t.toFixed(2)}`;

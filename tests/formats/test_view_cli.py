@@ -53,3 +53,26 @@ def test_viewer_url_of_names_with_url_characters(tmp_path):
             value = parse_qs(urlparse(page).query)["file"][0]                    # URLSearchParams.get
             with urllib.request.urlopen(urljoin(page, value)) as r:              # new URL(value, page)
                 assert r.read() == GOLDEN.read_bytes(), n
+
+
+def test_the_server_hands_out_every_file_the_viewer_imports():
+    """Every module the viewer's scripts import (``from "./X.js"``, ``new URL("./X.js", …)``,
+    ``import("./X.js")``) is one of the files `lfcodec serve` hands out, starting from the page's
+    own scripts: a module left off the list fails the page's load in the browser (a new kernel
+    did once, stop 85)."""
+    import re
+
+    from formats.serve import _WEB_FILES, WEB_DIR
+
+    seen, todo = set(), re.findall(r'src="(?:\./)?([^"]+\.js)"', (WEB_DIR / "index.html").read_text())
+    assert todo, "index.html names no script"
+    while todo:
+        name = todo.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        assert name in _WEB_FILES, f"{name} is imported by the viewer but not served"
+        text = (WEB_DIR / name).read_text()
+        for ref in re.findall(r'(?:from|import\(|new URL\()\s*"\./([^"]+\.js)"', text):
+            todo.append(str(Path(name).parent / ref) if "/" in name else ref)
+    assert {"render_kernel.js", "lfn_kernel.js", "render_worker.js", "lfn_worker.js"} <= seen

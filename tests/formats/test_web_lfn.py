@@ -397,8 +397,9 @@ console.log(JSON.stringify(res));
 
 @pytest.mark.skipif(not (HERE.parents[1] / "formats/web/node_modules/wabt").is_dir(),
                     reason="wabt is not installed (tools/build_web.sh installs it with npm ci)")
-def test_the_kernel_module_is_built_from_its_text():
-    """formats/web/lfn_kernel.js holds what tools/build_lfn_kernel.mjs makes of lfn_kernel.wat."""
-    got = subprocess.run([NODE, str(HERE.parents[1] / "tools/build_lfn_kernel.mjs"), "--check"], capture_output=True,
+def test_the_kernel_modules_are_built_from_their_text():
+    """formats/web/lfn_kernel.js and render_kernel.js hold what tools/build_kernels.mjs makes of
+    lfn_kernel.wat and render_kernel.wat."""
+    got = subprocess.run([NODE, str(HERE.parents[1] / "tools/build_kernels.mjs"), "--check"], capture_output=True,
                          text=True, timeout=120)
     assert got.returncode == 0, got.stdout + got.stderr

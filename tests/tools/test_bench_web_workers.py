@@ -20,3 +20,15 @@ def test_the_table_of_a_golden_file(capsys):
     row = capsys.readouterr().out.strip().splitlines()[-1].split("|")
     assert row[1].strip() == "rlfc_tx6_alpha_rgba8" and row[4].strip() == "True"
     assert float(row[2]) >= 0 and float(row[3].split("(")[0]) >= 0
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="Chromium is not installed")
+def test_settings_against_a_baseline(capsys):
+    """--settings: any URL query settings against the first (the blend's loops against WebAssembly)."""
+    pytest.importorskip("playwright")
+    assert main([str(GOLDEN / "rlfc_tx5_warped_rgb8.lfc"), "--rounds", "1", "--settings",
+                 "workers=0&wasm=0,workers=0"]) == 0
+    lines = capsys.readouterr().out.strip().splitlines()
+    assert "&workers=0&wasm=0 ms" in lines[0] and "&workers=0 ms (ratio)" in lines[0]
+    row = lines[-1].split("|")
+    assert row[1].strip() == "rlfc_tx5_warped_rgb8" and row[4].strip() == "True"

@@ -1,0 +1,55 @@
+// Assemble the browser viewer's WebAssembly text (SIMD) with wabt and write each kernel's loader:
+// formats/web/lfn_kernel.wat → lfn_kernel.js (the network renderer's dense layers) and
+// formats/web/render_kernel.wat → render_kernel.js (the novel-view blend): the module's bytes as
+// base64 and a synchronous compile. Run by tools/build_web.sh; `node tools/build_kernels.mjs
+// --check` exits 1 where a committed file differs from its build.
+import fs from "fs";
+import path from "path";
+import { fileURLToPath } from "url";
+
+const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
+const { default: wabtInit } = await import(path.join(web, "node_modules/wabt/index.js"));
+const wabt = await wabtInit();
+const KERNELS = [
+  ["lfn_kernel", "The WebAssembly module of the network renderer's dense layers"],
+  ["render_kernel", "The WebAssembly module of the novel-view renderer's blend"],
+];
+let stale = 0;
+for (const [name, what] of KERNELS) {
+  const wat = fs.readFileSync(path.join(web, `${name}.wat`), "utf8");
+  const mod = wabt.parseWat(`${name}.wat`, wat, { simd: true });
+  mod.validate();
+  const { buffer } = mod.toBinary({});
+  if (buffer.length > 4096) {     // browsers refuse to compile larger modules synchronously on a page's thread
+    console.error(`${name}.wat builds to ${buffer.length} bytes: over 4 KB, ${name}.js would need an asynchronous compile`);
+    process.exit(1);
+  }
+  const b64 = Buffer.from(buffer).toString("base64");
+  const js = `// ${name}.js — generated from ${name}.wat by tools/build_kernels.mjs (wabt); do not edit.
+// ${what} (${buffer.length} bytes), compiled once
+// (synchronously: it is small); null where the environment has no WebAssembly SIMD.
+const WASM = "${b64}";
+
+let compiled;
+export function kernelModule() {
+  if (compiled === undefined) {
+    try {
+      compiled = new WebAssembly.Module(Uint8Array.from(atob(WASM), (c) => c.charCodeAt(0)));
+    } catch {
+      compiled = null;
+    }
+  }
+  return compiled;
+}
+`;
+  const out = path.join(web, `${name}.js`);
+  if (process.argv.includes("--check")) {
+    const same = fs.existsSync(out) && fs.readFileSync(out, "utf8") === js;
+    console.log(same ? `${name}.js is up to date` : `${name}.js differs from ${name}.wat's build`);
+    stale += same ? 0 : 1;
+    continue;
+  }
+  fs.writeFileSync(out, js);
+  console.log(`wrote ${out} (${buffer.length} bytes of WebAssembly)`);
+}
+process.exit(stale ? 1 : 0);
