@@ -154,11 +154,10 @@ export class Renderer {
     }
     if (!acc) acc = blendBand(g, imgs, disp, jobs, cubic, 0, H);
     this._trim(keep);
-    const planes = new Int32Array(H * W * P);
-    for (let i = 0; i < planes.length; i++) {
-      const v = acc[i], f = Math.floor(v), r = v - f;
-      planes[i] = r > 0.5 ? f + 1 : r < 0.5 ? f : (f % 2 === 0 ? f : f + 1);          // rint: half to even
-    }
+    // rint, half to even: adding and taking away 1.5·2^52 leaves a double's integer part, rounded to
+    // nearest even by the addition itself (exact for |v| < 2^51; planes are far inside)
+    const planes = new Int32Array(H * W * P), RINT = 6755399441055744;
+    for (let i = 0; i < planes.length; i++) planes[i] = (acc[i] + RINT) - RINT;
     const pixels = fromPlanes(planes, H, W, H, W, d.C, d.peak);
     return { pixels, ms: performance.now() - t0, sources: src.length, cubic, wasm: g.wasm && BlendKernel.shared() !== null };
   }
