@@ -179,27 +179,25 @@ export class Renderer {
     });
   }
 
-  /** Bilinear samples of the first `np` planes of view planes `img` at the pixels `idx` (flat
-   *  indices y·W + x of a W-wide raster; grid positions (y, x)·1 here, or a subsampled grid via
-   *  `step`), displaced by disp[k]·(ds, dt): out[k·np + p]. Positions clamped to the image,
+  /** Bilinear samples of plane 0 of view planes `img` on a gh×gw grid of pixels every `step`
+   *  pixels, displaced by D[i·gw + j]·(ds, dt): out[i·gw + j]. Positions clamped to the image,
    *  weights at the exact positions (OpenCV 5's remap); plus the source's warp offset `wc` where
    *  given. */
-  _sample(img, idx, W, disp, ds, dt, np, out, step = 1, dispW = W, wc = null) {
-    const d = this.d, P = d.P, Wp = d.Wp, H = d.H, Wi = d.W;
-    const dsf = Math.fround(ds), dtf = Math.fround(dt);
-    for (let k = 0; k < idx.length; k++) {
-      const gy = Math.floor(idx[k] / W), gx = idx[k] - gy * W;
-      const y = gy * step, x = gx * step;
-      const dd = disp[gy * dispW + gx];
-      let Y = Math.fround(y + Math.fround(dd * dsf)), X = Math.fround(x + Math.fround(dd * dtf));
-      if (wc) { Y = Math.fround(Y + Math.fround(wc[0] * y + wc[1] * x + wc[2])); X = Math.fround(X + Math.fround(wc[3] * y + wc[4] * x + wc[5])); }
-      Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
-      X = X < 0 ? 0 : X > Wi - 1 ? Wi - 1 : X;
-      const y0 = Math.floor(Y), x0 = Math.floor(X), fy = Y - y0, fx = X - x0;
-      const y1 = Math.min(y0 + 1, d.Hp - 1), x1 = Math.min(x0 + 1, Wp - 1);
-      const i00 = (y0 * Wp + x0) * P, i01 = (y0 * Wp + x1) * P, i10 = (y1 * Wp + x0) * P, i11 = (y1 * Wp + x1) * P;
-      for (let p = 0; p < np; p++) {
-        out[k * np + p] = (img[i00 + p] * (1 - fx) + img[i01 + p] * fx) * (1 - fy) + (img[i10 + p] * (1 - fx) + img[i11 + p] * fx) * fy;
+  _sampleGrid(img, gh, gw, step, D, ds, dt, out, wc = null) {
+    const d = this.d, P = d.P, Wp = d.Wp, H = d.H, Wi = d.W, Hp1 = d.Hp - 1, Wp1 = Wp - 1, f32 = Math.fround;
+    const dsf = f32(ds), dtf = f32(dt);
+    for (let gy = 0, k = 0; gy < gh; gy++) {
+      const y = gy * step;
+      for (let gx = 0; gx < gw; gx++, k++) {
+        const x = gx * step, dd = D[k];
+        let Y = f32(y + f32(dd * dsf)), X = f32(x + f32(dd * dtf));
+        if (wc) { Y = f32(Y + f32(wc[0] * y + wc[1] * x + wc[2])); X = f32(X + f32(wc[3] * y + wc[4] * x + wc[5])); }
+        Y = Y < 0 ? 0 : Y > H - 1 ? H - 1 : Y;
+        X = X < 0 ? 0 : X > Wi - 1 ? Wi - 1 : X;
+        const y0 = Math.floor(Y), x0 = Math.floor(X), fy = Y - y0, fx = X - x0;
+        const y1 = y0 + 1 < Hp1 ? y0 + 1 : Hp1, x1 = x0 + 1 < Wp1 ? x0 + 1 : Wp1;
+        const i00 = (y0 * Wp + x0) * P, i01 = (y0 * Wp + x1) * P, i10 = (y1 * Wp + x0) * P, i11 = (y1 * Wp + x1) * P;
+        out[k] = (img[i00] * (1 - fx) + img[i01] * fx) * (1 - fy) + (img[i10] * (1 - fx) + img[i11] * fx) * fy;
       }
     }
   }
@@ -240,10 +238,9 @@ export class Renderer {
       (y, x) => med[(y >> 3) * bx + (x >> 3)],
       (y, x) => disp[y * W + x],
     ];
-    const idx = Int32Array.from({ length: G }, (_, i) => i);
     const best = new Float32Array(G), choice = new Uint8Array(G);
-    const D = new Float32Array(G), acc = new Float32Array(G), cost = new Float32Array(G);
-    const smp = src.map(() => new Float32Array(G));
+    const D = new Float32Array(G), cost = new Float32Array(G);
+    const smp = src.map(() => new Float32Array(G)), nq = src.length, wfs = src.map(([, , w]) => f32(w));
     const refl = (i, m) => {                                   // BORDER_REFLECT_101
       if (m === 1) return 0;
       for (;;) {
@@ -256,14 +253,13 @@ export class Renderer {
     const cols = Int32Array.from({ length: gw + 3 }, (_, j) => refl(j - 2, gw));
     cand.forEach((fn, k) => {
       for (let i = 0; i < gh; i++) for (let j = 0; j < gw; j++) D[i * gw + j] = fn(i * S, j * S);
-      src.forEach(([r, c], q) => this._sample(imgs[q], idx, gw, D, s - r, t - c, 1, smp[q], S, gw, warp && warp[q]));
-      acc.fill(0);
-      src.forEach(([, , w], q) => { const wf = f32(w); for (let i = 0; i < G; i++) acc[i] = f32(acc[i] + f32(wf * smp[q][i])); });
-      cost.fill(0);
-      src.forEach(([, , w], q) => {
-        const wf = f32(w);
-        for (let i = 0; i < G; i++) { const e = f32(smp[q][i] - acc[i]); cost[i] = f32(cost[i] + f32(wf * f32(e * e))); }
-      });
+      src.forEach(([r, c], q) => this._sampleGrid(imgs[q], gh, gw, S, D, s - r, t - c, smp[q], warp && warp[q]));
+      for (let i = 0; i < G; i++) {                          // the blend, then the weighted variance about it
+        let a = 0, v = 0;
+        for (let q = 0; q < nq; q++) a = f32(a + f32(wfs[q] * smp[q][i]));
+        for (let q = 0; q < nq; q++) { const e = f32(smp[q][i] - a); v = f32(v + f32(wfs[q] * f32(e * e))); }
+        cost[i] = v;
+      }
       for (let i = 0; i < gh; i++) {                          // 4×4 box, anchor (2, 2)
         for (let j = 0; j < gw; j++) {
           let sum = 0;
