@@ -415,7 +415,14 @@ export class BlendKernel {
     });
     const SLOTS = 64, dispAt = SLOTS + this.slots.length * slotBytes, accAt = dispAt + n * 4;
     const need = accAt + n * P * 4;
-    if (need > this.mem.buffer.byteLength) this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
+    if (need > this.mem.buffer.byteLength) {
+      try {
+        this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
+      } catch {                                                // (no memory to grow into: the loops)
+        this.slots = [];
+        return null;
+      }
+    }
     const buf = this.mem.buffer;
     for (const i of new Set(fresh)) {
       new Int32Array(buf, SLOTS + i * slotBytes, Hp * Wp * P).set(this.slots[i].img);
