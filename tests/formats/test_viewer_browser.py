@@ -197,6 +197,41 @@ def test_novel_views_blend_on_workers_with_the_same_pixels(site, page, name):
         page.unroute("**/render_worker.js")
 
 
+@pytest.mark.parametrize("name", ["dino.lfc", "res.lfc"])
+def test_the_blend_on_webassembly_draws_the_loops_canvas(site, page, name):
+    """The novel-view blend on WebAssembly SIMD (render_kernel.wat, the default where the browser
+    has it) draws the canvas of render.js's loops (&wasm=0), bit for bit, robust, refocused,
+    synthetic-aperture and as a bilinear preview; the stats line says which ran."""
+    srv, _ = site
+    cams = [(1.4, 2.7, "null", 0.0, "true"), (2.5, 1.5, "null", 0.0, "false"), (2.2, 2.1, "0.5", 0.0, "true"),
+            (2.0, 2.0, "1.0", 1.5, "true")]
+    got = {}
+    for query in ("&workers=0", "&workers=0&wasm=0"):
+        assert open_viewer(page, srv, name, query) == "ready", page.inner_text("#error")
+        for i, (s, t, focus, ap, robust) in enumerate(cams):
+            info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
+            got[query, i] = canvas_rgb(page)
+        assert ("JS loops" if "wasm=0" in query else "WebAssembly SIMD") in page.inner_text("#stats")
+        got[query, "preview"] = np.asarray(page.evaluate("""async () => {
+            const f = await lfcViewer.renderer.render(1.4, 2.7, {cubic: false}); return Array.from(f.pixels); }"""))
+    for k in list(range(len(cams))) + ["preview"]:
+        assert np.array_equal(got["&workers=0", k], got["&workers=0&wasm=0", k]), k
+
+
+def test_a_viewer_module_that_cannot_load_shows_a_message(site, page):
+    """A module the page imports that cannot be fetched fails the page at once with a message
+    (before, the page stayed "loading" with nothing said)."""
+    srv, _ = site
+    page.route("**/render_kernel.js", lambda route: route.abort())
+    try:
+        page.goto(srv.viewer_url("dino.lfc"))
+        page.wait_for_function("document.body.dataset.state !== 'loading'", timeout=30_000)
+        assert page.evaluate("document.body.dataset.state") == "error"
+        assert "could not be loaded" in page.inner_text("#error")
+    finally:
+        page.unroute("**/render_kernel.js")
+
+
 def test_a_grid_whose_every_view_is_alone_renders_through_its_shared_map(site, page):
     """Every view a JPEG 2000 image, no view predicted through a map: the page shows the views
     (OpenJPEG's wasm against imagecodecs: within 1) and renders novel views through the file's
