@@ -1,6 +1,6 @@
 """The browser viewer's JavaScript decoder against the Python decoder on the same files, one
-process per measurement, rounds interleaved: open with every key view decoded (the JavaScript reader
-decodes them when it opens a file; Python's open is lazy, so ``decode_keys()`` is timed with it),
+process per measurement, rounds interleaved: open with every key view decoded (both readers decode key
+views on demand; ``decodeKeys()`` and ``decode_keys()`` are timed with the open),
 median whole-view decode,
 median novel-view frame (the viewer's renderer in JS against ``Renderer()`` in Python, both robust).
 

@@ -756,10 +756,42 @@ export class TxDecoder {
     }
     if (file.info("tx.keyimg").length !== imgOff) throw new FormatError(`${name}: section 'tx.keyimg' has ${file.info("tx.keyimg").length} bytes, the header says ${imgOff}`);
     this.keyImage = keyImage;
-    this.keyPlanes = new Array(this.keys.length);
-    for (const k of this.keys) this.keyPlanes[this.keySlot[k]] = await this._decodeKey(k);
+    // key views are decoded when a view first needs them (_key), as the Python decoder decodes
+    // theirs on demand: an open reads no key view, a first frame only the keys in its views' cones
+    this.keyPlanes = new Array(this.keys.length).fill(null);
+    this._keyPending = new Array(this.keys.length).fill(null);
     return this;
   }
+
+  /** Planes of key view k, decoded on its first use (its references first); concurrent callers
+   *  share one decode. A damaged key view's error reaches every caller. */
+  _key(k) {
+    const s = this.keySlot[k];
+    if (this.keyPlanes[s]) return Promise.resolve(this.keyPlanes[s]);
+    if (!this._keyPending[s]) {
+      this._keyPending[s] = (async () => {
+        await this._refsOf(k);
+        this.keyPlanes[s] = await this._decodeKey(k);
+        return this.keyPlanes[s];
+      })();
+      this._keyPending[s].catch(() => { this._keyPending[s] = null; });   // (a later call tries again)
+    }
+    return this._keyPending[s];
+  }
+
+  /** Every key view that view v is predicted from, decoded. */
+  async _refsOf(v) {
+    for (let j = 0; j < MAX_REFS; j++) {
+      const r = this.refs[4 * v + j];
+      if (r >= 0) await this._key(r);
+    }
+  }
+
+  /** Key views decoded so far (of this.keys.length). */
+  keysDecoded() { return this.keyPlanes.filter((p) => p !== null).length; }
+
+  /** Every key view decoded now (what an open did before stop 85; Python's decode_keys()). */
+  async decodeKeys() { for (const k of this.keys) await this._key(k); }
 
   _checkLayout(name) {
     const N0 = this.n0, order = new Int32Array(N0).fill(-1);
@@ -1056,7 +1088,8 @@ export class TxDecoder {
   async decodeView(v, level = 0) {
     if (!Number.isInteger(v) || v < 0 || v >= this.n0) throw new LfcError(`view ${v} is not in 0..${this.n0 - 1}`);
     if (level !== 0 && level !== 1) throw new LfcError(`level ${level} is not 0 or 1 (0 = full quality, 1 = prediction only)`);
-    if (this.keySlot[v] >= 0) return this.keyPlanes[this.keySlot[v]];
+    if (this.keySlot[v] >= 0) return this._key(v);
+    await this._refsOf(v);
     const P = this.P, Hp = this.Hp, Wp = this.Wp, B = this.B, tpb = this.tpb, nloc = this.nby * this.nbx;
     const img = new Int32Array(Hp * Wp * P);
     for (let y0 = 0; y0 < Hp; y0 += 8) for (let x0 = 0; x0 < Wp; x0 += 8) this._predictTb(v, y0, x0, img);

@@ -160,7 +160,7 @@ async function main() {
       if (!state.useMaps) state.focus = opts.focus;
       $("focus").value = state.focus; $("aperture").value = state.aperture;           // the controls follow
       $("usemaps").checked = state.useMaps; $("robust").checked = state.robust; $("level").value = String(state.level);
-      return draw();
+      return draw().catch((e) => { fail(e); throw e; });        // (on the page too, as a drag's error is)
     },
   };
 }

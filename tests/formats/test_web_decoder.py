@@ -78,6 +78,15 @@ def sample_files(tmp_path_factory):
     return tx, j2k
 
 
+def test_key_views_are_decoded_on_demand(sample_files, tmp_path):
+    """An open decodes no key view; the first view decodes only the keys it is predicted from
+    (and theirs), not all of them; every view is still the Python decoder's (the test below)."""
+    tx, _ = sample_files
+    info = run_js(tx, tmp_path, ())
+    assert info["ok"] and info["keys"] > 2, info
+    assert info["keys_at_open"] == 0 and 0 < info["keys_after_first"] < info["keys"], info
+
+
 def test_real_capture_with_residual_blocks_bit_exact(sample_files, tmp_path):
     tx, _ = sample_files
     d = open_decoder(open_lfc(tx))
