@@ -209,7 +209,7 @@ def test_the_blend_on_webassembly_draws_the_loops_canvas(site, page, name):
     for query in ("&workers=0", "&workers=0&wasm=0"):
         assert open_viewer(page, srv, name, query) == "ready", page.inner_text("#error")
         for i, (s, t, focus, ap, robust) in enumerate(cams):
-            info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
+            page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
             got[query, i] = canvas_rgb(page)
         assert ("JS loops" if "wasm=0" in query else "WebAssembly SIMD") in page.inner_text("#stats")
         got[query, "preview"] = np.asarray(page.evaluate("""async () => {
