@@ -9,19 +9,11 @@
 // accumulator and frame equal), kernel (whether this Node has WebAssembly SIMD), the median ms of
 // each blend, their ratios, the views copied into the kernel's memory, and those copied by 8
 // frames of a drag inside one cell of the grid after a first frame there (0: the views stay).
-import fs from "fs";
 import path from "path";
-import { fileURLToPath } from "url";
-import { createRequire } from "module";
+import { WEB, openFile, say } from "./web_node.mjs";
 const [file, rounds = "5"] = process.argv.slice(2);
-const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
-const { openDecoder, BufferSource } = await import(web + "/lfc.js");
-const { makeKeyImage } = await import(web + "/openjpeg.js");
-const R = await import(web + "/render.js");
-const factory = createRequire(import.meta.url)(web + "/vendor/openjpegwasm_decode.js");
-const log = console.log; console.log = () => {};
-const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
-const d = await openDecoder(new BufferSource(fs.readFileSync(file)), { keyImage });
+const R = await import(path.join(WEB, "render.js"));
+const d = await openFile(file);
 const ren = new R.Renderer(d);
 const { H, W } = d;
 const g = (wasm) => ({ P: d.P, Wp: d.Wp, Hp: d.Hp, H, W, wasm });
@@ -74,5 +66,4 @@ if (Number(rounds) > 0) {
   Object.assign(out, { js_ms: med(T.js), wasm_ms: med(T.wasm), ratio: med(T.wasm) / med(T.js),
     js_bilinear_ms: med(T.js_bilinear), wasm_bilinear_ms: med(T.wasm_bilinear), ratio_bilinear: med(T.wasm_bilinear) / med(T.js_bilinear) });
 }
-console.log = log;
-console.log(JSON.stringify(out));
+say(JSON.stringify(out));

@@ -8,22 +8,15 @@
 // the open, decoded after the first view) or {ok: false, name, message} for an error the decoder raised.
 import fs from "fs";
 import path from "path";
-import { createRequire } from "module";
-import { fileURLToPath } from "url";
+import { WEB, openFile, say } from "./web_node.mjs";
 
-const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
-const { openDecoder, BufferSource, LfcError } = await import(path.join(web, "lfc.js"));
-const { makeKeyImage } = await import(path.join(web, "openjpeg.js"));
-const { Renderer } = await import(path.join(web, "render.js"));
-const factory = createRequire(import.meta.url)(path.join(web, "vendor/openjpegwasm_decode.js"));
+const { LfcError } = await import(path.join(WEB, "lfc.js"));
+const { Renderer } = await import(path.join(WEB, "render.js"));
 
 const [file, out, ...cams] = process.argv.slice(2);
 try {
-  const log = console.log;
-  console.log = () => {};                    // OpenJPEG prints progress lines
-  const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
   const chunkBudget = Number(process.env.LFC_CHUNK_BUDGET || Infinity);      // bytes of file chunks kept
-  const dec = await openDecoder(new BufferSource(fs.readFileSync(file)), { name: path.basename(file), keyImage, chunkBudget });
+  const dec = await openFile(file, { name: path.basename(file), chunkBudget });
   const keysAtOpen = dec.keysDecoded();
   let keysAfterFirst = null;
   fs.mkdirSync(out, { recursive: true });
@@ -41,8 +34,7 @@ try {
     const f = await r.render(s, t, { focus: Number.isNaN(focus) ? null : focus, aperture: ap });
     fs.writeFileSync(path.join(out, `render_${i}.bin`), Buffer.from(f.pixels.buffer));
   }
-  console.log = log;
-  console.log(JSON.stringify({ ok: true, Hp: dec.Hp, Wp: dec.Wp, P: dec.P, n: dec.n0, keys: dec.keys.length,
+  say(JSON.stringify({ ok: true, Hp: dec.Hp, Wp: dec.Wp, P: dec.P, n: dec.n0, keys: dec.keys.length,
     keys_at_open: keysAtOpen, keys_after_first: keysAfterFirst }));
 } catch (e) {
   if (!(e instanceof LfcError)) throw e;        // anything else is a bug: a non-zero exit and a trace

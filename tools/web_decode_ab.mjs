@@ -3,19 +3,13 @@
 //   node tools/web_decode_ab.mjs OLD_CHECKOUT FILE.lfc [ROUNDS]
 // Prints one JSON line: same (every view's planes equal), old_ms / new_ms (median view decode
 // over all views and rounds), ratio, and open_old_ms / open_new_ms (median open: header, maps,
-// every key view).
+// every key view; decodeKeys() where a reader decodes them on demand).
 import fs from "fs";
 import path from "path";
-import { fileURLToPath } from "url";
-import { createRequire } from "module";
+import { WEB, openFile, say } from "./web_node.mjs";
 const [oldRoot, file, rounds = "3"] = process.argv.slice(2);
-const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
-const NEW = await import(web + "/lfc.js");
+const NEW = await import(path.join(WEB, "lfc.js"));
 const OLD = await import(path.resolve(oldRoot, "formats/web/lfc.js"));
-const { makeKeyImage } = await import(web + "/openjpeg.js");
-const factory = createRequire(import.meta.url)(web + "/vendor/openjpegwasm_decode.js");
-const log = console.log; console.log = () => {};
-const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
 const bytes = fs.readFileSync(file);
 const med = (a) => a.slice().sort((x, y) => x - y)[a.length >> 1];
 const T = { old: [], new: [] }, O = { old: [], new: [] };
@@ -25,7 +19,8 @@ for (let r = 0; r < Number(rounds); r++) {
   const decs = {};
   for (const k of ["old", "new"]) {
     const t = performance.now();
-    decs[k] = await mods[k].openDecoder(new mods[k].BufferSource(bytes), { keyImage });
+    decs[k] = await openFile(bytes, { lfc: mods[k] });
+    if (decs[k].decodeKeys) await decs[k].decodeKeys();
     O[k].push(performance.now() - t);
   }
   for (let v = 0; v < decs.new.n0; v++) {
@@ -40,6 +35,5 @@ for (let r = 0; r < Number(rounds); r++) {
     }
   }
 }
-console.log = log;
-console.log(JSON.stringify({ file: path.basename(file), same, first_differing_view: first, old_ms: med(T.old),
+say(JSON.stringify({ file: path.basename(file), same, first_differing_view: first, old_ms: med(T.old),
   new_ms: med(T.new), ratio: med(T.new) / med(T.old), open_old_ms: med(O.old), open_new_ms: med(O.new) }));

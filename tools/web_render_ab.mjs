@@ -6,21 +6,13 @@
 // renderers alternated per round (NEW_OPTIONS_JSON, e.g. '{"cubic": false}': the new renderer's
 // render options in the timed rounds, against the old one's defaults). Prints one JSON line: same
 // (every pixel equal), old_ms and new_ms (median frame), ratio.
-import fs from "fs";
 import path from "path";
-import { fileURLToPath } from "url";
-import { createRequire } from "module";
+import { WEB, openFile, say } from "./web_node.mjs";
 const [oldRoot, file, rounds = "3", newOpts = "{}"] = process.argv.slice(2);
 const NEWOPT = JSON.parse(newOpts);
-const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
-const { openDecoder, BufferSource } = await import(web + "/lfc.js");
-const { makeKeyImage } = await import(web + "/openjpeg.js");
-const NEW = await import(web + "/render.js");
+const NEW = await import(path.join(WEB, "render.js"));
 const OLD = await import(path.resolve(oldRoot, "formats/web/render.js"));
-const factory = createRequire(import.meta.url)(web + "/vendor/openjpegwasm_decode.js");
-const log = console.log; console.log = () => {};
-const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
-const dec = await openDecoder(new BufferSource(fs.readFileSync(file)), { keyImage });
+const dec = await openFile(file);
 const rens = { old: new OLD.Renderer(dec), new: new NEW.Renderer(dec) };
 const cams = [];
 for (let i = 0; i < 8; i++) cams.push([(dec.rows - 1) * (0.3 + 0.05 * i), (dec.cols - 1) * (0.6 - 0.04 * i)]);
@@ -29,12 +21,11 @@ let same = true;
 const opts = [{}, { robust: false }, { focus: 1.5 }, { aperture: 1.2, focus: 0.5 }];
 for (const o of opts) for (const [s, t] of cams) {
   const a = await rens.old.render(s, t, o), b = await rens.new.render(s, t, o);
-  if (a.pixels.length !== b.pixels.length || a.pixels.some((v, i) => v !== b.pixels[i])) { same = false; log("differ", s, t, JSON.stringify(o)); }
+  if (a.pixels.length !== b.pixels.length || a.pixels.some((v, i) => v !== b.pixels[i])) { same = false; say("differ", s, t, JSON.stringify(o)); }
 }
 const T = { old: [], new: [] };
 for (let r = 0; r < Number(rounds); r++) for (const k of ["old", "new"]) for (const [s, t] of cams.slice(0, 8)) {
   const t0 = performance.now(); await rens[k].render(s, t, k === "new" ? NEWOPT : {}); T[k].push(performance.now() - t0);
 }
 const med = (a) => a.slice().sort((x, y) => x - y)[a.length >> 1];
-console.log = log;
-console.log(JSON.stringify({ file, same, old_ms: med(T.old), new_ms: med(T.new), ratio: med(T.new) / med(T.old) }));
+say(JSON.stringify({ file, same, old_ms: med(T.old), new_ms: med(T.new), ratio: med(T.new) / med(T.old) }));

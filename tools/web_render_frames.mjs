@@ -5,21 +5,13 @@
 // checkout, optional): render with that checkout's render.js (this checkout's decoder either way).
 import fs from "fs";
 import path from "path";
-import { createRequire } from "module";
-import { fileURLToPath } from "url";
+import { WEB, openFile, say } from "./web_node.mjs";
 
-const web = path.resolve(path.dirname(fileURLToPath(import.meta.url)), "../formats/web");
 const args = process.argv.slice(2);
 const root = args.length === 4 ? args.shift() : null;
 const [file, camsFile, outFile] = args;
-const { openDecoder, BufferSource } = await import(path.join(web, "lfc.js"));
-const { makeKeyImage } = await import(path.join(web, "openjpeg.js"));
-const { Renderer } = await import(root ? path.resolve(root, "formats/web/render.js") : path.join(web, "render.js"));
-const factory = createRequire(import.meta.url)(path.join(web, "vendor/openjpegwasm_decode.js"));
-const log = console.log;
-console.log = () => {};
-const keyImage = await makeKeyImage(() => factory({ print: () => {}, printErr: () => {} }));
-const dec = await openDecoder(new BufferSource(fs.readFileSync(file)), { keyImage });
+const { Renderer } = await import(root ? path.resolve(root, "formats/web/render.js") : path.join(WEB, "render.js"));
+const dec = await openFile(file);
 const ren = new Renderer(dec);
 const out = [];
 const ms = [];
@@ -29,5 +21,4 @@ for (const [s, t, focus, aperture, robust] of JSON.parse(fs.readFileSync(camsFil
   out.push(Buffer.from(got.pixels.buffer, got.pixels.byteOffset, got.pixels.byteLength));
 }
 fs.writeFileSync(outFile, Buffer.concat(out));
-console.log = log;
-console.log(JSON.stringify({ H: dec.H, W: dec.W, C: dec.C, ms }));
+say(JSON.stringify({ H: dec.H, W: dec.W, C: dec.C, ms }));
