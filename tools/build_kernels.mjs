@@ -1,8 +1,8 @@
 // Assemble the browser viewer's WebAssembly text (SIMD) with wabt and write each kernel's loader:
 // formats/web/lfn_kernel.wat → lfn_kernel.js (the network renderer's dense layers) and
 // formats/web/render_kernel.wat → render_kernel.js (the novel-view blend): the module's bytes as
-// base64 and a synchronous compile. Run by tools/build_web.sh; `node tools/build_kernels.mjs
-// --check` exits 1 where a committed file differs from its build.
+// base64, compiled by formats/web/wasm_module.js. Run by tools/build_web.sh; `node
+// tools/build_kernels.mjs --check` exits 1 where a committed file differs from its build.
 import fs from "fs";
 import path from "path";
 import { fileURLToPath } from "url";
@@ -26,21 +26,11 @@ for (const [name, what] of KERNELS) {
   }
   const b64 = Buffer.from(buffer).toString("base64");
   const js = `// ${name}.js — generated from ${name}.wat by tools/build_kernels.mjs (wabt); do not edit.
-// ${what} (${buffer.length} bytes), compiled once
-// (synchronously: it is small); null where the environment has no WebAssembly SIMD.
-const WASM = "${b64}";
+// ${what} (${buffer.length} bytes): kernelModule() compiles it once
+// (wasm_module.js); null where the environment has no WebAssembly SIMD.
+import { lazyModule } from "./wasm_module.js";
 
-let compiled;
-export function kernelModule() {
-  if (compiled === undefined) {
-    try {
-      compiled = new WebAssembly.Module(Uint8Array.from(atob(WASM), (c) => c.charCodeAt(0)));
-    } catch {
-      compiled = null;
-    }
-  }
-  return compiled;
-}
+export const kernelModule = lazyModule("${b64}");
 `;
   const out = path.join(web, `${name}.js`);
   if (process.argv.includes("--check")) {
