@@ -29,7 +29,8 @@ _TYPES = {".html": "text/html; charset=utf-8", ".js": "text/javascript; charset=
           ".json": "application/json", ".md": "text/plain; charset=utf-8", ".png": "image/png"}
 #: viewer files the server hands out (not package.json, node_modules, …)
 _WEB_FILES = ("index.html", "lfc.js", "lfn.js", "lfn_kernel.js", "lfn_pool.js", "lfn_worker.js", "tiles.js", "render.js",
-              "render_pool.js", "render_worker.js", "render_kernel.js", "wasm_module.js", "viewer.js", "openjpeg.js",
+              "render_pool.js", "render_worker.js", "render_kernel.js", "predict.js",
+              "predict_kernel.js", "wasm_module.js", "viewer.js", "openjpeg.js",
               "vendor/openjpegwasm_decode.js",
               "vendor/openjpegwasm_decode.wasm", "vendor/LICENSES.md")
 

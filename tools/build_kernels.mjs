@@ -1,6 +1,7 @@
 // Assemble the browser viewer's WebAssembly text (SIMD) with wabt and write each kernel's loader:
-// formats/web/lfn_kernel.wat → lfn_kernel.js (the network renderer's dense layers) and
-// formats/web/render_kernel.wat → render_kernel.js (the novel-view blend): the module's bytes as
+// formats/web/lfn_kernel.wat → lfn_kernel.js (the network renderer's dense layers),
+// formats/web/render_kernel.wat → render_kernel.js (the novel-view blend) and
+// formats/web/predict_kernel.wat → predict_kernel.js (a view's prediction): the module's bytes as
 // base64, compiled by formats/web/wasm_module.js. Run by tools/build_web.sh; `node
 // tools/build_kernels.mjs --check` exits 1 where a committed file differs from its build.
 import fs from "fs";
@@ -13,6 +14,7 @@ const wabt = await wabtInit();
 const KERNELS = [
   ["lfn_kernel", "The WebAssembly module of the network renderer's dense layers"],
   ["render_kernel", "The WebAssembly module of the novel-view renderer's blend"],
+  ["predict_kernel", "The WebAssembly module of the decoder's view prediction"],
 ];
 let stale = 0;
 for (const [name, what] of KERNELS) {

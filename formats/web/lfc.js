@@ -7,6 +7,7 @@
 // in-memory buffer: BufferSource). Every section chunk read is checked against its CRC-32 the
 // first time it arrives. Units: planes are Int32Array of Hp·Wp·P values, row-major, planes last
 // (YCoCg-R for RGB, grey, alpha last); pixels are H·W·C values of the file's dtype.
+import { PredictKernel } from "./predict.js";
 
 export class LfcError extends Error {
   constructor(msg) { super(msg); this.name = "LfcError"; }
@@ -693,6 +694,7 @@ export class TxDecoder {
     this.intra = new Uint8Array(N0);
     for (let i = 0; i < N0; i++) this.intra[i] = this.refs.slice(4 * i, 4 * i + 4).every((r) => r < 0) ? 1 : 0;
     this.wpGain = null;
+    this._at = new Int32Array(4);              // _tapAt's result
     this.warp = null;
     if (ver >= 5) {
       const w = v.slice(11 * N0 + 2 * N0 * P, 11 * N0 + 2 * N0 * P + 4 * N0);
@@ -941,6 +943,39 @@ export class TxDecoder {
     if (this.file.info("tx.blocks").length !== off + 8) throw new FormatError(`tx.blocks has ${this.file.info("tx.blocks").length} bytes, the index says ${off + 8}`);
   }
 
+  /** View v's prediction (planes img, Hp·Wp·P): on WebAssembly SIMD (predict.js) where this
+   *  environment has it, else in _predictTb's loops; the same planes. */
+  _predictView(v, img) {
+    if (this.predictsOnWasm() && this._kernelP.view(this, v, img)) {
+      if (this.wpGain) this._weighted(v, img, 0, 0, this.Hp, this.Wp);
+      return;
+    }
+    for (let y0 = 0; y0 < this.Hp; y0 += 8) for (let x0 = 0; x0 < this.Wp; x0 += 8) this._predictTb(v, y0, x0, img);
+  }
+
+  /** Whether views are predicted on WebAssembly SIMD here (PredictKernel), not in the loops. */
+  predictsOnWasm() {
+    if (!PredictKernel.useWasm) return false;
+    if (this._kernelP === undefined) this._kernelP = PredictKernel.create();
+    return this._kernelP !== null;
+  }
+
+  /** Where key view k's taps for the tb at pixel (y0, x0) of view v start, at disparity d (1/16
+   *  px per view step): this._at = [ry, rx, fy, fx] (the window's top-left pixel, then 1/16 px). */
+  _tapAt(v, k, d, y0, x0) {
+    let Y = 16 * y0 + d * (this.pos[2 * v] - this.pos[2 * k]);
+    let X = 16 * x0 + d * (this.pos[2 * v + 1] - this.pos[2 * k + 1]);
+    if (this.warp) {                            // per-view warps: the pair's offset at the tb's centre
+      const W = this.warp, X2 = 2 * x0 + 7, Y2 = 2 * y0 + 7;
+      const da = W[4 * k] - W[4 * v], db = W[4 * k + 1] - W[4 * v + 1];
+      const dcx = W[4 * k + 2] - W[4 * v + 2], dcy = W[4 * k + 3] - W[4 * v + 3];
+      X += Math.floor((da * X2 - db * Y2 + 512 * dcx + 4096) / 8192);     // (exact: below 2^31)
+      Y += Math.floor((db * X2 + da * Y2 + 512 * dcy + 4096) / 8192);
+    }
+    const at = this._at;
+    at[0] = Y >> 4; at[1] = X >> 4; at[2] = Y & 15; at[3] = X & 15;
+  }
+
   /** Prediction of the 8×8 tb at pixel (y0, x0) of view v, written where it lies in img (Hp·Wp·P).
    *  Each tap ((a(16−fx) + b·fx)(16−fy) + (c(16−fx) + e·fx)·fy + 128) >> 8 is summed as
    *  a·w00 + b·w01 + c·w10 + e·w11 + 128 (the same integer); a window inside the key view reads
@@ -952,7 +987,7 @@ export class TxDecoder {
     const d = this.disp[cell * this.nby8 * this.nbx8 + loc8], mode = this.modes[cell * this.nby8 * this.nbx8 + loc8];
     const n = 64 * P;
     if (!this._acc || this._acc.length !== n) this._acc = new Int32Array(n);
-    const acc = this._acc;
+    const acc = this._acc, at = this._at;
     acc.fill(0);
     for (let j = 0; j < MAX_REFS; j++) {
       const k = this.refs[4 * v + j];
@@ -960,16 +995,8 @@ export class TxDecoder {
       const w = mode === 0 ? this.weights[4 * v + j] : (mode - 1 === j ? 64 : 0);
       if (!w) continue;
       const kp = this.keyPlanes[this.keySlot[k]];
-      let Y = 16 * y0 + d * (this.pos[2 * v] - this.pos[2 * k]);
-      let X = 16 * x0 + d * (this.pos[2 * v + 1] - this.pos[2 * k + 1]);
-      if (this.warp) {                            // per-view warps: the pair's offset at the tb's centre
-        const W = this.warp, X2 = 2 * x0 + 7, Y2 = 2 * y0 + 7;
-        const da = W[4 * k] - W[4 * v], db = W[4 * k + 1] - W[4 * v + 1];
-        const dcx = W[4 * k + 2] - W[4 * v + 2], dcy = W[4 * k + 3] - W[4 * v + 3];
-        X += Math.floor((da * X2 - db * Y2 + 512 * dcx + 4096) / 8192);     // (exact: below 2^31)
-        Y += Math.floor((db * X2 + da * Y2 + 512 * dcy + 4096) / 8192);
-      }
-      const ry = Y >> 4, rx = X >> 4, fy = Y & 15, fx = X & 15;
+      this._tapAt(v, k, d, y0, x0);
+      const ry = at[0], rx = at[1], fy = at[2], fx = at[3];
       const w00 = (16 - fx) * (16 - fy), w01 = fx * (16 - fy), w10 = (16 - fx) * fy, w11 = fx * fy;
       const inside = ry >= 0 && ry + 8 <= Hp - 1 && rx >= 0 && rx + 8 <= Wp - 1;
       for (let y = 0; y < 8; y++) {
@@ -989,16 +1016,21 @@ export class TxDecoder {
       const o = ((y0 + y) * Wp + x0) * P, a = y * 8 * P;
       for (let i = 0; i < 8 * P; i++) img[o + i] = (acc[a + i] + 32) >> 6;
     }
-    if (this.wpGain) {                           // weighted prediction: ((p·g + 32) >> 6) + o, clipped
-      for (let p = 0; p < P; p++) {
-        const g = this.wpGain[v * P + p], off = this.wpOff[v * P + p], lo = this.lo[p], hi = this.hi[p];
-        if (g === 64 && off === 0) continue;
-        for (let y = 0; y < 8; y++) {
-          const o = ((y0 + y) * Wp + x0) * P + p;
-          for (let x = 0; x < 8; x++) {
-            const q = ((img[o + x * P] * g + 32) >> 6) + off;
-            img[o + x * P] = q < lo ? lo : q > hi ? hi : q;
-          }
+    if (this.wpGain) this._weighted(v, img, y0, x0, 8, 8);
+  }
+
+  /** Weighted prediction of view v on the h×w pixels at (y0, x0) of img: ((p·g + 32) >> 6) + o,
+   *  clipped to the plane's bounds. */
+  _weighted(v, img, y0, x0, h, w) {
+    const P = this.P, Wp = this.Wp;
+    for (let p = 0; p < P; p++) {
+      const g = this.wpGain[v * P + p], off = this.wpOff[v * P + p], lo = this.lo[p], hi = this.hi[p];
+      if (g === 64 && off === 0) continue;
+      for (let y = y0; y < y0 + h; y++) {
+        const o = (y * Wp + x0) * P + p;
+        for (let x = 0; x < w; x++) {
+          const q = ((img[o + x * P] * g + 32) >> 6) + off;
+          img[o + x * P] = q < lo ? lo : q > hi ? hi : q;
         }
       }
     }
@@ -1065,7 +1097,7 @@ export class TxDecoder {
         }
       }
     } else {
-      for (let y0 = 0; y0 < Hp; y0 += 8) for (let x0 = 0; x0 < Wp; x0 += 8) this._predictTb(k, y0, x0, img);
+      this._predictView(k, img);
     }
     const rows = this.keyRow.get(k), buf = this.file, ks = this.keySplit, sb = this.nbx / ks;
     for (let by = 0; by < this.nby; by++) {
@@ -1092,7 +1124,7 @@ export class TxDecoder {
     await this._refsOf(v);
     const P = this.P, Hp = this.Hp, Wp = this.Wp, B = this.B, tpb = this.tpb, nloc = this.nby * this.nbx;
     const img = new Int32Array(Hp * Wp * P);
-    for (let y0 = 0; y0 < Hp; y0 += 8) for (let x0 = 0; x0 < Wp; x0 += 8) this._predictTb(v, y0, x0, img);
+    this._predictView(v, img);
     if (level === 0) {
       const locs = [];
       for (let l = 0; l < nloc; l++) if (this.coded[v * nloc + l]) locs.push(l);

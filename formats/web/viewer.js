@@ -10,8 +10,8 @@
 // opened when a camera first blends it, and the frame is the blend of the tiles around the camera.
 // Novel views' blends and the networks' passes run on Web Workers (render_pool.js, lfn_pool.js;
 // &workers=N, 0 = on the page's thread: the same pixels),
-// their dense layers and the novel views' blend on WebAssembly SIMD where the browser has it
-// (&wasm=0: lfn.js's and render.js's own loops; the same pixels).
+// their dense layers, the novel views' blend and the decoded views' prediction on WebAssembly SIMD
+// where the browser has it (&wasm=0: lfn.js's, render.js's and lfc.js's own loops; the same pixels).
 // "foveate" (&fovea=1) draws the full network where the pointer is and coarser networks on
 // sparser pixels further out (lfn.js renderMip, LfnRenderer.render_pose_lod_mip's frame).
 //
@@ -23,6 +23,7 @@ import { LfcError, LfcFile, RangeSource, TxDecoder } from "./lfc.js";
 import { LfnDecoder } from "./lfn.js";
 import { ForwardPool, defaultWorkers } from "./lfn_pool.js";
 import { makeKeyImage } from "./openjpeg.js";
+import { PredictKernel } from "./predict.js";
 import { Renderer, toRGBA } from "./render.js";
 import { RenderPool } from "./render_pool.js";
 import { TiledLfn } from "./tiles.js";
@@ -33,9 +34,10 @@ const fileUrl = params.get("file");
 const cacheMiB = Number(params.get("cache_mib") || 256);     // decoded views
 const chunkMiB = Number(params.get("chunk_mib") || 64);      // verified file chunks
 const workers = params.has("workers") ? Math.max(0, Math.min(64, Math.floor(Number(params.get("workers")) || 0))) : defaultWorkers();
-if (params.get("wasm") === "0") {               // the networks and the blend in JS loops (the same pixels)
+if (params.get("wasm") === "0") {               // the networks, the blend and the views' prediction in JS loops (the same pixels)
   LfnDecoder.useWasm = false;
   Renderer.useWasm = false;
+  PredictKernel.useWasm = false;
 }
 
 function fail(e) {
@@ -101,7 +103,7 @@ async function main() {
       `range requests ${source.requests}`,
       `chunk cache    ${(dec.file.cachedBytes() / 1024).toFixed(1)} KiB of ${chunkMiB} MiB`,
       `view cache     ${(r.cachedBytes() / 1048576).toFixed(2)} MiB of ${cacheMiB} MiB (${r.cache.size} views)`,
-      `views decoded  ${r.viewsDecoded}`,
+      `views decoded  ${r.viewsDecoded} (predicted ${dec.predictsOnWasm() ? "on WebAssembly SIMD" : "in JS loops"})`,
       `open           ${openMs.toFixed(0)} ms`,
       `frame          ${f ? f.ms.toFixed(1) : "-"} ms (${f ? f.sources : 0} source views${f && !f.cubic ? ", bilinear preview" : ""}`
         + `${f ? (f.wasm ? ", WebAssembly SIMD" : ", JS loops") : ""}`

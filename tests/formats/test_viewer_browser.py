@@ -199,9 +199,10 @@ def test_novel_views_blend_on_workers_with_the_same_pixels(site, page, name):
 
 @pytest.mark.parametrize("name", ["dino.lfc", "res.lfc"])
 def test_the_blend_on_webassembly_draws_the_loops_canvas(site, page, name):
-    """The novel-view blend on WebAssembly SIMD (render_kernel.wat, the default where the browser
-    has it) draws the canvas of render.js's loops (&wasm=0), bit for bit, robust, refocused,
-    synthetic-aperture and as a bilinear preview; the stats line says which ran."""
+    """The novel-view blend and the views' prediction on WebAssembly SIMD (render_kernel.wat,
+    predict_kernel.wat: the default where the browser has it) draw the canvas of render.js's and
+    lfc.js's loops (&wasm=0), bit for bit, robust, refocused, synthetic-aperture and as a bilinear
+    preview; the stats line says which ran."""
     srv, _ = site
     cams = [(1.4, 2.7, "null", 0.0, "true"), (2.5, 1.5, "null", 0.0, "false"), (2.2, 2.1, "0.5", 0.0, "true"),
             (2.0, 2.0, "1.0", 1.5, "true")]
@@ -211,7 +212,9 @@ def test_the_blend_on_webassembly_draws_the_loops_canvas(site, page, name):
         for i, (s, t, focus, ap, robust) in enumerate(cams):
             page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
             got[query, i] = canvas_rgb(page)
-        assert ("JS loops" if "wasm=0" in query else "WebAssembly SIMD") in page.inner_text("#stats")
+        stats = page.inner_text("#stats")
+        assert ("JS loops" if "wasm=0" in query else "WebAssembly SIMD") in stats.split("frame ")[-1]
+        assert ("predicted in JS loops" if "wasm=0" in query else "predicted on WebAssembly SIMD") in stats
         got[query, "preview"] = np.asarray(page.evaluate("""async () => {
             const f = await lfcViewer.renderer.render(1.4, 2.7, {cubic: false}); return Array.from(f.pixels); }"""))
     for k in list(range(len(cams))) + ["preview"]:

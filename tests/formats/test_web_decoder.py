@@ -207,6 +207,37 @@ def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path
     assert info["copies"] > 0 and info["drag_copies"] == 0, info
 
 
+@pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16.lfc", "rlfc_tx4_weighted_rgb8.lfc", "rlfc_tx5_warped_rgb8.lfc",
+                                  "rlfc_tx6_alpha_rgba8.lfc", "grey", "sample"])
+def test_prediction_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path):
+    """A view's prediction on WebAssembly SIMD (predict_kernel.wat: four plane samples at a time;
+    windows across the edge through a clamped copy) makes _predictTb's planes integer for integer,
+    every view at both levels: 1 (grey), 2 (grey+alpha, 16-bit, lossless), 3 (weighted
+    prediction; per-view warps) and 4 (RGBA) planes. The key views go into the kernel's memory."""
+    from tests.rlfc.helpers import open_encoded, smooth_lf
+    from tests.rlfc.test_tx import tx
+
+    if name == "grey":
+        lf = smooth_lf(rows=3, cols=3, h=24, w=32, c=1)
+        _, blob = open_encoded(lf, tx(lf, step=6.0))
+        path = tmp_path / "grey.lfc"
+        path.write_bytes(blob)
+    else:
+        path = sample_files[0] if name == "sample" else GOLDEN / name
+    got = subprocess.run([NODE, str(ROOT / "tools" / "web_predict_kernel.mjs"), str(path), "0"], capture_output=True,
+                         text=True, timeout=300)
+    assert got.returncode == 0, got.stderr[-3000:]
+    info = json.loads(got.stdout.strip().splitlines()[-1])
+    assert info["kernel"], "this Node has no WebAssembly SIMD"
+    assert info["P"] == {"grey": 1, "rlfc_tx2_lossless_ga16.lfc": 2, "rlfc_tx6_alpha_rgba8.lfc": 4}.get(name, 3)
+    assert info["warps"] == (name == "rlfc_tx5_warped_rgb8.lfc")
+    if name == "rlfc_tx4_weighted_rgb8.lfc":
+        assert info["weighted"]
+    assert info["predicted"] > 0 and info["copies"] > 0, info
+    assert info["same"] and info["differ"] == 0, info
+    assert info["fallback_same"] and info["fallback_copies"] == 0, info
+
+
 def test_bad_files_get_typed_errors(tmp_path):
     good = (GOLDEN / "rlfc_tx2_lossy_rgba8.lfc").read_bytes()
     cases = {

@@ -1,0 +1,73 @@
+// A view's prediction on WebAssembly (formats/web/predict_kernel.wat, predict.js PredictKernel)
+// against lfc.js's _predictTb loops, in one Node process:
+//   node tools/web_predict_kernel.mjs FILE.lfc [ROUNDS]
+// First every view of the file (key views included: predicted keys are predicted too) is decoded
+// by a decoder predicting on the kernel and by one predicting in the loops, and their planes are
+// compared integer for integer. Then (ROUNDS > 0) every predicted view's prediction is timed
+// (level 1 of decodeView: the prediction alone), the two alternated per round on decoders whose
+// key views are decoded. Prints one JSON line: same (every view equal), differ (integers that
+// differ), kernel (whether this Node has WebAssembly SIMD), P, warps, weighted, the median ms per
+// view of each and their ratio, the key views copied into the kernel's memory, and (fallback_*)
+// the same with a key-view budget of one byte: every view in the loops, none copied.
+import { openFile, say } from "./web_node.mjs";
+import path from "path";
+import { WEB } from "./web_node.mjs";
+
+const [file, rounds = "5"] = process.argv.slice(2);
+const { PredictKernel } = await import(path.join(WEB, "predict.js"));
+const med = (a) => a.slice().sort((x, y) => x - y)[a.length >> 1];
+const dk = await openFile(file), dl = await openFile(file);
+const kernel = PredictKernel.create() !== null;
+
+async function withKernel(on, fn) {
+  PredictKernel.useWasm = on;
+  try {
+    return await fn();
+  } finally {
+    PredictKernel.useWasm = true;
+  }
+}
+
+let same = true, differ = 0;
+for (let v = 0; v < dk.n0; v++) {
+  for (const level of [0, 1]) {
+    const a = await withKernel(true, () => dk.decodeView(v, level));
+    const b = await withKernel(false, () => dl.decodeView(v, level));
+    for (let i = 0; i < a.length; i++) if (a[i] !== b[i]) differ++;
+    same = same && a.length === b.length;
+  }
+}
+same = same && differ === 0;
+// views whose key views do not fit the kernel's budget go to the loops (the same planes, none copied)
+const df = await openFile(file), budget = PredictKernel.SLOT_BYTES;
+PredictKernel.SLOT_BYTES = 1;
+let fallbackSame = true;
+try {
+  for (let v = 0; v < df.n0; v++) {
+    const a = await df.decodeView(v, 0), b = await dl.decodeView(v, 0);
+    fallbackSame = fallbackSame && a.length === b.length && a.every((x, i) => x === b[i]);
+  }
+} finally {
+  PredictKernel.SLOT_BYTES = budget;
+}
+const predicted = [];
+for (let v = 0; v < dk.n0; v++) if (dk.keySlot[v] < 0) predicted.push(v);
+const times = { kernel: [], loops: [] };
+for (let r = 0; r < Number(rounds); r++) {
+  for (const [name, d, on] of r % 2 ? [["loops", dl, false], ["kernel", dk, true]] : [["kernel", dk, true], ["loops", dl, false]]) {
+    for (const v of predicted) {
+      const t = performance.now();
+      await withKernel(on, () => d.decodeView(v, 1));
+      times[name].push(performance.now() - t);
+    }
+  }
+}
+const out = { same, differ, kernel, P: dk.P, warps: dk.warp !== null, weighted: dk.wpGain !== null,
+  views: dk.n0, predicted: predicted.length, copies: dk._kernelP ? dk._kernelP.copies : 0,
+  fallback_same: fallbackSame, fallback_copies: df._kernelP ? df._kernelP.copies : 0 };
+if (times.kernel.length) {
+  out.kernel_ms = med(times.kernel);
+  out.loops_ms = med(times.loops);
+  out.ratio = out.kernel_ms / out.loops_ms;
+}
+say(JSON.stringify(out));
