@@ -1,23 +1,22 @@
-// A view's prediction on WebAssembly (formats/web/predict_kernel.wat, predict.js PredictKernel)
-// against lfc.js's _predictTb loops, in one Node process:
+// A view's reconstruction on WebAssembly (formats/web/predict_kernel.wat, predict.js PredictKernel:
+// its prediction, its residual blocks) against lfc.js's loops, in one Node process:
 //   node tools/web_predict_kernel.mjs FILE.lfc [ROUNDS]
 // First every view of the file (key views included: predicted keys are predicted too) is decoded
 // by a decoder predicting on the kernel and by one predicting in the loops, and their planes are
-// compared integer for integer. Then (ROUNDS > 0) every predicted view's prediction is timed
-// (level 1 of decodeView: the prediction alone), the two alternated per round on decoders whose
-// key views are decoded. Prints one JSON line: same (every view equal), differ (integers that
-// differ), kernel (whether this Node has WebAssembly SIMD), P, warps, weighted, the median ms per
-// view of each and their ratio, the key views copied into the kernel's memory, and (fallback_*)
+// compared integer for integer. Then (ROUNDS > 0) every predicted view is timed, its prediction
+// alone (level 1 of decodeView) and whole (level 0: the residual blocks added), the two
+// alternated per round on decoders whose key views are decoded. Prints one JSON line: same (every
+// view equal), differ (integers that differ), kernel (whether this Node has WebAssembly SIMD), P,
+// warps, weighted, the median ms per view of each (kernel_ms, loops_ms; view_kernel_ms,
+// view_loops_ms) and their ratios, the key views copied into the kernel's memory, and (fallback_*)
 // the same with a key-view budget of one byte: every view in the loops, none copied.
-import { openFile, say } from "./web_node.mjs";
 import path from "path";
-import { WEB } from "./web_node.mjs";
+import { WEB, openFile, say } from "./web_node.mjs";
 
 const [file, rounds = "5"] = process.argv.slice(2);
 const { PredictKernel } = await import(path.join(WEB, "predict.js"));
 const med = (a) => a.slice().sort((x, y) => x - y)[a.length >> 1];
 const dk = await openFile(file), dl = await openFile(file);
-const kernel = PredictKernel.create() !== null;
 
 async function withKernel(on, fn) {
   PredictKernel.useWasm = on;
@@ -52,22 +51,27 @@ try {
 }
 const predicted = [];
 for (let v = 0; v < dk.n0; v++) if (dk.keySlot[v] < 0) predicted.push(v);
-const times = { kernel: [], loops: [] };
+const times = { kernel: [], loops: [], kernel0: [], loops0: [] };
 for (let r = 0; r < Number(rounds); r++) {
   for (const [name, d, on] of r % 2 ? [["loops", dl, false], ["kernel", dk, true]] : [["kernel", dk, true], ["loops", dl, false]]) {
-    for (const v of predicted) {
-      const t = performance.now();
-      await withKernel(on, () => d.decodeView(v, 1));
-      times[name].push(performance.now() - t);
+    for (const level of [1, 0]) {
+      for (const v of predicted) {
+        const t = performance.now();
+        await withKernel(on, () => d.decodeView(v, level));
+        times[level ? name : name + "0"].push(performance.now() - t);
+      }
     }
   }
 }
-const out = { same, differ, kernel, P: dk.P, warps: dk.warp !== null, weighted: dk.wpGain !== null,
+const out = { same, differ, kernel: dk.predictsOnWasm(), P: dk.P, warps: dk.warp !== null, weighted: dk.wpGain !== null,
   views: dk.n0, predicted: predicted.length, copies: dk._kernelP ? dk._kernelP.copies : 0,
   fallback_same: fallbackSame, fallback_copies: df._kernelP ? df._kernelP.copies : 0 };
 if (times.kernel.length) {
   out.kernel_ms = med(times.kernel);
   out.loops_ms = med(times.loops);
   out.ratio = out.kernel_ms / out.loops_ms;
+  out.view_kernel_ms = med(times.kernel0);
+  out.view_loops_ms = med(times.loops0);
+  out.view_ratio = out.view_kernel_ms / out.view_loops_ms;
 }
 say(JSON.stringify(out));

@@ -496,8 +496,9 @@ const COEF_MAX = 2 ** 21 - 1;
 
 function planeClasses(P) { return { 1: [0], 2: [0, 2], 3: [0, 1, 1], 4: [0, 1, 1, 2] }[P]; }
 
-/** Parse one block stream of `nt` tbs → {modes (nt), levels (nt·P·64, scan order)}. */
-function parseBlock(data, start, end, tables, nt, pcs, kind, key, what) {
+/** Parse one block stream of `nt` tbs → {modes (nt), levels (Int32Array nt·P·64, scan order;
+ *  `into`, zeroed, where given)}. */
+function parseBlock(data, start, end, tables, nt, pcs, kind, key, what, into = null) {
   const P = pcs.length;
   const d = new Rans(data, start, end, tables, what);
   const modes = new Int32Array(nt);
@@ -517,7 +518,7 @@ function parseBlock(data, start, end, tables, nt, pcs, kind, key, what) {
       last[t * P + p] = v;
     }
   }
-  const levels = new Float64Array(nt * P * 64);
+  const levels = into || new Int32Array(nt * P * 64);
   const cIdx = [], cFirst = [];                       // nonzero coefficients in magnitude order
   for (let g = 0; g < nt * P; g++) {
     const n = last[g];
@@ -943,20 +944,10 @@ export class TxDecoder {
     if (this.file.info("tx.blocks").length !== off + 8) throw new FormatError(`tx.blocks has ${this.file.info("tx.blocks").length} bytes, the index says ${off + 8}`);
   }
 
-  /** View v's prediction (planes img, Hp·Wp·P): on WebAssembly SIMD (predict.js) where this
-   *  environment has it, else in _predictTb's loops; the same planes. */
-  _predictView(v, img) {
-    if (this.predictsOnWasm() && this._kernelP.view(this, v, img)) {
-      if (this.wpGain) this._weighted(v, img, 0, 0, this.Hp, this.Wp);
-      return;
-    }
-    for (let y0 = 0; y0 < this.Hp; y0 += 8) for (let x0 = 0; x0 < this.Wp; x0 += 8) this._predictTb(v, y0, x0, img);
-  }
-
   /** Whether views are predicted on WebAssembly SIMD here (PredictKernel), not in the loops. */
   predictsOnWasm() {
     if (!PredictKernel.useWasm) return false;
-    if (this._kernelP === undefined) this._kernelP = PredictKernel.create();
+    if (this._kernelP === undefined) this._kernelP = PredictKernel.create(ZIGZAG, T8F);
     return this._kernelP !== null;
   }
 
@@ -1055,7 +1046,7 @@ export class TxDecoder {
   }
 
   async _decodeKey(k) {
-    const P = this.P, Hp = this.Hp, Wp = this.Wp, B = this.B, tpb = this.tpb;
+    const P = this.P, Hp = this.Hp, Wp = this.Wp;
     if (this.imgOf.has(k)) {
       if (!this.keyImage) throw new UnsupportedError(`${this.file.name}: key view ${k} is JPEG 2000 and no JPEG 2000 decoder is loaded`);
       const [a, b] = this.imgRange.get(k);
@@ -1096,24 +1087,51 @@ export class TxDecoder {
           }
         }
       }
-    } else {
-      this._predictView(k, img);
     }
-    const rows = this.keyRow.get(k), buf = this.file, ks = this.keySplit, sb = this.nbx / ks;
+    const rows = this.keyRow.get(k), ks = this.keySplit, sb = this.nbx / ks, jobs = [];
     for (let by = 0; by < this.nby; by++) {
       for (let sg = 0; sg < ks; sg++) {                  // a row's streams: sb blocks each, in order
         const [a, b] = rows[by * ks + sg];
-        const data = await buf.read("tx.blocks", a, b);
-        const parsed = parseBlock(data, 0, data.length, this.tables, this.nt * sb, this.pcs, this.intra[k], 1, `key view ${k} row ${by}`);
-        for (let j = 0; j < sb; j++) {
-          const bx = sg * sb + j;
-          for (let t = 0; t < this.nt; t++) {
-            this._addResidual(img, by * B + Math.floor(t / tpb) * 8, bx * B + (t % tpb) * 8, parsed, j * this.nt + t, true);
-          }
-        }
+        const blocks = [];
+        for (let j = 0; j < sb; j++) blocks.push(by * this.nbx + sg * sb + j);
+        jobs.push({ data: await this.file.read("tx.blocks", a, b), blocks, kind: this.intra[k], what: `key view ${k} row ${by}` });
       }
     }
+    this._reconstruct(k, img, !this.intra[k], jobs, true);
     return img;
+  }
+
+  /** View v's planes in img: its prediction (where `predicted`; else img as it is), then the
+   *  residual streams of `jobs` ({data, blocks: their block locations in order, kind, what};
+   *  `key`: a key view's streams and steps) added: on WebAssembly SIMD (predict.js) where this
+   *  environment has it, else in the loops; the same planes. */
+  _reconstruct(v, img, predicted, jobs, key) {
+    const B = this.B, tpb = this.tpb, nt = this.nt;
+    const pos = (blocks) => {                          // each tb's pixel (y, x), block by block
+      const ys = new Int32Array(blocks.length * nt), xs = new Int32Array(blocks.length * nt);
+      blocks.forEach((l, j) => {
+        const y = Math.floor(l / this.nbx) * B, x = (l % this.nbx) * B;
+        for (let t = 0; t < nt; t++) { ys[j * nt + t] = y + Math.floor(t / tpb) * 8; xs[j * nt + t] = x + (t % tpb) * 8; }
+      });
+      return [ys, xs];
+    };
+    const kp = this.predictsOnWasm() ? this._kernelP : null;
+    if (kp && kp.begin(this, v, predicted, img)) {
+      if (predicted && this.wpGain) this._weighted(v, kp.planes, 0, 0, this.Hp, this.Wp);
+      for (const { data, blocks, kind, what } of jobs) {
+        const n = blocks.length * nt;
+        const { modes } = parseBlock(data, 0, data.length, this.tables, n, this.pcs, kind, key ? 1 : 0, what, kp.levels(n));
+        kp.residual(modes, ...pos(blocks), key);
+      }
+      kp.end(img);
+      return;
+    }
+    if (predicted) for (let y0 = 0; y0 < this.Hp; y0 += 8) for (let x0 = 0; x0 < this.Wp; x0 += 8) this._predictTb(v, y0, x0, img);
+    for (const { data, blocks, kind, what } of jobs) {
+      const n = blocks.length * nt, parsed = parseBlock(data, 0, data.length, this.tables, n, this.pcs, kind, key ? 1 : 0, what);
+      const [ys, xs] = pos(blocks);
+      for (let t = 0; t < n; t++) this._addResidual(img, ys[t], xs[t], parsed, t, key);
+    }
   }
 
   /** Planes (Int32Array Hp·Wp·P) of view v (row·cols + col); level 1 = prediction only. */
@@ -1122,9 +1140,7 @@ export class TxDecoder {
     if (level !== 0 && level !== 1) throw new LfcError(`level ${level} is not 0 or 1 (0 = full quality, 1 = prediction only)`);
     if (this.keySlot[v] >= 0) return this._key(v);
     await this._refsOf(v);
-    const P = this.P, Hp = this.Hp, Wp = this.Wp, B = this.B, tpb = this.tpb, nloc = this.nby * this.nbx;
-    const img = new Int32Array(Hp * Wp * P);
-    this._predictView(v, img);
+    const nloc = this.nby * this.nbx, jobs = [];
     if (level === 0) {
       const locs = [];
       for (let l = 0; l < nloc; l++) if (this.coded[v * nloc + l]) locs.push(l);
@@ -1133,11 +1149,11 @@ export class TxDecoder {
       }
       for (const l of locs) {
         const data = await this.file.read("tx.blocks", this.start[v * nloc + l], this.end[v * nloc + l]);
-        const parsed = parseBlock(data, 0, data.length, this.tables, this.nt, this.pcs, 0, 0, `view ${v} block ${l}`);
-        const by = Math.floor(l / this.nbx), bx = l % this.nbx;
-        for (let t = 0; t < this.nt; t++) this._addResidual(img, by * B + Math.floor(t / tpb) * 8, bx * B + (t % tpb) * 8, parsed, t, false);
+        jobs.push({ data, blocks: [l], kind: 0, what: `view ${v} block ${l}` });
       }
     }
+    const img = new Int32Array(this.Hp * this.Wp * this.P);
+    this._reconstruct(v, img, true, jobs, false);
     return img;
   }
 

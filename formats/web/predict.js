@@ -1,9 +1,12 @@
-// predict.js — a view's prediction from its key views on WebAssembly SIMD (predict_kernel.wat),
-// for lfc.js's TxDecoder: the same planes as its _predictTb loops, bit for bit.
+// predict.js — a view's reconstruction on WebAssembly SIMD (predict_kernel.wat) for lfc.js's
+// TxDecoder: its prediction from its key views, then its parsed residual blocks added; the same
+// planes as _predictTb's and _addResidual's loops, bit for bit. The view is built in the module's
+// memory between begin() and end() (no await in between: one view at a time per kernel).
 import { kernelModule } from "./predict_kernel.js";
 
-const TAB = 4096;                 // the table's byte address (below it: the kernel's accumulator and window)
-const ROW = 8;                    // int32 per table row
+const TAB = 8192;                 // the tables' byte address (below it: the kernel's scratch and constants)
+const ROW = 8;                    // int32 per prediction table row
+const ZZ = 4224, T8I = 4480, T8D = 4736, PLANES = 5248;
 
 export class PredictKernel {
   /** false: every decoder predicts in its loops (the same planes). The viewer's `&wasm=0` clears it. */
@@ -14,38 +17,45 @@ export class PredictKernel {
    *  each key once while they fit). */
   static KEEP_KEYS = 8;
 
-  /** A kernel for one decoder, or null where this environment has no WebAssembly SIMD. */
-  static create() {
+  /** A kernel for one decoder, or null where this environment has no WebAssembly SIMD.
+   *  `zigzag`: the scan's raster positions (64); `t8`: the 8×8 transform, row-major (64). */
+  static create(zigzag, t8) {
     const mod = kernelModule();
     if (!mod) return null;
     try {
-      return new PredictKernel(mod);
+      return new PredictKernel(mod, zigzag, t8);
     } catch {
       return null;
     }
   }
 
-  constructor(mod) {
+  constructor(mod, zigzag, t8) {
     this.inst = new WebAssembly.Instance(mod, {});
     this.mem = this.inst.exports.memory;
+    const buf = this.mem.buffer;
+    new Int32Array(buf, ZZ, 64).set(zigzag);
+    new Int32Array(buf, T8I, 64).set(t8);
+    new Float64Array(buf, T8D, 64).set(t8);
     this.slots = [];                     // {kp, used}: key planes in the module's memory, in slot order
     this.clock = 0;
     this.copies = 0;                     // key views copied in (for tests and benchmarks)
   }
 
-  /** View v of decoder `d` predicted into `img` (Int32Array Hp·Wp·P) before weighted prediction;
-   *  false where it does not fit here (the caller's loops then predict it). */
-  view(d, v, img) {
+  /** Start view v of decoder `d` in the module's memory: its prediction from its key views before
+   *  weighted prediction (predicted), or a copy of `img` (Int32Array Hp·Wp·P). false where it
+   *  does not fit here (the caller's loops then build it). */
+  begin(d, v, predicted, img) {
     const { P, Hp, Wp } = d, n = Hp * Wp * P, slotBytes = n * 4, nTb = (Hp >> 3) * (Wp >> 3);
     const keys = [];
-    for (let j = 0; j < 4; j++) {
+    for (let j = 0; predicted && j < 4; j++) {
       const k = d.refs[4 * v + j];
       if (k >= 0 && !keys.includes(k)) keys.push(k);
     }
     const planes = keys.map((k) => d.keyPlanes[d.keySlot[k]]);
     if (planes.some((kp) => !kp || kp.length !== n) || keys.length * slotBytes > PredictKernel.SLOT_BYTES) return false;
     const at = this._slots(planes, slotBytes);
-    const outAt = TAB + nTb * 4 * ROW * 4, slotsAt = outAt + slotBytes, need = slotsAt + this.slots.length * slotBytes;
+    const lev = TAB + nTb * 4 * ROW * 4, tbs = lev + nTb * P * 256, outAt = tbs + nTb * 8, slotsAt = outAt + slotBytes;
+    const need = slotsAt + this.slots.length * slotBytes;
     if (need > this.mem.buffer.byteLength) {
       try {
         this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
@@ -58,6 +68,15 @@ export class PredictKernel {
     for (const [i, kp] of at.fresh) {
       new Int32Array(buf, slotsAt + i * slotBytes, n).set(kp);
       this.copies += 1;
+    }
+    this.d = d;
+    this.at = { lev, tbs, out: outAt, n, nTb };
+    this.planes = new Int32Array(buf, outAt, n);
+    const pp = new Int32Array(buf, PLANES, 5 * P);
+    for (let p = 0; p < P; p++) pp.set([0, d.bypass[p], d.lo[p], d.hi[p], d.flat[p]], 5 * p);
+    if (!predicted) {
+      this.planes.set(img);
+      return true;
     }
     const tab = new Int32Array(buf, TAB, nTb * 4 * ROW), tap = d._at;
     const loc = d.cell[v] * d.nby8 * d.nbx8;
@@ -89,8 +108,36 @@ export class PredictKernel {
       }
     }
     this.inst.exports.predict(TAB, r, Hp, Wp, P);
-    img.set(new Int32Array(buf, outAt, n));
     return true;
+  }
+
+  /** Zeroed room for the levels of `nt` tbs (Int32Array nt·P·64, in the module's memory), for
+   *  parseBlock to fill before residual(). */
+  levels(nt) {
+    const a = new Int32Array(this.mem.buffer, this.at.lev, nt * this.d.P * 64);
+    a.fill(0);
+    return a;
+  }
+
+  /** The parsed tbs (modes, nt; their levels in levels()) added to the view: tb i at pixel
+   *  (ys[i], xs[i]); key: a key view's quantizer steps (else a view's). */
+  residual(modes, ys, xs, key) {
+    const d = this.d, { P, Wp } = d, nt = modes.length, buf = this.mem.buffer;
+    const pp = new Int32Array(buf, PLANES, 5 * P), steps = d.step16[key ? 0 : 1];
+    for (let p = 0; p < P; p++) pp[5 * p] = steps[p];
+    const tb = new Int32Array(buf, this.at.tbs, 2 * nt);
+    for (let i = 0; i < nt; i++) {
+      tb[2 * i] = modes[i];
+      tb[2 * i + 1] = this.at.out + (ys[i] * Wp + xs[i]) * P * 4;
+    }
+    this.inst.exports.residual(this.at.lev, this.at.tbs, nt, P, Wp);
+  }
+
+  /** The view copied out into `img`. */
+  end(img) {
+    img.set(this.planes);
+    this.planes = null;
+    this.d = null;
   }
 
   /** Slots for key planes `planes` (held ones kept, the others in free or least recently used

@@ -210,10 +210,12 @@ def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path
 @pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16.lfc", "rlfc_tx4_weighted_rgb8.lfc", "rlfc_tx5_warped_rgb8.lfc",
                                   "rlfc_tx6_alpha_rgba8.lfc", "grey", "sample"])
 def test_prediction_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path):
-    """A view's prediction on WebAssembly SIMD (predict_kernel.wat: four plane samples at a time;
-    windows across the edge through a clamped copy) makes _predictTb's planes integer for integer,
-    every view at both levels: 1 (grey), 2 (grey+alpha, 16-bit, lossless), 3 (weighted
-    prediction; per-view warps) and 4 (RGBA) planes. The key views go into the kernel's memory."""
+    """A view built on WebAssembly SIMD (predict_kernel.wat: the prediction four plane samples at a
+    time, windows across the edge through a clamped copy; the residual blocks' dequantization,
+    inverse transform and clipping) makes the loops' planes (_predictTb, _addResidual) integer for
+    integer, every view at both levels, key views included: 1 (grey), 2 (grey+alpha, 16-bit,
+    lossless: bypassed planes), 3 (weighted prediction; per-view warps; the bundled crop's residual
+    blocks) and 4 (RGBA) planes. The key views go into the kernel's memory."""
     from tests.rlfc.helpers import open_encoded, smooth_lf
     from tests.rlfc.test_tx import tx
 

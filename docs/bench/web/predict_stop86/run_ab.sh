@@ -1,5 +1,5 @@
 #!/bin/bash
-# Stop 86: the viewer's decoder with views predicted on WebAssembly SIMD against stop 85's
+# Stop 86: the viewer's decoder with views built on WebAssembly SIMD against stop 85's
 # (OLD = a copy of 9f27ede's formats/web), on the six grids' 40 dB files in /tmp/dec:
 #   bash docs/bench/web/predict_stop86/run_ab.sh OLD_CHECKOUT OUT_DIR
 OLD=$1; OUT=$2; mkdir -p "$OUT"
