@@ -3,7 +3,8 @@
 //   node tools/web_predict_kernel.mjs FILE.lfc [ROUNDS]
 // First every view of the file (key views included: predicted keys are predicted too) is decoded
 // by a decoder predicting on the kernel and by one predicting in the loops, and their planes are
-// compared integer for integer. Then (ROUNDS > 0) every predicted view is timed, its prediction
+// compared integer for integer (a damaged file: both must throw the same errors; then only same,
+// differ, errors and first_error are printed). Then (ROUNDS > 0) every predicted view is timed, its prediction
 // alone (level 1 of decodeView) and whole (level 0: the residual blocks added), the two
 // alternated per round on decoders whose key views are decoded. Prints one JSON line: same (every
 // view equal), differ (integers that differ), kernel (whether this Node has WebAssembly SIMD), P,
@@ -27,16 +28,33 @@ async function withKernel(on, fn) {
   }
 }
 
-let same = true, differ = 0;
+const attempt = async (fn) => {
+  try {
+    return [await fn(), null];
+  } catch (e) {
+    return [null, `${e.name}: ${e.message}`];
+  }
+};
+let same = true, differ = 0, errors = 0, firstError = null;
 for (let v = 0; v < dk.n0; v++) {
   for (const level of [0, 1]) {
-    const a = await withKernel(true, () => dk.decodeView(v, level));
-    const b = await withKernel(false, () => dl.decodeView(v, level));
+    const [a, ea] = await attempt(() => withKernel(true, () => dk.decodeView(v, level)));
+    const [b, eb] = await attempt(() => withKernel(false, () => dl.decodeView(v, level)));
+    if (ea || eb) {                            // (a damaged file: the same error from both)
+      errors++;
+      firstError = firstError || ea || eb;
+      same = same && ea === eb;
+      continue;
+    }
     for (let i = 0; i < a.length; i++) if (a[i] !== b[i]) differ++;
     same = same && a.length === b.length;
   }
 }
 same = same && differ === 0;
+if (errors) {
+  say(JSON.stringify({ same, differ, errors, first_error: firstError, kernel: dk.predictsOnWasm() }));
+  process.exit(0);
+}
 // views whose key views do not fit the kernel's budget go to the loops (the same planes, none copied)
 const df = await openFile(file), budget = PredictKernel.SLOT_BYTES;
 PredictKernel.SLOT_BYTES = 1;

@@ -448,10 +448,15 @@ async function readTables(data, nCtx, A, what) {
   return new Tables(w, nCtx, A);
 }
 
+/** A rANS stream's and parseBlock's errors (after the stream's name), by the code predict_kernel.wat's parse returns. */
+const PARSE_ERRORS = [null, "rANS stream shorter than its 3-byte state", "rANS stream reads past its end",
+  "undefined tb mode", "a last position past 64", "undefined magnitude symbol", "undefined escape bucket",
+  "malformed stream (its symbols do not end where its raw bits start)"];
+
 /** One rANS stream (FORMAT.md "rANS"). */
 class Rans {
   constructor(data, start, end, t, what) {
-    if (end - start < 3) throw new FormatError(`${what}: rANS stream shorter than its 3-byte state`);
+    if (end - start < 3) throw new FormatError(`${what}: ${PARSE_ERRORS[1]}`);
     this.d = data; this.p = start + 3; this.end = end; this.t = t; this.what = what;
     this.x = data[start] | (data[start + 1] << 8) | (data[start + 2] << 16);
   }
@@ -462,7 +467,7 @@ class Rans {
     const s = t.slot[ctx * M + sl];
     x = t.freq[ctx * A + s] * (x >>> PROB_BITS) + sl - t.cum[ctx * (A + 1) + s];
     while (x < RANS_L) {
-      if (this.p >= this.end) throw new FormatError(`${this.what}: rANS stream reads past its end`);
+      if (this.p >= this.end) throw new FormatError(`${this.what}: ${PARSE_ERRORS[2]}`);
       x = (x << 8) | this.d[this.p++];
     }
     this.x = x;
@@ -496,16 +501,16 @@ const COEF_MAX = 2 ** 21 - 1;
 
 function planeClasses(P) { return { 1: [0], 2: [0, 2], 3: [0, 1, 1], 4: [0, 1, 1, 2] }[P]; }
 
-/** Parse one block stream of `nt` tbs → {modes (nt), levels (Int32Array nt·P·64, scan order;
- *  `into`, zeroed, where given)}. */
-function parseBlock(data, start, end, tables, nt, pcs, kind, key, what, into = null) {
+/** Parse one block stream of `nt` tbs → {modes (nt), levels (Int32Array nt·P·64, scan order)}
+ *  (predict_kernel.wat's parse: the same integers and errors). */
+function parseBlock(data, start, end, tables, nt, pcs, kind, key, what) {
   const P = pcs.length;
   const d = new Rans(data, start, end, tables, what);
   const modes = new Int32Array(nt);
   let prev = 3;
   for (let t = 0; t < nt; t++) {
     const s = d.get(CTX_MODE + kind * 4 + prev);
-    if (s >= 3) throw new FormatError(`${what}: undefined tb mode`);
+    if (s >= 3) throw new FormatError(`${what}: ${PARSE_ERRORS[3]}`);
     modes[t] = s; prev = s;
   }
   const last = new Int32Array(nt * P);
@@ -514,11 +519,11 @@ function parseBlock(data, start, end, tables, nt, pcs, kind, key, what, into = n
     const ci = modes[t] === MODE_INTRA ? 1 : 0;
     for (let p = 0; p < P; p++) {
       const v = d.get(CTX_LAST + (pcs[p] * 2 + ci) * 2 + key);
-      if (v > 64) throw new FormatError(`${what}: a last position past 64`);
+      if (v > 64) throw new FormatError(`${what}: ${PARSE_ERRORS[4]}`);
       last[t * P + p] = v;
     }
   }
-  const levels = into || new Int32Array(nt * P * 64);
+  const levels = new Int32Array(nt * P * 64);
   const cIdx = [], cFirst = [];                       // nonzero coefficients in magnitude order
   for (let g = 0; g < nt * P; g++) {
     const n = last[g];
@@ -526,13 +531,13 @@ function parseBlock(data, start, end, tables, nt, pcs, kind, key, what, into = n
     const base = CTX_MAG + pcs[g % P] * 48 + key * 4;
     let pos = n - 1;
     let s = d.get(base + BAND8[pos]);
-    if (s > ESC) throw new FormatError(`${what}: undefined magnitude symbol`);
+    if (s > ESC) throw new FormatError(`${what}: ${PARSE_ERRORS[5]}`);
     levels[g * 64 + pos] = s + 1;
     cIdx.push(g * 64 + pos); cFirst.push(1);
     let h1 = s + 1, h2 = 0;
     for (pos = n - 2; pos >= 0; pos--) {
       s = d.get(base + BAND8[pos] + 1 + (h1 > 0 ? 1 : 0) + (h2 > 0 ? 1 : 0));
-      if (s > ESC) throw new FormatError(`${what}: undefined magnitude symbol`);
+      if (s > ESC) throw new FormatError(`${what}: ${PARSE_ERRORS[5]}`);
       h2 = h1; h1 = s;
       if (s) { levels[g * 64 + pos] = s; cIdx.push(g * 64 + pos); cFirst.push(0); }
     }
@@ -542,7 +547,7 @@ function parseBlock(data, start, end, tables, nt, pcs, kind, key, what, into = n
     const m = levels[cIdx[i]];
     if (m - cFirst[i] === ESC) {
       const k = d.get(CTX_ESC + pcs[(cIdx[i] >> 6) % P]);
-      if (k >= N_BUCKETS) throw new FormatError(`${what}: undefined escape bucket`);
+      if (k >= N_BUCKETS) throw new FormatError(`${what}: ${PARSE_ERRORS[6]}`);
       escK.push([i, k]);
     }
   }
@@ -550,7 +555,7 @@ function parseBlock(data, start, end, tables, nt, pcs, kind, key, what, into = n
   for (const [, k] of escK) nbits += k;
   const kb = Math.min(nbits, 15);
   const rawStart = end - Math.ceil((nbits - kb) / 8);
-  if (rawStart < d.p || !d.done(rawStart, kb)) throw new FormatError(`${what}: malformed stream (its symbols do not end where its raw bits start)`);
+  if (rawStart < d.p || !d.done(rawStart, kb)) throw new FormatError(`${what}: ${PARSE_ERRORS[7]}`);
   const R = d.x - RANS_L;
   let bit = 0;
   const getBit = () => {
@@ -947,7 +952,7 @@ export class TxDecoder {
   /** Whether views are predicted on WebAssembly SIMD here (PredictKernel), not in the loops. */
   predictsOnWasm() {
     if (!PredictKernel.useWasm) return false;
-    if (this._kernelP === undefined) this._kernelP = PredictKernel.create(ZIGZAG, T8F);
+    if (this._kernelP === undefined) this._kernelP = PredictKernel.create(ZIGZAG, T8F, BAND8);
     return this._kernelP !== null;
   }
 
@@ -1116,11 +1121,14 @@ export class TxDecoder {
       return [ys, xs];
     };
     const kp = this.predictsOnWasm() ? this._kernelP : null;
-    if (kp && kp.begin(this, v, predicted, img)) {
+    if (kp && kp.begin(this, v, predicted, img, jobs.reduce((m, j) => Math.max(m, j.data.length), 0))) {
       if (predicted && this.wpGain) this._weighted(v, kp.planes, 0, 0, this.Hp, this.Wp);
       for (const { data, blocks, kind, what } of jobs) {
-        const n = blocks.length * nt;
-        const { modes } = parseBlock(data, 0, data.length, this.tables, n, this.pcs, kind, key ? 1 : 0, what, kp.levels(n));
+        const [code, modes] = kp.parse(data, blocks.length * nt, kind, key ? 1 : 0);
+        if (code) {
+          kp.end(null);
+          throw new FormatError(`${what}: ${PARSE_ERRORS[code]}`);
+        }
         kp.residual(modes, ...pos(blocks), key);
       }
       kp.end(img);

@@ -1,12 +1,13 @@
 // predict.js — a view's reconstruction on WebAssembly SIMD (predict_kernel.wat) for lfc.js's
-// TxDecoder: its prediction from its key views, then its parsed residual blocks added; the same
-// planes as _predictTb's and _addResidual's loops, bit for bit. The view is built in the module's
-// memory between begin() and end() (no await in between: one view at a time per kernel).
+// TxDecoder: its prediction from its key views, then its residual blocks parsed and added; the
+// same planes (and the same parse errors) as parseBlock's, _predictTb's and _addResidual's
+// loops, bit for bit. The view is built in the module's memory between begin() and end() (no
+// await in between: one view at a time per kernel).
 import { kernelModule } from "./predict_kernel.js";
 
 const TAB = 8192;                 // the tables' byte address (below it: the kernel's scratch and constants)
 const ROW = 8;                    // int32 per prediction table row
-const ZZ = 4224, T8I = 4480, T8D = 4736, PLANES = 5248;
+const ZZ = 4224, T8I = 4480, T8D = 4736, PLANES = 5248, BANDS = 5344, CLASSES = 5600;
 
 export class PredictKernel {
   /** false: every decoder predicts in its loops (the same planes). The viewer's `&wasm=0` clears it. */
@@ -18,33 +19,36 @@ export class PredictKernel {
   static KEEP_KEYS = 8;
 
   /** A kernel for one decoder, or null where this environment has no WebAssembly SIMD.
-   *  `zigzag`: the scan's raster positions (64); `t8`: the 8×8 transform, row-major (64). */
-  static create(zigzag, t8) {
+   *  `zigzag`: the scan's raster positions (64); `t8`: the 8×8 transform, row-major (64);
+   *  `bands`: each scan position's magnitude context band (64). */
+  static create(zigzag, t8, bands) {
     const mod = kernelModule();
     if (!mod) return null;
     try {
-      return new PredictKernel(mod, zigzag, t8);
+      return new PredictKernel(mod, zigzag, t8, bands);
     } catch {
       return null;
     }
   }
 
-  constructor(mod, zigzag, t8) {
+  constructor(mod, zigzag, t8, bands) {
     this.inst = new WebAssembly.Instance(mod, {});
     this.mem = this.inst.exports.memory;
     const buf = this.mem.buffer;
     new Int32Array(buf, ZZ, 64).set(zigzag);
     new Int32Array(buf, T8I, 64).set(t8);
     new Float64Array(buf, T8D, 64).set(t8);
+    new Int32Array(buf, BANDS, 64).set(bands);
+    this.tables = null;                  // the rANS tables copied in (a decoder's: they do not change)
     this.slots = [];                     // {kp, used}: key planes in the module's memory, in slot order
     this.clock = 0;
     this.copies = 0;                     // key views copied in (for tests and benchmarks)
   }
 
   /** Start view v of decoder `d` in the module's memory: its prediction from its key views before
-   *  weighted prediction (predicted), or a copy of `img` (Int32Array Hp·Wp·P). false where it
-   *  does not fit here (the caller's loops then build it). */
-  begin(d, v, predicted, img) {
+   *  weighted prediction (predicted), or a copy of `img` (Int32Array Hp·Wp·P); room for streams
+   *  of up to `maxData` bytes. false where it does not fit here (the caller's loops then build it). */
+  begin(d, v, predicted, img, maxData = 0) {
     const { P, Hp, Wp } = d, n = Hp * Wp * P, slotBytes = n * 4, nTb = (Hp >> 3) * (Wp >> 3);
     const keys = [];
     for (let j = 0; predicted && j < 4; j++) {
@@ -54,8 +58,11 @@ export class PredictKernel {
     const planes = keys.map((k) => d.keyPlanes[d.keySlot[k]]);
     if (planes.some((kp) => !kp || kp.length !== n) || keys.length * slotBytes > PredictKernel.SLOT_BYTES) return false;
     const at = this._slots(planes, slotBytes);
-    const lev = TAB + nTb * 4 * ROW * 4, tbs = lev + nTb * P * 256, outAt = tbs + nTb * 8, slotsAt = outAt + slotBytes;
-    const need = slotsAt + this.slots.length * slotBytes;
+    const t = d.tables;
+    const lev = TAB + nTb * 4 * ROW * 4, tbs = lev + nTb * P * 256, last = tbs + nTb * 8, rec = last + nTb * P * 4;
+    const esc = rec + nTb * P * 256, slotT = esc + nTb * P * 256, freqT = slotT + t.slot.length;
+    const cumT = freqT + t.freq.length * 4, outAt = (cumT + t.cum.length * 4 + 15) & ~15, slotsAt = outAt + slotBytes;
+    const dataAt = slotsAt + this.slots.length * slotBytes, need = dataAt + maxData + 8;
     if (need > this.mem.buffer.byteLength) {
       try {
         this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
@@ -69,8 +76,15 @@ export class PredictKernel {
       new Int32Array(buf, slotsAt + i * slotBytes, n).set(kp);
       this.copies += 1;
     }
+    if (this.tables !== t) {
+      new Uint8Array(buf, slotT, t.slot.length).set(t.slot);
+      new Int32Array(buf, freqT, t.freq.length).set(t.freq);
+      new Int32Array(buf, cumT, t.cum.length).set(t.cum);
+      this.tables = t;
+    }
+    new Int32Array(buf, CLASSES, P).set(d.pcs);
     this.d = d;
-    this.at = { lev, tbs, out: outAt, n, nTb };
+    this.at = { lev, tbs, last, rec, esc, slotT, freqT, cumT, out: outAt, data: dataAt, n, nTb };
     this.planes = new Int32Array(buf, outAt, n);
     const pp = new Int32Array(buf, PLANES, 5 * P);
     for (let p = 0; p < P; p++) pp.set([0, d.bypass[p], d.lo[p], d.hi[p], d.flat[p]], 5 * p);
@@ -111,15 +125,18 @@ export class PredictKernel {
     return true;
   }
 
-  /** Zeroed room for the levels of `nt` tbs (Int32Array nt·P·64, in the module's memory), for
-   *  parseBlock to fill before residual(). */
-  levels(nt) {
-    const a = new Int32Array(this.mem.buffer, this.at.lev, nt * this.d.P * 64);
-    a.fill(0);
-    return a;
+  /** Parse block stream `data` (bytes) of `nt` tbs (kind, key: parseBlock's) into the module's
+   *  memory for residual(): [0, modes (Int32Array nt)], or [parseBlock's error code, null]. */
+  parse(data, nt, kind, key) {
+    const a = this.at, buf = this.mem.buffer;
+    new Int32Array(buf, a.lev, nt * this.d.P * 64).fill(0);
+    new Uint8Array(buf, a.data, data.length).set(data);
+    const code = this.inst.exports.parse(a.data, a.data + data.length, nt, this.d.P, kind, key, a.lev, a.tbs, a.last,
+      a.rec, a.esc, a.slotT, a.freqT, a.cumT, this.d.tables.A);
+    return [code, code ? null : new Int32Array(buf, a.tbs, nt).slice()];
   }
 
-  /** The parsed tbs (modes, nt; their levels in levels()) added to the view: tb i at pixel
+  /** The tbs parse() just parsed (modes, nt) added to the view: tb i at pixel
    *  (ys[i], xs[i]); key: a key view's quantizer steps (else a view's). */
   residual(modes, ys, xs, key) {
     const d = this.d, { P, Wp } = d, nt = modes.length, buf = this.mem.buffer;
@@ -133,9 +150,9 @@ export class PredictKernel {
     this.inst.exports.residual(this.at.lev, this.at.tbs, nt, P, Wp);
   }
 
-  /** The view copied out into `img`. */
+  /** The view copied out into `img` (null: dropped). */
   end(img) {
-    img.set(this.planes);
+    if (img) img.set(this.planes);
     this.planes = null;
     this.d = null;
   }

@@ -14,8 +14,13 @@
 ;; Memory (bytes): the accumulator at 64 (64·P int32), a window's clamped copy at 2048 (9·9·P
 ;; int32), X, Y and R (64 int32 each) at 3456, 3712, 3968, set by the caller: the zigzag scan
 ;; (64 int32) at 4224, the transform T8 (row-major, 64 int32) at 4480 and as doubles at 4736;
-;; per plane [step16, bypass, lo, hi, flat] (int32) at 5248; the caller's tables, views and key
-;; planes from 8192.
+;; per plane [step16, bypass, lo, hi, flat] (int32) at 5248; the scan's context bands (64 int32)
+;; at 5344 and the planes' classes (P int32) at 5600; the caller's tables, views and key planes
+;; from 8192.
+;;
+;; A block stream's parse (lfc.js parseBlock: rANS symbols, then raw bits from the stream's end)
+;; the same way, symbol for symbol, with the same checks in the same order (an error code for
+;; each of parseBlock's messages).
 (module
   (memory (export "memory") 1)
   ;; `n` rows of 8 int32 at byte address `tab`, one per (tb, key view), a tb's rows together:
@@ -275,4 +280,179 @@
         (br $ploop)))
       (local.set $t (i32.add (local.get $t) (i32.const 1)))
       (br $tloop))))
+
+  (global $x (mut i32) (i32.const 0))      ;; the rANS state
+  (global $q (mut i32) (i32.const 0))      ;; the next byte's address
+  (global $e (mut i32) (i32.const 0))      ;; the stream's end
+  (global $bad (mut i32) (i32.const 0))    ;; set where a symbol read past the end
+  (global $slot (mut i32) (i32.const 0))
+  (global $freq (mut i32) (i32.const 0))
+  (global $cum (mut i32) (i32.const 0))
+  (global $A (mut i32) (i32.const 0))
+  ;; one symbol of context `ctx` (lfc.js Rans.get); 255 with $bad set where it reads past the end
+  (func $get (param $ctx i32) (result i32)
+    (local $x i32) (local $sl i32) (local $s i32)
+    (local.set $x (global.get $x))
+    (local.set $sl (i32.and (local.get $x) (i32.const 4095)))
+    (local.set $s (i32.load8_u (i32.add (global.get $slot) (i32.add (i32.shl (local.get $ctx) (i32.const 12)) (local.get $sl)))))
+    (local.set $x (i32.sub (i32.add (i32.mul (i32.load (i32.add (global.get $freq) (i32.shl (i32.add (i32.mul (local.get $ctx) (global.get $A)) (local.get $s)) (i32.const 2))))
+                                             (i32.shr_u (local.get $x) (i32.const 12)))
+                                    (local.get $sl))
+                           (i32.load (i32.add (global.get $cum) (i32.shl (i32.add (i32.mul (local.get $ctx) (i32.add (global.get $A) (i32.const 1))) (local.get $s)) (i32.const 2))))))
+    (block $ok (loop $renorm
+      (br_if $ok (i32.ge_u (local.get $x) (i32.const 32768)))
+      (if (i32.ge_u (global.get $q) (global.get $e)) (then
+        (global.set $bad (i32.const 1))
+        (global.set $x (local.get $x))
+        (return (i32.const 255))))
+      (local.set $x (i32.or (i32.shl (local.get $x) (i32.const 8)) (i32.load8_u (global.get $q))))
+      (global.set $q (i32.add (global.get $q) (i32.const 1)))
+      (br $renorm)))
+    (global.set $x (local.get $x))
+    (local.get $s))
+  ;; bit i of the raw bits: the first kb from the state's remainder R, then the bytes from raw
+  (func $bit (param $i i32) (param $R i32) (param $kb i32) (param $raw i32) (result i32)
+    (if (result i32) (i32.lt_u (local.get $i) (local.get $kb))
+      (then (i32.and (i32.shr_u (local.get $R) (local.get $i)) (i32.const 1)))
+      (else
+        (local.set $i (i32.sub (local.get $i) (local.get $kb)))
+        (i32.and (i32.shr_u (i32.load8_u (i32.add (local.get $raw) (i32.shr_u (local.get $i) (i32.const 3))))
+                            (i32.and (local.get $i) (i32.const 7))) (i32.const 1)))))
+  ;; parse the stream at bytes [a, b) of `nt` tbs of P planes → modes (int32 nt) and levels (int32
+  ;; nt·P·64, zeroed by the caller), with scratch `last` (nt·P int32), `rec` and `esc` (nt·P·64
+  ;; int32 each); the tables: slot (uint8 C·4096), freq (int32 C·A), cum (int32 C·(A+1)).
+  ;; Returns 0, or parseBlock's error: 1 a stream shorter than its state, 2 a read past its end,
+  ;; 3 a tb mode, 4 a last position, 5 a magnitude symbol, 6 an escape bucket, 7 the raw bits.
+  (func (export "parse") (param $a i32) (param $b i32) (param $nt i32) (param $P i32) (param $kind i32) (param $key i32)
+                         (param $lev i32) (param $modes i32) (param $last i32) (param $rec i32) (param $esc i32)
+                         (param $slot i32) (param $freq i32) (param $cum i32) (param $A i32) (result i32)
+    (local $t i32) (local $s i32) (local $prev i32) (local $p i32) (local $g i32) (local $n i32) (local $base i32)
+    (local $pos i32) (local $h1 i32) (local $h2 i32) (local $nc i32) (local $ne i32) (local $i i32) (local $c i32)
+    (local $k i32) (local $nbits i32) (local $kb i32) (local $raw i32) (local $R i32) (local $r i32) (local $j i32) (local $at i32)
+    (if (i32.lt_s (i32.sub (local.get $b) (local.get $a)) (i32.const 3)) (then (return (i32.const 1))))
+    (global.set $slot (local.get $slot))
+    (global.set $freq (local.get $freq))
+    (global.set $cum (local.get $cum))
+    (global.set $A (local.get $A))
+    (global.set $x (i32.or (i32.or (i32.load8_u (local.get $a)) (i32.shl (i32.load8_u offset=1 (local.get $a)) (i32.const 8)))
+                           (i32.shl (i32.load8_u offset=2 (local.get $a)) (i32.const 16))))
+    (global.set $q (i32.add (local.get $a) (i32.const 3)))
+    (global.set $e (local.get $b))
+    (global.set $bad (i32.const 0))
+    ;; the tbs' modes
+    (local.set $prev (i32.const 3))
+    (local.set $t (i32.const 0))
+    (block $mdone (loop $mloop
+      (br_if $mdone (i32.ge_s (local.get $t) (local.get $nt)))
+      (local.set $s (call $get (i32.add (i32.shl (local.get $kind) (i32.const 2)) (local.get $prev))))
+      (if (i32.ge_u (local.get $s) (i32.const 3)) (then (return (select (i32.const 2) (i32.const 3) (global.get $bad)))))
+      (i32.store (i32.add (local.get $modes) (i32.shl (local.get $t) (i32.const 2))) (local.get $s))
+      (local.set $prev (local.get $s))
+      (local.set $t (i32.add (local.get $t) (i32.const 1)))
+      (br $mloop)))
+    ;; each coded tb's last positions, per plane
+    (local.set $t (i32.const 0))
+    (block $ldone (loop $lloop
+      (br_if $ldone (i32.ge_s (local.get $t) (local.get $nt)))
+      (local.set $c (i32.load (i32.add (local.get $modes) (i32.shl (local.get $t) (i32.const 2)))))
+      (local.set $p (i32.const 0))
+      (block $lpdone (loop $lploop
+        (br_if $lpdone (i32.ge_s (local.get $p) (local.get $P)))
+        (local.set $s (i32.const 0))
+        (if (local.get $c) (then
+          (local.set $s (call $get (i32.add (i32.const 8) (i32.add (i32.shl (i32.add (i32.shl (i32.load offset=5600 (i32.shl (local.get $p) (i32.const 2))) (i32.const 1))
+                                                                                     (i32.eq (local.get $c) (i32.const 2))) (i32.const 1))
+                                                                (local.get $key)))))
+          (if (i32.gt_u (local.get $s) (i32.const 64)) (then (return (select (i32.const 2) (i32.const 4) (global.get $bad)))))))
+        (i32.store (i32.add (local.get $last) (i32.shl (i32.add (i32.mul (local.get $t) (local.get $P)) (local.get $p)) (i32.const 2))) (local.get $s))
+        (local.set $p (i32.add (local.get $p) (i32.const 1)))
+        (br $lploop)))
+      (local.set $t (i32.add (local.get $t) (i32.const 1)))
+      (br $lloop)))
+    ;; magnitudes, from each group's last position down; every nonzero one recorded (index·2 + first)
+    (local.set $g (i32.const 0))
+    (block $gdone (loop $gloop
+      (br_if $gdone (i32.ge_s (local.get $g) (i32.mul (local.get $nt) (local.get $P))))
+      (local.set $n (i32.load (i32.add (local.get $last) (i32.shl (local.get $g) (i32.const 2)))))
+      (if (local.get $n) (then
+        (local.set $base (i32.add (i32.add (i32.const 20) (i32.mul (i32.load offset=5600 (i32.shl (i32.rem_u (local.get $g) (local.get $P)) (i32.const 2))) (i32.const 48)))
+                                  (i32.shl (local.get $key) (i32.const 2))))
+        (local.set $pos (i32.sub (local.get $n) (i32.const 1)))
+        (local.set $s (call $get (i32.add (local.get $base) (i32.load offset=5344 (i32.shl (local.get $pos) (i32.const 2))))))
+        (if (i32.gt_u (local.get $s) (i32.const 15)) (then (return (select (i32.const 2) (i32.const 5) (global.get $bad)))))
+        (local.set $at (i32.add (i32.shl (local.get $g) (i32.const 6)) (local.get $pos)))
+        (i32.store (i32.add (local.get $lev) (i32.shl (local.get $at) (i32.const 2))) (i32.add (local.get $s) (i32.const 1)))
+        (i32.store (i32.add (local.get $rec) (i32.shl (local.get $nc) (i32.const 2))) (i32.or (i32.shl (local.get $at) (i32.const 1)) (i32.const 1)))
+        (local.set $nc (i32.add (local.get $nc) (i32.const 1)))
+        (local.set $h1 (i32.add (local.get $s) (i32.const 1)))
+        (local.set $h2 (i32.const 0))
+        (block $pdone (loop $ploop
+          (local.set $pos (i32.sub (local.get $pos) (i32.const 1)))
+          (br_if $pdone (i32.lt_s (local.get $pos) (i32.const 0)))
+          (local.set $s (call $get (i32.add (i32.add (i32.add (local.get $base) (i32.load offset=5344 (i32.shl (local.get $pos) (i32.const 2))))
+                                                     (i32.const 1))
+                                            (i32.add (i32.ne (local.get $h1) (i32.const 0)) (i32.ne (local.get $h2) (i32.const 0))))))
+          (if (i32.gt_u (local.get $s) (i32.const 15)) (then (return (select (i32.const 2) (i32.const 5) (global.get $bad)))))
+          (local.set $h2 (local.get $h1))
+          (local.set $h1 (local.get $s))
+          (if (local.get $s) (then
+            (local.set $at (i32.add (i32.shl (local.get $g) (i32.const 6)) (local.get $pos)))
+            (i32.store (i32.add (local.get $lev) (i32.shl (local.get $at) (i32.const 2))) (local.get $s))
+            (i32.store (i32.add (local.get $rec) (i32.shl (local.get $nc) (i32.const 2))) (i32.shl (local.get $at) (i32.const 1)))
+            (local.set $nc (i32.add (local.get $nc) (i32.const 1)))))
+          (br $ploop)))))
+      (local.set $g (i32.add (local.get $g) (i32.const 1)))
+      (br $gloop)))
+    ;; escapes' buckets, in the recorded order (each kept as record·32 + bucket)
+    (local.set $nbits (local.get $nc))
+    (local.set $i (i32.const 0))
+    (block $edone (loop $eloop
+      (br_if $edone (i32.ge_s (local.get $i) (local.get $nc)))
+      (local.set $c (i32.load (i32.add (local.get $rec) (i32.shl (local.get $i) (i32.const 2)))))
+      (local.set $at (i32.shr_u (local.get $c) (i32.const 1)))
+      (if (i32.eq (i32.sub (i32.load (i32.add (local.get $lev) (i32.shl (local.get $at) (i32.const 2)))) (i32.and (local.get $c) (i32.const 1)))
+                  (i32.const 15)) (then
+        (local.set $k (call $get (i32.add (i32.const 164) (i32.load offset=5600 (i32.shl (i32.rem_u (i32.shr_u (local.get $at) (i32.const 6)) (local.get $P)) (i32.const 2))))))
+        (if (i32.ge_u (local.get $k) (i32.const 24)) (then (return (select (i32.const 2) (i32.const 6) (global.get $bad)))))
+        (i32.store (i32.add (local.get $esc) (i32.shl (local.get $ne) (i32.const 2))) (i32.or (i32.shl (local.get $i) (i32.const 5)) (local.get $k)))
+        (local.set $ne (i32.add (local.get $ne) (i32.const 1)))
+        (local.set $nbits (i32.add (local.get $nbits) (local.get $k)))))
+      (local.set $i (i32.add (local.get $i) (i32.const 1)))
+      (br $eloop)))
+    ;; the raw bits: the last kb of them in the final state, the others before the stream's end
+    (local.set $kb (select (local.get $nbits) (i32.const 15) (i32.lt_s (local.get $nbits) (i32.const 15))))
+    (local.set $raw (i32.sub (local.get $b) (i32.shr_u (i32.add (i32.sub (local.get $nbits) (local.get $kb)) (i32.const 7)) (i32.const 3))))
+    (local.set $R (i32.sub (global.get $x) (i32.const 32768)))
+    (if (i32.or (i32.or (i32.lt_s (local.get $raw) (global.get $q)) (i32.ne (global.get $q) (local.get $raw)))
+                (i32.or (i32.lt_s (local.get $R) (i32.const 0)) (i32.ge_s (local.get $R) (i32.shl (i32.const 1) (local.get $kb)))))
+      (then (return (i32.const 7))))
+    ;; the escapes' suffixes (after every sign), then the signs
+    (local.set $r (local.get $nc))               ;; the next suffix bit
+    (local.set $j (i32.const 0))
+    (block $sdone (loop $sloop
+      (br_if $sdone (i32.ge_s (local.get $j) (local.get $ne)))
+      (local.set $c (i32.load (i32.add (local.get $esc) (i32.shl (local.get $j) (i32.const 2)))))
+      (local.set $k (i32.and (local.get $c) (i32.const 31)))
+      (local.set $s (i32.const 0))
+      (local.set $p (i32.const 0))
+      (block $bdone (loop $bloop
+        (br_if $bdone (i32.ge_s (local.get $p) (local.get $k)))
+        (local.set $s (i32.or (local.get $s) (i32.shl (call $bit (local.get $r) (local.get $R) (local.get $kb) (local.get $raw)) (local.get $p))))
+        (local.set $r (i32.add (local.get $r) (i32.const 1)))
+        (local.set $p (i32.add (local.get $p) (i32.const 1)))
+        (br $bloop)))
+      (local.set $c (i32.load (i32.add (local.get $rec) (i32.shl (i32.shr_u (local.get $c) (i32.const 5)) (i32.const 2)))))
+      (i32.store (i32.add (local.get $lev) (i32.shl (i32.shr_u (local.get $c) (i32.const 1)) (i32.const 2)))
+        (i32.add (i32.add (i32.add (i32.const 15) (i32.and (local.get $c) (i32.const 1))) (i32.sub (i32.shl (i32.const 1) (local.get $k)) (i32.const 1))) (local.get $s)))
+      (local.set $j (i32.add (local.get $j) (i32.const 1)))
+      (br $sloop)))
+    (local.set $i (i32.const 0))
+    (block $ndone (loop $nloop
+      (br_if $ndone (i32.ge_s (local.get $i) (local.get $nc)))
+      (if (call $bit (local.get $i) (local.get $R) (local.get $kb) (local.get $raw)) (then
+        (local.set $at (i32.add (local.get $lev) (i32.shl (i32.shr_u (i32.load (i32.add (local.get $rec) (i32.shl (local.get $i) (i32.const 2)))) (i32.const 1)) (i32.const 2))))
+        (i32.store (local.get $at) (i32.sub (i32.const 0) (i32.load (local.get $at))))))
+      (local.set $i (i32.add (local.get $i) (i32.const 1)))
+      (br $nloop)))
+    (i32.const 0))
 )

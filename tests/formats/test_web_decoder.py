@@ -240,6 +240,32 @@ def test_prediction_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp
     assert info["fallback_same"] and info["fallback_copies"] == 0, info
 
 
+def test_prediction_kernel_refuses_damaged_streams_as_the_loops_do(tmp_path):
+    """Block streams damaged in place (bytes and bits of tx.blocks changed, checksums made valid
+    again: tools.fuzz's mutations): the kernel's parse (predict_kernel.wat) gives every view the
+    loops' planes or the loops' FormatError, word for word (parseBlock's seven errors)."""
+    from tools.fuzz import join_file, split_file
+
+    meta, secs = split_file((GOLDEN / "rlfc_tx5_warped_rgb8.lfc").read_bytes())
+    names = [n for n, _ in secs]
+    blocks = bytearray(secs[names.index("tx.blocks")][1])
+    rng = np.random.default_rng(7)
+    outcomes = set()
+    for m in range(24):
+        b = bytearray(blocks)
+        for at in rng.integers(0, len(b), 1 + m % 3):
+            b[at] ^= 1 << int(rng.integers(8)) if m % 2 else int(rng.integers(1, 256))
+        path = tmp_path / f"m{m}.lfc"
+        path.write_bytes(join_file(meta, [(n, bytes(b) if n == "tx.blocks" else d) for n, d in secs]))
+        got = subprocess.run([NODE, str(ROOT / "tools" / "web_predict_kernel.mjs"), str(path), "0"],
+                             capture_output=True, text=True, timeout=300)
+        assert got.returncode == 0, got.stderr[-3000:]
+        info = json.loads(got.stdout.strip().splitlines()[-1])
+        assert info["same"] and info["kernel"], (m, info)
+        outcomes.add(info["first_error"].split(": ")[-1] if info.get("errors") else "decoded")
+    assert len(outcomes) >= 2, outcomes
+
+
 def test_bad_files_get_typed_errors(tmp_path):
     good = (GOLDEN / "rlfc_tx2_lossy_rgba8.lfc").read_bytes()
     cases = {
