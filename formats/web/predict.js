@@ -4,6 +4,7 @@
 // loops, bit for bit. The view is built in the module's memory between begin() and end() (no
 // await in between: one view at a time per kernel).
 import { kernelModule } from "./predict_kernel.js";
+import { assignSlots, growTo } from "./wasm_module.js";
 
 const TAB = 8192;                 // the tables' byte address (below it: the kernel's scratch and constants)
 const ROW = 8;                    // int32 per prediction table row
@@ -40,7 +41,7 @@ export class PredictKernel {
     new Float64Array(buf, T8D, 64).set(t8);
     new Int32Array(buf, BANDS, 64).set(bands);
     this.tables = null;                  // the rANS tables copied in (a decoder's: they do not change)
-    this.slots = [];                     // {kp, used}: key planes in the module's memory, in slot order
+    this.slots = [];                     // {a, used}: key planes in the module's memory, in slot order
     this.clock = 0;
     this.copies = 0;                     // key views copied in (for tests and benchmarks)
   }
@@ -57,19 +58,17 @@ export class PredictKernel {
     }
     const planes = keys.map((k) => d.keyPlanes[d.keySlot[k]]);
     if (planes.some((kp) => !kp || kp.length !== n) || keys.length * slotBytes > PredictKernel.SLOT_BYTES) return false;
-    const at = this._slots(planes, slotBytes);
+    if (slotBytes !== this.slotBytes) { this.slots = []; this.slotBytes = slotBytes; }
+    const at = assignSlots(this.slots, planes, Math.max(planes.length, Math.min(PredictKernel.KEEP_KEYS,
+      Math.floor(PredictKernel.SLOT_BYTES / slotBytes))), ++this.clock);
     const t = d.tables;
     const lev = TAB + nTb * 4 * ROW * 4, tbs = lev + nTb * P * 256, last = tbs + nTb * 8, rec = last + nTb * P * 4;
     const esc = rec + nTb * P * 256, slotT = esc + nTb * P * 256, freqT = slotT + t.slot.length;
     const cumT = freqT + t.freq.length * 4, outAt = (cumT + t.cum.length * 4 + 15) & ~15, slotsAt = outAt + slotBytes;
     const dataAt = slotsAt + this.slots.length * slotBytes, need = dataAt + maxData + 8;
-    if (need > this.mem.buffer.byteLength) {
-      try {
-        this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
-      } catch {                                                // (no memory to grow into: the loops)
-        this.slots = [];
-        return false;
-      }
+    if (!growTo(this.mem, need)) {                             // (no memory to grow into: the loops)
+      this.slots = [];
+      return false;
     }
     const buf = this.mem.buffer;
     for (const [i, kp] of at.fresh) {
@@ -155,29 +154,5 @@ export class PredictKernel {
     if (img) img.set(this.planes);
     this.planes = null;
     this.d = null;
-  }
-
-  /** Slots for key planes `planes` (held ones kept, the others in free or least recently used
-   *  slots): {slot: per plane, fresh: [slot, planes] to copy in}. */
-  _slots(planes, slotBytes) {
-    if (slotBytes !== this.slotBytes) { this.slots = []; this.slotBytes = slotBytes; }
-    const tick = ++this.clock, cap = Math.max(planes.length, Math.min(PredictKernel.KEEP_KEYS,
-      Math.floor(PredictKernel.SLOT_BYTES / slotBytes)));
-    const slot = planes.map((kp) => this.slots.findIndex((sl) => sl.kp === kp));
-    slot.forEach((i) => { if (i >= 0) this.slots[i].used = tick; });
-    const fresh = [];
-    planes.forEach((kp, j) => {
-      if (slot[j] >= 0) return;
-      let i = this.slots.length;
-      if (i < cap) this.slots.push(null);
-      else {
-        i = 0;
-        this.slots.forEach((sl, q) => { if (sl.used < this.slots[i].used) i = q; });
-      }
-      this.slots[i] = { kp, used: tick };
-      slot[j] = i;
-      fresh.push([i, kp]);
-    });
-    return { slot, fresh };
   }
 }

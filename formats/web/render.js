@@ -12,6 +12,7 @@
 // decoded whatever the budget).
 import { LfcError, fromPlanes } from "./lfc.js";
 import { kernelModule } from "./render_kernel.js";
+import { assignSlots, growTo } from "./wasm_module.js";
 
 /** Frames of at least this many pixels blend on the pool's workers when the renderer has one. */
 export const POOL_MIN_PIXELS = 1 << 15;
@@ -383,7 +384,7 @@ export class BlendKernel {
     this.inst = new WebAssembly.Instance(mod, {});
     this.mem = this.inst.exports.memory;
     this.slotBytes = 0;
-    this.slots = [];                     // {img, used}: the views in the module's memory, in slot order
+    this.slots = [];                     // {a, used}: the views in the module's memory, in slot order
     this.clock = 0;
     this.copies = 0;                     // views copied in (for tests and benchmarks)
   }
@@ -393,39 +394,15 @@ export class BlendKernel {
     const { P, Wp, Hp, H, W } = g, n = (y1 - y0) * W, slotBytes = Hp * Wp * P * 4;
     if (imgs.some((m) => m.length !== Hp * Wp * P) || imgs.length * slotBytes > BlendKernel.SLOT_BYTES) return null;
     if (slotBytes !== this.slotBytes) { this.slots = []; this.slotBytes = slotBytes; }
-    const tick = ++this.clock, at = [];
-    for (const img of imgs) {                                  // the slots of the views held already
-      const i = this.slots.findIndex((sl) => sl.img === img);
-      at.push(i);
-      if (i >= 0) this.slots[i].used = tick;
-    }
-    const cap = Math.max(imgs.length, BlendKernel.KEEP_VIEWS);
-    const fresh = [];
-    imgs.forEach((img, j) => {                                 // the others: a new slot, or the least recent
-      if (at[j] >= 0) return;
-      let i = this.slots.findIndex((sl) => sl.img === img);   // (a view named twice in one call)
-      if (i < 0 && this.slots.length < cap) { i = this.slots.length; this.slots.push({ img: null, used: 0 }); }
-      if (i < 0) {
-        i = 0;
-        this.slots.forEach((sl, q) => { if (sl.used < this.slots[i].used) i = q; });
-      }
-      if (this.slots[i].img !== img) fresh.push(i);
-      this.slots[i] = { img, used: tick };
-      at[j] = i;
-    });
+    const { slot: at, fresh } = assignSlots(this.slots, imgs, Math.max(imgs.length, BlendKernel.KEEP_VIEWS), ++this.clock);
     const SLOTS = 64, dispAt = SLOTS + this.slots.length * slotBytes, accAt = dispAt + n * 4;
-    const need = accAt + n * P * 4;
-    if (need > this.mem.buffer.byteLength) {
-      try {
-        this.mem.grow(Math.ceil((need - this.mem.buffer.byteLength) / 65536));
-      } catch {                                                // (no memory to grow into: the loops)
-        this.slots = [];
-        return null;
-      }
+    if (!growTo(this.mem, accAt + n * P * 4)) {              // (no memory to grow into: the loops)
+      this.slots = [];
+      return null;
     }
     const buf = this.mem.buffer;
-    for (const i of new Set(fresh)) {
-      new Int32Array(buf, SLOTS + i * slotBytes, Hp * Wp * P).set(this.slots[i].img);
+    for (const [i, img] of fresh) {
+      new Int32Array(buf, SLOTS + i * slotBytes, Hp * Wp * P).set(img);
       this.copies += 1;
     }
     new Float32Array(buf, dispAt, n).set(disp.subarray(0, n));

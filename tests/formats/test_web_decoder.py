@@ -178,14 +178,9 @@ def test_renderer_applies_per_view_warps_like_python(tmp_path):
     assert apart > 3.0                               # the warps change the frames
 
 
-@pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16.lfc", "rlfc_tx5_warped_rgb8.lfc", "rlfc_tx6_alpha_rgba8.lfc",
-                                  "grey", "sample"])
-def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path):
-    """The novel-view blend on WebAssembly SIMD (render_kernel.wat: two planes at a time, an odd
-    plane alone) makes blendOne's float32 accumulator bit for bit: 1 (grey), 2 (grey+alpha,
-    16-bit), 3 (with per-view warps; the Lytro crop) and 4 (RGBA) planes; bicubic and bilinear;
-    the maps, a focus, a synthetic aperture; a band of rows as the workers blend; whole robust
-    frames. A drag inside one cell copies no view into the kernel's memory (they stay there)."""
+def _kernel_tool(tool: str, name: str, sample_files, tmp_path) -> dict:
+    """tools/TOOL's JSON line (with 0 timed rounds) on a file: "grey" (a 3×3 grey grid made here),
+    "sample" (the bundled crop) or a golden file's name."""
     from tests.rlfc.helpers import open_encoded, smooth_lf
     from tests.rlfc.test_tx import tx
 
@@ -196,13 +191,24 @@ def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path
         path.write_bytes(blob)
     else:
         path = sample_files[0] if name == "sample" else GOLDEN / name
-    got = subprocess.run([NODE, str(ROOT / "tools" / "web_blend_kernel.mjs"), str(path), "0"], capture_output=True,
-                         text=True, timeout=300)
+    got = subprocess.run([NODE, str(ROOT / "tools" / tool), str(path), "0"], capture_output=True, text=True, timeout=300)
     assert got.returncode == 0, got.stderr[-3000:]
     info = json.loads(got.stdout.strip().splitlines()[-1])
     assert info["kernel"], "this Node has no WebAssembly SIMD"
     assert info["P"] == {"grey": 1, "rlfc_tx2_lossless_ga16.lfc": 2, "rlfc_tx6_alpha_rgba8.lfc": 4}.get(name, 3)
     assert info["warps"] == (name == "rlfc_tx5_warped_rgb8.lfc")
+    return info
+
+
+@pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16.lfc", "rlfc_tx5_warped_rgb8.lfc", "rlfc_tx6_alpha_rgba8.lfc",
+                                  "grey", "sample"])
+def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path):
+    """The novel-view blend on WebAssembly SIMD (render_kernel.wat: two planes at a time, an odd
+    plane alone) makes blendOne's float32 accumulator bit for bit: 1 (grey), 2 (grey+alpha,
+    16-bit), 3 (with per-view warps; the Lytro crop) and 4 (RGBA) planes; bicubic and bilinear;
+    the maps, a focus, a synthetic aperture; a band of rows as the workers blend; whole robust
+    frames. A drag inside one cell copies no view into the kernel's memory (they stay there)."""
+    info = _kernel_tool("web_blend_kernel.mjs", name, sample_files, tmp_path)
     assert info["same"] and info["differ"] == 0, info
     assert info["copies"] > 0 and info["drag_copies"] == 0, info
 
@@ -216,23 +222,7 @@ def test_prediction_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp
     integer, every view at both levels, key views included: 1 (grey), 2 (grey+alpha, 16-bit,
     lossless: bypassed planes), 3 (weighted prediction; per-view warps; the bundled crop's residual
     blocks) and 4 (RGBA) planes. The key views go into the kernel's memory."""
-    from tests.rlfc.helpers import open_encoded, smooth_lf
-    from tests.rlfc.test_tx import tx
-
-    if name == "grey":
-        lf = smooth_lf(rows=3, cols=3, h=24, w=32, c=1)
-        _, blob = open_encoded(lf, tx(lf, step=6.0))
-        path = tmp_path / "grey.lfc"
-        path.write_bytes(blob)
-    else:
-        path = sample_files[0] if name == "sample" else GOLDEN / name
-    got = subprocess.run([NODE, str(ROOT / "tools" / "web_predict_kernel.mjs"), str(path), "0"], capture_output=True,
-                         text=True, timeout=300)
-    assert got.returncode == 0, got.stderr[-3000:]
-    info = json.loads(got.stdout.strip().splitlines()[-1])
-    assert info["kernel"], "this Node has no WebAssembly SIMD"
-    assert info["P"] == {"grey": 1, "rlfc_tx2_lossless_ga16.lfc": 2, "rlfc_tx6_alpha_rgba8.lfc": 4}.get(name, 3)
-    assert info["warps"] == (name == "rlfc_tx5_warped_rgb8.lfc")
+    info = _kernel_tool("web_predict_kernel.mjs", name, sample_files, tmp_path)
     if name == "rlfc_tx4_weighted_rgb8.lfc":
         assert info["weighted"]
     assert info["predicted"] > 0 and info["copies"] > 0, info
