@@ -71,10 +71,11 @@ export class Renderer {
       }
       m = d.cell[best];
     }
-    const nloc = d.nby8 * d.nbx8;
-    const out = new Float32Array(d.H * d.W);
-    for (let y = 0; y < d.H; y++) {
-      for (let x = 0; x < d.W; x++) out[y * d.W + x] = d.disp[m * nloc + (y >> 3) * d.nbx8 + (x >> 3)] / 16;
+    const nloc = d.nby8 * d.nbx8, W = d.W;
+    const out = new Float32Array(d.H * W);
+    for (let y = 0; y < d.H; y++) {                 // each 8×8 block's value, written 8 pixels at a time
+      const row = m * nloc + (y >> 3) * d.nbx8, o = y * W;
+      for (let x = 0; x < W; x += 8) out.fill(d.disp[row + (x >> 3)] / 16, o + x, Math.min(o + x + 8, o + W));
     }
     return out;
   }
@@ -155,10 +156,7 @@ export class Renderer {
     }
     if (!acc) acc = blendBand(g, imgs, disp, jobs, cubic, 0, H);
     this._trim(keep);
-    // rint, half to even: adding and taking away 1.5·2^52 leaves a double's integer part, rounded to
-    // nearest even by the addition itself (exact for |v| < 2^51; planes are far inside)
-    const planes = new Int32Array(H * W * P), RINT = 6755399441055744;
-    for (let i = 0; i < planes.length; i++) planes[i] = (acc[i] + RINT) - RINT;
+    const planes = rintPlanes(acc, g.wasm !== false);
     const pixels = fromPlanes(planes, H, W, H, W, d.C, d.peak);
     return { pixels, ms: performance.now() - t0, sources: src.length, cubic, wasm: g.wasm && BlendKernel.shared() !== null };
   }
@@ -262,11 +260,16 @@ export class Renderer {
         cost[i] = v;
       }
       for (let i = 0; i < gh; i++) {                          // 4×4 box, anchor (2, 2)
+        const r0 = rows[i] * gw, r1 = rows[i + 1] * gw, r2 = rows[i + 2] * gw, r3 = rows[i + 3] * gw;
         for (let j = 0; j < gw; j++) {
-          let sum = 0;
-          for (let a = 0; a < 4; a++) {
-            const row = rows[i + a] * gw;
-            for (let b = 0; b < 4; b++) sum += cost[row + cols[j + b]];
+          let sum;
+          if (j >= 2 && j <= gw - 2) {                       // columns j − 2 .. j + 1: no reflection
+            const a = r0 + j - 2, b = r1 + j - 2, c = r2 + j - 2, e = r3 + j - 2;   // (the same order of sums)
+            sum = cost[a] + cost[a + 1] + cost[a + 2] + cost[a + 3] + cost[b] + cost[b + 1] + cost[b + 2] + cost[b + 3]
+              + cost[c] + cost[c + 1] + cost[c + 2] + cost[c + 3] + cost[e] + cost[e + 1] + cost[e + 2] + cost[e + 3];
+          } else {
+            sum = 0;
+            for (const row of [r0, r1, r2, r3]) for (let q = 0; q < 4; q++) sum += cost[row + cols[j + q]];
           }
           blurred[i * gw + j] = f32(sum / 16);
         }
@@ -281,10 +284,15 @@ export class Renderer {
       }
     });
     const out = new Float32Array(H * W);
-    for (let y = 0; y < H; y++) {                              // (the candidates, inlined)
-      for (let x = 0; x < W; x++) {
-        const k = choice[(y >> 2) * gw + (x >> 2)];
-        out[y * W + x] = k === 0 ? median : k === 1 ? med[(y >> 3) * bx + (x >> 3)] : disp[y * W + x];
+    for (let y = 0; y < H; y++) {                              // (the candidates, inlined: 4 pixels a choice)
+      const c = (y >> 2) * gw, b = (y >> 3) * bx, o = y * W;
+      for (let x = 0; x < W; x += 4) {
+        const k = choice[c + (x >> 2)], e = Math.min(x + 4, W);
+        if (k === 2) for (let i = o + x; i < o + e; i++) out[i] = disp[i];
+        else {
+          const v = k === 0 ? median : med[b + (x >> 3)];
+          for (let i = o + x; i < o + e; i++) out[i] = v;
+        }
       }
     }
     return out;
@@ -306,6 +314,18 @@ export function blendBand(g, imgs, disp, jobs, cubic, y0, y1) {
   const acc = new Float32Array((y1 - y0) * g.W * g.P);
   jobs.forEach(([ds, dt, wf, wc], j) => blendOne(g, imgs[j], disp, ds, dt, wf, acc, wc, y0, y1, cubic));
   return acc;
+}
+
+/** A frame's accumulator (Float32Array) rounded to integer planes (Int32Array), half to even: on
+ *  the blend's WebAssembly module where `wasm` and it can, else adding and taking away 1.5·2^52
+ *  (the addition rounds a double to the nearest even integer; exact for |v| < 2^51, planes are far
+ *  inside). The same integers either way. */
+export function rintPlanes(acc, wasm = true) {
+  const k = wasm ? BlendKernel.shared() : null, got = k && k.rint(acc);
+  if (got) return got;
+  const planes = new Int32Array(acc.length), RINT = 6755399441055744;
+  for (let i = 0; i < planes.length; i++) planes[i] = (acc[i] + RINT) - RINT;
+  return planes;
 }
 
 /** One source of blendBand: the Python renderer's _blend of one source (positions clamped to the
@@ -387,6 +407,17 @@ export class BlendKernel {
     this.slots = [];                     // {a, used}: the views in the module's memory, in slot order
     this.clock = 0;
     this.copies = 0;                     // views copied in (for tests and benchmarks)
+  }
+
+  /** rintPlanes' integers, or null where they do not fit in the module's memory. The values go
+   *  past the views kept (the next band() overwrites them). */
+  rint(acc) {
+    const n = acc.length, at = 64 + this.slots.length * (this.slotBytes || 0);
+    if (!growTo(this.mem, at + 8 * n)) return null;
+    const buf = this.mem.buffer;
+    new Float32Array(buf, at, n).set(acc);
+    this.inst.exports.rint(at, at + 4 * n, n);
+    return new Int32Array(buf, at + 4 * n, n).slice();
   }
 
   /** blendBand's accumulator, or null where this call does not fit (the loops then blend it). */

@@ -135,4 +135,23 @@
         (br $xloop)))
       (local.set $y (i32.add (local.get $y) (i32.const 1)))
       (br $yloop))))
+
+  ;; a frame's planes: each of `n` float32 values at byte `src` rounded to the nearest integer,
+  ;; ties to even (render.js rintPlanes' (v + 1.5·2^52) − 1.5·2^52 on the doubles), as int32 at `dst`
+  (func (export "rint") (param $src i32) (param $dst i32) (param $n i32)
+    (local $i i32) (local $e i32)
+    (local.set $e (i32.shl (i32.and (local.get $n) (i32.const -4)) (i32.const 2)))
+    (block $done (loop $l
+      (br_if $done (i32.ge_u (local.get $i) (local.get $e)))
+      (v128.store (i32.add (local.get $dst) (local.get $i))
+        (i32x4.trunc_sat_f32x4_s (f32x4.nearest (v128.load (i32.add (local.get $src) (local.get $i))))))
+      (local.set $i (i32.add (local.get $i) (i32.const 16)))
+      (br $l)))
+    (local.set $e (i32.shl (local.get $n) (i32.const 2)))
+    (block $tdone (loop $t
+      (br_if $tdone (i32.ge_u (local.get $i) (local.get $e)))
+      (i32.store (i32.add (local.get $dst) (local.get $i))
+        (i32.trunc_sat_f32_s (f32.nearest (f32.load (i32.add (local.get $src) (local.get $i))))))
+      (local.set $i (i32.add (local.get $i) (i32.const 4)))
+      (br $t))))
 )
