@@ -4,11 +4,14 @@
 // First the two blend 9 cameras of the file (the maps' disparities, a focus, a synthetic
 // aperture; bicubic and bilinear; with the file's warps where it has them) and their float32
 // accumulators are compared bit for bit, and whole frames of Renderer.render (robust, the
-// default) with and without the kernel are compared pixel for pixel. Then (ROUNDS > 0) the blend
-// of one frame is timed, the two alternated per round. Prints one JSON line: same (every
-// accumulator and frame equal), kernel (whether this Node has WebAssembly SIMD), the median ms of
-// each blend, their ratios, the views copied into the kernel's memory, and those copied by 8
-// frames of a drag inside one cell of the grid after a first frame there (0: the views stay).
+// default) with and without the kernel are compared pixel for pixel, and so are the robust
+// choice's costs (Renderer._cost: samples and variances on the kernel's `cost`; for the maps'
+// disparities and a constant one) and its disparities (_consistent) at each camera with two or
+// more sources (costs_checked: how many arrays). Then (ROUNDS > 0) the blend of one frame is
+// timed, the two alternated per round. Prints one JSON line: same (every accumulator, cost and
+// frame equal), kernel (whether this Node has WebAssembly SIMD), the median ms of each blend,
+// their ratios, the views copied into the kernel's memory, and those copied by 8 frames of a drag
+// inside one cell of the grid after a first frame there (0: the views stay).
 import path from "path";
 import { WEB, openFile, say } from "./web_node.mjs";
 const [file, rounds = "5"] = process.argv.slice(2);
@@ -46,6 +49,28 @@ for (const [s, t] of cams) for (const cubic of [true, false]) {
   const b = await ren.render(s, t, { cubic });
   for (let i = 0; i < a.pixels.length; i++) if (a.pixels[i] !== b.pixels[i]) { same = false; differ += 1; }
 }
+// the robust choice's costs (samples and variances on the kernel) and its disparities, both ways
+let costsChecked = 0;
+for (const [s, t] of cams) {
+  const src = ren.sources(s, t, 0), disp0 = ren.disparity(s, t);
+  if (src.length < 2 || !disp0) continue;
+  const imgs = [];
+  for (const [r, c] of src) imgs.push(await ren.view(r * d.cols + c));
+  const warp = ren._warpCoefs(src), gh = Math.ceil(H / 4), gw = Math.ceil(W / 4);
+  const D = Float32Array.from({ length: gh * gw }, (_, i) => disp0[4 * Math.floor(i / gw) * W + 4 * (i % gw)]);
+  const both = (fn) => {
+    R.Renderer.useWasm = false;
+    const a = fn();
+    R.Renderer.useWasm = true;
+    return [a, fn()];
+  };
+  for (const [a, b] of [both(() => ren._cost(s, t, src, imgs, D, gh, gw, 4, warp)),
+    both(() => ren._cost(s, t, src, imgs, D.map(() => 0.75), gh, gw, 4, warp)),
+    both(() => ren._consistent(s, t, src, imgs, disp0, warp))]) {
+    for (let i = 0; i < a.length; i++) if (!Object.is(a[i], b[i])) { same = false; differ += 1; }
+    costsChecked += 1;
+  }
+}
 // a drag: 8 frames inside one cell of the grid after a first one there copy no view into the kernel
 const k = R.BlendKernel.shared();
 const c0 = [Math.min(0.35, R1), Math.min(0.6, C1)];
@@ -61,7 +86,7 @@ for (let r = 0; r < Number(rounds); r++) for (const wasm of [false, true]) for (
   T[(wasm ? "wasm" : "js") + (cubic ? "" : "_bilinear")].push(performance.now() - t0);
 }
 const out = { file: path.basename(file), H, W, P: d.P, warps: Boolean(d.warp), same, differ, kernel: Boolean(k),
-  copies: k ? k.copies : 0, drag_copies: dragCopies };
+  copies: k ? k.copies : 0, drag_copies: dragCopies, costs_checked: costsChecked };
 if (Number(rounds) > 0) {
   Object.assign(out, { js_ms: med(T.js), wasm_ms: med(T.wasm), ratio: med(T.wasm) / med(T.js),
     js_bilinear_ms: med(T.js_bilinear), wasm_bilinear_ms: med(T.wasm_bilinear), ratio_bilinear: med(T.wasm_bilinear) / med(T.js_bilinear) });

@@ -201,6 +201,28 @@ export class Renderer {
     }
   }
 
+  /** The robust choice's cost at each of the gh×gw grid points every S pixels (Float32Array):
+   *  the sources' weighted variance about their blend, each sampled bilinearly (plane 0) at its
+   *  point displaced by D (the candidate's disparities) and the source's warp. On the blend's
+   *  WebAssembly module where Renderer.useWasm and it can (BlendKernel.costs), else in _sampleGrid
+   *  and the loops here; the same float32 values. */
+  _cost(s, t, src, imgs, D, gh, gw, S, warp = null) {
+    const d = this.d, G = gh * gw, nq = src.length, f32 = Math.fround, wfs = src.map(([, , w]) => f32(w));
+    const kern = Renderer.useWasm ? BlendKernel.shared() : null;
+    const got = kern && kern.costs({ P: d.P, Wp: d.Wp, Hp: d.Hp, H: d.H, W: d.W }, imgs,
+      src.map(([r, c], q) => [s - r, t - c, wfs[q], warp && warp[q]]), D, gh, gw, S);
+    if (got) return got;
+    const smp = src.map(() => new Float32Array(G)), cost = new Float32Array(G);
+    src.forEach(([r, c], q) => this._sampleGrid(imgs[q], gh, gw, S, D, s - r, t - c, smp[q], warp && warp[q]));
+    for (let i = 0; i < G; i++) {                            // the blend, then the weighted variance about it
+      let a = 0, v = 0;
+      for (let q = 0; q < nq; q++) a = f32(a + f32(wfs[q] * smp[q][i]));
+      for (let q = 0; q < nq; q++) { const e = f32(smp[q][i] - a); v = f32(v + f32(wfs[q] * f32(e * e))); }
+      cost[i] = v;
+    }
+    return cost;
+  }
+
   /** (H·W) disparities: per pixel the most photo-consistent of three candidates, smoothest
    *  first (the frame's median disparity, the map's 5×5-block median, the map), chosen on every
    *  4th pixel by the weighted variance of the sources' luma around their blend, box-averaged
@@ -238,8 +260,7 @@ export class Renderer {
       (y, x) => disp[y * W + x],
     ];
     const best = new Float32Array(G), choice = new Uint8Array(G);
-    const D = new Float32Array(G), cost = new Float32Array(G);
-    const smp = src.map(() => new Float32Array(G)), nq = src.length, wfs = src.map(([, , w]) => f32(w));
+    const D = new Float32Array(G);
     const refl = (i, m) => {                                   // BORDER_REFLECT_101
       if (m === 1) return 0;
       for (;;) {
@@ -252,13 +273,7 @@ export class Renderer {
     const cols = Int32Array.from({ length: gw + 3 }, (_, j) => refl(j - 2, gw));
     cand.forEach((fn, k) => {
       for (let i = 0; i < gh; i++) for (let j = 0; j < gw; j++) D[i * gw + j] = fn(i * S, j * S);
-      src.forEach(([r, c], q) => this._sampleGrid(imgs[q], gh, gw, S, D, s - r, t - c, smp[q], warp && warp[q]));
-      for (let i = 0; i < G; i++) {                          // the blend, then the weighted variance about it
-        let a = 0, v = 0;
-        for (let q = 0; q < nq; q++) a = f32(a + f32(wfs[q] * smp[q][i]));
-        for (let q = 0; q < nq; q++) { const e = f32(smp[q][i] - a); v = f32(v + f32(wfs[q] * f32(e * e))); }
-        cost[i] = v;
-      }
+      const cost = this._cost(s, t, src, imgs, D, gh, gw, S, warp);
       for (let i = 0; i < gh; i++) {                          // 4×4 box, anchor (2, 2)
         const r0 = rows[i] * gw, r1 = rows[i + 1] * gw, r2 = rows[i + 2] * gw, r3 = rows[i + 3] * gw;
         for (let j = 0; j < gw; j++) {
@@ -420,28 +435,57 @@ export class BlendKernel {
     return new Int32Array(buf, at + 4 * n, n).slice();
   }
 
-  /** blendBand's accumulator, or null where this call does not fit (the loops then blend it). */
-  band(g, imgs, disp, jobs, cubic, y0, y1) {
-    const { P, Wp, Hp, H, W } = g, n = (y1 - y0) * W, slotBytes = Hp * Wp * P * 4;
+  /** Views `imgs` (planes of g's layout) in the module's slots (those held kept, the others copied
+   *  in), with `extra` bytes free after the slots: {at: each view's byte address, end: the free
+   *  bytes' address}, or null where they do not fit (the caller's loops then do the work). */
+  _place(g, imgs, extra) {
+    const { P, Wp, Hp } = g, slotBytes = Hp * Wp * P * 4;
     if (imgs.some((m) => m.length !== Hp * Wp * P) || imgs.length * slotBytes > BlendKernel.SLOT_BYTES) return null;
     if (slotBytes !== this.slotBytes) { this.slots = []; this.slotBytes = slotBytes; }
-    const { slot: at, fresh } = assignSlots(this.slots, imgs, Math.max(imgs.length, BlendKernel.KEEP_VIEWS), ++this.clock);
-    const SLOTS = 64, dispAt = SLOTS + this.slots.length * slotBytes, accAt = dispAt + n * 4;
-    if (!growTo(this.mem, accAt + n * P * 4)) {              // (no memory to grow into: the loops)
+    const { slot, fresh } = assignSlots(this.slots, imgs, Math.max(imgs.length, BlendKernel.KEEP_VIEWS), ++this.clock);
+    const SLOTS = 64, end = SLOTS + this.slots.length * slotBytes;
+    if (!growTo(this.mem, end + extra)) {                      // (no memory to grow into: the loops)
       this.slots = [];
       return null;
     }
-    const buf = this.mem.buffer;
     for (const [i, img] of fresh) {
-      new Int32Array(buf, SLOTS + i * slotBytes, Hp * Wp * P).set(img);
+      new Int32Array(this.mem.buffer, SLOTS + i * slotBytes, Hp * Wp * P).set(img);
       this.copies += 1;
     }
+    return { at: slot.map((i) => SLOTS + i * slotBytes), end };
+  }
+
+  /** The robust choice's costs of one candidate (Renderer._consistent's samples and weighted
+   *  variance; the same float32 values): a Float32Array (gh·gw), or null where the views do not
+   *  fit. jobs: per source [ds, dt, wf (a float32 value), warp coefficients or null]. */
+  costs(g, imgs, jobs, D, gh, gw, step) {
+    const G = gh * gw, nq = jobs.length;
+    const got = this._place(g, imgs, 8 * G + 8 + nq * 100);
+    if (!got) return null;
+    const { at, end } = got, outAt = end + 4 * G, srcAt = (outAt + 4 * G + 7) & ~7, buf = this.mem.buffer;
+    new Float32Array(buf, end, G).set(D);
+    const iv = new Int32Array(buf, srcAt, nq * 24), fv = new Float64Array(buf, srcAt, nq * 12);
+    jobs.forEach(([ds, dt, wf, wc], q) => {
+      iv[24 * q] = at[q];
+      iv[24 * q + 1] = wc ? 1 : 0;
+      fv.set([Math.fround(ds), Math.fround(dt), wf, ...(wc || [0, 0, 0, 0, 0, 0])], 12 * q + 1);
+    });
+    this.inst.exports.cost(end, outAt, gh, gw, step, g.W, g.H, g.Wp, g.Hp, g.P, srcAt, nq, srcAt + nq * 96);
+    return new Float32Array(buf, outAt, G).slice();
+  }
+
+  /** blendBand's accumulator, or null where this call does not fit (the loops then blend it). */
+  band(g, imgs, disp, jobs, cubic, y0, y1) {
+    const { P, Wp, Hp, H, W } = g, n = (y1 - y0) * W;
+    const got = this._place(g, imgs, n * 4 + n * P * 4);
+    if (!got) return null;
+    const { at, end: dispAt } = got, accAt = dispAt + n * 4, buf = this.mem.buffer;
     new Float32Array(buf, dispAt, n).set(disp.subarray(0, n));
     new Float32Array(buf, accAt, n * P).fill(0);
     const blend = this.inst.exports.blend, wcs = new Float64Array(buf, 16, 6);
     jobs.forEach(([ds, dt, wf, wc], j) => {
       if (wc) wcs.set(wc);
-      blend(SLOTS + at[j] * slotBytes, dispAt, accAt, W, H, Wp, Hp, P, y0, y1, ds, dt, wf, wc ? 16 : 0, cubic ? 1 : 0);
+      blend(at[j], dispAt, accAt, W, H, Wp, Hp, P, y0, y1, ds, dt, wf, wc ? 16 : 0, cubic ? 1 : 0);
     });
     return new Float32Array(buf, accAt, n * P).slice();
   }

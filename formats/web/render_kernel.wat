@@ -154,4 +154,92 @@
         (i32.trunc_sat_f32_s (f32.nearest (f32.load (i32.add (local.get $src) (local.get $i))))))
       (local.set $i (i32.add (local.get $i) (i32.const 4)))
       (br $t))))
+
+  ;; the robust choice's costs of one candidate (render.js _consistent: _sampleGrid's bilinear
+  ;; samples of plane 0 of each source at a gh×gw grid of every `step`-th pixel, displaced by the
+  ;; candidate disparities D (float32, G), then the weighted variance of the samples about their
+  ;; blend, in float32 as there): out (float32, G). Sources: `nq` records of 96 bytes at `src`
+  ;; (planes' byte address (int32), warps? (int32), dsf, dtf, wf (doubles holding float32
+  ;; values), the 6 warp coefficients (doubles)); `tmp`: nq float32 of scratch.
+  (func (export "cost") (param $D i32) (param $out i32) (param $gh i32) (param $gw i32) (param $step i32)
+                        (param $W i32) (param $H i32) (param $Wp i32) (param $Hp i32) (param $P i32)
+                        (param $src i32) (param $nq i32) (param $tmp i32)
+    (local $gy i32) (local $gx i32) (local $k i32) (local $q i32) (local $r i32) (local $dd f64) (local $y f64) (local $x f64)
+    (local $Y f64) (local $X f64) (local $Hm f64) (local $Wm f64) (local $iy i32) (local $ix i32) (local $fy f64) (local $fx f64)
+    (local $y1 i32) (local $x1 i32) (local $img i32) (local $a f64) (local $v f64) (local $e f64) (local $smp f64)
+    (local $Hp1 i32) (local $Wp1 i32)
+    (local.set $Hm (f64.convert_i32_s (i32.sub (local.get $H) (i32.const 1))))
+    (local.set $Wm (f64.convert_i32_s (i32.sub (local.get $W) (i32.const 1))))
+    (local.set $Hp1 (i32.sub (local.get $Hp) (i32.const 1)))
+    (local.set $Wp1 (i32.sub (local.get $Wp) (i32.const 1)))
+    (block $ydone (loop $yloop
+      (br_if $ydone (i32.ge_s (local.get $gy) (local.get $gh)))
+      (local.set $y (f64.convert_i32_s (i32.mul (local.get $gy) (local.get $step))))
+      (local.set $gx (i32.const 0))
+      (block $xdone (loop $xloop
+        (br_if $xdone (i32.ge_s (local.get $gx) (local.get $gw)))
+        (local.set $x (f64.convert_i32_s (i32.mul (local.get $gx) (local.get $step))))
+        (local.set $dd (f64.promote_f32 (f32.load (i32.add (local.get $D) (i32.shl (local.get $k) (i32.const 2))))))
+        (local.set $a (f64.const 0))
+        (local.set $q (i32.const 0))
+        (block $qdone (loop $qloop
+          (br_if $qdone (i32.ge_s (local.get $q) (local.get $nq)))
+          (local.set $r (i32.add (local.get $src) (i32.mul (local.get $q) (i32.const 96))))
+          ;; Y = f32(y + f32(dd·dsf)), X likewise; plus the warp's offset; clamped to the frame
+          (local.set $Y (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $y)
+            (f64.promote_f32 (f32.demote_f64 (f64.mul (local.get $dd) (f64.load offset=8 (local.get $r)))))))))
+          (local.set $X (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $x)
+            (f64.promote_f32 (f32.demote_f64 (f64.mul (local.get $dd) (f64.load offset=16 (local.get $r)))))))))
+          (if (i32.load offset=4 (local.get $r)) (then
+            (local.set $Y (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $Y) (f64.promote_f32 (f32.demote_f64
+              (f64.add (f64.add (f64.mul (f64.load offset=32 (local.get $r)) (local.get $y)) (f64.mul (f64.load offset=40 (local.get $r)) (local.get $x)))
+                       (f64.load offset=48 (local.get $r)))))))))
+            (local.set $X (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $X) (f64.promote_f32 (f32.demote_f64
+              (f64.add (f64.add (f64.mul (f64.load offset=56 (local.get $r)) (local.get $y)) (f64.mul (f64.load offset=64 (local.get $r)) (local.get $x)))
+                       (f64.load offset=72 (local.get $r)))))))))))
+          (local.set $Y (select (f64.const 0) (select (local.get $Hm) (local.get $Y) (f64.gt (local.get $Y) (local.get $Hm))) (f64.lt (local.get $Y) (f64.const 0))))
+          (local.set $X (select (f64.const 0) (select (local.get $Wm) (local.get $X) (f64.gt (local.get $X) (local.get $Wm))) (f64.lt (local.get $X) (f64.const 0))))
+          (local.set $iy (i32.trunc_f64_s (f64.floor (local.get $Y))))
+          (local.set $ix (i32.trunc_f64_s (f64.floor (local.get $X))))
+          (local.set $fy (f64.sub (local.get $Y) (f64.convert_i32_s (local.get $iy))))
+          (local.set $fx (f64.sub (local.get $X) (f64.convert_i32_s (local.get $ix))))
+          (local.set $y1 (select (i32.add (local.get $iy) (i32.const 1)) (local.get $Hp1) (i32.lt_s (i32.add (local.get $iy) (i32.const 1)) (local.get $Hp1))))
+          (local.set $x1 (select (i32.add (local.get $ix) (i32.const 1)) (local.get $Wp1) (i32.lt_s (i32.add (local.get $ix) (i32.const 1)) (local.get $Wp1))))
+          (local.set $img (i32.load (local.get $r)))
+          ;; (a·(1 − fx) + b·fx)·(1 − fy) + (c·(1 − fx) + e·fx)·fy, plane 0, stored as float32
+          (local.set $smp (f64.promote_f32 (f32.demote_f64 (f64.add
+            (f64.mul (f64.add (f64.mul (f64.convert_i32_s (i32.load (i32.add (local.get $img) (i32.shl (i32.mul (i32.add (i32.mul (local.get $iy) (local.get $Wp)) (local.get $ix)) (local.get $P)) (i32.const 2)))))
+                                       (f64.sub (f64.const 1) (local.get $fx)))
+                              (f64.mul (f64.convert_i32_s (i32.load (i32.add (local.get $img) (i32.shl (i32.mul (i32.add (i32.mul (local.get $iy) (local.get $Wp)) (local.get $x1)) (local.get $P)) (i32.const 2)))))
+                                       (local.get $fx)))
+                     (f64.sub (f64.const 1) (local.get $fy)))
+            (f64.mul (f64.add (f64.mul (f64.convert_i32_s (i32.load (i32.add (local.get $img) (i32.shl (i32.mul (i32.add (i32.mul (local.get $y1) (local.get $Wp)) (local.get $ix)) (local.get $P)) (i32.const 2)))))
+                                       (f64.sub (f64.const 1) (local.get $fx)))
+                              (f64.mul (f64.convert_i32_s (i32.load (i32.add (local.get $img) (i32.shl (i32.mul (i32.add (i32.mul (local.get $y1) (local.get $Wp)) (local.get $x1)) (local.get $P)) (i32.const 2)))))
+                                       (local.get $fx)))
+                     (local.get $fy))))))
+          (f32.store (i32.add (local.get $tmp) (i32.shl (local.get $q) (i32.const 2))) (f32.demote_f64 (local.get $smp)))
+          ;; a = f32(a + f32(wf·smp))
+          (local.set $a (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $a)
+            (f64.promote_f32 (f32.demote_f64 (f64.mul (f64.load offset=24 (local.get $r)) (local.get $smp))))))))
+          (local.set $q (i32.add (local.get $q) (i32.const 1)))
+          (br $qloop)))
+        ;; v = Σ f32(v + f32(wf·f32(e·e))), e = f32(smp − a)
+        (local.set $v (f64.const 0))
+        (local.set $q (i32.const 0))
+        (block $vdone (loop $vloop
+          (br_if $vdone (i32.ge_s (local.get $q) (local.get $nq)))
+          (local.set $e (f64.promote_f32 (f32.demote_f64 (f64.sub
+            (f64.promote_f32 (f32.load (i32.add (local.get $tmp) (i32.shl (local.get $q) (i32.const 2))))) (local.get $a)))))
+          (local.set $v (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $v) (f64.promote_f32 (f32.demote_f64
+            (f64.mul (f64.load offset=24 (i32.add (local.get $src) (i32.mul (local.get $q) (i32.const 96))))
+                     (f64.promote_f32 (f32.demote_f64 (f64.mul (local.get $e) (local.get $e)))))))))))
+          (local.set $q (i32.add (local.get $q) (i32.const 1)))
+          (br $vloop)))
+        (f32.store (i32.add (local.get $out) (i32.shl (local.get $k) (i32.const 2))) (f32.demote_f64 (local.get $v)))
+        (local.set $k (i32.add (local.get $k) (i32.const 1)))
+        (local.set $gx (i32.add (local.get $gx) (i32.const 1)))
+        (br $xloop)))
+      (local.set $gy (i32.add (local.get $gy) (i32.const 1)))
+      (br $yloop))))
 )

@@ -207,10 +207,11 @@ def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path
     plane alone) makes blendOne's float32 accumulator bit for bit: 1 (grey), 2 (grey+alpha,
     16-bit), 3 (with per-view warps; the Lytro crop) and 4 (RGBA) planes; bicubic and bilinear;
     the maps, a focus, a synthetic aperture; a band of rows as the workers blend; whole robust
-    frames. A drag inside one cell copies no view into the kernel's memory (they stay there)."""
+    frames; the robust choice's costs (render_kernel.wat cost) and disparities. A drag inside one
+    cell copies no view into the kernel's memory (they stay there)."""
     info = _kernel_tool("web_blend_kernel.mjs", name, sample_files, tmp_path)
     assert info["same"] and info["differ"] == 0, info
-    assert info["copies"] > 0 and info["drag_copies"] == 0, info
+    assert info["copies"] > 0 and info["drag_copies"] == 0 and info["costs_checked"] >= 3, info
 
 
 @pytest.mark.parametrize("name", ["rlfc_tx2_lossless_ga16.lfc", "rlfc_tx4_weighted_rgb8.lfc", "rlfc_tx5_warped_rgb8.lfc",
