@@ -120,6 +120,27 @@ def canvas_rgb(page) -> np.ndarray:
     return np.asarray(data, np.uint8).reshape(h, w, 4)[..., :3]
 
 
+#: the cameras (s, t, focus, aperture, robust) the pixel-equality tests show: robust, not robust,
+#: refocused, a synthetic aperture
+CAMS = [(1.4, 2.7, "null", 0.0, "true"), (2.5, 1.5, "null", 0.0, "false"), (2.2, 2.1, "0.5", 0.0, "true"),
+        (2.0, 2.0, "1.0", 1.5, "true")]
+
+
+def show_cams(page) -> list:
+    """Each of CAMS shown in the open page: [(canvas RGB, show()'s info)]."""
+    out = []
+    for s, t, focus, ap, robust in CAMS:
+        info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
+        out.append((canvas_rgb(page), info))
+    return out
+
+
+def preview_pixels(page) -> np.ndarray:
+    """The page renderer's bilinear preview at the first of CAMS (its pixels, flat)."""
+    return np.asarray(page.evaluate("""async () => {
+        const f = await lfcViewer.renderer.render(1.4, 2.7, {cubic: false}); return Array.from(f.pixels); }"""))
+
+
 def drag(page) -> None:
     """Drag across the canvas (up and to the left) and wait for the frame."""
     box = page.locator("#view").bounding_box()
@@ -163,18 +184,13 @@ def test_novel_views_blend_on_workers_with_the_same_pixels(site, page, name):
     within one cell sends the workers no view again; a worker that cannot load leaves the frame
     to the page's thread."""
     srv, _ = site
-    cams = [(1.4, 2.7, "null", 0.0, "true"), (2.5, 1.5, "null", 0.0, "false"), (2.2, 2.1, "0.5", 0.0, "true"),
-            (2.0, 2.0, "1.0", 1.5, "true")]
     got = {}
     for query in ("&workers=2", "&workers=0"):
         assert open_viewer(page, srv, name, query) == "ready", page.inner_text("#error")
         page.evaluate("lfcViewer.renderer.poolMinPixels = 0")
-        for i, (s, t, focus, ap, robust) in enumerate(cams):
-            info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
-            got[query, i] = canvas_rgb(page), info["workers"]
-        prev = page.evaluate("""async () => { const r = lfcViewer.renderer;
-            const f = await r.render(1.4, 2.7, {cubic: false}); return Array.from(f.pixels); }""")
-        got[query, "preview"] = np.asarray(prev), 0
+        for i, (canvas, info) in enumerate(show_cams(page)):
+            got[query, i] = canvas, info["workers"]
+        got[query, "preview"] = preview_pixels(page), 0
         if query == "&workers=2":
             assert "worker" in page.inner_text("#stats")
             sent = page.evaluate("""async () => { const r = lfcViewer.renderer, p = r.pool; let n = 0;
@@ -182,15 +198,15 @@ def test_novel_views_blend_on_workers_with_the_same_pixels(site, page, name):
                   w.postMessage = (m, tr) => { n += Object.keys(m.send).length; post(m, tr); }; }
                 await r.render(1.45, 2.75); await r.render(1.5, 2.8); return n; }""")
             assert sent == 0
-    for k in range(len(cams)):
+    for k in range(len(CAMS)):
         assert got["&workers=2", k][1] == 1 and got["&workers=0", k][1] == 0
-        assert np.array_equal(got["&workers=2", k][0], got["&workers=0", k][0]), cams[k]
+        assert np.array_equal(got["&workers=2", k][0], got["&workers=0", k][0]), CAMS[k]
     assert np.array_equal(got["&workers=2", "preview"][0], got["&workers=0", "preview"][0])
     page.route("**/render_worker.js", lambda route: route.abort())
     try:
         assert open_viewer(page, srv, name, "&workers=2") == "ready", page.inner_text("#error")
         page.evaluate("lfcViewer.renderer.poolMinPixels = 0")
-        s, t, focus, ap, robust = cams[0]
+        s, t, focus, ap, robust = CAMS[0]
         info = page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
         assert info["workers"] == 0 and np.array_equal(canvas_rgb(page), got["&workers=0", 0][0])
     finally:
@@ -204,20 +220,16 @@ def test_the_blend_on_webassembly_draws_the_loops_canvas(site, page, name):
     lfc.js's loops (&wasm=0), bit for bit, robust, refocused, synthetic-aperture and as a bilinear
     preview; the stats line says which ran."""
     srv, _ = site
-    cams = [(1.4, 2.7, "null", 0.0, "true"), (2.5, 1.5, "null", 0.0, "false"), (2.2, 2.1, "0.5", 0.0, "true"),
-            (2.0, 2.0, "1.0", 1.5, "true")]
     got = {}
     for query in ("&workers=0", "&workers=0&wasm=0"):
         assert open_viewer(page, srv, name, query) == "ready", page.inner_text("#error")
-        for i, (s, t, focus, ap, robust) in enumerate(cams):
-            page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {focus}, aperture: {ap}, robust: {robust}}})")
-            got[query, i] = canvas_rgb(page)
+        for i, (canvas, _) in enumerate(show_cams(page)):
+            got[query, i] = canvas
         stats = page.inner_text("#stats")
         assert ("JS loops" if "wasm=0" in query else "WebAssembly SIMD") in stats.split("frame ")[-1]
         assert ("predicted in JS loops" if "wasm=0" in query else "predicted on WebAssembly SIMD") in stats
-        got[query, "preview"] = np.asarray(page.evaluate("""async () => {
-            const f = await lfcViewer.renderer.render(1.4, 2.7, {cubic: false}); return Array.from(f.pixels); }"""))
-    for k in list(range(len(cams))) + ["preview"]:
+        got[query, "preview"] = preview_pixels(page)
+    for k in list(range(len(CAMS))) + ["preview"]:
         assert np.array_equal(got["&workers=0", k], got["&workers=0&wasm=0", k]), k
 
 
