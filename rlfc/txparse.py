@@ -210,10 +210,15 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     and a symbol's two predecessors in its lane are at the same rank in the two steps before.
     ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1). A group's
     first symbol always counts as a nonzero neighbour, so the symbols after it (j = 1, 2) get
-    that +1 up front and look back only at symbols of their group past the first (j >= 2, 3);
-    the contexts are kept shifted to their slot-table rows (<< PROB_BITS). Each step is one
-    :func:`mag_words` look-up; the buffer is padded by two bytes a step, so the reads need no
-    clamping (the caller's end check refuses a stream that reads past its own bytes).
+    that +1 up front and look back only at symbols of their group past the first (j >= 2, 3):
+    a neighbour adds min(its symbol, g) with g = 1 where it counts, else 0. Each step is one
+    :func:`mag_words` look-up and the rANS update, then the renormalization without a branch:
+    n = [x < L] + [x < L / 256] bytes in (the borrows of two uint32 subtractions), read as one
+    big-endian byte pair, x = x << 8n | pair >> (16 − 8n). Every per-step operation has uint32
+    operands of one type (numpy's per-call cost, not the lanes, bounds a step: a Python scalar
+    operand or a mixed-type cast costs as much as the work). The buffer is padded by two bytes
+    a step, so the reads need no clamping (the caller's end check refuses a stream that reads
+    past its own bytes).
     """
     tot = ctx1.size
     order = np.argsort(-per_lane, kind="stable")
@@ -227,54 +232,67 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     c1 = np.empty(tot, np.uint32)
     c1[sm] = ctx1
     jm = np.empty(tot, np.int8)
-    jm[sm] = np.minimum(j, 3)
+    jm[sm] = np.minimum(j, 3).astype(np.int8)
     c1 += (jm == 1) | (jm == 2)                                        # (contiguous passes from here)
-    c1 <<= PROB_BITS
-    g1 = (jm >= 2).astype(np.uint32) << PROB_BITS                      # the previous symbol counts
-    g2 = (jm >= 3).astype(np.uint32) << PROB_BITS                      # ... and the one before it
+    g1 = (jm >= 2).astype(np.uint32)                                   # the previous symbol counts
+    g2 = (jm >= 3).astype(np.uint32)                                   # ... and the one before it
     del jm
-    words = np.empty(tot, np.uint32)                                   # each symbol's table word
-    nz = np.zeros(tot, bool)
+    syms = np.empty(tot, np.uint32)
+    syms.fill(0)                                  # (its pages touched once here, not a step at a time)
     tab = mag_words(tables)
-    x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order]
+    x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order].astype(np.intp)
     buf, top = dec.buf, dec.top
-    bufp = np.concatenate([buf[:top + 1], np.zeros(2 * K + 2, np.uint8)])
+    bufp = np.concatenate([buf[:top + 1], np.zeros(2 * K + 3, np.uint8)])
+    pair = bufp[:-1].astype(np.uint32)                                 # bytes p, p + 1 big-endian
+    pair <<= 8
+    pair |= bufp[1:]
+    ta, tb = np.empty(S, np.uint32), np.empty(S, np.uint32)
     offl = offs.tolist()
     for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
         if m < TAIL_LANES:                                             # few lanes left: plain Python
-            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables)
+            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables)
             break
+        c, a, b = c1[o:o + m], ta[:m], tb[:m]
         if k >= 1:
             o1 = offl[k - 1]
-            c = c1[o:o + m] + nz[o1:o1 + m] * g1[o:o + m]
+            np.minimum(syms[o1:o1 + m], g1[o:o + m], out=a)
+            c += a
             if k >= 2:
                 o2 = offl[k - 2]
-                c += nz[o2:o2 + m] * g2[o:o + m]
-        else:
-            c = c1[o:o + m].copy()
+                np.minimum(syms[o2:o2 + m], g2[o:o + m], out=a)
+                c += a
+        c <<= _U12
         x = x_all[:m]
-        c |= x & _MASK
-        w = words[o:o + m]
-        np.take(tab, c, out=w, mode="clip")        # (c is in range; "raise" buffers the output)
-        fr = (w >> 12) & 0x1FFF
-        fr *= x >> PROB_BITS
-        np.add(fr, w & 0xFFF, out=x)
+        np.bitwise_and(x, _UMASK, out=a)
+        c |= a
+        w = tab.take(c)                                                # (c is in range)
+        np.right_shift(w, _U25, out=syms[o:o + m])
+        np.right_shift(w, _U12, out=b)                                 # x = freq·(x >> 12) + slot − cum
+        b &= _UFREQ
+        np.right_shift(x, _U12, out=a)
+        b *= a
+        np.bitwise_and(w, _USLOT, out=a)
+        np.add(b, a, out=x)
+        np.subtract(x, _UL, out=a)                                     # n = [x < L] + [x < L / 256]
+        a >>= _U31
+        np.subtract(x, _UL8, out=b)
+        b >>= _U31
+        a += b
         p = p_all[:m]
-        need = x < RANS_L
-        np.copyto(x, (x << 8) | bufp[p], where=need)
-        p += need
-        if x.min() < RANS_L:                                           # a second byte (most steps of many lanes)
-            need = x < RANS_L
-            np.copyto(x, (x << 8) | bufp[p], where=need)
-            p += need
-        np.greater_equal(w, _MAG_NZ, out=nz[o:o + m])
+        v = pair.take(p)
+        np.add(p, a, out=p, casting="unsafe")
+        a <<= _U3
+        x <<= a
+        np.subtract(_U16, a, out=b)
+        v >>= b
+        x |= v
     dec.x[order], dec.ptr[order] = x_all, p_all
-    return np.right_shift(words, 25, out=words).astype(np.uint8)[sm]
+    return syms.astype(np.uint8)[sm]
 
 
-def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf, top, tables) -> None:
+def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables) -> None:
     """:func:`_magnitudes` from step ``k`` on, where only ranks [0, m) have symbols left: each
-    lane to its end in plain Python (the same integers; a numpy step costs ~20 calls whatever
+    lane to its end in plain Python (the same integers; a numpy step costs ~25 calls whatever
     the lanes). Reads past the buffer are clamped as in the numpy steps (the caller's end check
     refuses such a stream)."""
     o0 = offl[k]
@@ -284,11 +302,11 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf,
     out = []
     for r in range(m):
         x, p = int(x_all[r]), int(p_all[r])
-        n1 = bool(nz[offl[k - 1] + r]) if k >= 1 else False        # the lane's two previous symbols
-        n2 = bool(nz[offl[k - 2] + r]) if k >= 2 else False
+        n1 = bool(syms[offl[k - 1] + r]) if k >= 1 else False       # the lane's two previous symbols
+        n2 = bool(syms[offl[k - 2] + r]) if k >= 2 else False
         for kk in range(k, int(lens[r])):
             i = offl[kk] + r - o0
-            c = c1l[i] + (g1l[i] if n1 else 0) + (g2l[i] if n2 else 0)
+            c = (c1l[i] + (g1l[i] if n1 else 0) + (g2l[i] if n2 else 0)) << PROB_BITS
             w = tab[c | (x & _MASK)]
             x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
             if x < RANS_L:                 # at most two bytes, as the numpy steps (x >= 8 after a
@@ -297,16 +315,22 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, nz, words, x_all, p_all, buf,
                 if x < RANS_L:
                     x = (x << 8) | data[p if p < top else top]
                     p += 1
-            out.append((i, w))
-            n2, n1 = n1, w >= _MAG_NZ_INT
+            s = w >> 25
+            out.append((i, s))
+            n2, n1 = n1, s > 0
         x_all[r], p_all[r] = x, p
     if out:
         idx, val = np.array(out, np.int64).T
-        words[o0 + idx] = val
+        syms[o0 + idx] = val
 
 
-_MAG_NZ_INT = 1 << 25
-_MAG_NZ = np.uint32(_MAG_NZ_INT)          # a word of a nonzero symbol is at least this
+def _u32(v: int) -> np.ndarray:
+    return np.array(v, np.uint32)
+
+
+# the magnitude steps' operands: 0-d uint32 arrays (a Python int operand costs a step ~1 µs a call)
+_U3, _U12, _U16, _U25, _U31 = _u32(3), _u32(12), _u32(16), _u32(25), _u32(31)
+_UMASK, _UFREQ, _USLOT, _UL, _UL8 = _u32(_MASK), _u32(0x1FFF), _u32(0xFFF), _u32(RANS_L), _u32(RANS_L >> 8)
 
 
 def mag_words(tables: Tables) -> np.ndarray:

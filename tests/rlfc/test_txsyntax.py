@@ -335,17 +335,16 @@ def test_the_plain_python_tail_of_a_zero_state_ends():
     stays 0 and the pointer moves two bytes a symbol (the caller's end check refuses the
     stream)."""
     from rlfc.txsyntax import CTX_MAG
-    from rlfc.rans import PROB_BITS
 
     rng = np.random.default_rng(0)
     modes, levels = _random_blocks(rng, 2, 1, 1, 1.0, False)
     _, tables = _encode(modes, levels, np.zeros(2, np.int64), np.zeros(2, np.int64), tx.plane_classes(1))
     n = 3                                                                # symbols of the one lane
-    c1 = np.full(n, CTX_MAG << PROB_BITS, np.uint32)
+    c1 = np.full(n, CTX_MAG, np.uint32)
     x_all, p_all = np.zeros(1, np.uint32), np.zeros(1, np.int64)
     buf = np.zeros(4, np.uint8)
     args = (0, 1, list(range(n)), np.array([n]), c1, np.zeros(n, np.uint32), np.zeros(n, np.uint32),
-            np.zeros(n, bool), np.zeros(n, np.uint32), x_all, p_all, buf, buf.size - 1, tables)
+            np.zeros(n, np.uint32), x_all, p_all, buf, buf.size - 1, tables)
     run = threading.Thread(target=px._magnitudes_tail, args=args, daemon=True)   # (a hang fails, not blocks)
     run.start()
     run.join(30)
