@@ -1,0 +1,22 @@
+import sys, pickle, numpy as np
+import rlfc.txparse as tp
+caps = []
+orig = tp._magnitudes
+def wrap(dec, tables, S, per_lane, lane_start, j, ctx1):
+    caps.append(dict(x=dec.x.copy(), ptr=dec.ptr.copy(), buf=dec.buf, top=dec.top, tables=tables, S=S, per_lane=per_lane, lane_start=lane_start, j=j, ctx1=ctx1))
+    r = orig(dec, tables, S, per_lane, lane_start, j, ctx1)
+    caps[-1]["out"] = r; caps[-1]["x_after"] = dec.x.copy(); caps[-1]["ptr_after"] = dec.ptr.copy()
+    return r
+tp._magnitudes = wrap
+from formats.lfcfile import open_lfc
+from rlfc import RlfcDecoder
+import rlfc.render
+for name in sys.argv[1:]:
+    d3 = RlfcDecoder(open_lfc(f"/tmp/dec/{name}.lfc"))
+    rad = min(d3.rows, d3.cols) / 3
+    d3.renderer(cache_mib=1024).render((d3.rows - 1) / 2, (d3.cols - 1) / 2 + rad)
+    d3.decode_view(d3.rows//2, d3.cols//2 + 1)
+for c in caps:
+    c["tables"] = (c["tables"].freq, c["tables"].cum)
+pickle.dump(caps, open("/tmp/w87/caps.pkl", "wb"))
+print(len(caps), [c["S"] for c in caps], [c["ctx1"].size for c in caps])
