@@ -242,15 +242,23 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
     tab = mag_words(tables)
     x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order].astype(np.intp)
     buf, top = dec.buf, dec.top
-    bufp = np.concatenate([buf[:top + 1], np.zeros(2 * K + 3, np.uint8)])
+    # the bytes the steps can read (at most two a symbol), as pairs from the lowest pointer on, and
+    # zeros past the buffer (whose last bytes are slack; the end check refuses a stream read there)
+    lo, pmax = (int(p_all.min()), int(p_all.max())) if S else (0, 0)
+    lo = min(lo, top + 1)
+    hi = max(min(pmax + 2 * K + 2, top + 1), lo)
+    bufp = np.concatenate([buf[lo:hi], np.zeros(pmax + 2 * K + 4 - hi, np.uint8)])
     pair = bufp[:-1].astype(np.uint32)                                 # bytes p, p + 1 big-endian
     pair <<= 8
     pair |= bufp[1:]
+    p_all -= lo                                                        # (pointers into the pairs)
     ta, tb = np.empty(S, np.uint32), np.empty(S, np.uint32)
     offl = offs.tolist()
     for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
         if m < TAIL_LANES:                                             # few lanes left: plain Python
+            p_all += lo
             _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables)
+            p_all -= lo
             break
         c, a, b = c1[o:o + m], ta[:m], tb[:m]
         if k >= 1:
@@ -286,6 +294,7 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
         np.subtract(_U16, a, out=b)
         v >>= b
         x |= v
+    p_all += lo
     dec.x[order], dec.ptr[order] = x_all, p_all
     return syms.astype(np.uint8)[sm]
 

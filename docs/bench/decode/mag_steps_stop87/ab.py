@@ -2,7 +2,7 @@
 import sys, pickle, time, importlib.util, numpy as np
 sys.path.insert(0, "/work/main")
 from rlfc.rans import Tables
-caps = pickle.load(open("/tmp/w87/caps.pkl", "rb"))
+import os; caps = pickle.load(open(os.environ.get("CAPS", "/tmp/w87/caps.pkl"), "rb"))
 def load(path, name):
     spec = importlib.util.spec_from_file_location(name, path); m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); return m
 sys.path.insert(0, "/tmp/w87/oldpkg"); import rlfc_old.txparse as old; import rlfc.txparse as cur
