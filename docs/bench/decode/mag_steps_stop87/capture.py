@@ -1,4 +1,5 @@
-import sys, pickle, numpy as np
+"""Captures the _magnitudes calls of a first frame and a view (run on the code before: PYTHONPATH=OLD) with their outputs into caps.pkl for ab.py."""
+import sys, pickle
 import rlfc.txparse as tp
 caps = []
 orig = tp._magnitudes
@@ -10,7 +11,7 @@ def wrap(dec, tables, S, per_lane, lane_start, j, ctx1):
 tp._magnitudes = wrap
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
-import rlfc.render
+import rlfc.render  # noqa: F401  (its modules warm)
 for name in sys.argv[1:]:
     d3 = RlfcDecoder(open_lfc(f"/tmp/dec/{name}.lfc"))
     rad = min(d3.rows, d3.cols) / 3

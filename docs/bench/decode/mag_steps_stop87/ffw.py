@@ -1,7 +1,8 @@
+"""One fresh process: first frame, a fresh view and a second view of FILE (ms, JSON); ff_ab.py runs it on two checkouts alternated."""
 import sys, time, json
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
-import rlfc.render
+import rlfc.render  # noqa: F401  (its modules warm)
 path = sys.argv[1]
 RlfcDecoder(open_lfc(path)).decode_block(0, 0, 0, 0)
 out = {}
