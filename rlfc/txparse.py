@@ -302,21 +302,22 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
 def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables) -> None:
     """:func:`_magnitudes` from step ``k`` on, where only ranks [0, m) have symbols left: each
     lane to its end in plain Python (the same integers; a numpy step costs ~25 calls whatever
-    the lanes). Reads past the buffer are clamped as in the numpy steps (the caller's end check
+    the lanes), its contexts gathered first (numpy, a lane at a time) and its symbols stored
+    after. Reads past the buffer are clamped as in the numpy steps (the caller's end check
     refuses such a stream)."""
-    o0 = offl[k]
-    c1l, g1l, g2l = c1[o0:].tolist(), g1[o0:].tolist(), g2[o0:].tolist()
+    offs = np.asarray(offl[k:], np.int64)
     tab = memoryview(mag_words(tables))
     data = memoryview(buf)
-    out = []
     for r in range(m):
         x, p = int(x_all[r]), int(p_all[r])
         n1 = bool(syms[offl[k - 1] + r]) if k >= 1 else False       # the lane's two previous symbols
         n2 = bool(syms[offl[k - 2] + r]) if k >= 2 else False
-        for kk in range(k, int(lens[r])):
-            i = offl[kk] + r - o0
-            c = (c1l[i] + (g1l[i] if n1 else 0) + (g2l[i] if n2 else 0)) << PROB_BITS
-            w = tab[c | (x & _MASK)]
+        at = offs[:int(lens[r]) - k] + r                             # the lane's places, step-major
+        out = []
+        put = out.append
+        for b, u, v in zip((c1[at] << PROB_BITS).tolist(), (g1[at] << PROB_BITS).tolist(),
+                           (g2[at] << PROB_BITS).tolist()):
+            w = tab[(b + (u if n1 else 0) + (v if n2 else 0)) | (x & _MASK)]
             x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
             if x < RANS_L:                 # at most two bytes, as the numpy steps (x >= 8 after a
                 x = (x << 8) | data[p if p < top else top]   # step of a state >= RANS_L; a damaged
@@ -325,12 +326,10 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top,
                     x = (x << 8) | data[p if p < top else top]
                     p += 1
             s = w >> 25
-            out.append((i, s))
+            put(s)
             n2, n1 = n1, s > 0
+        syms[at] = out
         x_all[r], p_all[r] = x, p
-    if out:
-        idx, val = np.array(out, np.int64).T
-        syms[o0 + idx] = val
 
 
 def _u32(v: int) -> np.ndarray:
