@@ -114,20 +114,17 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     if S == 0:
         return Parsed(modes, np.zeros(0, np.int64), np.zeros(0, np.int64), P)
     dec = LaneDecoder(xp, buf, starts.astype(np.int64), tables)
-    lanes = np.arange(S)
-    prev = np.full(S, 3, np.int64)
-    for t in range(nt):
-        s = dec.step(lanes, ctx_mode(kind, prev))
-        modes[:, t] = s
-        prev = s
+    modes[...] = _modes(dec, tables, kind, nt)
     if (modes >= N_MODES).any():
         raise FormatError(f"{name}: tx block has an undefined tb mode")
+    # last positions: per lane, those of its coded tbs' planes in order (t, then p)
+    coded = modes != MODE_SKIP
+    ct = np.flatnonzero(coded.reshape(-1))                              # lane·nt + t of coded tbs
+    n_last = coded.sum(axis=1) * P
+    at = (ct[:, None] * P + np.arange(P)).reshape(-1)                   # lane-major: (lane·nt + t)·P + p
+    c_last = ctx_last(np.tile(pcs, ct.size), np.repeat(modes.reshape(-1)[ct], P), np.repeat(key[ct // nt], P))
     last = np.zeros((S, nt, P), np.int64)
-    for t in range(nt):
-        for p in range(P):
-            act = np.flatnonzero(modes[:, t] != MODE_SKIP)
-            if act.size:
-                last[act, t, p] = dec.step(act, ctx_last(pcs[p], modes[act, t], key[act]))
+    last.reshape(-1)[at] = _lasts(dec, tables, n_last, c_last)
     if (last > 64).any():
         raise FormatError(f"{name}: tx block has a last position past 64")
     # magnitudes: per lane, groups g = (lane, t, p) in order, each of length last; symbol j of a
@@ -202,66 +199,148 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
 
 def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, j, ctx1) -> np.ndarray:
     """The magnitude symbols of every lane (flat, lane-major, uint8), decoded in steps over the lanes
-    that still have symbols.
+    that still have symbols (:func:`_ragged`).
 
-    Step-major layout: lanes are ranked by their number of symbols (longest first), so the
-    lanes active at step k are ranks [0, m_k) and symbol k of rank r sits at offs[k] + r: every
-    per-step read and write is a contiguous slice (the lanes' states too, kept in rank order),
-    and a symbol's two predecessors in its lane are at the same rank in the two steps before.
     ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1). A group's
     first symbol always counts as a nonzero neighbour, so the symbols after it (j = 1, 2) get
     that +1 up front and look back only at symbols of their group past the first (j >= 2, 3):
-    a neighbour adds min(its symbol, g) with g = 1 where it counts, else 0. Each step is one
-    :func:`mag_words` look-up and the rANS update, then the renormalization without a branch:
-    n = [x < L] + [x < L / 256] bytes in (the borrows of two uint32 subtractions), read as one
-    big-endian byte pair, x = x << 8n | pair >> (16 − 8n). Every per-step operation has uint32
-    operands of one type (numpy's per-call cost, not the lanes, bounds a step: a Python scalar
-    operand or a mixed-type cast costs as much as the work). The buffer is padded by two bytes
-    a step, so the reads need no clamping (the caller's end check refuses a stream that reads
-    past its own bytes).
+    a neighbour adds min(its symbol, g) with g = 1 where it counts, else 0.
     """
-    tot = ctx1.size
-    order = np.argsort(-per_lane, kind="stable")
-    rank = np.empty(S, np.int64)
-    rank[order] = np.arange(S)
-    lens = per_lane[order]
-    K = int(lens[0]) if S else 0
-    cnt = np.searchsorted(-lens, -np.arange(K), side="left")          # lanes with more than k symbols
-    offs = np.cumsum(cnt) - cnt
-    sm = offs[np.arange(tot) - np.repeat(lane_start, per_lane)] + np.repeat(rank, per_lane)   # lane-major → step-major
-    c1 = np.empty(tot, np.uint32)
+    plan = _Plan(per_lane, lane_start)
+    sm = plan.sm
+    c1 = np.empty(ctx1.size, np.uint32)
     c1[sm] = ctx1
-    jm = np.empty(tot, np.int8)
+    jm = np.empty(ctx1.size, np.int8)
     jm[sm] = np.minimum(j, 3).astype(np.int8)
     c1 += (jm == 1) | (jm == 2)                                        # (contiguous passes from here)
     g1 = (jm >= 2).astype(np.uint32)                                   # the previous symbol counts
     g2 = (jm >= 3).astype(np.uint32)                                   # ... and the one before it
     del jm
-    syms = np.empty(tot, np.uint32)
-    syms.fill(0)                                  # (its pages touched once here, not a step at a time)
+    return _ragged(dec, tables, plan, c1, g1, g2).astype(np.uint8)[sm]
+
+
+def _lasts(dec: LaneDecoder, tables: Tables, n: np.ndarray, ctx: np.ndarray) -> np.ndarray:
+    """``n[i]`` symbols of each lane i with contexts ``ctx`` (flat, lane-major; no neighbours),
+    decoded by :func:`_ragged`: (Σn,) uint32, lane-major."""
+    plan = _Plan(n, np.cumsum(n) - n)
+    c1 = np.empty(ctx.size, np.uint32)
+    c1[plan.sm] = ctx
+    return _ragged(dec, tables, plan, c1, None, None)[plan.sm]
+
+
+def _modes(dec: LaneDecoder, tables: Tables, kind: np.ndarray, nt: int) -> np.ndarray:
+    """The nt tb modes of every lane, (S, nt) uint32: each in the context of the lane's kind and
+    previous mode (3 before the first), in the steps of :func:`_step`."""
+    S = kind.size
+    out = np.empty((nt, S), np.uint32)
+    x, p = dec.x.astype(np.uint32), dec.ptr.astype(np.intp)
+    pair, lo = _pairs(dec, p, nt)
+    base = (ctx_mode(np.asarray(kind, np.int64), 0)).astype(np.uint32)
+    prev = np.full(S, 3, np.uint32)
+    c, a, b = np.empty(S, np.uint32), np.empty(S, np.uint32), np.empty(S, np.uint32)
     tab = mag_words(tables)
-    x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order].astype(np.intp)
+    for t in range(nt):
+        np.add(base, prev, out=c)
+        c <<= _U12
+        _step(tab, pair, c, x, p, a, b, out[t])
+        prev = out[t]
+    p += lo
+    dec.x[:], dec.ptr[:] = x, p
+    return out.T
+
+
+class _Plan:
+    """Lanes of ``per_lane`` symbols each (lane-major from ``lane_start``) in step-major order:
+    lanes ranked by their number of symbols (longest first), so that the lanes active at step k
+    are ranks [0, m_k) and symbol k of rank r sits at offs[k] + r (``sm``: each lane-major
+    symbol's step-major place)."""
+
+    def __init__(self, per_lane: np.ndarray, lane_start: np.ndarray):
+        S, tot = per_lane.size, int(per_lane.sum())
+        self.order = order = np.argsort(-per_lane, kind="stable")
+        rank = np.empty(S, np.int64)
+        rank[order] = np.arange(S)
+        self.lens = lens = per_lane[order]
+        self.K = K = int(lens[0]) if S else 0
+        self.cnt = cnt = np.searchsorted(-lens, -np.arange(K), side="left")   # lanes with more than k symbols
+        self.offs = offs = np.cumsum(cnt) - cnt
+        self.sm = offs[np.arange(tot) - np.repeat(lane_start, per_lane)] + np.repeat(rank, per_lane)
+
+
+def _pairs(dec: LaneDecoder, p_all: np.ndarray, K: int) -> tuple:
+    """(pair, lo): the bytes ``K`` steps of lanes at pointers ``p_all`` can read (at most two a
+    symbol), as big-endian pairs (uint32: bytes p, p + 1) from the lowest pointer lo on, and
+    zeros past the buffer (whose last bytes are slack; the end check refuses a stream read
+    there). ``p_all`` is made relative to lo (the caller adds it back)."""
     buf, top = dec.buf, dec.top
-    # the bytes the steps can read (at most two a symbol), as pairs from the lowest pointer on, and
-    # zeros past the buffer (whose last bytes are slack; the end check refuses a stream read there)
-    lo, pmax = (int(p_all.min()), int(p_all.max())) if S else (0, 0)
+    lo, pmax = (int(p_all.min()), int(p_all.max())) if p_all.size else (0, 0)
     lo = min(lo, top + 1)
     hi = max(min(pmax + 2 * K + 2, top + 1), lo)
     bufp = np.concatenate([buf[lo:hi], np.zeros(pmax + 2 * K + 4 - hi, np.uint8)])
-    pair = bufp[:-1].astype(np.uint32)                                 # bytes p, p + 1 big-endian
+    pair = bufp[:-1].astype(np.uint32)
     pair <<= 8
     pair |= bufp[1:]
-    p_all -= lo                                                        # (pointers into the pairs)
+    p_all -= lo
+    return pair, lo
+
+
+def _step(tab, pair, c, x, p, a, b, out) -> None:
+    """One rANS step of lanes in states ``x`` (uint32) at pointers ``p`` (intp, into ``pair``)
+    with contexts ``c`` (uint32, shifted to their table rows; the slot is or-ed in): the
+    symbols to ``out``, x and p updated in place; ``a``, ``b``: uint32 scratch of the lanes' size.
+
+    One :func:`mag_words` look-up and the rANS update, then the renormalization without a
+    branch: n = [x < L] + [x < L / 256] bytes in (the borrows of two uint32 subtractions), read
+    as one pair, x = x << 8n | pair >> (16 − 8n). Every operation has uint32 operands of one
+    type: numpy's per-call cost, not the lanes, bounds a step, and a Python scalar operand or a
+    mixed-type cast costs as much as the work."""
+    np.bitwise_and(x, _UMASK, out=a)
+    c |= a
+    w = tab.take(c)                                                    # (c is in range)
+    np.right_shift(w, _U25, out=out)
+    np.right_shift(w, _U12, out=b)                                     # x = freq·(x >> 12) + slot − cum
+    b &= _UFREQ
+    np.right_shift(x, _U12, out=a)
+    b *= a
+    np.bitwise_and(w, _USLOT, out=a)
+    np.add(b, a, out=x)
+    np.subtract(x, _UL, out=a)                                         # n = [x < L] + [x < L / 256]
+    a >>= _U31
+    np.subtract(x, _UL8, out=b)
+    b >>= _U31
+    a += b
+    v = pair.take(p)
+    np.add(p, a, out=p, casting="unsafe")
+    a <<= _U3
+    x <<= a
+    np.subtract(_U16, a, out=b)
+    v >>= b
+    x |= v
+
+
+def _ragged(dec: LaneDecoder, tables: Tables, plan: _Plan, c1, g1, g2) -> np.ndarray:
+    """The symbols (step-major, uint32) of lanes laid out by ``plan``, contexts ``c1`` (step-major,
+    unshifted), each plus min(previous symbol, g1) + min(the one before, g2) (step-major; None:
+    no neighbours), one :func:`_step` per symbol index over the lanes still active (contiguous
+    slices: the lanes' states are kept in rank order), the last few lanes in plain Python
+    (:data:`TAIL_LANES`)."""
+    order, lens, K, cnt, offs = plan.order, plan.lens, plan.K, plan.cnt, plan.offs
+    S = order.size
+    syms = np.empty(c1.size, np.uint32)
+    syms.fill(0)                                  # (its pages touched once here, not a step at a time)
+    tab = mag_words(tables)
+    x_all, p_all = dec.x[order].astype(np.uint32), dec.ptr[order].astype(np.intp)
+    pair, lo = _pairs(dec, p_all, K)
     ta, tb = np.empty(S, np.uint32), np.empty(S, np.uint32)
     offl = offs.tolist()
     for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
         if m < TAIL_LANES:                                             # few lanes left: plain Python
             p_all += lo
-            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables)
+            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, dec.buf, dec.top, tables)
             p_all -= lo
             break
-        c, a, b = c1[o:o + m], ta[:m], tb[:m]
-        if k >= 1:
+        c, a = c1[o:o + m], ta[:m]
+        if g1 is not None and k >= 1:
             o1 = offl[k - 1]
             np.minimum(syms[o1:o1 + m], g1[o:o + m], out=a)
             c += a
@@ -270,33 +349,10 @@ def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, 
                 np.minimum(syms[o2:o2 + m], g2[o:o + m], out=a)
                 c += a
         c <<= _U12
-        x = x_all[:m]
-        np.bitwise_and(x, _UMASK, out=a)
-        c |= a
-        w = tab.take(c)                                                # (c is in range)
-        np.right_shift(w, _U25, out=syms[o:o + m])
-        np.right_shift(w, _U12, out=b)                                 # x = freq·(x >> 12) + slot − cum
-        b &= _UFREQ
-        np.right_shift(x, _U12, out=a)
-        b *= a
-        np.bitwise_and(w, _USLOT, out=a)
-        np.add(b, a, out=x)
-        np.subtract(x, _UL, out=a)                                     # n = [x < L] + [x < L / 256]
-        a >>= _U31
-        np.subtract(x, _UL8, out=b)
-        b >>= _U31
-        a += b
-        p = p_all[:m]
-        v = pair.take(p)
-        np.add(p, a, out=p, casting="unsafe")
-        a <<= _U3
-        x <<= a
-        np.subtract(_U16, a, out=b)
-        v >>= b
-        x |= v
+        _step(tab, pair, c, x_all[:m], p_all[:m], a, tb[:m], syms[o:o + m])
     p_all += lo
     dec.x[order], dec.ptr[order] = x_all, p_all
-    return syms.astype(np.uint8)[sm]
+    return syms
 
 
 def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables) -> None:
@@ -315,8 +371,10 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top,
         at = offs[:int(lens[r]) - k] + r                             # the lane's places, step-major
         out = []
         put = out.append
-        for b, u, v in zip((c1[at] << PROB_BITS).tolist(), (g1[at] << PROB_BITS).tolist(),
-                           (g2[at] << PROB_BITS).tolist()):
+        cs = (c1[at] << PROB_BITS).tolist()
+        zero = [0] * len(cs)
+        for b, u, v in zip(cs, zero if g1 is None else (g1[at] << PROB_BITS).tolist(),
+                           zero if g2 is None else (g2[at] << PROB_BITS).tolist()):
             w = tab[(b + (u if n1 else 0) + (v if n2 else 0)) | (x & _MASK)]
             x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
             if x < RANS_L:                 # at most two bytes, as the numpy steps (x >= 8 after a
