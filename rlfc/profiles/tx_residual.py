@@ -23,10 +23,11 @@ from .tx_single import _dequantize_clipped
 PREPARSE_LANES = 4096
 PREPARSE_MIN = 1024
 #: streams are parsed one by one (plain Python, ~1.5 µs per byte) rather than as numpy lanes
-#: stepping together (~85 µs per byte of the longest stream, whatever the number of lanes) while
-#: their bytes sum to less than this many times the longest one's (measured on the dense grids'
-#: key rows: one key's 19-27 rows parse 3-9× faster one by one)
-ONE_BY_ONE_RATIO = 48
+#: stepping together (a step per symbol of the longest stream, whatever the number of lanes) while
+#: their bytes sum to less than this many times the longest one's (stop 87, after the lanes' one-type
+#: steps: 31 parses of six grids both ways, lanes 1.1-3.6× slower below a ratio of ~20, the two
+#: even between 18 and 37, lanes 0.24-0.38× from 48.6 up: BENCHMARKS.md)
+ONE_BY_ONE_RATIO = 40
 
 
 class Residuals:
