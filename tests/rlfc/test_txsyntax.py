@@ -107,11 +107,21 @@ def test_malformed_streams_raise(tail, monkeypatch):
 
 @settings(max_examples=60, deadline=None)
 @given(st.integers(0, 2 ** 31), st.sampled_from([1, 4]), st.sampled_from([1, 3, 4]), st.booleans(),
-       st.integers(1, 4), st.sampled_from(["flip", "cut", "extend"]))
-def test_one_stream_parser_and_lanes_agree_on_damaged_streams(seed, nt, P, big, hits, how):
+       st.integers(1, 4), st.sampled_from(["flip", "cut", "extend"]), st.sampled_from([0, 32]))
+def test_one_stream_parser_and_lanes_agree_on_damaged_streams(seed, nt, P, big, hits, how, tail):
     """Damaged streams (bytes changed, cut short or lengthened): the one-stream parser and the
     lanes parser both refuse a stream with a FormatError, or both give the same syntax (a
-    damaged stream may still be a valid one)."""
+    damaged stream may still be a valid one); the lanes' symbols in numpy steps throughout
+    (tail 0) or, a single lane being under TAIL_LANES, in the plain-Python tail."""
+    old_tail = px.TAIL_LANES
+    px.TAIL_LANES = tail
+    try:
+        _damaged_agree(seed, nt, P, big, hits, how)
+    finally:
+        px.TAIL_LANES = old_tail
+
+
+def _damaged_agree(seed, nt, P, big, hits, how):
     rng = np.random.default_rng(seed)
     modes, levels = _random_blocks(rng, 6, nt, P, 0.7, big)
     kind, key, pcs = rng.integers(0, 2, 6), rng.integers(0, 2, 6), tx.plane_classes(P)
@@ -324,6 +334,48 @@ def test_taking_lanes_gives_their_coefficients(seed, S, nt, P, n):
     for got in (p.take(lanes), p.take(lanes, b)):
         assert got.P == P and (got.modes == p.modes[lanes]).all()
         assert (got.levels == levels[lanes]).all()
+
+
+def test_the_one_type_step_is_the_rans_step_on_every_state():
+    """:func:`rlfc.txparse._step` (uint32 operands, a branchless two-byte renormalization read as
+    byte pairs) against the textbook decode step in Python ints: x = freq·(x >> 12) + slot −
+    cum, then a byte in while x < L, at most two (as every parser reads). States drawn over
+    everything a stream's three state bytes can hold (0 and values past 256·L included, as a
+    damaged stream gives), contexts over the whole table, and the pointers near the end of the
+    bytes, where the pairs read the zeros past them."""
+    from rlfc.rans import L, PROB_BITS, Tables
+
+    rng = np.random.default_rng(7)
+    C, A, n = 6, 9, 4000
+    freq = np.zeros((C, A), np.int64)
+    for c in range(C):                                   # rows summing to M, some symbols absent
+        w = rng.random(A) * (rng.random(A) < 0.8) + 1e-9
+        f = np.maximum(np.floor(w / w.sum() * 4096).astype(np.int64), 0)
+        f[np.argmax(f)] += 4096 - f.sum()
+        freq[c] = f
+    tables = Tables(freq)
+    tab = px.mag_words(tables)
+    x0 = np.concatenate([rng.integers(0, 1 << 24, n - 4), [0, 1, L - 1, (1 << 24) - 1]]).astype(np.uint32)
+    data = rng.integers(0, 256, 64).astype(np.uint8)
+    p0 = rng.integers(0, data.size, n)                   # (up to the last byte: its pair reads a 0)
+    ctx = rng.integers(0, C, n).astype(np.uint32)
+    pair = np.concatenate([data, np.zeros(1, np.uint8)])
+    pair = (pair[:-1].astype(np.uint32) << 8) | pair[1:]
+    pair = np.concatenate([pair, np.zeros(2, np.uint32)])
+    x, p, out = x0.copy(), p0.astype(np.intp), np.empty(n, np.uint32)
+    c = ctx << np.uint32(PROB_BITS)
+    px._step(tab, pair, c, x, p, np.empty(n, np.uint32), np.empty(n, np.uint32), out)
+    slot_t, cum = tables.slot, tables.cum
+    for i in range(n):
+        xi, pi, ci = int(x0[i]), int(p0[i]), int(ctx[i])
+        sl = xi & 4095
+        s = int(slot_t[ci, sl])
+        xi = int(freq[ci, s]) * (xi >> PROB_BITS) + sl - int(cum[ci, s])
+        for _ in range(2):
+            if xi < L:
+                xi = (xi << 8) | (int(data[pi]) if pi < data.size else 0)
+                pi += 1
+        assert (int(out[i]), int(x[i]), int(p[i])) == (s, xi, pi), i
 
 
 def test_the_plain_python_tail_of_a_zero_state_ends():
