@@ -740,12 +740,6 @@ export class TxDecoder {
 
     this.tables = await readTables(await file.read("tx.tables"), N_CTX, ALPHABET, "tx.tables");
     await this._readMaps(await file.read("tx.maps"));
-    for (let i = 0; i < N0; i++) {
-      if (this.cell[i] < 0) continue;
-      const nrefs = this.refs.slice(4 * i, 4 * i + 4).filter((r) => r >= 0).length;
-      const m = this.modes.subarray(this.cell[i] * this.nby8 * this.nbx8, (this.cell[i] + 1) * this.nby8 * this.nbx8);
-      for (const x of m) if (x > nrefs) throw new FormatError(`${name}: tx.maps selects a reference view ${i} does not have`);
-    }
     const intraCoded = this.codedKeys.filter((k) => this.intra[k]);
     this.thumbOf = new Map(intraCoded.map((k, i) => [k, i]));
     this.thumbs = await this._readThumbs(await file.read("tx.thumbs"), intraCoded.length);
@@ -829,12 +823,12 @@ export class TxDecoder {
     }
   }
 
+  /** The maps section's header and tables; the maps themselves are decoded when a view first
+   *  needs one (needMap), as the Python decoder does: an open decodes none of them. */
   async _readMaps(raw) {
-    const what = "tx.maps", nMaps = this.nMaps, ny = this.nby8, nx = this.nbx8, nloc = ny * nx, R = 31;
+    const what = "tx.maps", nMaps = this.nMaps, nloc = this.nby8 * this.nbx8;
     if (!raw.length || raw[0] < 1 || raw[0] > 3) throw new FormatError(`${what}: unknown maps version`);
     if (raw[0] === 1) throw new UnsupportedError(`${what}: version 1 maps (float tables) are not read here`);
-    // version 3: each escape digit position has its own context (32 + position); version 2: all in 32
-    const ver = raw[0], digitCtx = (i) => (ver >= 3 ? 32 + i : 32);
     let p = 1, cnt = 0;
     while (cnt < nMaps + 2) {
       if (p >= raw.length) throw new FormatError(`${what}: truncated stream lengths`);
@@ -842,8 +836,23 @@ export class TxDecoder {
     }
     const lens = unvarints(raw.subarray(1, p), nMaps + 2, what);
     if (lens.some((x) => x < 0) || p + lens.reduce((a, b) => a + b, 0) !== raw.length) throw new FormatError(`${what}: stream lengths do not add up to the section`);
-    let pos = p + lens[0];
-    const tables = await readTables(raw.subarray(p, pos), ver >= 3 ? 35 : 33, 64, what);
+    const at = [p + lens[0]];                          // where the shared map's and each map's streams start
+    for (let i = 1; i < nMaps + 2; i++) at.push(at[i - 1] + lens[i]);
+    const tables = await readTables(raw.subarray(p, at[0]), raw[0] >= 3 ? 35 : 33, 64, what);
+    this._maps = { raw, ver: raw[0], at, tables, base: null, done: new Uint8Array(nMaps) };
+    this.disp = new Int32Array(nMaps * nloc);
+    this.modes = new Int32Array(nMaps * nloc);
+  }
+
+  /** Decode map m (and the shared map, the first time) where not decoded yet: its disparities
+   *  (this.disp) and modes (this.modes), each checked (a mode past a view's references, for
+   *  every view that reads the map, is a FormatError). */
+  needMap(m) {
+    const M = this._maps;
+    if (M.done[m]) return;
+    const what = "tx.maps", ny = this.nby8, nx = this.nbx8, nloc = ny * nx, R = 31, { raw, at, tables } = M;
+    // version 3: each escape digit position has its own context (32 + position); version 2: all in 32
+    const digitCtx = (i) => (M.ver >= 3 ? 32 + i : 32);
     const unesc = (d, s) => {
       if (s > 2 * R) throw new FormatError(`${what}: undefined map symbol ${s}`);
       if (s !== 0 && s !== 2 * R) return s - R;
@@ -851,46 +860,53 @@ export class TxDecoder {
       for (let i = 0; i < 3; i++) x = x * 64 + d.get(digitCtx(i));
       return (R + x) * (s === 2 * R ? 1 : -1);
     };
-    const base = new Float64Array(nloc);
-    let d = new Rans(raw, pos, pos + lens[1], tables, what);
+    if (M.base === null) {
+      const base = new Float64Array(nloc);
+      const d = new Rans(raw, at[0], at[1], tables, what);
+      for (let i = 0; i < nloc; i++) {
+        const y = Math.floor(i / nx), x = i % nx;
+        const a = x ? base[i - 1] : (y ? base[i - nx] : 0);
+        const b = y ? base[i - nx] : a;
+        const c = x && y ? base[i - nx - 1] : (y ? b : a);
+        const act = a === c && b === c ? 0 : (Math.abs(a - c) + Math.abs(b - c) <= 16 ? 1 : 2);
+        const e = unesc(d, d.get(act));
+        const lo = a < b ? a : b, hi = a < b ? b : a;              // the median of a, b, a + b − c
+        base[i] = (i === 0 ? 0 : c >= hi ? lo : c <= lo ? hi : a + b - c) + e;
+      }
+      if (!d.done(at[1])) throw new FormatError(`${what}: the shared map's stream is malformed`);
+      M.base = base;
+    }
+    const d = new Rans(raw, at[1 + m], at[2 + m], tables, what);
+    const corr = new Float64Array(nloc), mo = new Int32Array(nloc);
     for (let i = 0; i < nloc; i++) {
       const y = Math.floor(i / nx), x = i % nx;
-      const a = x ? base[i - 1] : (y ? base[i - nx] : 0);
-      const b = y ? base[i - nx] : a;
-      const c = x && y ? base[i - nx - 1] : (y ? b : a);
-      const act = a === c && b === c ? 0 : (Math.abs(a - c) + Math.abs(b - c) <= 16 ? 1 : 2);
-      const e = unesc(d, d.get(act));
-      const med = [a, b, a + b - c].sort((u, w) => u - w)[1];
-      base[i] = (i === 0 ? 0 : med) + e;
+      const left = x && corr[i - 1] !== 0 ? 1 : 0, up = y && corr[i - nx] !== 0 ? 1 : 0;
+      corr[i] = unesc(d, d.get(3 + left + 2 * up));
     }
-    if (!d.done(pos + lens[1])) throw new FormatError(`${what}: the shared map's stream is malformed`);
-    pos += lens[1];
-    this.disp = new Int32Array(nMaps * nloc);
-    this.modes = new Int32Array(nMaps * nloc);
-    for (let m = 0; m < nMaps; m++) {
-      d = new Rans(raw, pos, pos + lens[2 + m], tables, what);
-      const corr = new Float64Array(nloc), mo = new Int32Array(nloc);
-      for (let i = 0; i < nloc; i++) {
-        const y = Math.floor(i / nx), x = i % nx;
-        const left = x && corr[i - 1] !== 0 ? 1 : 0, up = y && corr[i - nx] !== 0 ? 1 : 0;
-        corr[i] = unesc(d, d.get(3 + left + 2 * up));
-      }
-      for (let i = 0; i < nloc; i++) {
-        const y = Math.floor(i / nx), x = i % nx;
-        const ml = x ? Math.min(mo[i - 1], 4) : 0, mu = y ? Math.min(mo[i - nx], 4) : 0;
-        const s = d.get(7 + 5 * ml + mu);
-        if (s >= 1 + MAX_REFS) throw new FormatError(`${what}: a prediction mode is out of range`);
-        mo[i] = s;
-      }
-      if (!d.done(pos + lens[2 + m])) throw new FormatError(`${what}: a map stream is malformed`);
-      pos += lens[2 + m];
-      for (let i = 0; i < nloc; i++) {
-        const v = base[i] + corr[i];
-        if (Math.abs(v) > 1 << 20) throw new FormatError(`${what}: a disparity is out of range`);
-        this.disp[m * nloc + i] = v;
-        this.modes[m * nloc + i] = mo[i];
-      }
+    for (let i = 0; i < nloc; i++) {
+      const y = Math.floor(i / nx), x = i % nx;
+      const ml = x ? Math.min(mo[i - 1], 4) : 0, mu = y ? Math.min(mo[i - nx], 4) : 0;
+      const s = d.get(7 + 5 * ml + mu);
+      if (s >= 1 + MAX_REFS) throw new FormatError(`${what}: a prediction mode is out of range`);
+      mo[i] = s;
     }
+    if (!d.done(at[2 + m])) throw new FormatError(`${what}: a map stream is malformed`);
+    for (let i = 0; i < nloc; i++) {
+      const v = M.base[i] + corr[i];
+      if (Math.abs(v) > 1 << 20) throw new FormatError(`${what}: a disparity is out of range`);
+    }
+    let top = 0;
+    for (let i = 0; i < nloc; i++) if (mo[i] > top) top = mo[i];
+    for (let v = 0; v < this.n0; v++) {
+      if (this.cell[v] !== m) continue;
+      const nrefs = this.refs.slice(4 * v, 4 * v + 4).filter((r) => r >= 0).length;
+      if (top > nrefs) throw new FormatError(`${this.file.name}: tx.maps selects a reference view ${v} does not have`);
+    }
+    for (let i = 0; i < nloc; i++) {
+      this.disp[m * nloc + i] = M.base[i] + corr[i];
+      this.modes[m * nloc + i] = mo[i];
+    }
+    M.done[m] = 1;
   }
 
   async _readThumbs(data, n) {
@@ -1120,6 +1136,7 @@ export class TxDecoder {
       });
       return [ys, xs];
     };
+    if (predicted) this.needMap(this.cell[v]);
     const kp = this.predictsOnWasm() ? this._kernelP : null;
     if (kp && kp.begin(this, v, predicted, img, jobs.reduce((m, j) => Math.max(m, j.data.length), 0))) {
       if (predicted && this.wpGain) this._weighted(v, kp.planes, 0, 0, this.Hp, this.Wp);

@@ -71,6 +71,7 @@ export class Renderer {
       }
       m = d.cell[best];
     }
+    d.needMap(m);
     const nloc = d.nby8 * d.nbx8, W = d.W;
     const out = new Float32Array(d.H * W);
     for (let y = 0; y < d.H; y++) {                 // each 8×8 block's value, written 8 pixels at a time

@@ -343,3 +343,50 @@ def test_disparity_escapes_agree(tmp_path):
     path = tmp_path / "escapes.lfc"
     path.write_bytes(blob)
     assert_same_planes(path, tmp_path / "out")
+
+
+def test_maps_are_decoded_when_a_view_needs_them(tmp_path):
+    """The JavaScript decoder opens a file without decoding its disparity maps (as the Python
+    decoder: an open decodes none of them) and decodes each map when a view first needs it. A map
+    stream damaged in place (checksums made valid again) is then refused by exactly the views
+    that read it, with a FormatError, in JavaScript as in Python, while the other views still
+    decode to Python's planes."""
+    from formats.errors import FormatError
+    from tools.fuzz import join_file, split_file
+
+    src = GOLDEN / "rlfc_tx4_weighted_rgb8.lfc"
+    out = tmp_path / "clean"
+    got = subprocess.run([NODE, str(HERE / "web_each_view.mjs"), str(src), str(out)], capture_output=True,
+                         text=True, timeout=300)
+    info = json.loads(got.stdout.strip().splitlines()[-1])
+    assert info["ok"] and info["mapsAfterOpen"] == 0 and info["nMaps"] > 2
+    assert all(v["ok"] for v in info["views"]) and info["views"][-1]["maps"] == info["nMaps"]
+    assert 0 < min(v["maps"] for v in info["views"] if v["cell"] >= 0) < info["nMaps"]   # one at a time
+    meta, secs = split_file(src.read_bytes())
+    names = [n for n, _ in secs]
+    maps = bytearray(secs[names.index("tx.maps")][1])
+    refused = set()
+    for k in range(12):                              # bytes of the last map streams, changed
+        b = bytearray(maps)
+        b[len(b) - 1 - 2 * k] ^= 0x5A
+        path = tmp_path / f"m{k}.lfc"
+        path.write_bytes(join_file(meta, [(n, bytes(b) if n == "tx.maps" else d) for n, d in secs]))
+        got = subprocess.run([NODE, str(HERE / "web_each_view.mjs"), str(path), str(tmp_path / f"o{k}")],
+                             capture_output=True, text=True, timeout=300)
+        info = json.loads(got.stdout.strip().splitlines()[-1])
+        assert info["ok"], info                      # the open reads no map
+        d = open_decoder(open_lfc(path))
+        for v, js in enumerate(info["views"]):
+            try:
+                py = d.decode_views([v], planes=True)[0]
+            except FormatError:
+                py = None
+            assert js["ok"] == (py is not None), (k, v, js)
+            if py is None:
+                assert js["name"] == "FormatError" and "tx.maps" in js["message"], js
+                refused.add((k, v))
+            else:
+                a = np.fromfile(tmp_path / f"o{k}" / f"view_{v}.bin", np.int32).reshape(info["Hp"], info["Wp"], info["P"])
+                np.testing.assert_array_equal(a[:d.height, :d.width], py, err_msg=f"damage {k} view {v}")
+    cases = {k for k, _ in refused}
+    assert cases and any(len([1 for kk, _ in refused if kk == k]) < 16 for k in cases), refused
