@@ -1,14 +1,9 @@
 """Captures the _magnitudes calls of three 64-request batched calls and a view (run on the code before: PYTHONPATH=OLD) into caps2.pkl for ab.py (CAPS=...)."""
 import sys, pickle, numpy as np
-import rlfc.txparse as tp
+sys.path.insert(0, __file__.rsplit('/', 1)[0])
+import captures
 caps = []
-orig = tp._magnitudes
-def wrap(dec, tables, S, per_lane, lane_start, j, ctx1):
-    caps.append(dict(x=dec.x.copy(), ptr=dec.ptr.copy(), buf=dec.buf, top=dec.top, tables=tables, S=S, per_lane=per_lane, lane_start=lane_start, j=j, ctx1=ctx1))
-    r = orig(dec, tables, S, per_lane, lane_start, j, ctx1)
-    caps[-1]["out"] = r; caps[-1]["x_after"] = dec.x.copy(); caps[-1]["ptr_after"] = dec.ptr.copy()
-    return r
-tp._magnitudes = wrap
+captures.magnitudes(caps)
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
 rng = np.random.default_rng(0)

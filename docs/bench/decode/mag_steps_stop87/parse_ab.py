@@ -7,13 +7,9 @@ import numpy as np
 sys.path.insert(0, sys.argv[1])
 import rlfc_old.txparse as old
 import rlfc.txparse as new
-import rlfc.profiles.tx_residual as trm
-captured = []
-orig = trm.Residuals._parse_streams
-def ps(self, buf, s2, e2, nt, kind, key):
-    captured.append((self, buf, s2.copy(), e2.copy(), nt, np.asarray(kind).copy(), np.asarray(key).copy()))
-    return orig(self, buf, s2, e2, nt, kind, key)
-trm.Residuals._parse_streams = ps
+sys.path.insert(0, __file__.rsplit('/', 1)[0])
+import captures
+captured = captures.parse_streams()
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
 rounds = int(sys.argv[2])
