@@ -183,8 +183,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     if not ok.all():
         raise FormatError(f"{name}: tx block stream is malformed (its symbols do not end where its raw bits start)")
     back = dec.back()
-    soff = np.arange(sidx.size) - (np.cumsum(nsign) - nsign)[s_lane]     # bit offset within the lane
-    sbit = _raw_bits(buf, raw_start, back, kb, s_lane, soff)
+    sbit = _sign_bits(buf, raw_start, ends, back, kb, nsign, s_lane)
     vals = sym[sidx].astype(np.int64)
     vals += first[sidx]
     if esc.size:
@@ -195,6 +194,32 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
             suffix[m] |= _raw_bits(buf, raw_start, back, kb, e_lane[m], eoff[m] + b).astype(np.int64) << b
         vals[(np.cumsum(nz) - 1)[esc]] = ESC + first[esc] + ((1 << buckets) - 1) + suffix
     return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
+
+
+def _sign_bits(buf, raw_start, ends, back, kb, nsign, s_lane) -> np.ndarray:
+    """The sign bits (uint8, the K nonzero coefficients' in lane order, ``s_lane`` (K,) their
+    lanes): raw bits 0..nsign − 1 of each lane, as :func:`_raw_bits` reads them, in a few passes
+    over the signs: every lane's stored bytes (``raw_start`` to ``ends``, the callers' checks having
+    put them inside the buffer) unpacked once, LSB first, each sign one look-up there, and the
+    few below a lane's ``kb`` (at most BACK_BITS a lane) from its start state's R (``back``)."""
+    nbytes = ends - raw_start
+    cb = np.cumsum(nbytes) - nbytes                                     # each lane's first unpacked byte
+    nb = int(nbytes.sum())
+    cs = np.cumsum(nsign) - nsign                                       # each lane's first sign
+    K = s_lane.size
+    if nb:
+        bits = np.unpackbits(buf[np.repeat(raw_start - cb, nbytes) + np.arange(nb)], bitorder="little")
+        at = np.arange(K, dtype=np.int64)
+        at += (8 * cb - kb - cs)[s_lane]                                # sign i of lane L: stored bit i − cs − kb
+        out = bits.take(at, mode="clip")                                # (those below kb: replaced below)
+    else:
+        out = np.zeros(K, np.uint8)
+    nlow = np.minimum(kb, nsign)
+    if nlow.any():
+        lanes = np.repeat(np.arange(nsign.size), nlow)
+        off = np.arange(int(nlow.sum())) - np.repeat(np.cumsum(nlow) - nlow, nlow)   # bit within the lane
+        out[cs[lanes] + off] = (back[lanes] >> off) & 1
+    return out
 
 
 def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, j, ctx1) -> np.ndarray:
