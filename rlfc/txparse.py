@@ -6,6 +6,8 @@ tb modes and the nonzero levels, sparse) with the same integers. A stream that i
 """
 from __future__ import annotations
 
+from itertools import repeat
+
 import numpy as np
 
 from formats.errors import FormatError
@@ -182,8 +184,8 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     ok = dec.check(raw_start, kb) & (raw_start >= starts + STATE_BYTES)
     if not ok.all():
         raise FormatError(f"{name}: tx block stream is malformed (its symbols do not end where its raw bits start)")
-    back = dec.back()
-    sbit = _sign_bits(buf, raw_start, ends, back, kb, nsign, s_lane)
+    raw = _RawBits(buf, raw_start, ends, dec.back(), kb)
+    sbit = raw.signs(nsign, s_lane)
     vals = sym[sidx].astype(np.int64)
     vals += first[sidx]
     if esc.size:
@@ -191,35 +193,49 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
         suffix = np.zeros(esc.size, np.int64)
         for b in range(int(buckets.max(initial=0))):
             m = buckets > b
-            suffix[m] |= _raw_bits(buf, raw_start, back, kb, e_lane[m], eoff[m] + b).astype(np.int64) << b
+            suffix[m] |= raw.at(e_lane[m], eoff[m] + b).astype(np.int64) << b
         vals[(np.cumsum(nz) - 1)[esc]] = ESC + first[esc] + ((1 << buckets) - 1) + suffix
     return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
 
 
-def _sign_bits(buf, raw_start, ends, back, kb, nsign, s_lane) -> np.ndarray:
-    """The sign bits (uint8, the K nonzero coefficients' in lane order, ``s_lane`` (K,) their
-    lanes): raw bits 0..nsign − 1 of each lane, as :func:`_raw_bits` reads them, in a few passes
-    over the signs: every lane's stored bytes (``raw_start`` to ``ends``, the callers' checks having
-    put them inside the buffer) unpacked once, LSB first, each sign one look-up there, and the
-    few below a lane's ``kb`` (at most BACK_BITS a lane) from its start state's R (``back``)."""
-    nbytes = ends - raw_start
-    cb = np.cumsum(nbytes) - nbytes                                     # each lane's first unpacked byte
-    nb = int(nbytes.sum())
-    cs = np.cumsum(nsign) - nsign                                       # each lane's first sign
-    K = s_lane.size
-    if nb:
-        bits = np.unpackbits(buf[np.repeat(raw_start - cb, nbytes) + np.arange(nb)], bitorder="little")
-        at = np.arange(K, dtype=np.int64)
-        at += (8 * cb - kb - cs)[s_lane]                                # sign i of lane L: stored bit i − cs − kb
-        out = bits.take(at, mode="clip")                                # (those below kb: replaced below)
-    else:
-        out = np.zeros(K, np.uint8)
-    nlow = np.minimum(kb, nsign)
-    if nlow.any():
-        lanes = np.repeat(np.arange(nsign.size), nlow)
-        off = np.arange(int(nlow.sum())) - np.repeat(np.cumsum(nlow) - nlow, nlow)   # bit within the lane
-        out[cs[lanes] + off] = (back[lanes] >> off) & 1
-    return out
+class _RawBits:
+    """Each lane's raw bits (its signs, then its escapes' suffixes): bits below ``kb`` from the
+    start state's R (``back``), the others stored LSB-first from byte ``raw_start`` to ``ends``
+    (the callers' checks having put them inside the buffer). Every lane's stored bytes are
+    unpacked once; a bit is then one look-up (arrays per lane: raw_start, ends, back, kb)."""
+
+    def __init__(self, buf, raw_start, ends, back, kb):
+        nbytes = ends - raw_start
+        cb = np.cumsum(nbytes) - nbytes                                 # each lane's first unpacked byte
+        nb = int(nbytes.sum())
+        # (no stored byte anywhere: every bit is below its lane's kb, read from back)
+        self.bits = np.unpackbits(buf[np.repeat(raw_start - cb, nbytes) + np.arange(nb)], bitorder="little") \
+            if nb else np.zeros(1, np.uint8)
+        self.first = 8 * cb - kb                                        # raw bit i (>= kb) of lane L: bits[first[L] + i]
+        self.back, self.kb = back, kb
+
+    def at(self, lane, off) -> np.ndarray:
+        """Raw bit ``off`` of lane ``lane`` (arrays), uint8."""
+        out = self.bits.take(self.first[lane] + off, mode="clip")      # (those below kb: replaced)
+        low = np.flatnonzero(off < self.kb[lane])
+        if low.size:
+            out[low] = (self.back[lane[low]] >> off[low]) & 1
+        return out
+
+    def signs(self, nsign, s_lane) -> np.ndarray:
+        """Raw bits 0..nsign − 1 of every lane, in lane order (``s_lane`` (K,): their lanes), uint8:
+        :meth:`at` of them in fewer passes (their offsets are consecutive; at most BACK_BITS a
+        lane from back)."""
+        cs = np.cumsum(nsign) - nsign                                   # each lane's first sign
+        at = np.arange(s_lane.size, dtype=np.int64)
+        at += (self.first - cs)[s_lane]
+        out = self.bits.take(at, mode="clip")                           # (those below kb: replaced)
+        nlow = np.minimum(self.kb, nsign)
+        if nlow.any():
+            lanes = np.repeat(np.arange(nsign.size), nlow)
+            off = np.arange(int(nlow.sum())) - np.repeat(np.cumsum(nlow) - nlow, nlow)   # bit within the lane
+            out[cs[lanes] + off] = (self.back[lanes] >> off) & 1
+        return out
 
 
 def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, j, ctx1) -> np.ndarray:
@@ -361,7 +377,7 @@ def _ragged(dec: LaneDecoder, tables: Tables, plan: _Plan, c1, g1, g2) -> np.nda
     for k, (o, m) in enumerate(zip(offl, cnt.tolist())):
         if m < TAIL_LANES:                                             # few lanes left: plain Python
             p_all += lo
-            _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, dec.buf, dec.top, tables)
+            _ragged_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, dec.buf, dec.top, tables)
             p_all -= lo
             break
         c, a = c1[o:o + m], ta[:m]
@@ -380,8 +396,8 @@ def _ragged(dec: LaneDecoder, tables: Tables, plan: _Plan, c1, g1, g2) -> np.nda
     return syms
 
 
-def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables) -> None:
-    """:func:`_magnitudes` from step ``k`` on, where only ranks [0, m) have symbols left: each
+def _ragged_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top, tables) -> None:
+    """:func:`_ragged` from step ``k`` on, where only ranks [0, m) have symbols left: each
     lane to its end in plain Python (the same integers; a numpy step costs ~25 calls whatever
     the lanes), its contexts gathered first (numpy, a lane at a time) and its symbols stored
     after. Reads past the buffer are clamped as in the numpy steps (the caller's end check
@@ -396,10 +412,9 @@ def _magnitudes_tail(k, m, offl, lens, c1, g1, g2, syms, x_all, p_all, buf, top,
         at = offs[:int(lens[r]) - k] + r                             # the lane's places, step-major
         out = []
         put = out.append
-        cs = (c1[at] << PROB_BITS).tolist()
-        zero = [0] * len(cs)
-        for b, u, v in zip(cs, zero if g1 is None else (g1[at] << PROB_BITS).tolist(),
-                           zero if g2 is None else (g2[at] << PROB_BITS).tolist()):
+        none = repeat(0)                                             # (no neighbours: last positions)
+        for b, u, v in zip((c1[at] << PROB_BITS).tolist(), none if g1 is None else (g1[at] << PROB_BITS).tolist(),
+                           none if g2 is None else (g2[at] << PROB_BITS).tolist()):
             w = tab[(b + (u if n1 else 0) + (v if n2 else 0)) | (x & _MASK)]
             x = ((w >> 12) & 0x1FFF) * (x >> PROB_BITS) + (w & 0xFFF)
             if x < RANS_L:                 # at most two bytes, as the numpy steps (x >= 8 after a
@@ -463,24 +478,3 @@ def slot_words(tables: Tables) -> np.ndarray:
         got += np.arange(C * RANS_M, dtype=np.uint32) << np.uint32(20)
         tables._slot_words = got
     return got
-
-
-def _raw_bits(buf, start, back, kb, lane, off):
-    """Raw bit ``off`` of lane ``lane`` (arrays; ``start``, ``back``, ``kb`` per lane, the
-    callers' check having put every ``start`` inside the buffer): bits below ``kb`` from the
-    start state's R (``back``), the others from the stored bits at byte ``start`` (LSB-first).
-    Returns uint8 bits (the stored ones read for every request in uint8, then the few below
-    ``kb`` replaced)."""
-    kl = kb[lane]
-    st = off - kl
-    np.maximum(st, 0, out=st)
-    at = st >> 3
-    at += start[lane]
-    np.minimum(at, buf.size - 1, out=at)
-    bit = buf[at]
-    bit >>= (st & 7).astype(np.uint8)
-    bit &= 1
-    low = np.flatnonzero(off < kl)
-    if low.size:
-        bit[low] = (back[lane[low]] >> np.minimum(off[low], 62)) & 1
-    return bit

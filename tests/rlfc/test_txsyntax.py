@@ -397,7 +397,7 @@ def test_the_plain_python_tail_of_a_zero_state_ends():
     buf = np.zeros(4, np.uint8)
     args = (0, 1, list(range(n)), np.array([n]), c1, np.zeros(n, np.uint32), np.zeros(n, np.uint32),
             np.zeros(n, np.uint32), x_all, p_all, buf, buf.size - 1, tables)
-    run = threading.Thread(target=px._magnitudes_tail, args=args, daemon=True)   # (a hang fails, not blocks)
+    run = threading.Thread(target=px._ragged_tail, args=args, daemon=True)   # (a hang fails, not blocks)
     run.start()
     run.join(30)
     assert not run.is_alive(), "the tail never ended on a 0 state"
