@@ -28,7 +28,7 @@ from formats.campath import assemble_quilt, quilt_positions
 from formats.codec_api import is_real
 from formats.errors import ParameterError
 
-from .render_ops import make_ops
+from .render_ops import make_ops, median_f32
 
 
 ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
@@ -381,7 +381,7 @@ class Renderer:
             maps = ops.from_blocks_many(cands, d.height, d.width)
             disp = maps[0]
             if robust:                              # the frame's median disparity: the third candidate
-                cands.append(np.full_like(blk, np.float32(np.median(blk))))
+                cands.append(np.full_like(blk, median_f32(blk)))
             dlo, dhi = np.min(cands, axis=0), np.max(cands, axis=0)
         # the blocks of every candidate disparity, from the host's maps: one decode call per
         # frame and no device round trip before the frame's last copy
@@ -433,7 +433,7 @@ class Renderer:
         S = ROBUST_STEP
         ys, xs = ops.sub(yy, S), ops.sub(xx, S)
         # the candidates on the choice's grid (only there are they sampled and chosen)
-        subs = [ops.const(*ys.shape, float(np.median(blk))), ops.sub(med, S), ops.sub(disp, S)]
+        subs = [ops.const(*ys.shape, float(median_f32(blk))), ops.sub(med, S), ops.sub(disp, S)]
         Ys = ops.shifted(ys, subs, [s - r for r, _, _ in src])
         Xs = ops.shifted(xs, subs, [t - c for _, c, _ in src])
         if warp is not None:

@@ -20,13 +20,30 @@ from . import cvremap
 TILE = 8               # the geometry's block: tile extents and block maps are per 8×8 pixels
 
 
+def median_f32(a: np.ndarray) -> np.float32:
+    """``np.median`` of a float32 array (all its values), the same value: the middle one, or
+    the float32 mean of the two middle ones (NaN where any value is NaN). Without
+    ``np.median``, whose first call in a process imports ``numpy.ma`` (~17 ms of a first frame
+    on the 2-core box)."""
+    v = np.asarray(a, np.float32).reshape(-1)
+    n = v.size
+    if n == 0 or np.isnan(v).any():
+        return np.float32(np.nan)
+    k = n // 2
+    if n % 2:
+        return np.partition(v, k)[k]
+    p = np.partition(v, (k - 1, k))
+    return (p[k - 1] + p[k]) / np.float32(2)
+
+
 class NumpyOps:
     """numpy + OpenCV, on the CPU (the default)."""
 
     name = "numpy"
 
     def grid(self, H: int, W: int):
-        yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+        yy = np.broadcast_to(np.arange(H, dtype=np.float32)[:, None], (H, W)).copy()
+        xx = np.broadcast_to(np.arange(W, dtype=np.float32)[None, :], (H, W)).copy()
         return yy, xx
 
     def const(self, H: int, W: int, v: float):

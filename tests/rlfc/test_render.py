@@ -357,3 +357,23 @@ def test_the_robust_choice_is_made_per_cell(device):
 
         got = ops.choose(torch.as_tensor(sel), S, H, W, [torch.as_tensor(npo.sub(c, S)) for c in full]).numpy()
     assert got.dtype == np.float32 and (got == want).all()
+
+
+def test_the_frames_median_is_numpys():
+    """The robust choice's median disparity (``median_f32``, which spares a first frame numpy.ma's
+    import) is ``np.median``'s value: odd and even sizes, ties, tiny and large values, NaN."""
+    import warnings
+
+    from rlfc.render_ops import median_f32
+
+    rng = np.random.default_rng(3)
+    for n in list(range(1, 34)) + [4095, 4096]:
+        for scale in (1.0, 1e-3, 1e4):
+            a = (rng.standard_normal(n) * scale).astype(np.float32)
+            for v in (a, np.round(a), a.reshape(1, -1)):
+                want = np.median(v)
+                got = median_f32(v)
+                assert got.dtype == np.float32 and got == want, (n, scale, got, want)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert np.isnan(np.median(np.float32([1, np.nan, 2]))) and np.isnan(median_f32(np.float32([1, np.nan, 2])))
