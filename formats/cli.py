@@ -130,13 +130,12 @@ def cmd_view(a) -> int:
 
 
 def _add_codec_groups(parser, only: str | None = None) -> dict:
-    """Each registered codec's options in its own group → {codec id: option dests}."""
+    """Each registered codec's options in its own group (or codec ``only``'s) → {codec id:
+    option dests}."""
     from .registry import available_codecs, get_codec
 
     groups = {}
-    for cid in available_codecs():
-        if only is not None and cid != only:
-            continue
+    for cid in [only] if only is not None else available_codecs():
         codec = get_codec(cid)
         g = parser.add_argument_group(f"{cid} options", codec.description)
         before = {x.dest for x in parser._actions}
@@ -171,7 +170,10 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The command line's parser; with ``command``, only that command's parser has its codecs'
+    options (the others' would load every codec plug-in for nothing: :func:`main` passes the
+    command it was given)."""
     p = _Parser(prog="lfcodec", description="Light-field compression: encode, decode and inspect .lfc files.")
     p.add_argument("--version", action="version", version=f"lfcodec {__version__}")
     sub = p.add_subparsers(dest="cmd", required=True)
@@ -203,7 +205,7 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="code views on a dask.distributed cluster (e.g. tcp://host:8786) instead")
     _add_scene_options(e)
-    e.set_defaults(func=cmd_encode, _groups=_add_codec_groups(e))
+    e.set_defaults(func=cmd_encode, _groups=_add_codec_groups(e) if command in (None, "encode") else {})
 
     d = sub.add_parser("decode", help="decode views, one view, or one block of an .lfc file",
                        description="Decode an .lfc file: all views as PNG (rRR_cCC.png), one view (--view; into OUTDIR, "
@@ -327,8 +329,8 @@ def build_parser() -> argparse.ArgumentParser:
     t.add_argument("scene")
     t.add_argument("out")
     _add_scene_options(t)
-    t.set_defaults(func=cmd_train, _groups=_add_codec_groups(t, only="lfn"), target_psnr=None, target_bpp=None,
-                   min_view_psnr=None, lossless=False)
+    t.set_defaults(func=cmd_train, _groups=_add_codec_groups(t, only="lfn") if command in (None, "train") else {},
+                   target_psnr=None, target_bpp=None, min_view_psnr=None, lossless=False)
     return p
 
 
@@ -336,8 +338,9 @@ def main(argv: list[str] | None = None) -> int:
     from .heap import keep_freed, limit_arenas
 
     limit_arenas(1)                  # one malloc arena for the coding threads (formats.heap)
-    parser = build_parser()
-    a = parser.parse_args(argv)
+    args = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(next((x for x in args if not x.startswith("-")), None))
+    a = parser.parse_args(args)
     if getattr(a, "func", None) is cmd_render:
         keep_freed()                 # frame after frame: freed blocks reused, not faulted in again
     try:

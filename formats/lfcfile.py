@@ -206,11 +206,12 @@ def open_lfc(source, *, name: str | None = None, partial: bool = False, limits: 
     streams): sections past the prefix are reported unavailable instead of the file being
     rejected as truncated.
     """
-    from .remote import DEFAULT_CACHE, is_url, open_remote
+    if isinstance(source, str) and "://" in source:       # (formats.remote, and urllib, for URLs only)
+        from .remote import DEFAULT_CACHE, is_url, open_remote
 
-    if is_url(source):
-        name = name or source
-        source = open_remote(source, cache_bytes=cache_bytes or DEFAULT_CACHE)
+        if is_url(source):
+            name = name or source
+            source = open_remote(source, cache_bytes=cache_bytes or DEFAULT_CACHE)
     c = Container(source, name=name, partial=partial)
     try:
         if c.info("meta").length > limits.max_meta_bytes:

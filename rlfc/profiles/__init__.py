@@ -5,10 +5,8 @@ entry-point group (``id = "package.module:PROFILE"``). Nothing is imported until
 """
 from __future__ import annotations
 
-import importlib
-from importlib import metadata
-
 from formats.errors import UnsupportedError
+from formats.registry import load_ref
 
 from .base import Profile, ProfileDecoder
 
@@ -21,13 +19,14 @@ GROUP = "lfcodec.rlfc_profiles"
 _cache: dict[str, Profile] = {}
 
 
-def _load(ref: str):
-    mod, attr = ref.split(":")
-    return getattr(importlib.import_module(mod), attr)
+def _entry_points() -> dict:
+    from importlib import metadata       # (only for profiles not built in: its import costs ~50 ms)
+
+    return {ep.name: ep for ep in metadata.entry_points(group=GROUP)}
 
 
 def available_profiles() -> list[str]:
-    return sorted(set(BUILTIN) | {ep.name for ep in metadata.entry_points(group=GROUP)})
+    return sorted(set(BUILTIN) | set(_entry_points()))
 
 
 def get_profile(pid: str) -> Profile:
@@ -35,13 +34,13 @@ def get_profile(pid: str) -> Profile:
     if pid not in _cache:
         ref = BUILTIN.get(pid)
         if ref is None:
-            eps = {ep.name: ep for ep in metadata.entry_points(group=GROUP)}
+            eps = _entry_points()
             if pid not in eps:
                 raise UnsupportedError(f"RLFC profile {pid!r} is not supported by this lfcodec "
                                        f"(known: {', '.join(available_profiles())})")
             prof = eps[pid].load()
         else:
-            prof = _load(ref)
+            prof = load_ref(ref)
         _cache[pid] = prof
     return _cache[pid]
 
