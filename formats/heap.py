@@ -11,7 +11,6 @@ that measures its file (:func:`trim`). A program calling the library can do the 
 from __future__ import annotations
 
 import ctypes
-import ctypes.util
 import os
 import sys
 
@@ -28,7 +27,8 @@ def _libc():
     if not sys.platform.startswith("linux"):
         return None
     try:
-        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        return ctypes.CDLL(None)             # (the process's own symbols, libc's among them: no
+        #                                      ctypes.util, whose import and search cost ~10-25 ms)
     except OSError:
         return None
 
