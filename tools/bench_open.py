@@ -92,6 +92,9 @@ def main(argv=None) -> int:
         ap.error("give at least one .lfc file")
     here = Path(__file__).resolve().parents[1]
     versions = [("new", here)] + ([("old", Path(a.against).resolve())] if a.against else [])
+    from tools.common import compile_checkouts
+
+    compile_checkouts(*(code for _, code in versions))   # (a fresh process's imports are timed: .pyc in each)
     rows = []
     for rnd in range(a.rounds):
         for f in a.files:
