@@ -179,14 +179,14 @@ def _drop_pad(a: np.ndarray, C: int, P: int) -> np.ndarray:
     return a[..., :P]
 
 
-def row_grids(atlas: KeyAtlas, slots, weights, disp_y, disp_x) -> list:
+def row_grids(atlas: KeyAtlas, slots, weights, disp_y, disp_x, first: int = 0) -> list:
     """The sampling rows and columns of :func:`predict_rows` for every reference of nonzero
     weight, over all the 8×8 block rows given, in one pass per reference (their values are
     small: one per pixel row or column of each 8×8 block).
 
     Args:
         slots: (R,) key slots; weights: (R,) blend weights; disp_y, disp_x: (R, n, n8x)
-            displacements in 1/16 pixel of the blocks (from block row 0).
+            displacements in 1/16 pixel of the blocks of 8×8 block rows ``first`` .. first + n − 1.
 
     Returns:
         per reference of nonzero weight, (weight, atlas group, rows (n, 8, n8x) float32: the
@@ -194,7 +194,7 @@ def row_grids(atlas: KeyAtlas, slots, weights, disp_y, disp_x) -> list:
         (n, n8x, 8) float32: the column of each pixel column, clamped).
     """
     R, n, n8x = disp_y.shape
-    yb = (np.arange(n) * TB) << DISP_BITS
+    yb = ((np.arange(n) + first) * TB) << DISP_BITS
     xb = (np.arange(n8x) * TB) << DISP_BITS
     out = []
     for r in range(R):
@@ -253,9 +253,10 @@ BAND_TBS = 1024
 
 
 def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n8x: int,
-                 out: np.ndarray | None = None, warp=None) -> np.ndarray:
-    """The prediction of a whole view with references: the blend-mode blocks by
-    :func:`predict_rows` in bands, the single-reference blocks by :func:`predict`.
+                 out: np.ndarray | None = None, warp=None, rows: tuple[int, int] | None = None) -> np.ndarray:
+    """The prediction of a whole view with references (or of its 8×8 block rows ``rows`` =
+    (a, b): rows a .. b − 1): the blend-mode blocks by :func:`predict_rows` in bands, the
+    single-reference blocks by :func:`predict`.
 
     Args:
         slots: (R,) key slots of the references; weights: (R,) blend weights (sum 64);
@@ -265,28 +266,32 @@ def predict_view(atlas: KeyAtlas, slots, weights, disp, modes, dpos, n8y: int, n
             added to each reference's displacements (1/16 px: :func:`rlfc.txwarp.view_offsets`).
 
     Returns:
-        (8·n8y, 8·n8x, P) int32, the integers of :func:`predict` for every block (written to
-        ``out`` where given: a C-contiguous int32 array of that shape; no band is copied).
+        (8·n, 8·n8x, P) int32 (n = b − a, or n8y), the integers of :func:`predict` for every
+        block (written to ``out`` where given: a C-contiguous int32 array of that shape; no band
+        is copied).
     """
     R, P = slots.size, atlas.P
-    d = np.asarray(disp).reshape(1, n8y, n8x)
-    dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]                  # (R, n8y, n8x)
+    a0, b0 = (0, n8y) if rows is None else rows
+    n = b0 - a0
+    d = np.asarray(disp).reshape(1, n8y, n8x)[:, a0:b0]
+    dy, dx = d * dpos[:, 0, None, None], d * dpos[:, 1, None, None]                  # (R, n, n8x)
     if warp is not None:
-        dy, dx = dy + warp[0], dx + warp[1]
+        dy, dx = dy + warp[0][:, a0:b0], dx + warp[1][:, a0:b0]
     if out is None:
-        out = np.empty((n8y * TB, n8x * TB, P), np.int32)
+        out = np.empty((n * TB, n8x * TB, P), np.int32)
     band = max(1, BAND_TBS // n8x)
-    grids = row_grids(atlas, slots, weights, dy, dx)             # (each reference's, for the whole view at once)
-    for a in range(0, n8y, band):
-        b = min(n8y, a + band)
+    grids = row_grids(atlas, slots, weights, dy, dx, a0)         # (each reference's, for all the rows at once)
+    for a in range(0, n, band):
+        b = min(n, a + band)
         predict_rows(atlas, grids, a, b, out=out[a * TB:b * TB])
-    other = np.flatnonzero(np.asarray(modes) != 0)
+    m = np.asarray(modes).reshape(n8y, n8x)[a0:b0].reshape(-1)
+    other = np.flatnonzero(m != 0)
     if other.size:
         ty, tx = np.divmod(other, n8x)
-        w = mode_weights(weights)[np.asarray(modes)[other]]
+        w = mode_weights(weights)[m[other]]
         p = predict(atlas, np.broadcast_to(slots, (other.size, R)), w, dy.reshape(R, -1)[:, other].T,
-                    dx.reshape(R, -1)[:, other].T, ty * TB, tx * TB)
-        out.reshape(n8y, TB, n8x, TB, P)[ty, :, tx] = p
+                    dx.reshape(R, -1)[:, other].T, (ty + a0) * TB, tx * TB)
+        out.reshape(n, TB, n8x, TB, P)[ty, :, tx] = p
     return out
 
 

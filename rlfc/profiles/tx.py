@@ -383,6 +383,30 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
             o4[ty, :, tx] = self._add_residual(got, self._residual(vs, parsed), parsed.modes).reshape(-1, TB, TB, P)
         return out
 
+    def _key_rows_planes(self, k: int, rr: np.ndarray, parsed) -> np.ndarray:
+        """(n, B, Wp, P) int32 planes of block rows ``rr`` (n,) ascending of key view k, which
+        has references (every block of a key row is coded: ``parsed`` holds their syntax, the
+        rows' blocks in order): each run of consecutive rows predicted in raster bands
+        (:func:`rlfc.txsample.predict_view`), then the residuals added tb by tb; the integers of
+        :meth:`_reconstruct`'s block by block prediction (a quarter to a third of a first frame's
+        key rows on the grids whose keys are predicted: BENCHMARKS.md)."""
+        B, tpb, P, nbx, n = self.block_size, self.tpb, self.P, self.nbx, rr.size
+        out = np.empty((n * B, self.Wp, P), np.int32)
+        slots, wmode, dpos = self._view_refs(k)
+        cell = self.lay.cell[k]
+        disp, modes = self._maps_of([k])
+        warp = None if self.warp_dw is None else view_offsets(self.warp_dw[k], self.nby8, self.nbx8)
+        cut = (np.flatnonzero(np.diff(rr) != 1) + 1).tolist()
+        for lo, hi in zip([0] + cut, cut + [n]):
+            predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, self.nby8, self.nbx8,
+                         out=out[lo * B:hi * B], warp=warp, rows=(int(rr[lo]) * tpb, (int(rr[hi - 1]) + 1) * tpb))
+        self._weigh(out, k)                       # (in place: ``out`` is C-contiguous int32)
+        # (rows, tb row, y, blocks, tb column, x, P) → (rows · blocks, tbs, 8, 8, P) and back
+        tbs = out.reshape(n, tpb, TB, nbx, tpb, TB, P).transpose(0, 3, 1, 4, 2, 5, 6).reshape(n * nbx, self.nt, TB,
+                                                                                            TB, P)
+        tbs = self._add_residual(tbs, self._residual(np.full(n * nbx, k), parsed), parsed.modes)
+        return tbs.reshape(n, nbx, tpb, tpb, TB, TB, P).transpose(0, 2, 4, 1, 3, 5, 6).reshape(n, B, self.Wp, P)
+
     def _key_image(self, k: int, threads: int) -> np.ndarray:
         """(Hp, Wp, C) pixels of JPEG 2000 intra key view ``k``, decoded on ``threads`` of
         OpenJPEG's threads (its bytes read under the I/O lock: a byte-range source is shared)."""

@@ -13,6 +13,9 @@ from ..txpredict import DISP_BITS, TB, upsample_thumb
 from ..txwarp import max_row_offset
 
 KEY_PARSE_TBS = 1 << 20  # tbs of key-view rows parsed together (bounds the parsed coefficients held)
+#: rows of keys with references predicted in raster bands (:meth:`TxDecoder._key_rows_planes`);
+#: False: block by block, as the requests of other views (the tests compare the two)
+KEY_ROWS_RASTER = True
 #: pixels of whole JPEG 2000 views kept after a whole-view decode (:meth:`OnDemand.image_pixels`;
 #: a posed capture's 960×540 RGB view is 1.5 MiB)
 IMAGE_CACHE_BYTES = 64 << 20
@@ -275,6 +278,9 @@ class OnDemand:
             if s not in parsed:
                 parse_next()
             p = parsed.pop(s)
+            if not lay.intra[k] and self.atlas is not None and KEY_ROWS_RASTER:
+                self._set_key_rows(s, rr, self._key_rows_planes(k, rr, p))
+                continue
             locs = (rr[:, None] * self.nbx + np.arange(self.nbx)).reshape(-1)
             pred = None
             if lay.intra[k]:

@@ -211,3 +211,29 @@ def test_renderer_moves_each_source_by_its_warp(warped):
     tr = d.renderer(device="cpu")
     a, b = r.render(3.5, 4.25), tr.render(3.5, 4.25)
     assert np.abs(a.astype(int) - b).max() <= 1
+
+
+@pytest.mark.parametrize("which", ["warped", "plain"])
+def test_key_rows_in_raster_bands_are_the_block_paths(warped, which, monkeypatch):
+    """Rows of predicted key views decoded in raster bands (runs of rows, not whole views: rows
+    0, 2, 3 and the last first, then the rest) are the block-by-block path's integers, with and
+    without warps (the crop's files have single-reference modes and weighted views too)."""
+    import rlfc.profiles.tx_lazy as tl
+
+    lf, e, plain = warped
+    enc = e if which == "warped" else plain
+    got = []
+    for flag in (True, False):
+        monkeypatch.setattr(tl, "KEY_ROWS_RASTER", flag)
+        d, _ = open_encoded(lf, enc)
+        core = d.core
+        assert (~core.lay.intra[np.asarray(core.lay.keys)]).sum() >= 1      # (keys with references)
+        need = np.zeros(core._key_done.shape, bool)
+        need[:, [0, 2, 3, -1]] = True
+        core._have_keys(need)
+        done = core._key_done.copy()
+        part = core.keyplanes.reshape(done.shape[0], done.shape[1], -1)[done].copy()
+        d.decode_keys()
+        got.append((done, part, core.keyplanes.copy()))
+    (d1, p1, k1), (d2, p2, k2) = got
+    assert (d1 == d2).all() and (p1 == p2).all() and (k1 == k2).all()
