@@ -36,8 +36,13 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
     put = words.append
     try:
         ctx = CTX_MODE + kind * 4 + 3
-        for _ in range(nt):
-            s, x, ptr = scalar_step(slot_t, freq_t, cum_t, ctx, x, ptr, data)
+        for _ in range(nt):                          # (the rANS step inlined, as for magnitudes)
+            sl = x & _MASK
+            s = slot_t[ctx][sl]
+            x = freq_t[ctx][s] * (x >> PROB_BITS) + sl - cum_t[ctx][s]
+            while x < RANS_L:
+                x = (x << 8) | data[ptr]
+                ptr += 1
             if s >= N_MODES:
                 raise FormatError("tx block has an undefined tb mode")
             modes.append(s)
@@ -48,7 +53,13 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
             if mt != MODE_SKIP:
                 row = lrows[mt == MODE_INTRA]
                 for p in range(P):
-                    v, x, ptr = scalar_step(slot_t, freq_t, cum_t, row[pcl[p]], x, ptr, data)
+                    ctx = row[pcl[p]]
+                    sl = x & _MASK
+                    v = slot_t[ctx][sl]
+                    x = freq_t[ctx][v] * (x >> PROB_BITS) + sl - cum_t[ctx][v]
+                    while x < RANS_L:
+                        x = (x << 8) | data[ptr]
+                        ptr += 1
                     if v > 64:
                         raise FormatError("tx block has a last position past 64")
                     if v:
