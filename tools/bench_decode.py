@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tools.common import compile_checkouts, log, machine
+from tools.common import log, machine
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -388,6 +388,8 @@ def main(argv=None) -> int:
     files = [Path(f).resolve() for f in a.files]
     peers = {f.stem: _prepare_peer(f, Path(a.data), cache) for f in files}
     codes = {"new": ROOT} | ({"old": Path(a.against).resolve()} if a.against else {})
+    from tools.common import compile_checkouts         # (here: an older checkout's workers import its tools)
+
     compile_checkouts(*codes.values())                 # (the processes' imports are timed: .pyc in each)
     raw = {f.stem: {k: [] for k in codes} for f in files}
     for rnd in range(a.rounds):
