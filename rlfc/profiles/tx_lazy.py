@@ -13,9 +13,10 @@ from ..txpredict import DISP_BITS, TB, upsample_thumb
 from ..txwarp import max_row_offset
 
 KEY_PARSE_TBS = 1 << 20  # tbs of key-view rows parsed together (bounds the parsed coefficients held)
-#: rows of keys with references predicted in raster bands (:meth:`TxDecoder._key_rows_planes`);
-#: False: block by block, as the requests of other views (the tests compare the two)
-KEY_ROWS_RASTER = True
+#: a key with references whose rows are decoded this many at a time or more has them predicted in
+#: raster bands (:meth:`TxDecoder._key_rows_planes`: 0.59–0.95× on whole keys of five grids); fewer
+#: go block by block, as the requests of other views (1–4 rows: raster 0.98–1.19×; BENCHMARKS.md)
+KEY_ROWS_RASTER_MIN = 8
 #: pixels of whole JPEG 2000 views kept after a whole-view decode (:meth:`OnDemand.image_pixels`;
 #: a posed capture's 960×540 RGB view is 1.5 MiB)
 IMAGE_CACHE_BYTES = 64 << 20
@@ -278,7 +279,7 @@ class OnDemand:
             if s not in parsed:
                 parse_next()
             p = parsed.pop(s)
-            if not lay.intra[k] and self.atlas is not None and KEY_ROWS_RASTER:
+            if not lay.intra[k] and self.atlas is not None and rr.size >= KEY_ROWS_RASTER_MIN:
                 self._set_key_rows(s, rr, self._key_rows_planes(k, rr, p))
                 continue
             locs = (rr[:, None] * self.nbx + np.arange(self.nbx)).reshape(-1)

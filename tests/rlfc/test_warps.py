@@ -223,8 +223,8 @@ def test_key_rows_in_raster_bands_are_the_block_paths(warped, which, monkeypatch
     lf, e, plain = warped
     enc = e if which == "warped" else plain
     got = []
-    for flag in (True, False):
-        monkeypatch.setattr(tl, "KEY_ROWS_RASTER", flag)
+    for least in (1, 10 ** 9):                                        # raster bands always, never
+        monkeypatch.setattr(tl, "KEY_ROWS_RASTER_MIN", least)
         d, _ = open_encoded(lf, enc)
         core = d.core
         assert (~core.lay.intra[np.asarray(core.lay.keys)]).sum() >= 1      # (keys with references)

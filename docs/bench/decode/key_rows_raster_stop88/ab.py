@@ -1,7 +1,7 @@
 """Key rows of predicted keys in raster bands (KEY_ROWS_RASTER) against block by block, alternated
 in one process: a fresh decoder's first frame (the robust renderer, as ffw.py) and decode_keys().
 python ab.py ROUNDS GRID..."""
-import sys, time, statistics
+import os, sys, time, statistics
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
 import rlfc.render  # noqa: F401
@@ -13,7 +13,7 @@ for g in sys.argv[2:]:
     res = {(w, f): [] for w in ("frame", "keys") for f in (False, True)}
     for r in range(rounds):
         for flag in ((False, True) if r % 2 else (True, False)):
-            tl.KEY_ROWS_RASTER = flag
+            tl.KEY_ROWS_RASTER_MIN = int(os.environ.get("RASTER_MIN", 1)) if flag else 10 ** 9
             d = RlfcDecoder(open_lfc(path))
             rad = min(d.rows, d.cols) / 3
             t = time.perf_counter()
