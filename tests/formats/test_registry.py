@@ -60,9 +60,8 @@ def test_codecs_registered_at_run_time_come_first(monkeypatch):
     assert issubclass(Mine, Codec)
 
 
-def test_opening_a_local_file_needs_no_url_reader(tmp_path):
-    """formats.remote (and urllib with it, ~20 ms) loads only for URLs; importlib.metadata only
-    where an id is not built in."""
+def _small_file(tmp_path):
+    """A 2×2 grid of 16² views coded with ``tx``, written to tmp_path/a.lfc."""
     import numpy as np
 
     from rlfc import encode
@@ -71,13 +70,25 @@ def test_opening_a_local_file_needs_no_url_reader(tmp_path):
     lf = make_lf(np.random.default_rng(0).integers(0, 255, (2, 2, 16, 16, 3), np.uint8))
     path = tmp_path / "a.lfc"
     path.write_bytes(open_encoded(lf, encode(lf, profile="tx", step=2.0))[1])
-    code = ("import sys\n"
-            "from formats import open_lfc, open_decoder\n"
-            f"open_decoder(open_lfc({str(path)!r})).decode_view(1, 1)\n"
+    return path
+
+
+def _run_without_scan(lines: str):
+    """Run ``lines`` in a fresh interpreter, then check it imported neither the URL reader nor
+    importlib.metadata."""
+    code = ("import sys\n" + lines +
             "bad = [m for m in ('formats.remote', 'importlib.metadata') if m in sys.modules]\n"
             "assert not bad, bad\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0, r.stderr
+    assert r.returncode == 0, (lines, r.stderr)
+
+
+def test_opening_a_local_file_needs_no_url_reader(tmp_path):
+    """formats.remote (and urllib with it, ~20 ms) loads only for URLs; importlib.metadata only
+    where an id is not built in."""
+    path = _small_file(tmp_path)
+    _run_without_scan("from formats import open_lfc, open_decoder\n"
+                      f"open_decoder(open_lfc({str(path)!r})).decode_view(1, 1)\n")
 
 
 def test_a_set_is_named_by_its_codecs_suffix(monkeypatch):
@@ -94,20 +105,7 @@ def test_commands_on_a_file_load_no_plug_in_scan(tmp_path):
     """``lfcodec info`` / ``decode`` / ``render`` of an .lfc file build only their own command's
     options (encode's codec groups would load every plug-in) and import neither
     importlib.metadata nor the URL reader."""
-    import numpy as np
-
-    from rlfc import encode
-    from tests.rlfc.helpers import make_lf, open_encoded
-
-    lf = make_lf(np.random.default_rng(0).integers(0, 255, (2, 2, 16, 16, 3), np.uint8))
-    path = tmp_path / "a.lfc"
-    path.write_bytes(open_encoded(lf, encode(lf, profile="tx", step=2.0))[1])
+    path = _small_file(tmp_path)
     for args in (["info", str(path)], ["decode", str(path), str(tmp_path / "b.png"), "--block", "1,1,0,0"],
                  ["render", str(path), str(tmp_path / "c.png"), "--at", "0.5,0.5", "--quiet"]):
-        code = ("import sys\n"
-                "from formats.cli import main\n"
-                f"assert main({args!r}) == 0\n"
-                "bad = [m for m in ('formats.remote', 'importlib.metadata') if m in sys.modules]\n"
-                "assert not bad, bad\n")
-        r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
-        assert r.returncode == 0, (args, r.stderr)
+        _run_without_scan(f"from formats.cli import main\nassert main({args!r}) == 0\n")
