@@ -1787,3 +1787,28 @@ def test_whole_views_reuse_a_scratch_without_aliasing_what_they_return(monkeypat
     a, b = d.core.views(np.array([7]), 0), d.core.views(np.array([7]), 0)
     assert not np.shares_memory(a, b) and np.array_equal(a, b)
     assert np.array_equal(d.decode_all().reshape(want.shape), want)
+
+
+@pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=2), dict(c=4)])
+def test_tall_keys_decode_in_raster_bands_exactly(kw, monkeypatch):
+    """Views of 9 block rows: decoding a whole key decodes 8 rows or more of it at once, so its
+    rows are predicted in raster bands (KEY_ROWS_RASTER_MIN); on every sample layout (16-bit,
+    grey, grey + alpha, RGBA) the lossless file decodes exactly, the lossy one to the encoder's
+    closed loop, and the key planes are those of the block-by-block path."""
+    import rlfc.profiles.tx_lazy as tl
+
+    lf = smooth_lf(rows=3, cols=3, h=144, w=40, **kw)
+    step = 6.0 * (257 if kw.get("dtype") == np.uint16 else 1)
+    for e in (tx(lf, lossless=True), encode(lf, EncodeOptions(profile="tx", params={"step": step},
+                                                             keep_decoded=True))):
+        keys = []
+        for least in (tl.KEY_ROWS_RASTER_MIN, 10 ** 9):
+            monkeypatch.setattr(tl, "KEY_ROWS_RASTER_MIN", least)
+            d, _ = open_encoded(lf, e)
+            c = d.core
+            assert d.nby >= tl.KEY_ROWS_RASTER_MIN or least > d.nby
+            assert any(not c.lay.intra[k] and k not in c.img_of for k in c.lay.keys)      # (keys with references)
+            full = d.decode_all()
+            assert (full == (lf.views if e.decoded is None else e.decoded)).all()
+            keys.append(c.keyplanes.copy())
+        assert (keys[0] == keys[1]).all()
