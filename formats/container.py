@@ -358,6 +358,23 @@ class Container:
             return data[start - a:stop - a]
         return self._src.read(info.offset + start, info.offset + stop)
 
+    def fetch_ranges(self, name: str, starts, stops) -> int:
+        """Ask a remote source to fetch now the checksum chunks that section byte ranges
+        [starts[i], stops[i]) touch (those past the available bytes left out), one request per
+        run of consecutive chunks not held yet, before the reads that need them (verified when
+        read). Returns the requests made: 0 where the source is local or holds them already."""
+        if self._closed or not hasattr(self._src, "fetch_ranges"):
+            return 0
+        info = self.info(name)
+        cs, end = info.chunk_size, self.available_bytes(name)
+        chunks: set[int] = set()
+        for a, b in zip(np.asarray(starts).tolist(), np.asarray(stops).tolist()):
+            a, b = max(0, a), min(b, end)
+            if b > a:
+                chunks.update(range(a // cs, (b - 1) // cs + 1))
+        return self._src.fetch_ranges([(info.offset + c * cs, info.offset + min((c + 1) * cs, info.length))
+                                       for c in sorted(chunks)])
+
     def prefetch(self, name: str, start: int = 0, stop: int | None = None) -> int:
         """Ask a remote source to fetch the checksum chunks of section bytes [start, stop) in
         the background (verified when read); the part past the available bytes is left out.

@@ -36,6 +36,8 @@ from .errors import FormatError, LfcError, TruncatedError
 
 DEFAULT_PAGE = 1 << 16
 DEFAULT_CACHE = 64 << 20
+#: concurrent range requests of :meth:`RemoteSource.fetch_ranges` (separate runs of pages)
+FETCH_THREADS = 4
 
 
 def is_url(source) -> bool:
@@ -223,6 +225,39 @@ class RemoteSource(ByteRangeSource):
             self._store({p: got[p] for p in missing})
         out = b"".join(got[p] for p in range(p0, p1))
         return out[start - p0 * P:stop - p0 * P]
+
+    def fetch_ranges(self, ranges) -> int:
+        """Fetch now the pages of byte ranges ``ranges`` ([(start, stop), …]) that are neither
+        cached nor being fetched: one request per run of consecutive missing pages, the runs of an
+        HTTP(S) source on up to FETCH_THREADS requests at once. For a reader that knows its next
+        reads (the streams a decode call parses): they then find their pages cached, instead of
+        each waiting for a request of its own in turn. At most half the cache budget is fetched
+        (the rest is left to the reads). Returns the requests made."""
+        P = self.page
+        want: set[int] = set()
+        for a, b in ranges:
+            a, b = max(0, int(a)), min(int(b), self.size)
+            if b > a:
+                want.update(range(a // P, (b - 1) // P + 1))
+        with self._lock:
+            pages = sorted(p for p in want if p not in self._pages and p not in self._inflight)
+        runs = self._runs(pages[:max(1, self.cache_bytes // 2 // P)])
+        if not runs:
+            return 0
+        got: dict[int, bytes] = {}
+        if len(runs) > 1 and isinstance(self.backend, _Http):
+            from concurrent.futures import ThreadPoolExecutor
+
+            with ThreadPoolExecutor(min(FETCH_THREADS, len(runs))) as ex:
+                for part in ex.map(lambda r: self._fetch_run(*r), runs):
+                    got.update(part)
+        else:
+            for r in runs:
+                got.update(self._fetch_run(*r))
+        with self._lock:
+            self._store(got)
+            self.read_requests += len(runs)
+        return len(runs)
 
     def prefetch(self, start: int, stop: int) -> int:
         """Fetch the pages of bytes [start, stop) that are neither cached nor being fetched, on a

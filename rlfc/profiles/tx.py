@@ -233,6 +233,8 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
                 a, b = s, e
         if a is not None:
             runs.append((a, b))
+        if len(runs) > 1:                                     # (their missing chunks in as few requests as
+            c.fetch_ranges("tx.blocks", [r[0] for r in runs], [r[1] for r in runs])   # there are runs of them)
         run_pos = {}
         for a, b in runs:
             parts.append(np.frombuffer(c.read("tx.blocks", a, b), np.uint8))

@@ -216,3 +216,39 @@ def test_serve_on_a_port_in_use_is_one_line(tmp_path, capsys):
         assert main(["serve", str(tmp_path), "--port", str(srv.port)]) == 2
         err = capsys.readouterr().err
         assert len(err.splitlines()) == 1 and "give another --port" in err
+
+
+def test_a_calls_streams_come_in_one_request_per_run_of_missing_chunks(tmp_path, monkeypatch):
+    """A decode call's residual streams (here every block of three views with references, in
+    a file of 512-byte checksum chunks read through 512-byte pages) are fetched before they are
+    read, one request per run of consecutive missing chunks (Container.fetch_ranges), not one
+    per run of streams in turn: fewer requests, the same pixels as the local file."""
+    from formats.container import Container
+    from formats.lfcfile import write_lfc
+    from rlfc import encode
+    from tests.rlfc.helpers import smooth_lf
+
+    lf = smooth_lf(rows=3, cols=3, h=64, w=64)
+    noisy = lf.views.astype(np.int16) + np.random.default_rng(1).integers(-12, 13, lf.views.shape)
+    lf.views[...] = np.clip(noisy, 0, 255).astype(np.uint8)
+    e = encode(lf, profile="tx", step=3.0)
+    write_lfc(tmp_path / "n.lfc", "rlfc", 1, e.config, lf.geometry(), e.sections, chunk_size=512)
+    local = open_decoder(open_lfc(tmp_path / "n.lfc"))
+    views = [v for v in range(9) if not local.core.is_key[v] and local.core.coded[v].any()][:3]
+    assert len(views) == 3
+    nb = local.nby * local.nbx
+    req = (np.repeat(views, nb), np.tile(np.arange(nb) // local.nbx, 3), np.tile(np.arange(nb) % local.nbx, 3))
+    want = local.decode_blocks(*req)
+    counts = []
+    with FileServer(tmp_path) as srv:
+        for ahead in (True, False):
+            if not ahead:
+                monkeypatch.setattr(Container, "fetch_ranges", lambda self, *a: 0)
+            src = RemoteSource(srv.url_of("n.lfc"), cache_bytes=1 << 22, page=512)
+            d = open_decoder(open_lfc(src, name="n.lfc"))
+            d.decode_keys()
+            d.decode_maps()
+            before = src.read_requests
+            assert (d.decode_blocks(*req) == want).all()
+            counts.append(src.read_requests - before)
+    assert 1 <= counts[0] < counts[1], counts

@@ -1,4 +1,4 @@
-import sys, time
+import sys
 from formats.lfcfile import open_lfc
 from rlfc import RlfcDecoder
 import rlfc.render  # noqa: F401
