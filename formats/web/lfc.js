@@ -691,6 +691,9 @@ export class TxDecoder {
     // gains − 64 (N0×P) and the offsets (N0×P) of the weighted predictions; version 5: then each
     // view's warp (a, b, cx, cy)
     const count = N0 * 11 + (ver >= 4 ? 2 * N0 * P : 0) + (ver >= 5 ? 4 * N0 : 0);
+    // the sections opening reads, fetched first: one range request per run of them in the file
+    // (layout … thumbs, then the index), not one per section in turn
+    await file.prefetch(["tx.layout", "tx.tables", "tx.maps", "tx.thumbs", "tx.index"]);
     const v = unvarints(await inflate(await file.read("tx.layout"), count * 10, "tx.layout"), count, "tx.layout");
     this.pos = v.slice(0, 2 * N0);
     this.refs = v.slice(2 * N0, 6 * N0);
@@ -1110,6 +1113,9 @@ export class TxDecoder {
       }
     }
     const rows = this.keyRow.get(k), ks = this.keySplit, sb = this.nbx / ks, jobs = [];
+    // the key's rows lie one after another: their missing chunks first, in one request per run
+    // of them (then each row's read is served from the cache, instead of a request per row in turn)
+    await this.file.read("tx.blocks", rows[0][0], rows[rows.length - 1][1]);
     for (let by = 0; by < this.nby; by++) {
       for (let sg = 0; sg < ks; sg++) {                  // a row's streams: sb blocks each, in order
         const [a, b] = rows[by * ks + sg];

@@ -390,3 +390,27 @@ def test_maps_are_decoded_when_a_view_needs_them(tmp_path):
                 np.testing.assert_array_equal(a[:d.height, :d.width], py, err_msg=f"damage {k} view {v}")
     cases = {k for k, _ in refused}
     assert cases and any(len([1 for kk, _ in refused if kk == k]) < 16 for k in cases), refused
+
+
+def test_open_and_key_views_read_in_few_requests(tmp_path):
+    """Over HTTP each read is a round trip: opening reads the header, the section table, the
+    metadata and then the sections it needs in one request per run of them (5 in all), and a
+    transform-coded key view's rows (2 streams a row, in a file of 256-byte checksum chunks: a
+    key's rows span several) come in one request, not one per chunk as row after row is read."""
+    from formats.cli import main
+    from formats.lfcfile import write_lfc
+
+    f = tmp_path / "split.lfc"
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(f), "--quant", "3", "--intra-codec", "tx",
+                 "--key-split", "2", "--quiet"]) == 0
+    g = open_lfc(f)
+    small = tmp_path / "small_chunks.lfc"
+    write_lfc(small, g.codec, g.meta["codec_version"], g.meta["config"], g.meta["scene"],
+              [(n, g.container.read(n)) for n in g.container.sections if n != "meta"], chunk_size=256)
+    got = subprocess.run([NODE, str(HERE / "web_requests.mjs"), str(small)], capture_output=True, text=True,
+                         timeout=300)
+    assert got.returncode == 0, got.stderr[-3000:]
+    info = json.loads(got.stdout.strip().splitlines()[-1])
+    assert info["open"] <= 5, info
+    coded = [k for k in info["keys"] if k["transform"]]
+    assert coded and all(k["requests"] <= 1 for k in coded), info
