@@ -57,6 +57,26 @@ export class BufferSource {
   }
 }
 
+/** Bytes a file's open reads ahead (LfcFile.open: one request for the header, the section table
+ *  and the metadata, ~2.5 KB on the dense grids' files; small, as a light field network's first
+ *  renderable prefix is ≤ 8 KB). */
+const EARLY_BYTES = 4096;
+
+/** A source whose first bytes were read ahead: reads inside them cost no request. */
+class EarlySource {
+  constructor(source, early) { this.source = source; this.early = early; }
+  async size() { return this.source.size(); }
+  async read(a, b) {
+    const n = this.early.length;
+    if (b <= n) return this.early.subarray(a, b);
+    if (a >= n) return this.source.read(a, b);
+    const rest = await this.source.read(n, b), out = new Uint8Array(b - a);   // (the rest only)
+    out.set(this.early.subarray(a, n), 0);
+    out.set(rest, n - a);
+    return out;
+  }
+}
+
 /** Bytes of a URL by HTTP Range requests (one request per read; `fetchImpl` = fetch). */
 export class RangeSource {
   constructor(url, fetchImpl = (...a) => globalThis.fetch(...a)) {
@@ -168,7 +188,11 @@ export class LfcFile {
     f.held = 0;
     const size = await source.size();
     if (size < 32) throw new FormatError(`${name}: ${size} bytes is too short for an .lfc header`);
-    const head = await source.read(0, 32);
+    // the file's first bytes in one request (the header, the section table and the metadata come
+    // first), served to the reads below and later ones; each chunk is still verified when first read
+    const early = await source.read(0, Math.min(size, EARLY_BYTES));
+    f.source = new EarlySource(source, early);
+    const head = early.subarray(0, 32);
     for (let i = 0; i < 8; i++) {
       if (head[i] !== MAGIC[i]) throw new FormatError(`${name}: not an .lfc file (bad magic)`);
     }
@@ -178,7 +202,7 @@ export class LfcFile {
     if (nSec < 1 || nSec > LIMITS.sections) throw new FormatError(`${name}: ${nSec} sections is out of range`);
     const tableEnd = 32 + 48 * nSec + 4 * nCrc;
     if (tableEnd > size) throw new FormatError(`${name}: the section table does not fit the file (truncated?)`);
-    const table = await source.read(32, tableEnd);
+    const table = await f.source.read(32, tableEnd);
     let c = crc32(head.subarray(0, 20));
     c = crc32(table, c);
     if (c !== hcrc) throw new FormatError(`${name}: header checksum mismatch (corrupt file)`);

@@ -169,8 +169,10 @@ def test_viewer_matches_python(site, page, name):
         arg = "null" if focus is None else focus
         page.evaluate(f"lfcViewer.show({s}, {t}, {{focus: {arg}, aperture: {ap}}})")
         assert_same_frame(r.render(s, t, focus, ap), canvas_rgb(page))
-    # byte ranges, not one download: several requests, never more bytes than the file
-    assert info["requests"] > 2 and info["bytesFetched"] <= f.stat().st_size
+    # byte ranges, not one download: never more bytes than the file; a file past the 4 KiB an
+    # open reads ahead (lfc.js EARLY_BYTES: header, table, metadata) in several requests
+    size = f.stat().st_size
+    assert info["bytesFetched"] <= size and (info["requests"] > 2 if size > 4096 else info["requests"] >= 1)
     stats = page.inner_text("#stats")
     assert "bytes fetched" in stats and "view cache" in stats and "frame" in stats
 
