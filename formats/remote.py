@@ -48,20 +48,44 @@ def is_url(source) -> bool:
 class _Http:
     """Range requests over HTTP(S) with the rules in the module doc."""
 
-    def __init__(self, url: str, timeout: float):
+    def __init__(self, url: str, timeout: float, first: int = 0):
+        """``first``: the file's first bytes are asked for in the request that learns its size
+        and version (a range GET: its Content-Range gives the size, one round trip, not a HEAD
+        and then a read; ``self.first`` holds them); 0, or a server whose answer gives no total
+        size: a HEAD."""
         self.url, self.timeout = url, timeout
-        req = urllib.request.Request(url, method="HEAD")
-        with self._open(req) as r:
+        self.first = None
+        if first > 0:
+            with self._open(urllib.request.Request(url, headers={"Range": f"bytes=0-{first - 1}"})) as r:
+                if r.status != 206:
+                    raise FormatError(f"{url}: the server ignored the byte range (HTTP {r.status} instead of 206); "
+                                      f"it does not support range requests")
+                cr = r.headers.get("Content-Range", "")
+                total = cr.rsplit("/", 1)[-1] if cr.startswith("bytes ") else ""
+                self._tag_from(r.headers)
+                if total.isdigit():
+                    data = r.read()
+                    self.size = int(total)
+                    if cr != f"bytes 0-{len(data) - 1}/{self.size}" or len(data) != min(first, self.size):
+                        raise FormatError(f"{url}: the server answered range {cr!r} with {len(data)} bytes for "
+                                          f"bytes 0-{first - 1}")
+                    self.first = data
+                    return
+        with self._open(urllib.request.Request(url, method="HEAD")) as r:
             size = r.headers.get("Content-Length")
-            etag, modified = r.headers.get("ETag"), r.headers.get("Last-Modified")
-            self.tag = etag or modified
-            self.condition = "If-Match" if etag else "If-Unmodified-Since"
+            self._tag_from(r.headers)
             ranges = r.headers.get("Accept-Ranges", "")
         if size is None or not size.isdigit():
             raise FormatError(f"{url}: the server gives no Content-Length; byte-range reading needs one")
         if ranges.strip().lower() == "none":
             raise FormatError(f"{url}: the server does not support byte ranges (Accept-Ranges: none)")
         self.size = int(size)
+
+    def _tag_from(self, headers) -> None:
+        """The file's version (ETag, else Last-Modified) that every later range must match."""
+        etag, modified = headers.get("ETag"), headers.get("Last-Modified")
+        self.tag = etag or modified
+        self.condition = "If-Match" if etag else "If-Unmodified-Since"
 
     def _open(self, req):
         try:
@@ -149,7 +173,8 @@ class RemoteSource(ByteRangeSource):
         page = page or max(512, min(DEFAULT_PAGE, cache_bytes))
         if page < 512 or cache_bytes < page:
             raise ValueError("page must be >= 512 bytes and cache_bytes >= page")
-        self.backend = _Http(url, timeout) if url.lower().startswith(("http://", "https://")) else _Fsspec(url)
+        # (over HTTP(S) the first page comes with the size, in one request: every open reads it)
+        self.backend = _Http(url, timeout, page) if url.lower().startswith(("http://", "https://")) else _Fsspec(url)
         super().__init__(self._read_pages, self.backend.size)
         self.url, self.page, self.cache_bytes, self.latency_s = url, page, cache_bytes, latency_s
         self._pages: collections.OrderedDict[int, bytes] = collections.OrderedDict()
@@ -162,6 +187,10 @@ class RemoteSource(ByteRangeSource):
         self.wire_requests = 0
         self.prefetched_bytes = 0
         self.read_requests = 0
+        first = getattr(self.backend, "first", None)
+        if first:                                       # (the page the size request brought)
+            self._store({0: first})
+            self.wire_bytes, self.wire_requests = len(first), 1
 
     def _get(self, a: int, b: int) -> bytes:
         if self.latency_s:

@@ -80,9 +80,10 @@ def test_prefetch_fills_the_cache_within_budget_and_errors_reach_the_read(served
     srv, root = served
     data = (root / NAME).read_bytes()
     src = RemoteSource(srv.url_of(NAME), cache_bytes=4096, page=512)
-    assert src.prefetch(0, 10 ** 9) == 2048                  # at most half the budget at once
+    assert src.wire_requests == 1 and src.cached_bytes == 512    # the size and the first page: one request
+    assert src.prefetch(0, 10 ** 9) == 1536                  # at most half the budget at once (page 0 held)
     src.wait_prefetch()
-    assert src.prefetched_bytes == 2048 and src.prefetch(0, 2048) == 0 and src.cached_bytes <= 4096
+    assert src.prefetched_bytes == 1536 and src.prefetch(0, 2048) == 0 and src.cached_bytes <= 4096
     n = src.read_requests
     assert src.read(100, 2000) == data[100:2000] and src.read_requests == n      # served from the cache
     assert src.read(1000, 3000) == data[1000:3000] and src.read_requests == n + 1
@@ -101,7 +102,7 @@ def test_prefetch_worker_is_a_daemon_and_close_drops_queued_runs(served):
     srv, root = served
     data = (root / NAME).read_bytes()
     src = RemoteSource(srv.url_of(NAME), cache_bytes=8192, page=512, latency_s=0.2)
-    assert src.prefetch(0, 512) == 512 and src.prefetch(2048, 2560) == 512      # two runs, two jobs
+    assert src.prefetch(512, 1024) == 512 and src.prefetch(2048, 2560) == 512   # two runs, two jobs
     assert src._worker.daemon
     time.sleep(0.05)                                          # the first run is under way
     src.close()
@@ -252,3 +253,19 @@ def test_a_calls_streams_come_in_one_request_per_run_of_missing_chunks(tmp_path,
             assert (d.decode_blocks(*req) == want).all()
             counts.append(src.read_requests - before)
     assert 1 <= counts[0] < counts[1], counts
+
+
+def test_the_size_comes_with_the_first_bytes(served):
+    """Over HTTP one range GET gives the file's size (Content-Range), version (ETag) and first
+    bytes, where a HEAD and then a read took two round trips; the HEAD stays for servers whose
+    answer gives no total size (and for a first of 0 bytes)."""
+    from formats.remote import _Http
+
+    srv, root = served
+    data = (root / NAME).read_bytes()
+    h = _Http(srv.url_of(NAME), 30.0, 512)
+    assert h.size == len(data) and h.first == data[:512] and h.tag
+    assert _Http(srv.url_of(NAME), 30.0, 10 ** 7).first == data          # (a file under one page: all of it)
+    head = _Http(srv.url_of(NAME), 30.0)
+    assert head.size == len(data) and head.first is None and head.tag == h.tag
+    assert head.fetch(100, 300) == data[100:300]
