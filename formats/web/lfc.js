@@ -86,9 +86,29 @@ export class RangeSource {
     this.requests = 0;
     this._size = null;
     this._etag = null;
+    this._head = null;                      // the first bytes, read with the size
   }
   async size() {
     if (this._size === null) {
+      // the size (Content-Range), version (ETag) and the file's first bytes in one range GET,
+      // which LfcFile.open reads next; a HEAD where the answer gives no total size (a
+      // cross-origin server that does not expose Content-Range)
+      const g = await this.fetch(this.url, { headers: { Range: `bytes=0-${EARLY_BYTES - 1}` }, cache: "no-store" });
+      if (g.status !== 206 && g.status !== 200 && !g.ok) throw new LfcError(`${this.url}: HTTP ${g.status}`);
+      const m = /^bytes 0-(\d+)\/(\d+)$/.exec(g.headers.get("Content-Range") || "");
+      if (g.status === 206 && m) {
+        const buf = new Uint8Array(await g.arrayBuffer()), n = Number(m[2]);
+        if (!Number.isSafeInteger(n) || buf.length !== Math.min(EARLY_BYTES, n) || Number(m[1]) !== buf.length - 1) {
+          throw new FormatError(`${this.url}: the server answered range ${g.headers.get("Content-Range")} with ${buf.length} bytes`);
+        }
+        this.requests += 1;
+        this.bytesFetched += buf.length;
+        this._size = n;
+        this._etag = g.headers.get("ETag");
+        this._head = buf;
+        return n;
+      }
+      if (g.body && g.body.cancel) g.body.cancel().catch(() => {});   // (a 200: the whole file; not read)
       const r = await this.fetch(this.url, { method: "HEAD", cache: "no-store" });
       if (!r.ok) throw new LfcError(`${this.url}: HTTP ${r.status}`);
       const n = Number(r.headers.get("Content-Length"));
@@ -103,6 +123,7 @@ export class RangeSource {
   }
   async read(a, b) {
     if (b <= a) return new Uint8Array(0);
+    if (this._head && a >= 0 && b <= this._head.length) return this._head.subarray(a, b);   // (size()'s bytes)
     const headers = { Range: `bytes=${a}-${b - 1}` };
     if (this._etag) headers["If-Match"] = this._etag;
     this.requests += 1;
