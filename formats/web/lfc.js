@@ -108,7 +108,11 @@ export class RangeSource {
         this._head = buf;
         return n;
       }
-      if (g.body && g.body.cancel) g.body.cancel().catch(() => {});   // (a 200: the whole file; not read)
+      // the first bytes without the size: kept (read once); a 200 (the whole file): not read
+      const part = g.status === 206 && /^bytes 0-\d+\//.test(g.headers.get("Content-Range") || "")
+        ? new Uint8Array(await g.arrayBuffer()) : null;
+      if (!part && g.body && g.body.cancel) g.body.cancel().catch(() => {});
+      if (part) { this.requests += 1; this.bytesFetched += part.length; }
       const r = await this.fetch(this.url, { method: "HEAD", cache: "no-store" });
       if (!r.ok) throw new LfcError(`${this.url}: HTTP ${r.status}`);
       const n = Number(r.headers.get("Content-Length"));
@@ -118,6 +122,7 @@ export class RangeSource {
       }
       this._size = n;
       this._etag = r.headers.get("ETag");
+      if (part && part.length === Math.min(EARLY_BYTES, n) && g.headers.get("ETag") === this._etag) this._head = part;
     }
     return this._size;
   }

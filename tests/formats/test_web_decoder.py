@@ -415,3 +415,25 @@ def test_open_and_key_views_read_in_few_requests(tmp_path):
     assert info["open"] <= 3, info
     coded = [k for k in info["keys"] if k["transform"]]
     assert coded and all(k["requests"] <= 1 for k in coded), info
+
+
+def test_range_source_reads_the_size_with_the_first_bytes(tmp_path):
+    """lfc.js's RangeSource (a fake fetch serving a file's ranges): the size, version and first
+    4 KiB come in one range GET, which the open then reads without a request of its own (no
+    HEAD); a server whose Content-Range gives no total size (cross-origin, not exposed) takes a
+    HEAD as before, its first bytes kept. The same planes either way."""
+    from formats.cli import main
+
+    f = tmp_path / "d.lfc"
+    assert main(["encode", str(ROOT / "samples" / "dino_crop"), str(f), "--quant", "3", "--intra-codec", "tx",
+                 "--quiet"]) == 0
+    runs = {}
+    for mode in ("total", "nototal"):
+        got = subprocess.run([NODE, str(HERE / "web_range_source.mjs"), str(f), mode], capture_output=True, text=True,
+                             timeout=300)
+        assert got.returncode == 0, got.stderr[-3000:]
+        runs[mode] = json.loads(got.stdout.strip().splitlines()[-1])
+    for mode, r in runs.items():
+        assert r["same"] and r["size"] == r["n"] == f.stat().st_size, (mode, r)
+        assert r["calls"][0] == "GET bytes=0-4095" and r["calls"].count("GET bytes=0-4095") == 1, (mode, r)
+    assert "HEAD" not in runs["total"]["calls"] and "HEAD" in runs["nototal"]["calls"]
