@@ -364,13 +364,7 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
             else:
                 out[...] = planes
         else:                           # raster bands of blend (mode 0) blocks, then the other blocks
-            slots, wmode, dpos = self._view_refs(v)
-            cell = self.lay.cell[v]
-            disp, modes = self._maps_of([v])
-            warp = None if self.warp_dw is None else view_offsets(self.warp_dw[v], n8y, n8x)
-            out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, n8y, n8x, out=out,
-                               warp=warp)
-            self._weigh(out, v)                   # (in place: ``out`` is C-contiguous int32)
+            out = self._raster_prediction(v, out)
         locs = np.flatnonzero(self.coded[v]) if level == 0 else np.zeros(0, np.int64)
         if locs.size:
             by, bx = np.divmod(locs, self.nbx)
@@ -385,6 +379,19 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
             o4[ty, :, tx] = self._add_residual(got, self._residual(vs, parsed), parsed.modes).reshape(-1, TB, TB, P)
         return out
 
+    def _raster_prediction(self, v: int, out=None, rows: tuple[int, int] | None = None) -> np.ndarray:
+        """(8·n, Wp, P) int32 weighted prediction of view v (with references; the atlas) in raster
+        bands (:func:`rlfc.txsample.predict_view`): the whole view, or its 8×8 block rows
+        ``rows`` = (a, b) (n = b − a); written to ``out`` where given (C-contiguous int32)."""
+        slots, wmode, dpos = self._view_refs(v)
+        cell = self.lay.cell[v]
+        disp, modes = self._maps_of([v])
+        warp = None if self.warp_dw is None else view_offsets(self.warp_dw[v], self.nby8, self.nbx8)
+        out = predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, self.nby8, self.nbx8,
+                           out=out, warp=warp, rows=rows)
+        self._weigh(out, v)                       # (in place: ``out`` is C-contiguous int32)
+        return out
+
     def _key_rows_planes(self, k: int, rr: np.ndarray, parsed) -> np.ndarray:
         """(n, B, Wp, P) int32 planes of block rows ``rr`` (n,) ascending of key view k, which
         has references (every block of a key row is coded: ``parsed`` holds their syntax, the
@@ -394,15 +401,9 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         key rows on the grids whose keys are predicted: BENCHMARKS.md)."""
         B, tpb, P, nbx, n = self.block_size, self.tpb, self.P, self.nbx, rr.size
         out = np.empty((n * B, self.Wp, P), np.int32)
-        slots, wmode, dpos = self._view_refs(k)
-        cell = self.lay.cell[k]
-        disp, modes = self._maps_of([k])
-        warp = None if self.warp_dw is None else view_offsets(self.warp_dw[k], self.nby8, self.nbx8)
         cut = (np.flatnonzero(np.diff(rr) != 1) + 1).tolist()
         for lo, hi in zip([0] + cut, cut + [n]):
-            predict_view(self.atlas, slots, wmode[0], disp[cell], modes[cell], dpos, self.nby8, self.nbx8,
-                         out=out[lo * B:hi * B], warp=warp, rows=(int(rr[lo]) * tpb, (int(rr[hi - 1]) + 1) * tpb))
-        self._weigh(out, k)                       # (in place: ``out`` is C-contiguous int32)
+            self._raster_prediction(k, out[lo * B:hi * B], (int(rr[lo]) * tpb, (int(rr[hi - 1]) + 1) * tpb))
         # (rows, tb row, y, blocks, tb column, x, P) → (rows · blocks, tbs, 8, 8, P) and back
         tbs = out.reshape(n, tpb, TB, nbx, tpb, TB, P).transpose(0, 3, 1, 4, 2, 5, 6).reshape(n * nbx, self.nt, TB,
                                                                                             TB, P)
