@@ -57,9 +57,7 @@ class _Http:
         self.first = None
         if first > 0:
             with self._open(urllib.request.Request(url, headers={"Range": f"bytes=0-{first - 1}"})) as r:
-                if r.status != 206:
-                    raise FormatError(f"{url}: the server ignored the byte range (HTTP {r.status} instead of 206); "
-                                      f"it does not support range requests")
+                self._expect_partial(r)
                 cr = r.headers.get("Content-Range", "")
                 total = cr.rsplit("/", 1)[-1] if cr.startswith("bytes ") else ""
                 self._tag_from(r.headers)
@@ -80,6 +78,13 @@ class _Http:
         if ranges.strip().lower() == "none":
             raise FormatError(f"{url}: the server does not support byte ranges (Accept-Ranges: none)")
         self.size = int(size)
+
+    def _expect_partial(self, r) -> None:
+        """A range request's answer must be 206 Partial Content (a 200 is the whole file: the
+        server does not serve ranges)."""
+        if r.status != 206:
+            raise FormatError(f"{self.url}: the server ignored the byte range (HTTP {r.status} instead of 206); "
+                              f"it does not support range requests")
 
     def _tag_from(self, headers) -> None:
         """The file's version (ETag, else Last-Modified) that every later range must match."""
@@ -106,9 +111,7 @@ class _Http:
         if self.tag:
             headers[self.condition] = self.tag
         with self._open(urllib.request.Request(self.url, headers=headers)) as r:
-            if r.status != 206:
-                raise FormatError(f"{self.url}: the server ignored the byte range (HTTP {r.status} instead of 206); "
-                                  f"it does not support range requests")
+            self._expect_partial(r)
             cr = r.headers.get("Content-Range", "")
             tag = r.headers.get("ETag") or r.headers.get("Last-Modified")
             if self.tag and tag and tag != self.tag:
