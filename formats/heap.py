@@ -53,9 +53,9 @@ def keep_freed(mmap_bytes: int = KEEP_MMAP_BYTES, trim_bytes: int = KEEP_TRIM_BY
     top back) and map them again on the next frame, a page fault per 4 KiB: on the 2-core box
     ``lfcodec render FILE DIR --path orbit:60`` took 400 000 page faults and 2.7-2.9 s, and 53 000
     and 2.0-2.1 s with this; warm frames ran 1.3-1.8x as fast; peaks 0-7% higher (BENCHMARKS.md).
-    ``lfcodec render`` asks for it (not ``decode``: one pass, no faster, a peak up to 23% higher;
-    nor ``encode``, whose peak-memory line it would cross); a renderer calling the library can
-    too. Leaves the environment's ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_`` alone.
+    ``lfcodec render`` and the library's renderer (:class:`rlfc.render.Renderer`, unless made
+    with ``keep_freed=False``) ask for it (not ``decode``: one pass, no faster, a peak up to 23%
+    higher; nor ``encode``, whose peak-memory line it would cross). Leaves the environment's ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_`` alone.
     Returns whether both were set."""
     if "MALLOC_MMAP_THRESHOLD_" in os.environ or "MALLOC_TRIM_THRESHOLD_" in os.environ:
         return False

@@ -83,6 +83,14 @@ class Renderer:
         robust: choose per pixel among smoother disparities where the file's maps make the
             sources disagree (about 3× the sampling work of ``robust=False``; see
             :meth:`_consistent`).
+        keep_freed: ask the process's malloc to keep the blocks a frame frees for the next
+            (:func:`formats.heap.keep_freed`, as ``lfcodec render`` does; glibc only): without
+            it every frame maps its large temporaries afresh and faults their pages in again.
+            It sets the whole process's malloc (blocks below 32 MiB from the heap, up to 64 MiB
+            of freed memory kept at its top) and is left set; an environment's
+            ``MALLOC_MMAP_THRESHOLD_`` / ``MALLOC_TRIM_THRESHOLD_`` wins. On the six dense grids
+            at 40 dB: warm frames 1.3–1.6× as fast (the first frame of a fresh process within
+            the box's noise; BENCHMARKS.md, stop 89). False leaves malloc as it is.
 
     Attributes:
         blocks_decoded, blocks_requested: counters over the renderer's life (hit rate =
@@ -90,7 +98,7 @@ class Renderer:
     """
 
     def __init__(self, decoder, cache_mib: float = 256.0, margin: float = 0.5, robust: bool = True,
-                 device: str | None = None):
+                 device: str | None = None, keep_freed: bool = True):
         self.d = decoder
         if isinstance(cache_mib, bool) or not isinstance(cache_mib, (int, float, np.integer, np.floating)) \
                 or not 0 <= cache_mib < 1 << 40:
@@ -100,6 +108,10 @@ class Renderer:
             raise ParameterError(f"margin must be a number of views >= 0, got {margin!r}")
         self.robust = bool(robust)
         self.ops = make_ops(device)
+        if keep_freed:
+            from formats.heap import keep_freed as keep
+
+            keep()                                  # (frame after frame: freed blocks reused)
         scene = decoder.file.meta.get("scene", {}) if hasattr(decoder, "file") else {}
         if isinstance(scene, dict) and scene.get("layout") == "posed":
             raise ParameterError("novel views are rendered on grids of parallel cameras; this capture is posed "

@@ -12,7 +12,11 @@ geometric interpolation of its neighbours at all (see :func:`midview_check`).
 Usage:
     python -m tools.bench_render SCENE [SCENE ...] [--target-psnr 40] [--device numpy cuda] [--out DIR]
     python -m tools.bench_render SCENE [SCENE ...] --midview
-    python -m tools.bench_render FILE.lfc [...] [--device numpy cuda] [--keep-freed]   (frame times only)
+    python -m tools.bench_render FILE.lfc [...] [--device numpy cuda] [--malloc-default]   (frame times only)
+
+Renderers ask malloc to keep freed blocks (``Renderer(keep_freed=True)``, the default since stop
+89); ``--malloc-default`` makes them with ``keep_freed=False``, glibc's defaults, as library
+renderers were before (call it in a fresh process: the setting is the process's).
 """
 from __future__ import annotations
 
@@ -29,6 +33,9 @@ from formats.scenes import read_scene
 from rlfc import encode
 from tools.common import log, machine, open_encoded
 
+#: what the renderers made here are given as ``keep_freed`` (``--malloc-default``: False)
+KEEP_FREED = True
+
 
 def bench_scene(path: str, target: float, devices=("numpy",)) -> dict:
     lf = read_scene(path)
@@ -38,8 +45,8 @@ def bench_scene(path: str, target: float, devices=("numpy",)) -> dict:
     t0 = time.perf_counter()
     d, blob = open_encoded(lf, encode(lf, EncodeOptions(target_psnr=target)))
     t_enc = time.perf_counter() - t0
-    ren = d.renderer(cache_mib=1024)
-    fast = d.renderer(cache_mib=1024, robust=False)
+    ren = d.renderer(cache_mib=1024, keep_freed=KEEP_FREED)
+    fast = d.renderer(cache_mib=1024, robust=False, keep_freed=KEEP_FREED)
     rows = {"render": [], "render_fast": [], "nearest": [], "blend": []}
     ss = {"render": [], "render_fast": [], "nearest": [], "blend": []}
     R, C = full.shape[:2]
@@ -76,12 +83,12 @@ def time_path(d, devices=("numpy",)) -> dict:
     speed = {}
     for dev, (label, robust) in ((dv, lr) for dv in devices for lr in (("", True), ("_fast", False))):
         label = label if dev == "numpy" else f"{label}_{dev}"
-        ren2 = d.renderer(cache_mib=1024, robust=robust, device=dev)
+        ren2 = d.renderer(cache_mib=1024, robust=robust, device=dev, keep_freed=KEEP_FREED)
         if dev != "numpy":
-            ref = d.renderer(cache_mib=1024, robust=robust).render_planes(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
+            ref = d.renderer(cache_mib=1024, robust=robust, keep_freed=KEEP_FREED).render_planes(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
             got = ren2.render_planes(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
             speed[f"max_plane_diff{label}"] = float(np.abs(ref - got.cpu().numpy()).max())
-            ren2 = d.renderer(cache_mib=1024, robust=robust, device=dev)
+            ren2 = d.renderer(cache_mib=1024, robust=robust, device=dev, keep_freed=KEEP_FREED)
         t = time.perf_counter()
         ren2.render(cs + rad * np.sin(ang[0]), ct + rad * np.cos(ang[0]))
         first = time.perf_counter() - t
@@ -159,14 +166,12 @@ def main(argv=None) -> int:
                          "of their neighbours (original views, no codec)")
     ap.add_argument("--view-step", type=int, nargs="+", default=[1],
                     help="--midview: use every k-th view (2 = the baseline of a leave-views-out file)")
-    ap.add_argument("--keep-freed", action="store_true",
-                    help="ask malloc to keep freed blocks first (formats.heap.keep_freed), as `lfcodec render` "
-                         "does; call it in a fresh process (it sets the process's malloc)")
+    ap.add_argument("--malloc-default", action="store_true",
+                    help="renderers made with keep_freed=False: glibc's malloc as it is, as library renderers "
+                         "were before stop 89 (by default they ask it to keep freed blocks, formats.heap.keep_freed)")
     a = ap.parse_args(argv)
-    if a.keep_freed:
-        from formats.heap import keep_freed
-
-        keep_freed()
+    global KEEP_FREED
+    KEEP_FREED = not a.malloc_default
     if a.midview:
         res = {"machine": machine(), "midview": [midview_check(s, st) for st in a.view_step for s in a.scenes]}
     else:

@@ -53,6 +53,22 @@ def test_captured_positions_are_the_decoded_views_and_blocks_are_cached(leave_ou
     assert ren.blocks_decoded == decoded and ren.blocks_requested > decoded
 
 
+def test_a_renderer_asks_malloc_to_keep_freed_blocks_unless_told_not_to(leave_out, monkeypatch):
+    """Frame after frame, a renderer's large temporaries are freed and allocated again: it asks
+    formats.heap.keep_freed (as ``lfcodec render`` does) so that they are reused rather than
+    mapped and faulted in afresh; ``keep_freed=False`` leaves malloc alone. The frames are the
+    same either way."""
+    import formats.heap as heap
+
+    _, d, _ = leave_out
+    calls = []
+    monkeypatch.setattr(heap, "keep_freed", lambda *a: calls.append(a) or True)
+    a = d.renderer().render(0.5, 1.5)
+    assert len(calls) == 1
+    b = d.renderer(keep_freed=False).render(0.5, 1.5)
+    assert len(calls) == 1 and np.array_equal(a, b)
+
+
 def test_a_grid_whose_every_view_is_coded_alone_renders_through_its_shared_map(leave_out):
     """A grid file whose every view is a JPEG 2000 image (the encoder's choice at high rates on
     views that predict each other badly) keeps its maps, the shared one in every cell. The
