@@ -64,6 +64,13 @@ MODEL_SPAN = 1.5      # octaves: a search evaluation between two measured models
 SEARCH_MIN_WIDTH = 1 / 32   # octaves: a PSNR search ends when a step that met the target and one that
                             # missed are this close (the staircase below it is noise: BENCHMARKS.md)
 PSNR_SLOPE = -2.5    # dB per octave of the step around 40 dB (dense grids: 2.2-2.8), the search's prior
+#: dB per octave of the step from the probe pass to the step a PSNR target settles at, where the
+#: probe lands above the target (the step goes coarser) and below it (finer). Measured on the six
+#: dense grids at 36 / 40 / 45 dB: 1.2–2.9 (median 2.0) and 2.1–5.2 (median 3.5). The coarse side
+#: stays at PSNR_SLOPE: -2.0 there grew files 0.9–1.8% (the maps repriced further from the
+#: target); -3.5 on the fine side saves a pass on most searches, files within ±0.4%
+#: (BENCHMARKS.md, "The probe's slope, by direction")
+PROBE_SLOPES = (PSNR_SLOPE, -3.5)
 BPP_SLOPE = -1.0     # log2 bpp per octave of the step, the same for a bpp target
 
 #: posed captures coded as JPEG 2000 (a PSNR target): the first shift of the views' levels
@@ -559,7 +566,10 @@ def _encode_tx(lf, options: EncodeOptions, params: TxParams, progress, runner) -
         if probe is not None:          # the probe pass says where the target lies (prior slope)
             ps0 = enc.psnr(probe)
             if options.target_psnr is not None:
-                shift = (options.target_psnr - ps0) / PSNR_SLOPE
+                # (the probe codes with the default key ratio, before the one it sets: from it
+                # the PSNR falls more slowly towards a coarser step than the search's points do,
+                # and rises more slowly towards a finer one)
+                shift = (options.target_psnr - ps0) / PROBE_SLOPES[0 if ps0 > options.target_psnr else 1]
                 q0 = q0 + shift
             else:
                 b0 = file_bpp(lf, *enc.pack(probe))

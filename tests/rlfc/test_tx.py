@@ -835,17 +835,18 @@ def test_an_encode_that_keeps_no_decoded_views_writes_the_same_file(case, monkey
     """``EncodeOptions(keep_decoded=False)``: the passes keep each view's error, not its pixels
     (one copy of the light field less at the peak), and ``decoded`` is None; the sections, the
     rate search's trace and the summary are those of the default encode. The cases take the
-    paths that looked at the kept pixels before: the λ trim (noisy grid at 40 dB), views
-    promoted to JPEG 2000 keys (unrelated views at 48 dB), a bpp target, lossless, 16-bit grey,
-    and maps repriced for the search then restored on a grid too small for a sampled search
-    (the search's pass coded with the repriced maps: without keeping pixels that pass used to
-    be written with the restored ones, a file 0.03 dB below the target it claimed)."""
+    paths that looked at the kept pixels before: the λ trim (noisy grid at 43 dB, where the search
+    ends more than TRIM_DB above the target), views promoted to JPEG 2000 keys (unrelated views at
+    48 dB), a bpp target, lossless, 16-bit grey, and maps repriced for the search then restored
+    on a grid too small for a sampled search (the search's pass coded with the repriced maps:
+    without keeping pixels that pass used to be written with the restored ones, a file 0.03 dB
+    below the target it claimed)."""
     import rlfc.txencode as T
 
     lf = {"trim": _noisy_grid, "promote": _unrelated_grid, "restored": lambda: _plane_grid(3, 3, 96, 128),
           "grey16": lambda: smooth_lf(rows=3, cols=3, h=24, w=32, c=1, dtype=np.uint16)}.get(
         case, lambda: smooth_lf(rows=3, cols=3, h=24, w=32))()
-    kw = {"trim": {"target_psnr": 40}, "promote": {"target_psnr": 48}, "bpp": {"target_bpp": 0.8},
+    kw = {"trim": {"target_psnr": 43}, "promote": {"target_psnr": 48}, "bpp": {"target_bpp": 0.8},
           "lossless": {"lossless": True}, "grey16": {"target_psnr": 50}, "restored": {"target_psnr": 37}}[case]
     restores = []
     real = T.TxEncoder.restore_maps
@@ -1538,6 +1539,42 @@ def test_an_entropy_model_between_two_measured_ones_interpolates_their_counts():
     assert _between_models(models, 2.0) is None                                               # at a measured step
     far = 2.0 ** (2 + MODEL_SPAN + 0.25)
     assert _between_models({4.0: Model(ca), far: Model(cb)}, 2.5) is None                     # too far apart
+
+
+@pytest.mark.parametrize("target", [36.0, 45.0])
+def test_the_search_starts_from_the_probe_along_the_slope_of_its_direction(monkeypatch, target):
+    """The probe pass (default key ratio, the step the target's MSE suggests) says where the
+    search starts: its PSNR's distance to the target over PROBE_SLOPES[0] (dB per octave) where
+    it lands above the target (a coarser step), over PROBE_SLOPES[1] where below (finer; the
+    PSNR rises more slowly that way than the search's own prior slope says)."""
+    import rlfc.txrate as R
+    from formats.scenes import read_scene
+    from rlfc import txencode as T
+    from rlfc.ratesearch import SearchResult
+
+    lf = read_scene(ROOT / "samples" / "dino_crop")
+    runs, seen = [], {}
+    orig = T.TxEncoder.run
+
+    def run(self, step, model, progress=None, keep_pixels=False, views=None, lam_scale=1.0):
+        r = orig(self, step, model, progress, keep_pixels, views, lam_scale)
+        runs.append((step, self.psnr(r)))
+        return r
+
+    def first_point(value, q0, target, **k):
+        seen["q0"] = q0
+        v, r = value(q0)
+        return SearchResult(v >= target, q0, r, [(q0, v)])
+
+    monkeypatch.setattr(T.TxEncoder, "run", run)
+    monkeypatch.setattr(R, "secant_search", first_point)
+    monkeypatch.setattr(R, "PROBE_SLOPES", (-2.0, -4.0))          # (any two: which one is used)
+    encode(lf, EncodeOptions(profile="tx", target_psnr=target, params={"ablate": ["maps_reprice"]}))
+    step0, ps0 = runs[0]
+    assert step0 == pytest.approx(math.sqrt(12 * 255 ** 2 * 10 ** (-target / 10)))
+    slope = -2.0 if ps0 > target else -4.0
+    assert (ps0 > target) == (target == 36.0)                       # (both directions are tried)
+    assert seen["q0"] == pytest.approx(math.log2(step0) + (target - ps0) / slope)
 
 
 def test_a_search_step_between_two_measured_models_is_coded_once(monkeypatch):
