@@ -162,6 +162,7 @@ class TxEncoder(PassCoder, J2kViews, RdoQuantizer, FilePacker):
         self._alpha: dict = {}                    # view → its alpha stream (alpha_stream_of)
         self.kr = self.DEFAULT_KEY_RATIO          # until :meth:`auto_key_ratio` has measured one
         self._j2k_hints: dict = {}                # view → what its JPEG 2000 searches learnt (j2ksearch)
+        self._thumb_at: dict = {}                 # key step (1/16) → the thumbnail step an earlier pass chose there
         self._map_cost: dict = {}                 # predicted key → bytes of its own map; "all": the section (_map_bytes)
         self._block_means: dict = {}              # intra view → (nby8, nbx8, P) float64 block means
         if progress:

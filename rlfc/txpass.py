@@ -104,21 +104,30 @@ class PassCoder:
                 # squared error + λ·bits) for the first intra view; the others use the same. (By
                 # bits alone, a model measured at another step could pick the key step's coarse
                 # thumbnail at 6 dB less: hci_antinous at step 120.5, 46 738 bits at 30.4 dB
-                # against 50 900 at 36.1.)
+                # against 50 900 at 36.1.) A pass at a key step an earlier pass chose at takes
+                # that choice (rate control runs a step again with another model or other maps; the
+                # files of six grids at 40 and 45 dB were the same on 10 of 12, within ±0.03% on the
+                # other two, with 25% fewer trials of ~60 ms of CPU each: BENCHMARKS.md).
                 lam_rgb = lam_k * (3.0 if self.P >= 3 else 1.0)   # a luma error e is e in each of R, G, B
                 best = None
-                cands = [thumb16] if thumb16 is not None else sorted({16, int(s16[0, 0])})
+                if thumb16 is not None:
+                    cands = [thumb16]
+                elif int(s16[0, 0]) in self._thumb_at:
+                    cands = [self._thumb_at[int(s16[0, 0])]]
+                else:
+                    cands = sorted({16, int(s16[0, 0])})
                 # (several candidates: each keeps its own pixels, gathered at the end; coded side
                 # by side on threads, the same integers, from the view read once here)
                 opx = self.view_pixels(k) if len(cands) > 1 else None
                 got = Runner().map_threaded(self.code_intra, [(k, t16, s16[0], lam_k, model,
-                                                               px_slot(k) if thumb16 is not None else keep or own_px,
+                                                               px_slot(k) if len(cands) == 1 else keep or own_px,
                                                                opx) for t16 in cands])
                 for t16, (lv, c) in zip(cands, got):
                     cost = c.sse + lam_rgb * (c.bits + 8 * len(pack_thumbs(lv[None])))
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
+                self._thumb_at.setdefault(int(s16[0, 0]), thumb16)
             else:                               # (as :meth:`_dag_pass` codes them, one after another)
                 codes[k], img, tc, _ = _pass_task(self, "key", k, kp, model, s16[0], lam_k, lam_k / lam_scale,
                                                   px_slot(k), j2k_ref, None)

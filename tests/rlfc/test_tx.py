@@ -1259,7 +1259,8 @@ def test_a_predicted_key_weighs_its_own_map_against_jpeg2000():
 def test_the_thumbnail_step_is_chosen_by_distortion_and_bits(monkeypatch):
     """The first intra key tries two thumbnail steps (exact block means, the key step) and keeps
     the one of least colour squared error + λ·bits. By bits alone, a model measured at another
-    step picked hci_antinous's coarse thumbnail at 30.4 dB over 36.1 dB at step 120.5."""
+    step picked hci_antinous's coarse thumbnail at 30.4 dB over 36.1 dB at step 120.5. A later
+    pass at the same key step takes the choice made there."""
     import rlfc.txencode as T
     import rlfc.txrate as R
     from formats.scenes import read_scene
@@ -1278,12 +1279,19 @@ def test_the_thumbnail_step_is_chosen_by_distortion_and_bits(monkeypatch):
     assert enc.run(8.0, T.Model(T.default_counts()))["thumb16"] == 16
 
     def coarse_is_cheap_and_as_good(k, t16, *a, **kw):
+        tried.append(t16)
         lv, c = real(k, t16, *a, **kw)
         if t16 != 16:
             c.bits = 0.0
         return lv, c
+    tried = []
     monkeypatch.setattr(enc, "code_intra", coarse_is_cheap_and_as_good)
+    # a later pass at the same key step takes the earlier pass's choice, trying nothing else
+    assert enc.run(8.0, T.Model(T.default_counts()))["thumb16"] == 16 and tried == [16]
+    tried.clear()
+    enc._thumb_at.clear()                              # a pass that remembers nothing chooses again
     assert enc.run(8.0, T.Model(T.default_counts()))["thumb16"] != 16
+    assert len(tried) == 2 and 16 in tried and len(set(tried)) == 2
 
 
 def test_streams_packed_together_are_the_bytes_of_each_part_alone(monkeypatch):
