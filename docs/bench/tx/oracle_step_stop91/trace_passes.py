@@ -1,4 +1,7 @@
-import os, sys, time, json
+"""Trace a PSNR-targeted encode pass by pass (step, views, key pixels kept, λ scale, CPU s, PSNR,
+who asked), then the total CPU, bytes and PSNR. usage: python trace_passes.py GRID T
+(env ORACLE_STEP / ORACLE_LAMBDA only act with the hooks of oracle.diff applied)."""
+import os, sys, time
 os.environ["OMP_NUM_THREADS"]="1"
 from formats.scenes import read_scene
 from formats.codec_api import EncodeOptions
