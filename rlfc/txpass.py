@@ -110,12 +110,13 @@ class PassCoder:
                 # other two, with 25% fewer trials of ~60 ms of CPU each: BENCHMARKS.md).
                 lam_rgb = lam_k * (3.0 if self.P >= 3 else 1.0)   # a luma error e is e in each of R, G, B
                 best = None
+                key16 = int(s16[0, 0])
                 if thumb16 is not None:
                     cands = [thumb16]
-                elif int(s16[0, 0]) in self._thumb_at:
-                    cands = [self._thumb_at[int(s16[0, 0])]]
+                elif key16 in self._thumb_at:
+                    cands = [self._thumb_at[key16]]
                 else:
-                    cands = sorted({16, int(s16[0, 0])})
+                    cands = sorted({16, key16})
                 # (several candidates: each keeps its own pixels, gathered at the end; coded side
                 # by side on threads, the same integers, from the view read once here)
                 opx = self.view_pixels(k) if len(cands) > 1 else None
@@ -127,7 +128,7 @@ class PassCoder:
                     if best is None or cost < best[0]:
                         best = (cost, t16, lv, c)
                 _, thumb16, thumbs[k], codes[k] = best
-                self._thumb_at.setdefault(int(s16[0, 0]), thumb16)
+                self._thumb_at.setdefault(key16, thumb16)
             else:                               # (as :meth:`_dag_pass` codes them, one after another)
                 codes[k], img, tc, _ = _pass_task(self, "key", k, kp, model, s16[0], lam_k, lam_k / lam_scale,
                                                   px_slot(k), j2k_ref, None)
