@@ -67,13 +67,13 @@ class SingleRequests:
                 return from_planes(self.block(view, by, bx, level, parsed).reshape(B, B, self.P), self.dtype)
             if parsed.index.size:
                 res, bounds = self._residual_rows(parsed), self._pixel_bounds
-        disp, modes = self._cell_map(self._one_ready(view, by))
+        disp, modes, dmax = self._cell_map(self._one_ready(view, by))
         warp = None
         if self.warp_dw is not None:
             wy, wx = self._warp_pixels(view)
             warp = (wy[loc], wx[loc])
         return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
-                                    self._peak_f, self.dtype, res, bounds, warp)
+                                    self._peak_f, self.dtype, res, bounds, warp, dmax)
 
     def _warp_pixels(self, view: int) -> tuple:
         """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
@@ -133,9 +133,10 @@ class SingleRequests:
         return prefs
 
     def _cell_map(self, cell: int) -> tuple:
-        """(disparities as float32, modes) of a decoded map, block-major: (nby·nbx, nt), row
-        by·nbx + bx the 8×8 blocks of block (by, bx) in raster order (cached; a request reads
-        one row, a view)."""
+        """A decoded map block-major, row by·nbx + bx the 8×8 blocks of block (by, bx) in raster
+        order: its disparities as float32 followed by the block's pixel origin (by·B, bx·B)
+        (nby·nbx, nt + 2), its modes (nby·nbx, nt), and its largest |disparity| (a float)
+        (cached; a request reads one row, a view)."""
         dm = self._cell_maps.get(cell)
         if dm is None:
             t, ny, nx = self.tpb, self.nby, self.nbx
@@ -143,8 +144,12 @@ class SingleRequests:
             def blocks(a):
                 return np.ascontiguousarray(a.reshape(ny, t, nx, t).swapaxes(1, 2)).reshape(ny * nx, t * t)
 
-            dm = self._cell_maps[cell] = (blocks(self._map_store.disp[cell].astype(np.float32)),
-                                          blocks(self._map_store.modes[cell].astype(np.uint8)))
+            dc = self._map_store.disp[cell]
+            org = np.stack(np.meshgrid(np.arange(ny) * self.block_size, np.arange(nx) * self.block_size,
+                                       indexing="ij"), axis=-1).reshape(ny * nx, 2)
+            dm = self._cell_maps[cell] = (np.concatenate([blocks(dc.astype(np.float32)), org.astype(np.float32)], axis=1),
+                                          blocks(self._map_store.modes[cell].astype(np.uint8)),
+                                          float(np.abs(dc).max(initial=0)))
         return dm
 
     def _one_rows(self, view: int, by: int) -> None:

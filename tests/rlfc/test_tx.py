@@ -583,6 +583,37 @@ def test_one_request_pixel_path_equals_planes_then_pixels(kw):
     assert (d.decode_block(r, c, 0, 0, 1) == full[r, c, :B, :B]).all()
 
 
+@pytest.mark.parametrize("kw", [dict(), dict(c=1), dict(dtype=np.uint16, c=4)])
+def test_one_request_pixel_path_skips_the_rows_clamp_only_where_no_row_leaves_its_key_view(kw):
+    """The lean path skips clamping rows to their key view where the view's largest disparity
+    keeps every row of the block inside it (block rows away from the top and bottom edges), and
+    clamps elsewhere: with disparities of a few pixels both kinds of block occur, and every one
+    gives the pixels of ``block`` + ``from_planes`` (a skip where rows leave the view would read
+    the neighbouring key view's rows in the stacked atlas)."""
+    from formats.pixels import from_planes
+
+    lf = smooth_lf(rows=5, cols=5, h=72, w=40, **kw)
+    e = tx(lf, step=6.0 * (257 if kw.get("dtype") == np.uint16 else 1))
+    d, _ = open_encoded(lf, e)
+    core, B = d.core, d.block_size
+    disp, _ = core._map_store.all()
+    disp[...] = np.random.default_rng(9).integers(-90, 91, disp.shape)   # rows move by up to a few pixels
+    core._map_done[:] = False
+    kinds = set()
+    for v in np.flatnonzero(~core.is_key):
+        for by in range(d.nby):
+            for bx in range(d.nbx):
+                lean = core.block_pixels(int(v), by, bx, 0)
+                if lean is None:
+                    continue
+                prefs = core._pixel_refs(int(v))
+                reach = core._cell_map(int(core.lay.cell[v]))[2] * prefs[-1]
+                kinds.add(reach <= by * B <= core.atlas.hp - B - reach)
+                ref = from_planes(core.block(int(v), by, bx, 0).reshape(B, B, core.P), core.dtype)
+                assert lean.dtype == ref.dtype and (lean == ref).all()
+    assert kinds == {True, False}
+
+
 def test_small_remaps_in_one_row_or_in_rows_give_the_same_pixels(monkeypatch):
     """A single request's remap maps go to OpenCV as one row (no thread pool woken) where the
     width allows it, else as they are: the same pixels either way, on the lean path, the
