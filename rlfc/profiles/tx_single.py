@@ -149,7 +149,7 @@ class SingleRequests:
                                        indexing="ij"), axis=-1).reshape(ny * nx, 2)
             dm = self._cell_maps[cell] = (np.concatenate([blocks(dc.astype(np.float32)), org.astype(np.float32)], axis=1),
                                           blocks(self._map_store.modes[cell].astype(np.uint8)),
-                                          float(np.abs(dc).max(initial=0)))
+                                          float(max(int(dc.max(initial=0)), -int(dc.min(initial=0)))))
         return dm
 
     def _one_rows(self, view: int, by: int) -> None:
