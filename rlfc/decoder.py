@@ -181,6 +181,8 @@ class RlfcDecoder(Decoder):
         out = lean(v, int(by), int(bx), level) if lean is not None else None
         if out is None:
             out = from_planes(self.core.block(v, int(by), int(bx), level).reshape(B, B, self.P), self.dtype)
+        if (by + 1) * B <= self.height and (bx + 1) * B <= self.width:
+            return out                    # (a block inside the image: nothing to crop)
         return out[:min(B, self.height - by * B), :min(B, self.width - bx * B)]
 
     def decode_views(self, views=None, level: int = 0, planes: bool = False, threads: int | None = None

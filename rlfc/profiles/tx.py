@@ -155,6 +155,7 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         self._res_tab = None                                    # _residual_rows' look-ups (_res_tables)
         self._warp_px_cache: dict = {}                          # view → _warp_pixels (warped files)
         self._cell_maps: dict = {}                              # map → (disparities as float32, modes)
+        self._pix_ready: dict = {}     # view → (its _pixel_refs, its map's _cell_map), once nothing is left to decode
         self._peak = int(np.iinfo(self.dtype).max)
         if c.info("tx.blocks").length != off[-1] + PAD:
             raise FormatError(f"{name}: section 'tx.blocks' has {c.info('tx.blocks').length} bytes, the index "

@@ -54,11 +54,19 @@ class SingleRequests:
         (its stream parsed by :func:`rlfc.txparse_one.parse_one`) is added there too, unless a tb
         of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
         (the caller takes :meth:`block`)."""
-        if self.is_key[view] or self.atlas is None:
+        if self.atlas is None:
             return None
-        prefs = self._pixel_refs(view)
-        if prefs is None:
-            return None
+        ready = self._pix_ready.get(view)
+        if ready is None:
+            if self.is_key[view]:
+                return None
+            prefs = self._pixel_refs(view)
+            if prefs is None:
+                return None
+            ready = (prefs,) + self._cell_map(self._one_ready(view, by))
+            if self._keys_all:                  # (every key row and this view's map decoded: nothing
+                self._pix_ready[view] = ready   # left to check for its later requests)
+        prefs, disp, modes, dmax = ready
         B, loc = self.block_size, by * self.nbx + bx
         res = bounds = None
         if level == 0 and self.coded[view, loc]:
@@ -67,7 +75,6 @@ class SingleRequests:
                 return from_planes(self.block(view, by, bx, level, parsed).reshape(B, B, self.P), self.dtype)
             if parsed.index.size:
                 res, bounds = self._residual_rows(parsed), self._pixel_bounds
-        disp, modes, dmax = self._cell_map(self._one_ready(view, by))
         warp = None
         if self.warp_dw is not None:
             wy, wx = self._warp_pixels(view)

@@ -614,6 +614,26 @@ def test_one_request_pixel_path_skips_the_rows_clamp_only_where_no_row_leaves_it
     assert kinds == {True, False}
 
 
+def test_one_request_pixel_path_keeps_each_views_constants_once_everything_is_decoded():
+    """Once every key view is decoded, decode_block keeps each view's one-request constants (its
+    pixel refs and its map's block rows) and skips the per-request checks: every block of every
+    view, requested in an order that alternates views, still equals the whole light field's, and
+    the edge blocks are cropped."""
+    lf = smooth_lf(rows=4, cols=4, h=36, w=44)
+    d, _ = open_encoded(lf, tx(lf, step=6.0))
+    full = d.decode_all()
+    d.decode_keys()
+    core, B = d.core, d.block_size
+    reqs = [(v, by, bx) for by in range(d.nby) for bx in range(d.nbx) for v in range(lf.rows * lf.cols)]
+    for _ in range(2):
+        for v, by, bx in reqs:
+            r, c = divmod(v, lf.cols)
+            got = d.decode_block(r, c, by, bx)
+            want = full[r, c, by * B:(by + 1) * B, bx * B:(bx + 1) * B]
+            assert got.shape == want.shape and (got == want).all()
+    assert len(core._pix_ready) == int((~core.is_key).sum())
+
+
 def test_small_remaps_in_one_row_or_in_rows_give_the_same_pixels(monkeypatch):
     """A single request's remap maps go to OpenCV as one row (no thread pool woken) where the
     width allows it, else as they are: the same pixels either way, on the lean path, the

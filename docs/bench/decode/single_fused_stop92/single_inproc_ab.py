@@ -20,16 +20,23 @@ old_tsb = load("rlfc.txsample_block_old", OLD + "/rlfc/txsample_block.py", "rlfc
 old_ts = load("rlfc.profiles.tx_single_old", OLD + "/rlfc/profiles/tx_single.py", "rlfc.profiles")
 old_ts.predict_block_pixels = old_tsb.predict_block_pixels
 old_ts.block_pixel_refs = old_tsb.block_pixel_refs
+old_dec = load("rlfc.decoder_old", OLD + "/rlfc/decoder.py", "rlfc")
+import rlfc.decoder as new_dec
 out = {}
 for path in sys.argv[2:]:
     d = RlfcDecoder(open_lfc(path)); d.decode_keys(); d.decode_maps()
     core = d.core
     vers = {"old": (types.MethodType(old_ts.SingleRequests.block_pixels, core), types.MethodType(old_ts.SingleRequests._pixel_refs, core), types.MethodType(old_ts.SingleRequests._cell_map, core), {}, {}),
             "new": (types.MethodType(new_ts.SingleRequests.block_pixels, core), types.MethodType(new_ts.SingleRequests._pixel_refs, core), types.MethodType(new_ts.SingleRequests._cell_map, core), {}, {})}
+    dbs = {"old": types.MethodType(old_dec.RlfcDecoder.decode_block, d), "new": types.MethodType(new_dec.RlfcDecoder.decode_block, d)}
+    readies = {"old": {}, "new": {}}
+
     def use(k):
         bp, pr, cm, c1, c2 = vers[k]
         core.block_pixels, core._pixel_refs, core._cell_map = bp, pr, cm
         core._pixref_cache, core._cell_maps = c1, c2
+        core._pix_ready = readies[k]
+        d.decode_block = dbs[k]
     rng = np.random.default_rng(1); n = d.rows * d.cols
     lat = {"old": [], "new": []}
     for k in ("old", "new"):       # warm: every view's constants built once
