@@ -136,6 +136,16 @@ def _scratch_planes(n: int, samples: int) -> list[np.ndarray]:
     return got
 
 
+def cv_saturating_depth(dtype, peak: int) -> int | None:
+    """The OpenCV depth whose saturating conversion clips integer sums to [0, ``peak``] and casts
+    them to ``dtype`` in one call (uint8 / uint16 where ``peak`` is the type's largest value),
+    or None (then clip and cast with numpy)."""
+    import cv2
+
+    depth = {np.dtype(np.uint8): cv2.CV_8U, np.dtype(np.uint16): cv2.CV_16U}.get(np.dtype(dtype))
+    return None if depth is None or peak != np.iinfo(dtype).max else depth
+
+
 def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
     """:func:`from_planes` of many samples: the interleaved planes split into contiguous ones
     (OpenCV), YCoCg-R inverted in place, each clipped and narrowed, then interleaved again, in
@@ -160,8 +170,8 @@ def _from_planes_split(p: np.ndarray, peak: int, dtype) -> np.ndarray:
     # the last sum of each colour and its clip to [0, peak] in one OpenCV call: integer sums
     # saturated to the output depth (0.8x the time of the sums, then max(0) and a saturating
     # cast, measured; the same integers)
-    depth = {np.dtype(np.uint8): cv2.CV_8U, np.dtype(np.uint16): cv2.CV_16U}.get(np.dtype(dtype))
-    if depth is None or peak != np.iinfo(dtype).max:
+    depth = cv_saturating_depth(dtype, peak)
+    if depth is None:
         def sat_add(q, r):
             q = np.add(q, r) if r is not None else q
             return np.minimum(np.maximum(q, 0, out=q), peak, out=q).astype(dtype)

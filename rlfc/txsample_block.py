@@ -61,12 +61,6 @@ def predict_block(atlas: KeyAtlas, refs, disp, modes, y0, x0) -> np.ndarray:
     return _sample_blend(atlas, src, Y, X, rows0, wm[modes])
 
 
-#: pixel types whose clip to [0, their largest value] and cast OpenCV does in one call (its
-#: saturating conversion): dtype → (OpenCV depth, largest value)
-_SATURATE = {k: v for t, d in ((np.uint8, cv2.CV_8U), (np.uint16, cv2.CV_16U))
-             for k, v in ((t, (d, np.iinfo(t).max)), (np.dtype(t), (d, np.iinfo(t).max)))}
-
-
 @functools.lru_cache(maxsize=32)
 def pixel_matrix(P: int, C: int, ftype) -> np.ndarray:
     """(2C, P) matrix M with ``[planes, floor(planes / 2)] @ M`` = the YCoCg-R inverse of
@@ -152,8 +146,8 @@ def block_pixel_refs(atlas: KeyAtlas, refs, tpb: int, wp=None, lo=None, hi=None)
             w / ft(1 << W_BITS), M[:C], M[C:], float(np.abs(dpy).max()))
 
 
-def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: int, tpb: int, peak, dtype,
-                         res=None, bounds=None, warp=None, dmax: float | None = None) -> np.ndarray:
+def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, tpb: int, peak, dtype, res=None,
+                         bounds=None, warp=None, dmax: float | None = None, depth: int | None = None) -> np.ndarray:
     """The pixels of one random-access block predicted from its references (and a coded one's
     residual added, ``res``): the same values as :func:`predict_block` (and the residual added
     and clipped) followed by :func:`formats.pixels.from_planes`, in fewer numpy calls (a single
@@ -162,8 +156,9 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
     The sampling positions are the same exact values as :func:`predict_block`'s, summed in
     another order (disparity × offset + block origin, one matrix-vector product whose rows hold
     one offset and a 1, + the window's pixel grid; integers and sixteenths, exact in float32
-    wherever they fall inside the image, and clamped alike where they do not). Columns are not clamped: the remap's replicated border gives the clamped
-    coordinate's sample exactly, as rows clamped to their key view do in the stacked atlas. The
+    wherever they fall inside the image, and clamped alike where they do not). Columns are not
+    clamped: the remap's replicated border gives the clamped coordinate's sample exactly, as
+    rows clamped to their key view do in the stacked atlas. The
     blend's weights are divided by 64 (exact: each product and sum has at most 24 significant
     bits), so ``floor(x + 0.5)`` is its rounded shift; the YCoCg-R inverse is one product with
     :func:`pixel_matrix` of the planes and their floor halves. A block neither weighted nor coded
@@ -181,9 +176,10 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
 
     Args:
         prefs: :func:`block_pixel_refs` of the view; d: (nt + 2,) float32: the disparities of
-            the block's 8×8 blocks (raster order), then its pixel origin (by_px, bx_px);
-            ``modes`` (nt,) their modes; by_px, bx_px: the block's pixel origin (ints); tpb: 8×8 blocks per block side; peak (a number of the
-            atlas's float type), dtype: the pixels'.
+            the block's 8×8 blocks (raster order), then its pixel origin (row, column);
+            ``modes`` (nt,) their modes; by_px: the block's first pixel row (an int); tpb: 8×8
+            blocks per block side; peak (a number of the atlas's float type), dtype: the
+            pixels'.
         res: None (predicted only), or (nt·64, C) residual samples in the atlas's float type
             (0 past the P planes), 8×8 blocks and their samples in raster order; bounds: then
             the planes' (lo, hi) in that type (±inf past the P planes), each (C,) or tiled to
@@ -191,6 +187,8 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
         warp: None, or the (y, x) offsets in pixels (each (R·nt,) float32 sixteenths,
             reference-major as the pairs) of a view with per-view warps (:mod:`rlfc.txwarp`).
         dmax: None, or a bound on the view's |disparity| (the largest of its map).
+        depth: None, or :func:`formats.pixels.cv_saturating_depth` of ``dtype`` and ``peak``
+            (then OpenCV clips and casts in one call).
 
     Returns:
         (8·tpb, 8·tpb, P) pixels of ``dtype``.
@@ -244,9 +242,8 @@ def predict_block_pixels(atlas: KeyAtlas, prefs, d, modes, by_px: int, bx_px: in
         px = np.dot(acc, M1)
         px += np.dot(half, M2)
     P = atlas.P
-    sat = _SATURATE.get(dtype)
-    if sat is not None and peak == sat[1]:      # clipped to [0, peak] and cast in one call (OpenCV saturates;
-        px = cv2.addWeighted(px, 1.0, px, 0.0, 0.0, dtype=sat[0])   # the values are integers: exact)
+    if depth is not None:                 # clipped to [0, peak] and cast in one call (OpenCV saturates;
+        px = cv2.addWeighted(px, 1.0, px, 0.0, 0.0, dtype=depth)    # the values are integers: exact)
         return px.reshape(tpb, tpb, TB, TB, P).transpose(0, 2, 1, 3, 4).reshape(tpb * TB, tpb * TB, P)
     np.minimum(np.maximum(px, 0, out=px), peak, out=px)
     out = np.empty((tpb, TB, tpb, TB, P), dtype)

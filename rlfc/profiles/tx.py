@@ -22,7 +22,7 @@ import threading
 import numpy as np
 
 from formats.errors import FormatError, UnsupportedError
-from formats.pixels import from_planes
+from formats.pixels import cv_saturating_depth, from_planes
 
 from ..txlayout import MAX_REFS, TxLayout, weighted_views
 from ..txwarp import offsets, pair_params, view_offsets
@@ -188,6 +188,7 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
             n = self.nt * TB * TB
             self._pixel_bounds = (np.tile(lw, (n, 1)), np.tile(hg, (n, 1)))
             self._peak_f = ft(self._peak)  # (block_pixels' clip bound, made once)
+            self._pix_depth = cv_saturating_depth(self.dtype, self._peak)   # (and its clip + cast in OpenCV)
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)

@@ -79,8 +79,8 @@ class SingleRequests:
         if self.warp_dw is not None:
             wy, wx = self._warp_pixels(view)
             warp = (wy[loc], wx[loc])
-        return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, bx * B, self.tpb,
-                                    self._peak_f, self.dtype, res, bounds, warp, dmax)
+        return predict_block_pixels(self.atlas, prefs, disp[loc], modes[loc], by * B, self.tpb, self._peak_f,
+                                    self.dtype, res, bounds, warp, dmax, self._pix_depth)
 
     def _warp_pixels(self, view: int) -> tuple:
         """(y, x) warp offsets in pixels of a warped view's (reference, 8×8 block) pairs, block
@@ -154,7 +154,8 @@ class SingleRequests:
             dc = self._map_store.disp[cell]
             org = np.stack(np.meshgrid(np.arange(ny) * self.block_size, np.arange(nx) * self.block_size,
                                        indexing="ij"), axis=-1).reshape(ny * nx, 2)
-            dm = self._cell_maps[cell] = (np.concatenate([blocks(dc.astype(np.float32)), org.astype(np.float32)], axis=1),
+            dm = self._cell_maps[cell] = (np.concatenate([blocks(dc.astype(np.float32)), org.astype(np.float32)],
+                                                         axis=1),
                                           blocks(self._map_store.modes[cell].astype(np.uint8)),
                                           float(max(int(dc.max(initial=0)), -int(dc.min(initial=0)))))
         return dm
