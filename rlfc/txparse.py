@@ -13,7 +13,7 @@ import numpy as np
 from formats.errors import FormatError
 
 from .rans import BACK_BITS, L as RANS_L, M as RANS_M, PROB_BITS, LaneDecoder, Tables
-from .txsyntax import _BAND8_ARR, _MASK, ESC, MODE_SKIP, N_BUCKETS, N_MODES, ctx_esc, ctx_last, ctx_mag, ctx_mode
+from .txsyntax import _BAND8_ARR, _MASK, ESC, MODE_SKIP, N_BUCKETS, N_CTX, N_MODES, ctx_esc, ctx_last, ctx_mag, ctx_mode
 
 _BAND8_U32 = _BAND8_ARR.astype(np.uint32)
 #: a magnitude parse finishes in plain Python once fewer lanes than this have symbols left
@@ -149,8 +149,8 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     g_lane = np.repeat(np.arange(S), per_lane)
     ctx1 = np.repeat(g_ctx.astype(np.uint32), flat_len)                     # (uint32 in place: the
     ctx1 += _BAND8_U32.take(index & 63)                                    # values are < 2^12)
-    ctx1 += j >= 1
-    sym = _magnitudes(dec, tables, S, per_lane, lane_start, j, ctx1)
+    ctx1 += _J_FLAGS.take(j)                                               # + neighbour terms, flags
+    sym = _magnitudes(dec, tables, S, per_lane, lane_start, ctx1)
     if tot and int(sym.max()) > ESC:
         raise FormatError(f"{name}: tx block has an undefined magnitude symbol")
     # escapes (symbol ESC: |c| >= ESC + first)
@@ -194,8 +194,9 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
         for b in range(int(buckets.max(initial=0))):
             m = buckets > b
             suffix[m] |= raw.at(e_lane[m], eoff[m] + b).astype(np.int64) << b
-        vals[(np.cumsum(nz) - 1)[esc]] = ESC + first[esc] + ((1 << buckets) - 1) + suffix
-    return Parsed(modes, index[sidx], np.where(sbit == 1, -vals, vals), P)
+        vals[np.searchsorted(sidx, esc)] = ESC + first[esc] + ((1 << buckets) - 1) + suffix   # (escapes are
+    np.negative(vals, out=vals, where=sbit.view(bool))                                       # nonzero: in sidx)
+    return Parsed(modes, index[sidx], vals, P)
 
 
 class _RawBits:
@@ -238,26 +239,33 @@ class _RawBits:
         return out
 
 
-def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, j, ctx1) -> np.ndarray:
+def _magnitudes(dec: LaneDecoder, tables: Tables, S: int, per_lane, lane_start, ctx1) -> np.ndarray:
     """The magnitude symbols of every lane (flat, lane-major, uint8), decoded in steps over the lanes
     that still have symbols (:func:`_ragged`).
 
-    ``ctx1``: each symbol's context without its neighbour count (+1 where j >= 1). A group's
-    first symbol always counts as a nonzero neighbour, so the symbols after it (j = 1, 2) get
-    that +1 up front and look back only at symbols of their group past the first (j >= 2, 3):
-    a neighbour adds min(its symbol, g) with g = 1 where it counts, else 0.
+    ``ctx1`` (flat, lane-major, uint32): each symbol's context without its neighbour count, plus
+    :data:`_J_FLAGS` of its index j in its group. A group's first symbol always counts as a
+    nonzero neighbour, so the symbols after it (j = 1, 2) get that +1 up front and look back only
+    at symbols of their group past the first (j >= 2, 3): a neighbour adds min(its symbol, g)
+    with g = 1 where it counts, else 0; g of the previous symbol is bit 16 of ``ctx1``, of the
+    one before it bit 17 (packed, the symbols are put in step-major order in one scatter).
     """
     plan = _Plan(per_lane, lane_start)
     sm = plan.sm
     c1 = np.empty(ctx1.size, np.uint32)
     c1[sm] = ctx1
-    jm = np.empty(ctx1.size, np.int8)
-    jm[sm] = np.minimum(j, 3).astype(np.int8)
-    c1 += (jm == 1) | (jm == 2)                                        # (contiguous passes from here)
-    g1 = (jm >= 2).astype(np.uint32)                                   # the previous symbol counts
-    g2 = (jm >= 3).astype(np.uint32)                                   # ... and the one before it
-    del jm
+    g2 = c1 >> _U17                                                    # (contiguous passes from here)
+    g1 = c1 >> _U16
+    g1 &= _U1
+    c1 &= _U16M
     return _ragged(dec, tables, plan, c1, g1, g2).astype(np.uint8)[sm]
+
+
+#: per index j of a magnitude symbol in its group (< 64): what its context adds, +1 where j >= 1
+#: and +1 more where j is 1 or 2 (the group's first symbol, a nonzero neighbour), and the flags of
+#: :func:`_magnitudes`: bit 16 where j >= 2 (the previous symbol counts), bit 17 where j >= 3
+_J_FLAGS = np.array([0, 2, 2 | 1 << 16] + [1 | 1 << 16 | 1 << 17] * 61, np.uint32)
+assert N_CTX < 1 << 16                                                 # (contexts below the flags)
 
 
 def _lasts(dec: LaneDecoder, tables: Tables, n: np.ndarray, ctx: np.ndarray) -> np.ndarray:
@@ -435,7 +443,8 @@ def _u32(v: int) -> np.ndarray:
 
 
 # the magnitude steps' operands: 0-d uint32 arrays (a Python int operand costs a step ~1 µs a call)
-_U3, _U12, _U16, _U25, _U31 = _u32(3), _u32(12), _u32(16), _u32(25), _u32(31)
+_U1, _U3, _U12, _U16, _U17, _U25, _U31 = _u32(1), _u32(3), _u32(12), _u32(16), _u32(17), _u32(25), _u32(31)
+_U16M = _u32(0xFFFF)
 _UMASK, _UFREQ, _USLOT, _UL, _UL8 = _u32(_MASK), _u32(0x1FFF), _u32(0xFFF), _u32(RANS_L), _u32(RANS_L >> 8)
 
 
