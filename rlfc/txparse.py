@@ -142,11 +142,14 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     lane_start = np.cumsum(per_lane) - per_lane
     flat_len = gl.reshape(-1)
     G = flat_len.size
-    j = np.arange(tot, dtype=np.int32) - np.repeat((np.cumsum(flat_len) - flat_len).astype(np.int32), flat_len)
-    index = np.repeat((np.arange(G) << 6) + flat_len - 1, flat_len) - j      # g·64 + position: ascending
+    # (in place where they can be: every temporary of the symbols' size is pages faulted in)
+    j = np.arange(tot, dtype=np.int32)
+    j -= np.repeat((np.cumsum(flat_len) - flat_len).astype(np.int32), flat_len)
+    index = np.repeat((np.arange(G) << 6) + flat_len - 1, flat_len)
+    index -= j                                                              # g·64 + position: ascending
     g_pc = np.tile(pcs, G // P)                                             # per group: plane class, key
     g_ctx = ctx_mag(g_pc, 0, np.repeat(key, nt * P), 0)
-    g_lane = np.repeat(np.arange(S), per_lane)
+    lane_end = lane_start + per_lane
     ctx1 = np.repeat(g_ctx.astype(np.uint32), flat_len)                     # (uint32 in place: the
     ctx1 += _BAND8_U32.take(index & 63)                                    # values are < 2^12)
     ctx1 += _J_FLAGS.take(j)                                               # + neighbour terms, flags
@@ -156,7 +159,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     # escapes (symbol ESC: |c| >= ESC + first)
     esc = np.flatnonzero(sym == ESC)
     if esc.size:
-        e_lane = g_lane[esc]
+        e_lane = np.searchsorted(lane_end, esc, side="right")             # each escape's lane
         ec = np.bincount(e_lane, minlength=S)
         es = np.cumsum(ec) - ec
         col = np.arange(esc.size) - es[e_lane]
@@ -171,11 +174,12 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
         buckets = np.zeros(0, np.int64)
     # raw bits: signs then escape suffixes, per lane
     first = j == 0
-    nz = (sym > 0) | first
+    nz = sym > 0
+    nz |= first
     sidx = np.flatnonzero(nz)
-    s_lane = g_lane[sidx]
-    nsign = np.bincount(s_lane, minlength=S)
-    nsuf = np.bincount(g_lane[esc], weights=buckets, minlength=S).astype(np.int64) if esc.size else np.zeros(S, np.int64)
+    nsign = np.searchsorted(sidx, lane_end) - np.searchsorted(sidx, lane_start)    # per lane (ascending)
+    s_lane = np.repeat(np.arange(S), nsign)
+    nsuf = np.bincount(e_lane, weights=buckets, minlength=S).astype(np.int64) if esc.size else np.zeros(S, np.int64)
     nbits = nsign + nsuf
     kb = np.minimum(nbits, BACK_BITS)
     raw_start = ends - (nbits - kb + 7) // 8
@@ -313,7 +317,10 @@ class _Plan:
         self.K = K = int(lens[0]) if S else 0
         self.cnt = cnt = np.searchsorted(-lens, -np.arange(K), side="left")   # lanes with more than k symbols
         self.offs = offs = np.cumsum(cnt) - cnt
-        self.sm = offs[np.arange(tot) - np.repeat(lane_start, per_lane)] + np.repeat(rank, per_lane)
+        k = np.arange(tot)                                             # each symbol's index in its lane
+        k -= np.repeat(lane_start, per_lane)                           # (in place: fewer fresh pages)
+        self.sm = offs.take(k)
+        self.sm += np.repeat(rank, per_lane)
 
 
 def _pairs(dec: LaneDecoder, p_all: np.ndarray, K: int) -> tuple:
