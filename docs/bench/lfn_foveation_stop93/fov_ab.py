@@ -1,21 +1,14 @@
 """In-process A/B of the mip render: old (a checkout's lfn_stream.foveation) vs new, alternated."""
-import sys, time, types, importlib.util, numpy as np, torch
+import sys, time, importlib.util, numpy as np, torch
 torch.set_num_threads(1)
 from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
 spec = importlib.util.spec_from_file_location('oldfov', sys.argv[1] + '/lfn_stream/foveation.py', submodule_search_locations=None)
-import lfn_stream
 old = importlib.util.module_from_spec(spec); old.__package__ = 'lfn_stream'; spec.loader.exec_module(old)
 r = LfnRenderer(open_lfc(sys.argv[2]), device='cpu')
 views = [int(v) for v in sys.argv[3].split(',')]; rounds = int(sys.argv[4])
 h, w = r.height, r.width
 lod = r.foveation_map((w / 2, h / 2), dither=False)
-def old_mip(row, col):
-    lod2, scale = r._lod_map(lod)
-    rays_at = r._view_rays_at(row, col, scale)
-    self = r
-    o = types.SimpleNamespace()
-    return old.Foveated._render_mip(r, lod2, scale, rays_at, 3, old.MIP_BLEND, 0.0, False) if False else None
 # bind the old class's methods on a copy of the renderer's class
 Old = type('OldR', (type(r),), {k: v for k, v in old.Foveated.__dict__.items() if callable(v) or isinstance(v, (staticmethod, classmethod))})
 ro = LfnRenderer(open_lfc(sys.argv[2]), device='cpu'); ro.__class__ = Old

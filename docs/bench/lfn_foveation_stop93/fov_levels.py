@@ -1,8 +1,7 @@
-import sys, time, numpy as np, torch
+import sys, time, torch
 torch.set_num_threads(1)
 from formats.lfcfile import open_lfc
 from lfn_stream import LfnRenderer
-import lfn_stream.foveation as fv
 r = LfnRenderer(open_lfc(sys.argv[1]), device='cpu')
 h, w = r.height, r.width
 orig = r.render_rays

@@ -1,5 +1,5 @@
 """Own work of the mip render vs the full render: network and occupancy net stubbed (cheap, deterministic)."""
-import sys, time, types, importlib.util, numpy as np, torch
+import sys, time, importlib.util, numpy as np, torch
 torch.set_num_threads(1)
 import cv2; cv2.setNumThreads(1)
 from formats.lfcfile import open_lfc

@@ -1,5 +1,5 @@
 """A first frame's parses (captured), then parse_lanes of OLD and of this checkout on them, alternated."""
-import sys, time, importlib.util, resource, numpy as np
+import sys, time, importlib.util, numpy as np
 import rlfc.profiles.tx_residual as tr
 import rlfc.txparse as new
 from rlfc import RlfcDecoder
