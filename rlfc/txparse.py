@@ -177,7 +177,7 @@ def parse_lanes(buf: np.ndarray, starts: np.ndarray, ends: np.ndarray, tables: T
     nz = sym > 0
     nz |= first
     sidx = np.flatnonzero(nz)
-    nsign = np.searchsorted(sidx, lane_end) - np.searchsorted(sidx, lane_start)    # per lane (ascending)
+    nsign = np.diff(np.searchsorted(sidx, lane_end), prepend=0)    # per lane (a lane starts where the last ends)
     s_lane = np.repeat(np.arange(S), nsign)
     nsuf = np.bincount(e_lane, weights=buckets, minlength=S).astype(np.int64) if esc.size else np.zeros(S, np.int64)
     nbits = nsign + nsuf
