@@ -95,6 +95,29 @@ _T8F_128T = np.ascontiguousarray(_T8F.T / 128)
 _T8F_256 = _T8F / 256
 
 
+def inverse_interleaved(X: np.ndarray, C: int) -> np.ndarray:
+    """:func:`inverse_float` of (n, 8, 8·C) float64 blocks whose C channels are interleaved
+    along the rows (element [i, y, x·C + c] is channel c's coefficient at raster (y, x)), the
+    same layout out, exact: the column pass is one product for every channel, the row pass one
+    product with kron(T/256, I_C) (its zeros add exact zeros)."""
+    Y = np.matmul(_T8F_128T, X)
+    Y += 0.5
+    np.floor(Y, out=Y)
+    R = np.matmul(Y, _kron_256(C))
+    R += 0.5
+    return np.floor(R, out=R)
+
+
+_KRON_256: dict = {}
+
+
+def _kron_256(C: int) -> np.ndarray:
+    got = _KRON_256.get(C)
+    if got is None:
+        got = _KRON_256[C] = np.kron(_T8F_256, np.eye(C))
+    return got
+
+
 _T8F_TORCH: dict = {}
 
 

@@ -8,6 +8,7 @@ import numpy as np
 
 from formats.errors import FormatError
 
+from .transform import COEF_MAX
 from .rans import BACK_BITS, L as RANS_L, PROB_BITS, STATE_BYTES, Tables, scalar_step, scalar_tables
 from .txparse import Parsed
 from .txsyntax import _BAND8, _MASK, CTX_ESC, CTX_LAST, CTX_MAG, CTX_MODE, ESC, MODE_INTRA, MODE_SKIP, N_BANDS, \
@@ -16,14 +17,92 @@ from .txsyntax import _BAND8, _MASK, CTX_ESC, CTX_LAST, CTX_MAG, CTX_MODE, ESC, 
 
 def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) -> Parsed:
     """One stream in plain Python (the same results as :func:`parse_lanes`; faster than lanes
-    for a few streams).
+    for a few streams). ``pcs``: the planes' classes (a list of ints is used as it is)."""
+    pcl = pcs if type(pcs) is list else [int(v) for v in pcs]
+    return _parsed(*_words(data, tables, nt, pcl, kind, key), len(pcl))
+
+
+def _parsed(modes: list, words: list, esc: list, buckets: list, raw: int, P: int) -> Parsed:
+    """:func:`parse_one`'s :class:`Parsed` of :func:`_words`' symbols."""
+    nsign = len(words)                               # every coefficient kept is nonzero
+    if nsign <= SMALL_SIGNS:                         # few coefficients: Python ints, then two arrays
+        mag = [wd & 255 for wd in words]
+        _add_escapes(mag, esc, buckets, raw, nsign)
+        for i in range(nsign):
+            if (raw >> i) & 1:
+                mag[i] = -mag[i]
+        return Parsed(np.array([modes], np.int64), np.array([wd >> 8 for wd in words], np.int64),
+                      np.array(mag, np.int64), P)
+    w = np.array(words, np.int64)
+    index, mag = w >> 8, w & 255
+    _add_escapes(mag, esc, buckets, raw, nsign)
+    np.negative(mag, out=mag, where=_sign_bits(raw, nsign))
+    return Parsed(np.array([modes], np.int64), index, mag, P)
+
+
+def parse_one_rows(data: bytes, tables: Tables, nt: int, pcl: list, kind: int, key: int, rows: tuple
+                   ) -> tuple[list, object, object]:
+    """One stream parsed as :func:`parse_one` and dequantized for a single request's residual:
+    (the tbs' modes as a list, each nonzero coefficient's place, its dequantized value clipped to
+    ±COEF_MAX), without the :class:`Parsed` in between (the same numbers as
+    :func:`rlfc.kernels.dequantize` of ``Parsed.values`` at ``rows``' steps, clipped). ``rows``:
+    (per index g·64 + scan position: its place, as a list and an int64 array; per g = tb·P +
+    plane: its step in 1/16, as a list and an int64 array). Places and values are lists where
+    the coefficients are few (:data:`SMALL_SIGNS`), int64 arrays above. Where a tb is
+    intra-coded (the planes' path decodes it): (the modes, the stream's :class:`Parsed`, None)."""
+    modes, words, esc, buckets, raw = _words(data, tables, nt, pcl, kind, key)
+    if MODE_INTRA in modes:
+        return modes, _parsed(modes, words, esc, buckets, raw, len(pcl)), None
+    place, q16, place_a, q16_a = rows
+    nsign = len(words)
+    if nsign <= SMALL_SIGNS:
+        mag = [wd & 255 for wd in words]
+        _add_escapes(mag, esc, buckets, raw, nsign)
+        vals = []
+        put = vals.append
+        for i in range(nsign):                       # sign(q)·((|q|·q16 + 8) >> 4), clipped
+            d = (mag[i] * q16[words[i] >> 14] + 8) >> 4
+            if d > COEF_MAX:
+                d = COEF_MAX
+            put(-d if (raw >> i) & 1 else d)
+        return modes, [place[wd >> 8] for wd in words], vals
+    w = np.array(words, np.int64)
+    mag = w & 255
+    _add_escapes(mag, esc, buckets, raw, nsign)
+    mag *= q16_a[w >> 14]
+    mag += 8
+    mag >>= 4
+    np.minimum(mag, COEF_MAX, out=mag)
+    np.negative(mag, out=mag, where=_sign_bits(raw, nsign))
+    w >>= 8
+    return modes, place_a[w], mag
+
+
+def _add_escapes(mag, esc: list, buckets: list, raw: int, nsign: int) -> None:
+    """The escapes' magnitudes completed in place (a list or an array): |c| = ESC + first +
+    2^k − 1 + k raw bits (the raw bits after the ``nsign`` signs)."""
+    bit = nsign
+    for (i, _), k in zip(esc, buckets):
+        mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
+        bit += k
+
+
+def _sign_bits(raw: int, nsign: int) -> np.ndarray:
+    """Bits 0..nsign−1 of ``raw`` as a bool array (the coefficients' signs: set = negative)."""
+    nb = (nsign + 7) >> 3
+    return np.unpackbits(np.frombuffer((raw & ((1 << (8 * nb)) - 1)).to_bytes(nb, "little"), np.uint8),
+                         count=nsign, bitorder="little").view(bool)
+
+
+def _words(data: bytes, tables: Tables, nt: int, pcl: list, kind: int, key: int) -> tuple:
+    """A stream's symbols in plain Python: (modes list, words, escapes, buckets, raw bits).
 
     Every rANS step is inlined on locals (the tables' per-context slot → symbol bytes and
     frequency and cum lists: Python ints below 2^30, CPython's one-digit ints); each nonzero
     coefficient is one Python int, ``(g·64 + position) << 8 | magnitude`` (g = tb·P + plane;
-    an escape's magnitude symbol, the rest of it added afterwards), and the signs are bits
-    0..K−1 of the raw bits. ``pcs``: the planes' classes (a list of ints is used as it is)."""
-    pcl = pcs if type(pcs) is list else [int(v) for v in pcs]
+    an escape's magnitude symbol, the rest of it added afterwards: ``escapes`` holds its place
+    in words and its symbol, ``buckets`` its bucket), and the signs are bits 0..K−1 of the raw
+    bits (K = len(words)), the escapes' extra bits after them."""
     P = len(pcl)
     if len(data) < STATE_BYTES:
         raise FormatError(f"rANS stream shorter than its {STATE_BYTES}-byte state")
@@ -110,29 +189,7 @@ def parse_one(data: bytes, tables: Tables, nt: int, pcs, kind: int, key: int) ->
     raw_start = len(data) - (nbits - kb + 7) // 8
     if not (0 <= x - RANS_L < (1 << kb) and ptr == raw_start):
         raise FormatError("tx block stream is malformed (its symbols do not end where its raw bits start)")
-    raw = (x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
-    if nsign <= SMALL_SIGNS:                         # few coefficients: Python ints, then two arrays
-        mag = [wd & 255 for wd in words]
-        bit = nsign
-        for (i, _), k in zip(esc, buckets):          # |c| = ESC + first + 2^k − 1 + k raw bits
-            mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
-            bit += k
-        for i in range(nsign):
-            if (raw >> i) & 1:
-                mag[i] = -mag[i]
-        return Parsed(np.array([modes], np.int64), np.array([wd >> 8 for wd in words], np.int64),
-                      np.array(mag, np.int64), P)
-    w = np.array(words, np.int64)
-    index, mag = w >> 8, w & 255
-    bit = nsign
-    for (i, _), k in zip(esc, buckets):
-        mag[i] += ((1 << k) - 1) + ((raw >> bit) & ((1 << k) - 1))
-        bit += k
-    nb = (nsign + 7) >> 3
-    signs = np.unpackbits(np.frombuffer((raw & ((1 << (8 * nb)) - 1)).to_bytes(nb, "little"), np.uint8),
-                          count=nsign, bitorder="little")
-    np.negative(mag, out=mag, where=signs.view(bool))
-    return Parsed(np.array([modes], np.int64), index, mag, P)
+    return modes, words, esc, buckets, (x - RANS_L) | (int.from_bytes(data[raw_start:], "little") << kb)
 
 
 #: coefficients up to which :func:`parse_one` signs them in Python ints (above: numpy)

@@ -152,7 +152,8 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         self._tb_x = (self._tbx * TB).astype(np.float32)
         self._blockref_cache: dict = {}
         self._pixref_cache: dict = {}                           # view → block_pixel_refs (block_pixels)
-        self._res_tab = None                                    # _residual_rows' look-ups (_res_tables)
+        self._res_tab = None                                    # _residual_pixels' look-ups (_res_tables)
+        self._bypass_c = None                                   # ... and its channels without transform
         self._warp_px_cache: dict = {}                          # view → _warp_pixels (warped files)
         self._cell_maps: dict = {}                              # map → (disparities as float32, modes)
         self._pix_ready: dict = {}     # view → (its _pixel_refs, its map's _cell_map), once nothing is left to decode

@@ -8,9 +8,9 @@ import numpy as np
 from formats.pixels import from_planes
 
 from ..kernels import dequantize
-from ..transform import COEF_MAX, ZIGZAG
+from ..transform import COEF_MAX, ZIGZAG, inverse_interleaved
 from ..txpredict import TB, predict_tbs
-from ..txparse_one import parse_one
+from ..txparse_one import parse_one, parse_one_rows
 from ..txsample import predict as remap_predict
 from ..txsample_block import block_pixel_refs, block_refs, predict_block, predict_block_pixels
 from ..txsyntax import MODE_INTRA
@@ -51,7 +51,7 @@ class SingleRequests:
         """One request's pixels (B, B, P) when its 8×8 blocks are predicted from references in
         one atlas group: :func:`rlfc.txsample_block.predict_block_pixels`, the same pixels as
         :meth:`block` + ``from_planes`` in about half the numpy calls; a coded block's residual
-        (its stream parsed by :func:`rlfc.txparse_one.parse_one`) is added there too, unless a tb
+        (its stream parsed by :func:`rlfc.txparse_one.parse_one_rows`) is added there too, unless a tb
         of it is intra-coded (then :meth:`block`, with the stream parsed here). None otherwise
         (the caller takes :meth:`block`)."""
         if self.atlas is None:
@@ -70,11 +70,11 @@ class SingleRequests:
         B, loc = self.block_size, by * self.nbx + bx
         res = bounds = None
         if level == 0 and self.coded[view, loc]:
-            parsed = self._parse_one(view, loc)
-            if (parsed.modes == MODE_INTRA).any():
-                return from_planes(self.block(view, by, bx, level, parsed).reshape(B, B, self.P), self.dtype)
-            if parsed.index.size:
-                res, bounds = self._residual_rows(parsed), self._pixel_bounds
+            _, places, vals = self._parse_rows(view, loc)
+            if vals is None:                  # (an intra tb, rare: the planes' path, with the Parsed)
+                return from_planes(self.block(view, by, bx, level, places).reshape(B, B, self.P), self.dtype)
+            if len(places):
+                res, bounds = self._residual_pixels(places, vals), self._pixel_bounds
         warp = None
         if self.warp_dw is not None:
             wy, wx = self._warp_pixels(view)
@@ -102,30 +102,64 @@ class SingleRequests:
             got = self._warp_px_cache[view] = (blocks(oy), blocks(ox))
         return got
 
-    def _residual_rows(self, parsed) -> np.ndarray:
-        """:meth:`_residual_one` of a stream of a view with references laid out as
-        :func:`rlfc.txsample_block.predict_block_pixels` adds it: (nt·64, C) in the atlas's float type
-        (C its channels; 0 past the P planes), 8×8 blocks and their samples in raster order.
-        Values past 2^24 may round in float32; the sum with the prediction is then past the
-        planes' bounds either way and clips alike."""
-        nt, P, C = self.nt, self.P, self.atlas.C
+    def _parse_rows(self, view: int, loc: int) -> tuple:
+        """The stream of a request of a view with references (not a key view), parsed and
+        dequantized for :meth:`_residual_pixels`: (its tbs' modes as a list, each nonzero
+        coefficient's place, its value); where a tb is intra-coded (the modes, the stream's
+        :class:`rlfc.txparse.Parsed`, None) (:func:`rlfc.txparse_one.parse_one_rows`)."""
+        rows = self._res_tables()
+        if self._remote:
+            return self._rows_of(self._parse(np.array([view]), np.array([loc])))
+        s, e = int(self.start[view, loc]), int(self.end[view, loc])
+        with self._io:
+            if e > s:
+                self.container.verify_span("tx.blocks", s, e)
+        return parse_one_rows(bytes(self.buf[s:e]), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
+                              int(self.is_key[view]), rows)
+
+    def _rows_of(self, parsed) -> tuple:
+        """:meth:`_parse_rows` of a :class:`rlfc.txparse.Parsed` of one stream (numpy)."""
+        _, _, place, q16 = self._res_tables()
+        modes = parsed.modes[0].tolist()
+        if MODE_INTRA in modes:
+            return modes, parsed, None
         idx = parsed.index
-        at, q16 = self._res_tables()                  # (per index g·64 + scan position: its place, its step)
-        X = np.zeros((nt * P, 64))
-        X.reshape(-1)[at[idx]] = _dequantize_clipped(parsed.values, q16[idx])
-        res = np.zeros((nt, 64, C), self.atlas.ftype)
-        res[..., :P] = self._inverse_rows(X, self._row_planes).reshape(nt, P, 64).transpose(0, 2, 1)
-        return res.reshape(nt * 64, C)
+        return modes, place[idx], _dequantize_clipped(parsed.values, q16[idx >> 6])
+
+    def _residual_pixels(self, places, vals) -> np.ndarray:
+        """One request's residual as :func:`rlfc.txsample_block.predict_block_pixels` adds it:
+        (nt·64, C) float64 integers (C the atlas's channels; 0 past the P planes), 8×8 blocks and
+        their samples in raster order, from dequantized coefficients ``vals`` at ``places`` in
+        that layout (:meth:`_res_tables`): every 8×8 block inverse-transformed at once with its
+        channels interleaved (:func:`rlfc.transform.inverse_interleaved`; a block without
+        coefficients transforms to exact zeros), planes that bypass the transform as they are."""
+        C = self.atlas.C
+        X = np.zeros((self.nt, TB, TB * C))
+        X.reshape(-1)[places] = vals
+        bp = self._bypass_c
+        if bp is None:
+            return inverse_interleaved(X, C).reshape(-1, C)
+        if bp.all():
+            return X.reshape(-1, C)
+        R = inverse_interleaved(X, C).reshape(-1, C)
+        R[:, bp] = X.reshape(-1, C)[:, bp]
+        return R
 
     def _res_tables(self) -> tuple:
         """Per index g·64 + scan position of a block's coefficients (g = tb·P + plane): its place
-        in (nt·P, 64) raster rows (zig-zag for transformed planes, as is for bypassed ones) and
-        its step (1/16) in a view with references: :meth:`_residual_rows`' look-ups (cached)."""
+        in :meth:`_residual_pixels`' (nt, 8, 8, C) layout (zig-zag for transformed planes, as is
+        for bypassed ones); per g: its step (1/16) in a view with references. Each as a list and
+        as an int64 array (cached)."""
         got = self._res_tab
         if got is None:
-            g = np.arange(self.nt * self.P)
-            raster = np.where(self.lay.bypass[self._row_planes][:, None], np.arange(64), ZIGZAG[None, :])
-            got = self._res_tab = (((g * 64)[:, None] + raster).reshape(-1), np.repeat(self._q16_rows, 64))
+            nt, P, C = self.nt, self.P, self.atlas.C
+            tb, plane = np.divmod(np.arange(nt * P), P)
+            raster = np.where(self.lay.bypass[plane][:, None], np.arange(64), ZIGZAG[None, :])
+            place = ((tb * 64 * C)[:, None] + raster * C + plane[:, None]).reshape(-1)
+            q16 = np.asarray(self._q16_rows, np.int64)
+            got = self._res_tab = (place.tolist(), q16.tolist(), place, q16)
+            bp = self.lay.bypass[:P]
+            self._bypass_c = None if not bp.any() else np.concatenate([bp, np.zeros(C - P, bool)])
         return got
 
     def _pixel_refs(self, view: int):

@@ -319,28 +319,31 @@ def test_single_coded_blocks_equal_the_whole_views(kw):
 
 @pytest.mark.parametrize("kw", [dict(), dict(dtype=np.uint16), dict(c=1), dict(c=4), dict(lossless=True, c=4)])
 def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
-    """decode_block's lean path on coded blocks (the residual added and clipped in the remap's
-    floats, :meth:`TxDecoder._residual_rows`) gives the pixels of ``block`` + ``from_planes``:
-    the file's own streams (noisy views, saturated corners; 16-bit, grey, RGBA whose alpha
-    bypasses the transform, lossless where every plane does), and crafted ones whose
-    coefficients reach the decoder's bound (sums far past the planes' bounds; float32 rounds
-    them), with intra 8×8 blocks (``block`` then takes the stream parsed once)."""
+    """decode_block's lean path on coded blocks (the stream parsed and dequantized in plain
+    Python, :func:`rlfc.txparse_one.parse_one_rows`, the residual added and clipped in the
+    remap's floats, :meth:`TxDecoder._residual_pixels`) gives the pixels of ``block`` +
+    ``from_planes``: the file's own streams (noisy views, saturated corners; 16-bit, grey, RGBA
+    whose alpha bypasses the transform, lossless where every plane does), whose parse is the
+    numpy dequantization of :func:`parse_one`'s (few coefficients and many), and crafted ones
+    whose coefficients reach the decoder's bound (sums far past the planes' bounds; float32
+    rounds them), with intra 8×8 blocks (``block`` then takes the stream parsed for it)."""
     from formats.pixels import from_planes
     from rlfc.profiles.tx import TxDecoder
     from rlfc.txparse import Parsed
+    from rlfc import txparse_one as p1
     from rlfc.txsyntax import MODE_INTRA, MODE_RES
 
     lf, e, _ = _noisy_grid_encoded(kw, amp8=9, seed=4, step8=2.0, saturate=True)
     d, _ = open_encoded(lf, e)
     core, B = d.core, d.block_size
     lean = {"rows": 0}
-    real_rows = TxDecoder._residual_rows
+    real_rows = TxDecoder._residual_pixels
 
-    def counted(self, parsed):
+    def counted(self, places, vals):
         lean["rows"] += 1
-        return real_rows(self, parsed)
+        return real_rows(self, places, vals)
 
-    monkeypatch.setattr(TxDecoder, "_residual_rows", counted)
+    monkeypatch.setattr(TxDecoder, "_residual_pixels", counted)
     v, loc = np.nonzero(core.coded & ~core.is_key[:, None])
     for i in range(min(v.size, 60)):
         by, bx = divmod(int(loc[i]), core.nbx)
@@ -348,6 +351,18 @@ def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
         ref = from_planes(core.block(int(v[i]), by, bx, 0).reshape(B, B, core.P), core.dtype)
         assert got.dtype == ref.dtype and (got == ref).all()
     assert lean["rows"] > 20
+    for small in (0, 1 << 20):              # every stream dequantized in numpy, then in Python ints:
+        monkeypatch.setattr(p1, "SMALL_SIGNS", small)        # the numpy dequantization of parse_one's
+        for i in range(v.size):
+            modes, places, vals = core._parse_rows(int(v[i]), int(loc[i]))
+            m2, p2, v2 = core._rows_of(core._parse_one(int(v[i]), int(loc[i])))
+            assert modes == m2 and (vals is None) == (v2 is None) == (2 in modes)
+            if vals is None:                # (an intra tb: the same Parsed)
+                assert (places.levels == p2.levels).all() and (places.modes == p2.modes).all()
+                continue
+            assert list(places) == p2.tolist() and list(vals) == v2.tolist()
+            assert isinstance(places, list) == (small > 0)
+    monkeypatch.undo()
     rng = np.random.default_rng(7)
     nt, P = core.nt, core.P
     for trial in range(40):
@@ -361,6 +376,7 @@ def test_one_request_pixel_path_adds_residuals_exactly(kw, monkeypatch):
             modes[0, rng.integers(nt)] = MODE_INTRA
         parsed = Parsed(modes, idx, vals.astype(np.int64), P)
         monkeypatch.setattr(core, "_parse_one", lambda view, at, p=parsed: p)
+        monkeypatch.setattr(core, "_parse_rows", lambda view, at, p=parsed: core._rows_of(p))
         got = core.block_pixels(int(v[i]), by, bx, 0)
         ref = from_planes(core.block(int(v[i]), by, bx, 0, parsed).reshape(B, B, P), core.dtype)
         assert (got == ref).all(), trial
@@ -450,9 +466,10 @@ def test_single_block_reads_at_most_one_stream():
     d, _ = open_encoded(lf, tx(lf, step=2.0))
     core = d.core
     seen = []
-    orig, orig_one = core._parse, core._parse_one
+    orig, orig_one, orig_rows = core._parse, core._parse_one, core._parse_rows
     core._parse = lambda v, l: seen.append(len(v)) or orig(v, l)
     core._parse_one = lambda v, l: seen.append(1) or orig_one(v, l)
+    core._parse_rows = lambda v, l: seen.append(1) or orig_rows(v, l)
     for v in range(25):
         for loc in range(core.nby * core.nbx):
             seen.clear()
