@@ -32,6 +32,9 @@ from .render_ops import make_ops, median_f32
 
 
 ROBUST_WINDOW = 17      # pixels: the box over which the sources' disagreement is averaged
+ROBUST_LEVEL_WINDOW = 64   # pixels: the box whose mean (a source's local brightness) each source's luma
+                           # loses before the disagreement (a vignette or exposure of its own is not a
+                           # geometric disagreement: antinous_vignette +1.6 dB; BENCHMARKS.md, stop 94)
 ROBUST_MARGIN = 0.5     # a more detailed disparity candidate must halve the disagreement to win
 ROBUST_STEP = 4         # the choice is made on every 4th pixel (the frame is rendered once, at full size);
                         # it divides the maps' 8×8 blocks, so each candidate is constant over a choice's cell
@@ -433,7 +436,8 @@ class Renderer:
         smoothest first: the frame's median disparity, the map's median over 5×5 blocks (``med``
         per pixel), the file's map (``blk`` per 8×8 block, ``disp`` per pixel). The choice is made on a grid of
         every ROBUST_STEP-th pixel: disagreement = the weighted variance of the sources' luma
-        around their blend there, averaged over ROBUST_WINDOW² pixels; a later candidate replaces
+        (each less its own mean over ROBUST_LEVEL_WINDOW² pixels) around their blend there,
+        averaged over ROBUST_WINDOW² pixels; a later candidate replaces
         an earlier one where it has less than ROBUST_MARGIN times its disagreement (the maps are
         chosen for prediction bits, so on noisy captures some blocks carry disparities that fit
         the noise). The caller renders the frame once with them. ``needs`` (len(src), nby, nbx):
@@ -453,7 +457,10 @@ class Renderer:
             Xs = ops.plus_affine(Xs, ys, xs, warp[1], len(subs))
         allsmp = ops.plane(self._sample_many([r * d.cols + c for _ in subs for r, c, _ in src], Ys, Xs,
                                              needs=None if needs is None else np.concatenate([needs] * len(subs))), 0)
-        costs = ops.disagreement(allsmp, [w for _, _, w in src], max(1, ROBUST_WINDOW // S))
+        # (the brightness box at most 2·min(h, w) − 1 wide on the choice's grid: its reflected
+        # edges then the same on every backend, OpenCV's and torch's)
+        kb = max(1, min(ROBUST_LEVEL_WINDOW // S, 2 * min(ys.shape[-2:]) - 1))
+        costs = ops.disagreement(allsmp, [w for _, _, w in src], max(1, ROBUST_WINDOW // S), kb)
         return ops.choose(robust_choice(ops, costs), S, H, W, subs)      # (candidates constant per cell)
 
     def quilt(self, cols: int, rows: int, focus: float | None = None) -> np.ndarray:

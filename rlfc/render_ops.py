@@ -86,14 +86,16 @@ class NumpyOps:
         return [p + (yy * np.float32(c[0]) + xx * np.float32(c[1]) + np.float32(c[2]))
                 for p, c in zip(pos, [coefs[i % n] for i in range(n * reps)])]
 
-    def disagreement(self, lum, ws, k: int):
+    def disagreement(self, lum, ws, k: int, kb: int):
         """Per candidate, the box mean over k×k (:meth:`blur`) of the weighted variance of its n
-        sources' luma around their weighted mean: ``lum`` K·n planes (candidate-major), ``ws`` the n
-        weights; a list of K planes."""
+        sources' luma around their weighted mean, each source's luma less its own box mean over
+        kb×kb first (its brightness there: vignetting or exposure that differs per view is no
+        disagreement about geometry): ``lum`` K·n planes (candidate-major), ``ws`` the n weights;
+        a list of K planes."""
         n = len(ws)
         costs = []
         for i in range(0, len(lum), n):
-            smp = lum[i:i + n]
+            smp = [x - self.blur(x, kb) for x in lum[i:i + n]]
             costs.append(self.blur(self.wsum(self.sq_dev(smp, self.wsum(smp, ws)), ws), k))
         return costs
 
@@ -249,11 +251,12 @@ class TorchOps:
         c = c.view(-1, 3)[:, :, None, None]
         return pos + (yy[None] * c[:, 0] + xx[None] * c[:, 1] + c[:, 2])
 
-    def disagreement(self, lum, ws, k: int):
+    def disagreement(self, lum, ws, k: int, kb: int):
         """As :meth:`NumpyOps.disagreement`, every candidate at once: ``lum`` (K·n, h, w)."""
         n = len(ws)
         w = self.vector(ws).view(1, n, 1, 1)
-        L = lum.reshape(-1, n, *lum.shape[1:])                        # (K, n, h, w)
+        L = lum - self.blur(lum, kb)
+        L = L.reshape(-1, n, *lum.shape[1:])                          # (K, n, h, w)
         mean = (L * w).sum(1, keepdim=True)
         var = ((L - mean) ** 2 * w).sum(1)                             # (K, h, w)
         return list(self.blur(var, k))

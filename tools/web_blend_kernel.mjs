@@ -5,7 +5,7 @@
 // aperture; bicubic and bilinear; with the file's warps where it has them) and their float32
 // accumulators are compared bit for bit, and whole frames of Renderer.render (robust, the
 // default) with and without the kernel are compared pixel for pixel, and so are the robust
-// choice's costs (Renderer._cost: samples and variances on the kernel's `cost`; for the maps'
+// choice's costs (Renderer._cost: samples on the kernel's `samples`, brightness and variances; for the maps'
 // disparities and a constant one) and its disparities (_consistent) at each camera with two or
 // more sources (costs_checked: how many arrays). Then (ROUNDS > 0) the blend of one frame is
 // timed, the two alternated per round. Prints one JSON line: same (every accumulator, cost and
@@ -57,6 +57,7 @@ for (const [s, t] of cams) {
   const imgs = [];
   for (const [r, c] of src) imgs.push(await ren.view(r * d.cols + c));
   const warp = ren._warpCoefs(src), gh = Math.ceil(H / 4), gw = Math.ceil(W / 4);
+  const kb = Math.max(1, Math.min(16, 2 * Math.min(gh, gw) - 1));     // (render.js _consistent's)
   const D = Float32Array.from({ length: gh * gw }, (_, i) => disp0[4 * Math.floor(i / gw) * W + 4 * (i % gw)]);
   const both = (fn) => {
     R.Renderer.useWasm = false;
@@ -64,8 +65,8 @@ for (const [s, t] of cams) {
     R.Renderer.useWasm = true;
     return [a, fn()];
   };
-  for (const [a, b] of [both(() => ren._cost(s, t, src, imgs, D, gh, gw, 4, warp)),
-    both(() => ren._cost(s, t, src, imgs, D.map(() => 0.75), gh, gw, 4, warp)),
+  for (const [a, b] of [both(() => ren._cost(s, t, src, imgs, D, gh, gw, 4, kb, warp)),
+    both(() => ren._cost(s, t, src, imgs, D.map(() => 0.75), gh, gw, 4, kb, warp)),
     both(() => ren._consistent(s, t, src, imgs, disp0, warp))]) {
     for (let i = 0; i < a.length; i++) if (!Object.is(a[i], b[i])) { same = false; differ += 1; }
     costsChecked += 1;

@@ -204,17 +204,24 @@ export class Renderer {
 
   /** The robust choice's cost at each of the gh×gw grid points every S pixels (Float32Array):
    *  the sources' weighted variance about their blend, each sampled bilinearly (plane 0) at its
-   *  point displaced by D (the candidate's disparities) and the source's warp. On the blend's
-   *  WebAssembly module where Renderer.useWasm and it can (BlendKernel.costs), else in _sampleGrid
-   *  and the loops here; the same float32 values. */
-  _cost(s, t, src, imgs, D, gh, gw, S, warp = null) {
+   *  point displaced by D (the candidate's disparities) and the source's warp, and less its own
+   *  box mean over kb×kb grid points first (its brightness: rlfc.render.ROBUST_LEVEL_WINDOW). The
+   *  samples on the blend's WebAssembly module where Renderer.useWasm and it can
+   *  (BlendKernel.samples), else in _sampleGrid; the same float32 values. */
+  _cost(s, t, src, imgs, D, gh, gw, S, kb, warp = null) {
     const d = this.d, G = gh * gw, nq = src.length, f32 = Math.fround, wfs = src.map(([, , w]) => f32(w));
     const kern = Renderer.useWasm ? BlendKernel.shared() : null;
-    const got = kern && kern.costs({ P: d.P, Wp: d.Wp, Hp: d.Hp, H: d.H, W: d.W }, imgs,
+    let smp = kern && kern.samples({ P: d.P, Wp: d.Wp, Hp: d.Hp, H: d.H, W: d.W }, imgs,
       src.map(([r, c], q) => [s - r, t - c, wfs[q], warp && warp[q]]), D, gh, gw, S);
-    if (got) return got;
-    const smp = src.map(() => new Float32Array(G)), cost = new Float32Array(G);
-    src.forEach(([r, c], q) => this._sampleGrid(imgs[q], gh, gw, S, D, s - r, t - c, smp[q], warp && warp[q]));
+    if (!smp) {
+      smp = src.map(() => new Float32Array(G));
+      src.forEach(([r, c], q) => this._sampleGrid(imgs[q], gh, gw, S, D, s - r, t - c, smp[q], warp && warp[q]));
+    }
+    for (const x of smp) {                                   // x − its box mean (cv2.blur: double sums, × 1/kb²)
+      const m = boxMean(x, gh, gw, kb);
+      for (let i = 0; i < G; i++) x[i] = f32(x[i] - m[i]);
+    }
+    const cost = new Float32Array(G);
     for (let i = 0; i < G; i++) {                            // the blend, then the weighted variance about it
       let a = 0, v = 0;
       for (let q = 0; q < nq; q++) a = f32(a + f32(wfs[q] * smp[q][i]));
@@ -226,8 +233,8 @@ export class Renderer {
 
   /** (H·W) disparities: per pixel the most photo-consistent of three candidates, smoothest
    *  first (the frame's median disparity, the map's 5×5-block median, the map), chosen on every
-   *  4th pixel by the weighted variance of the sources' luma around their blend, box-averaged
-   *  over 4×4 grid points; a later candidate wins where its cost is below half the best so far
+   *  4th pixel by the weighted variance of the sources' luma (each less its own mean over 16×16
+   *  grid points: its brightness) around their blend, box-averaged over 4×4 grid points; a later candidate wins where its cost is below half the best so far
    *  (by more than 1e-4 relative; costs below 1e-6 count as 0).
    *  The method and constants of rlfc.render.Renderer._consistent. */
   _consistent(s, t, src, imgs, disp, warp = null) {
@@ -255,6 +262,7 @@ export class Renderer {
       }
     }
     const gh = Math.ceil(H / S), gw = Math.ceil(W / S), G = gh * gw;
+    const kb = Math.max(1, Math.min(64 / S, 2 * Math.min(gh, gw) - 1));   // (rlfc.render: ROBUST_LEVEL_WINDOW)
     const cand = [
       () => median,
       (y, x) => med[(y >> 3) * bx + (x >> 3)],
@@ -274,7 +282,7 @@ export class Renderer {
     const cols = Int32Array.from({ length: gw + 3 }, (_, j) => refl(j - 2, gw));
     cand.forEach((fn, k) => {
       for (let i = 0; i < gh; i++) for (let j = 0; j < gw; j++) D[i * gw + j] = fn(i * S, j * S);
-      const cost = this._cost(s, t, src, imgs, D, gh, gw, S, warp);
+      const cost = this._cost(s, t, src, imgs, D, gh, gw, S, kb, warp);
       for (let i = 0; i < gh; i++) {                          // 4×4 box, anchor (2, 2)
         const r0 = rows[i] * gw, r1 = rows[i + 1] * gw, r2 = rows[i + 2] * gw, r3 = rows[i + 3] * gw;
         for (let j = 0; j < gw; j++) {
@@ -456,14 +464,14 @@ export class BlendKernel {
     return { at: slot.map((i) => SLOTS + i * slotBytes), end };
   }
 
-  /** The robust choice's costs of one candidate (Renderer._consistent's samples and weighted
-   *  variance; the same float32 values): a Float32Array (gh·gw), or null where the views do not
-   *  fit. jobs: per source [ds, dt, wf (a float32 value), warp coefficients or null]. */
-  costs(g, imgs, jobs, D, gh, gw, step) {
+  /** The robust choice's samples of one candidate (Renderer._consistent's, the same float32
+   *  values): per source a Float32Array (gh·gw), or null where the views do not fit. jobs: per
+   *  source [ds, dt, wf (a float32 value), warp coefficients or null]. */
+  samples(g, imgs, jobs, D, gh, gw, step) {
     const G = gh * gw, nq = jobs.length;
-    const got = this._place(g, imgs, 8 * G + 8 + nq * 100);
+    const got = this._place(g, imgs, 4 * G + 4 * nq * G + 8 + nq * 96);
     if (!got) return null;
-    const { at, end } = got, outAt = end + 4 * G, srcAt = (outAt + 4 * G + 7) & ~7, buf = this.mem.buffer;
+    const { at, end } = got, outAt = end + 4 * G, srcAt = (outAt + 4 * nq * G + 7) & ~7, buf = this.mem.buffer;
     new Float32Array(buf, end, G).set(D);
     const iv = new Int32Array(buf, srcAt, nq * 24), fv = new Float64Array(buf, srcAt, nq * 12);
     jobs.forEach(([ds, dt, wf, wc], q) => {
@@ -471,8 +479,8 @@ export class BlendKernel {
       iv[24 * q + 1] = wc ? 1 : 0;
       fv.set([Math.fround(ds), Math.fround(dt), wf, ...(wc || [0, 0, 0, 0, 0, 0])], 12 * q + 1);
     });
-    this.inst.exports.cost(end, outAt, gh, gw, step, g.W, g.H, g.Wp, g.Hp, g.P, srcAt, nq, srcAt + nq * 96);
-    return new Float32Array(buf, outAt, G).slice();
+    this.inst.exports.samples(end, outAt, gh, gw, step, g.W, g.H, g.Wp, g.Hp, g.P, srcAt, nq, G);
+    return jobs.map((_, q) => new Float32Array(buf, outAt + 4 * q * G, G).slice());
   }
 
   /** blendBand's accumulator, or null where this call does not fit (the loops then blend it). */
@@ -490,6 +498,37 @@ export class BlendKernel {
     });
     return new Float32Array(buf, accAt, n * P).slice();
   }
+}
+
+/** The box mean over k×k of a gh×gw float32 plane, as OpenCV's cv2.blur gives it (anchor k>>1,
+ *  BORDER_REFLECT_101 edges, running sums in double along the rows and then the columns, × 1/k²,
+ *  rounded to float32; k ≤ 2·min(gh, gw) − 1, so one reflection reaches every tap): a
+ *  Float32Array. */
+export function boxMean(x, gh, gw, k) {
+  const a0 = k >> 1, scale = 1 / (k * k);
+  const refl = (i, m) => (m === 1 ? 0 : i < 0 ? -i : i >= m ? 2 * m - 2 - i : i);
+  const cols = Int32Array.from({ length: gw + k - 1 }, (_, j) => refl(j - a0, gw));
+  const rows = Int32Array.from({ length: gh + k - 1 }, (_, i) => refl(i - a0, gh) * gw);
+  const hs = new Float64Array(gh * gw), out = new Float32Array(gh * gw), col = new Float64Array(gw);
+  for (let i = 0; i < gh; i++) {                             // row sums: the first window, then slide
+    const o = i * gw;
+    let sum = 0;
+    for (let q = 0; q < k; q++) sum += x[o + cols[q]];
+    hs[o] = sum;
+    for (let j = 1; j < gw; j++) {
+      sum += x[o + cols[j + k - 1]] - x[o + cols[j - 1]];
+      hs[o + j] = sum;
+    }
+  }
+  for (let q = 0; q < k; q++) for (let j = 0, r = rows[q]; j < gw; j++) col[j] += hs[r + j];
+  for (let i = 0; i < gh; i++) {                             // column sums likewise, a row at a time
+    if (i > 0) {
+      const add = rows[i + k - 1], sub = rows[i - 1];
+      for (let j = 0; j < gw; j++) col[j] += hs[add + j] - hs[sub + j];
+    }
+    for (let j = 0, o = i * gw; j < gw; j++) out[o + j] = Math.fround(col[j] * scale);
+  }
+  return out;
 }
 
 /** RGBA bytes (H·W·4) for a canvas from pixels of C channels (16-bit: the high byte). */

@@ -155,18 +155,17 @@
       (local.set $i (i32.add (local.get $i) (i32.const 4)))
       (br $t))))
 
-  ;; the robust choice's costs of one candidate (render.js _consistent: _sampleGrid's bilinear
+  ;; the robust choice's samples of one candidate (render.js _consistent: _sampleGrid's bilinear
   ;; samples of plane 0 of each source at a gh×gw grid of every `step`-th pixel, displaced by the
-  ;; candidate disparities D (float32, G), then the weighted variance of the samples about their
-  ;; blend, in float32 as there): out (float32, G). Sources: `nq` records of 96 bytes at `src`
-  ;; (planes' byte address (int32), warps? (int32), dsf, dtf, wf (doubles holding float32
-  ;; values), the 6 warp coefficients (doubles)); `tmp`: nq float32 of scratch.
-  (func (export "cost") (param $D i32) (param $out i32) (param $gh i32) (param $gw i32) (param $step i32)
+  ;; candidate disparities D (float32, G), in float32 as there): out (float32, nq·G, source-major).
+  ;; Sources: `nq` records of 96 bytes at `src` (planes' byte address (int32), warps? (int32), dsf,
+  ;; dtf, wf (doubles holding float32 values), the 6 warp coefficients (doubles)).
+  (func (export "samples") (param $D i32) (param $out i32) (param $gh i32) (param $gw i32) (param $step i32)
                         (param $W i32) (param $H i32) (param $Wp i32) (param $Hp i32) (param $P i32)
-                        (param $src i32) (param $nq i32) (param $tmp i32)
+                        (param $src i32) (param $nq i32) (param $G i32)
     (local $gy i32) (local $gx i32) (local $k i32) (local $q i32) (local $r i32) (local $dd f64) (local $y f64) (local $x f64)
     (local $Y f64) (local $X f64) (local $Hm f64) (local $Wm f64) (local $iy i32) (local $ix i32) (local $fy f64) (local $fx f64)
-    (local $y1 i32) (local $x1 i32) (local $img i32) (local $a f64) (local $v f64) (local $e f64) (local $smp f64)
+    (local $y1 i32) (local $x1 i32) (local $img i32) (local $smp f64)
     (local $Hp1 i32) (local $Wp1 i32)
     (local.set $Hm (f64.convert_i32_s (i32.sub (local.get $H) (i32.const 1))))
     (local.set $Wm (f64.convert_i32_s (i32.sub (local.get $W) (i32.const 1))))
@@ -180,7 +179,6 @@
         (br_if $xdone (i32.ge_s (local.get $gx) (local.get $gw)))
         (local.set $x (f64.convert_i32_s (i32.mul (local.get $gx) (local.get $step))))
         (local.set $dd (f64.promote_f32 (f32.load (i32.add (local.get $D) (i32.shl (local.get $k) (i32.const 2))))))
-        (local.set $a (f64.const 0))
         (local.set $q (i32.const 0))
         (block $qdone (loop $qloop
           (br_if $qdone (i32.ge_s (local.get $q) (local.get $nq)))
@@ -218,25 +216,10 @@
                               (f64.mul (f64.convert_i32_s (i32.load (i32.add (local.get $img) (i32.shl (i32.mul (i32.add (i32.mul (local.get $y1) (local.get $Wp)) (local.get $x1)) (local.get $P)) (i32.const 2)))))
                                        (local.get $fx)))
                      (local.get $fy))))))
-          (f32.store (i32.add (local.get $tmp) (i32.shl (local.get $q) (i32.const 2))) (f32.demote_f64 (local.get $smp)))
-          ;; a = f32(a + f32(wf·smp))
-          (local.set $a (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $a)
-            (f64.promote_f32 (f32.demote_f64 (f64.mul (f64.load offset=24 (local.get $r)) (local.get $smp))))))))
+          (f32.store (i32.add (local.get $out) (i32.shl (i32.add (i32.mul (local.get $q) (local.get $G)) (local.get $k)) (i32.const 2)))
+            (f32.demote_f64 (local.get $smp)))
           (local.set $q (i32.add (local.get $q) (i32.const 1)))
           (br $qloop)))
-        ;; v = Σ f32(v + f32(wf·f32(e·e))), e = f32(smp − a)
-        (local.set $v (f64.const 0))
-        (local.set $q (i32.const 0))
-        (block $vdone (loop $vloop
-          (br_if $vdone (i32.ge_s (local.get $q) (local.get $nq)))
-          (local.set $e (f64.promote_f32 (f32.demote_f64 (f64.sub
-            (f64.promote_f32 (f32.load (i32.add (local.get $tmp) (i32.shl (local.get $q) (i32.const 2))))) (local.get $a)))))
-          (local.set $v (f64.promote_f32 (f32.demote_f64 (f64.add (local.get $v) (f64.promote_f32 (f32.demote_f64
-            (f64.mul (f64.load offset=24 (i32.add (local.get $src) (i32.mul (local.get $q) (i32.const 96))))
-                     (f64.promote_f32 (f32.demote_f64 (f64.mul (local.get $e) (local.get $e)))))))))))
-          (local.set $q (i32.add (local.get $q) (i32.const 1)))
-          (br $vloop)))
-        (f32.store (i32.add (local.get $out) (i32.shl (local.get $k) (i32.const 2))) (f32.demote_f64 (local.get $v)))
         (local.set $k (i32.add (local.get $k) (i32.const 1)))
         (local.set $gx (i32.add (local.get $gx) (i32.const 1)))
         (br $xloop)))

@@ -207,7 +207,7 @@ def test_blend_kernel_matches_the_loops_bit_for_bit(name, sample_files, tmp_path
     plane alone) makes blendOne's float32 accumulator bit for bit: 1 (grey), 2 (grey+alpha,
     16-bit), 3 (with per-view warps; the Lytro crop) and 4 (RGBA) planes; bicubic and bilinear;
     the maps, a focus, a synthetic aperture; a band of rows as the workers blend; whole robust
-    frames; the robust choice's costs (render_kernel.wat cost) and disparities. A drag inside one
+    frames; the robust choice's costs (its samples on render_kernel.wat's `samples`) and disparities. A drag inside one
     cell copies no view into the kernel's memory (they stay there)."""
     info = _kernel_tool("web_blend_kernel.mjs", name, sample_files, tmp_path)
     assert info["same"] and info["differ"] == 0, info

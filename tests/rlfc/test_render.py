@@ -393,3 +393,33 @@ def test_the_frames_median_is_numpys():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         assert np.isnan(np.median(np.float32([1, np.nan, 2]))) and np.isnan(median_f32(np.float32([1, np.nan, 2])))
+
+
+def test_the_robust_choice_ignores_each_source_brightness():
+    """The disagreement the robust choice compares takes each source's luma less its own box mean
+    (its brightness: a vignette or an exposure of its own, ``ROBUST_LEVEL_WINDOW``): sources that
+    differ by an offset and a slow gain agree (a gain-only disagreement was ~10^3 here and made the
+    smoothest candidate win on a vignetted grid), a shifted texture still disagrees; numpy and
+    torch alike."""
+    import torch
+
+    from rlfc.render_ops import make_ops
+
+    rng = np.random.default_rng(3)
+    tex = rng.uniform(0, 200, (40, 48)).astype(np.float32)
+    yy, xx = np.mgrid[:40, :48].astype(np.float32)
+    slow = (40 + 0.2 * yy + 0.3 * xx).astype(np.float32)              # an offset changing slowly
+    pairs = {"brightness": [tex, tex + slow], "shifted": [tex, np.roll(tex, 3, axis=1)]}
+    for name, lum in pairs.items():
+        got = []
+        for dev in ("numpy", "cpu"):
+            ops = make_ops(dev)
+            x = lum if dev == "numpy" else torch.from_numpy(np.stack(lum))
+            cost = ops.disagreement(x, [0.5, 0.5], 4, 16)[0]
+            got.append(cost if dev == "numpy" else cost.numpy())
+        inner = (slice(8, -8), slice(8, -8))                          # (the box's reflected edges apart)
+        if name == "brightness":
+            assert got[0][inner].max() < 0.5, got[0][inner].max()
+        else:
+            assert got[0][inner].min() > 100
+        np.testing.assert_allclose(got[0], got[1], rtol=1e-4, atol=1e-2)
