@@ -22,7 +22,7 @@ def after(self, lum, ws, k, kb):
     n = len(ws)
     costs = []
     for i in range(0, len(lum), n):
-        smp = [x - self.blur(x, min(MK * k, kb if MK * k > kb else MK * k)) for x in lum[i:i + n]]
+        smp = [x - self.blur(x, min(MK * k, kb)) for x in lum[i:i + n]]
         costs.append(self.blur(self.wsum(self.sq_dev(smp, self.wsum(smp, ws)), ws), k))
     return costs
 
