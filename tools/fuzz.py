@@ -209,7 +209,7 @@ def mutate_run(meta: dict, secs: list, rng: np.random.Generator) -> str | None:
         nbm, hs = int(lay["bitmap_bytes"]), int(lay["off_bytes"]) + 3 * int(meta["config"]["planes"])
     except (zlib.error, KeyError, TypeError, ValueError):
         return None
-    if (lengths < 0).any():
+    if (lengths < 0).any() or nbm < 1 or hs < 0:     # (a layout an earlier mutation changed: no run to aim at)
         return None
     runs = np.flatnonzero(lengths)
     if runs.size == 0:
