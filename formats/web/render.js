@@ -234,8 +234,9 @@ export class Renderer {
   /** (H·W) disparities: per pixel the most photo-consistent of three candidates, smoothest
    *  first (the frame's median disparity, the map's 5×5-block median, the map), chosen on every
    *  4th pixel by the weighted variance of the sources' luma (each less its own mean over 16×16
-   *  grid points: its brightness) around their blend, box-averaged over 4×4 grid points; a later candidate wins where its cost is below half the best so far
-   *  (by more than 1e-4 relative; costs below 1e-6 count as 0).
+   *  grid points: its brightness) around their blend, box-averaged over 4×4 grid points; a later
+   *  candidate wins where its cost is below half the best so far (by more than 1e-4 relative;
+   *  costs below 1e-6 count as 0).
    *  The method and constants of rlfc.render.Renderer._consistent. */
   _consistent(s, t, src, imgs, disp, warp = null) {
     const d = this.d, H = d.H, W = d.W, S = 4, f32 = Math.fround;

@@ -132,7 +132,9 @@ class SingleRequests:
         their samples in raster order, from dequantized coefficients ``vals`` at ``places`` in
         that layout (:meth:`_res_tables`): every 8×8 block inverse-transformed at once with its
         channels interleaved (:func:`rlfc.transform.inverse_interleaved`; a block without
-        coefficients transforms to exact zeros), planes that bypass the transform as they are."""
+        coefficients transforms to exact zeros), planes that bypass the transform as they are.
+        float64: the prediction's float32 sum takes it rounded once (values past 2^24, which may
+        round, put the sum past the planes' bounds either way, and it clips alike)."""
         C = self.atlas.C
         X = np.zeros((self.nt, TB, TB * C))
         X.reshape(-1)[places] = vals
