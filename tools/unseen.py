@@ -40,8 +40,9 @@ The grids are derived deterministically from ../shared/data:
 
 For each: per-view JPEG 2000 (imagecodecs) at several PSNRs, interpolated at the target like
 tools/bench.py; and the RLFC profile at the target (the CLI's ``--target-psnr``), with the
-whole ``.lfc`` file counted. Writes ``unseen.json`` and ``unseen.md`` to DIR (and the scenes
-as PNG folders with ``--save-scenes``).
+whole ``.lfc`` file counted. Writes ``unseen.json`` and ``unseen.md`` to DIR (and, with
+``--save-scenes``, each scene as a folder that ``lfcodec encode`` and ``tools.bench_render`` read:
+PNG views and a ``scene.json``).
 """
 from __future__ import annotations
 
@@ -69,6 +70,20 @@ def _grid(views: np.ndarray, name: str) -> LightField:
     f = float(max(views.shape[2:4]))
     return LightField(views=np.ascontiguousarray(views), positions=grid_positions(r, c), focal=(f, f),
                       layout="grid", meta={"source": name})
+
+
+def save_scene(folder: Path, lf: LightField) -> None:
+    """A variant as a scene folder that ``lfcodec encode``, ``tools.bench_render`` and
+    :func:`formats.scenes.read_scene` read: ``rRR_cCC.png`` views (16-bit PNG for uint16) and a
+    ``scene.json`` (a grid; baseline and focal left to the readers' defaults, which are the ones
+    :func:`_grid` gives; its derivation as the source)."""
+    write_views(folder, lf.views)
+    doc = {"layout": "grid", "rows": lf.rows, "cols": lf.cols, "views": "r{row:02d}_c{col:02d}.png",
+           "baseline": None, "focal_px": None,
+           "source": f"derived by tools/unseen.py: {lf.meta.get('source', '')} (from ../shared/data: see the "
+                     "source scenes' own provenance)",
+           "license": "that of the scenes it is derived from (../shared/data/README.md)"}
+    (Path(folder) / "scene.json").write_text(json.dumps(doc, indent=1) + "\n")
 
 
 def _textures(data: Path, scenes: tuple, h: int, w: int) -> list:
@@ -307,7 +322,7 @@ def main(argv=None) -> int:
             continue
         _log(f"[{name}] {lf.rows}x{lf.cols} of {lf.height}x{lf.width}x{lf.channels} {lf.views.dtype}")
         if a.save_scenes:
-            write_views(out / name, lf.views)
+            save_scene(out / name, lf)
         jb, pts = j2k_at(lf, a.target)
         r = rlfc_at(lf, a.target, a.profile)
         r.update({"j2k_bpp": jb, "j2k_points": pts})

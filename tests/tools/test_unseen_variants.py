@@ -87,3 +87,22 @@ def test_jpeg_sourced_views_carry_their_own_block_artefacts():
     err = j.astype(np.float64) - v
     assert 1.0 < np.sqrt((err ** 2).mean()) < 12.0                     # lossy, not ruinous at quality 85
     assert not (err[0, 0] == err[0, 1]).all()                           # each view its own artefacts
+
+
+def test_saved_scenes_read_back_as_grids(tmp_path):
+    """``--save-scenes`` writes each variant as a scene the readers take as it is (views and a
+    scene.json saying where it comes from), 8-bit RGB and 16-bit grey alike: the same views,
+    grid and focal as the variant in memory."""
+    from formats.scenes import read_scene
+    from tools.unseen import _grid, save_scene
+
+    rng = np.random.default_rng(1)
+    for name, views in (("rgb8", rng.integers(0, 256, (2, 3, 12, 16, 3)).astype(np.uint8)),
+                        ("grey16", rng.integers(0, 65536, (3, 2, 10, 14, 1)).astype(np.uint16))):
+        lf = _grid(views, f"a test variant {name}")
+        save_scene(tmp_path / name, lf)
+        back = read_scene(tmp_path / name)
+        assert back.layout == "grid" and (back.rows, back.cols) == views.shape[:2]
+        assert back.views.dtype == views.dtype and (back.views == views).all()
+        assert tuple(back.focal) == tuple(lf.focal)
+        assert f"a test variant {name}" in back.meta.get("source", "")
