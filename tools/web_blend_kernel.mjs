@@ -57,7 +57,7 @@ for (const [s, t] of cams) {
   const imgs = [];
   for (const [r, c] of src) imgs.push(await ren.view(r * d.cols + c));
   const warp = ren._warpCoefs(src), gh = Math.ceil(H / 4), gw = Math.ceil(W / 4);
-  const kb = Math.max(1, Math.min(16, 2 * Math.min(gh, gw) - 1));     // (render.js _consistent's)
+  const kb = R.levelBox(gh, gw, 4);
   const D = Float32Array.from({ length: gh * gw }, (_, i) => disp0[4 * Math.floor(i / gw) * W + 4 * (i % gw)]);
   const both = (fn) => {
     R.Renderer.useWasm = false;

@@ -263,7 +263,7 @@ export class Renderer {
       }
     }
     const gh = Math.ceil(H / S), gw = Math.ceil(W / S), G = gh * gw;
-    const kb = Math.max(1, Math.min(64 / S, 2 * Math.min(gh, gw) - 1));   // (rlfc.render: ROBUST_LEVEL_WINDOW)
+    const kb = levelBox(gh, gw, S);
     const cand = [
       () => median,
       (y, x) => med[(y >> 3) * bx + (x >> 3)],
@@ -499,6 +499,12 @@ export class BlendKernel {
     });
     return new Float32Array(buf, accAt, n * P).slice();
   }
+}
+
+/** The robust choice's brightness box in points of its gh×gw grid (every S pixels):
+ *  rlfc.render.ROBUST_LEVEL_WINDOW (64 px), at most 2·min(gh, gw) − 1 points (one reflection). */
+export function levelBox(gh, gw, S) {
+  return Math.max(1, Math.min(Math.floor(64 / S), 2 * Math.min(gh, gw) - 1));
 }
 
 /** The box mean over k×k of a gh×gw float32 plane, as OpenCV's cv2.blur gives it (anchor k>>1,

@@ -153,7 +153,6 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
         self._blockref_cache: dict = {}
         self._pixref_cache: dict = {}                           # view → block_pixel_refs (block_pixels)
         self._res_tab = None                                    # _residual_pixels' look-ups (_res_tables)
-        self._bypass_c = None                                   # ... and its channels without transform
         self._warp_px_cache: dict = {}                          # view → _warp_pixels (warped files)
         self._cell_maps: dict = {}                              # map → (disparities as float32, modes)
         self._pix_ready: dict = {}     # view → (its _pixel_refs, its map's _cell_map), once nothing is left to decode
@@ -190,6 +189,9 @@ class TxDecoder(OnDemand, SingleRequests, Residuals, ProfileDecoder):
             self._pixel_bounds = (np.tile(lw, (n, 1)), np.tile(hg, (n, 1)))
             self._peak_f = ft(self._peak)  # (block_pixels' clip bound, made once)
             self._pix_depth = cv_saturating_depth(self.dtype, self._peak)   # (and its clip + cast in OpenCV)
+            # the atlas's channels that bypass the transform (None: none does), for _residual_pixels
+            bp = np.concatenate([lay.bypass[:self.P], np.zeros(C - self.P, bool)])
+            self._bypass_c = bp if bp.any() else None
         # key views are decoded by block rows when a request first needs them (lazy: opening a
         # file reads and decodes nothing of them; :meth:`decode_keys` decodes them all)
         self._key_done = np.zeros((keys.size, self.nby), bool)

@@ -107,15 +107,10 @@ class SingleRequests:
         dequantized for :meth:`_residual_pixels`: (its tbs' modes as a list, each nonzero
         coefficient's place, its value); where a tb is intra-coded (the modes, the stream's
         :class:`rlfc.txparse.Parsed`, None) (:func:`rlfc.txparse_one.parse_one_rows`)."""
-        rows = self._res_tables()
         if self._remote:
-            return self._rows_of(self._parse(np.array([view]), np.array([loc])))
-        s, e = int(self.start[view, loc]), int(self.end[view, loc])
-        with self._io:
-            if e > s:
-                self.container.verify_span("tx.blocks", s, e)
-        return parse_one_rows(bytes(self.buf[s:e]), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
-                              int(self.is_key[view]), rows)
+            return self._rows_of(self._parse_one(view, loc))
+        return parse_one_rows(self._stream_bytes(view, loc), self.tables, self.nt, self._pcl,
+                              int(self.lay.intra[view]), int(self.is_key[view]), self._res_tables())
 
     def _rows_of(self, parsed) -> tuple:
         """:meth:`_parse_rows` of a :class:`rlfc.txparse.Parsed` of one stream (numpy)."""
@@ -160,8 +155,6 @@ class SingleRequests:
             place = ((tb * 64 * C)[:, None] + raster * C + plane[:, None]).reshape(-1)
             q16 = np.asarray(self._q16_rows, np.int64)
             got = self._res_tab = (place.tolist(), q16.tolist(), place, q16)
-            bp = self.lay.bypass[:P]
-            self._bypass_c = None if not bp.any() else np.concatenate([bp, np.zeros(C - P, bool)])
         return got
 
     def _pixel_refs(self, view: int):
@@ -251,12 +244,17 @@ class SingleRequests:
         """:meth:`_parse` of one request's stream (a scalar range: no arrays around it)."""
         if self._remote:
             return self._parse(np.array([view]), np.array([loc]))
+        return parse_one(self._stream_bytes(view, loc), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
+                         int(self.is_key[view]))
+
+    def _stream_bytes(self, view: int, loc: int) -> bytes:
+        """A request's stream from the file held in memory, its chunk verified first (a scalar
+        range: no arrays around it)."""
         s, e = int(self.start[view, loc]), int(self.end[view, loc])
         with self._io:
             if e > s:
                 self.container.verify_span("tx.blocks", s, e)
-        return parse_one(bytes(self.buf[s:e]), self.tables, self.nt, self._pcl, int(self.lay.intra[view]),
-                         int(self.is_key[view]))
+        return bytes(self.buf[s:e])
 
     def _residual_one(self, view: int, parsed) -> np.ndarray:
         """:meth:`_residual` of one parsed stream, (nt, 8, 8, P) int32: every 8×8 block of the
